@@ -1,0 +1,93 @@
+//! Typed errors for everything the engine can refuse.
+
+use core::fmt;
+
+/// Everything the engine reports instead of panicking.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Error {
+    /// A numeric parameter is outside its domain.
+    InvalidParameter {
+        /// The parameter's name as it appears in the settings struct.
+        name: &'static str,
+        /// The rejected value.
+        value: f64,
+        /// What the parameter must satisfy.
+        expected: &'static str,
+    },
+    /// The oracle reported a resolution with zero pixels.
+    EmptyResolution,
+    /// Every bootstrap candidate had zero importance: the start-up normalization
+    /// `b*` (seed 002, eq. 3.12) is zero and no chain can be started. The scene is
+    /// black for this importance function (or its light is unreachable by the
+    /// candidates drawn); render it with MC instead, or draw more candidates.
+    AllCandidatesBlack {
+        /// How many candidates were drawn.
+        candidates: u64,
+    },
+    /// Two films or images that must have the same shape do not.
+    ShapeMismatch {
+        /// Shape of the left operand (width, height, channels).
+        left: (u32, u32, usize),
+        /// Shape of the right operand (width, height, channels).
+        right: (u32, u32, usize),
+    },
+}
+
+impl Error {
+    pub(crate) fn invalid(name: &'static str, value: f64, expected: &'static str) -> Self {
+        Error::InvalidParameter {
+            name,
+            value,
+            expected,
+        }
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::InvalidParameter {
+                name,
+                value,
+                expected,
+            } => {
+                write!(
+                    f,
+                    "invalid parameter `{name}` = {value}: expected {expected}"
+                )
+            }
+            Error::EmptyResolution => write!(f, "the oracle's resolution has no pixels"),
+            Error::AllCandidatesBlack { candidates } => write!(
+                f,
+                "all {candidates} bootstrap candidates have zero importance: nothing to start a chain from"
+            ),
+            Error::ShapeMismatch { left, right } => {
+                write!(
+                    f,
+                    "shape mismatch: {left:?} vs {right:?} (width, height, channels)"
+                )
+            }
+        }
+    }
+}
+
+impl core::error::Error for Error {}
+
+/// Checks that `value` is a probability.
+pub(crate) fn check_probability(name: &'static str, value: f64) -> Result<(), Error> {
+    if (0.0..=1.0).contains(&value) {
+        Ok(())
+    } else {
+        Err(Error::invalid(name, value, "a probability in [0, 1]"))
+    }
+}
+
+/// Checks that `value` is finite and strictly positive.
+pub(crate) fn check_positive(name: &'static str, value: f64) -> Result<(), Error> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::invalid(name, value, "a finite value > 0"))
+    }
+}

@@ -1,0 +1,156 @@
+//! Accumulation buffers: per-pixel, per-channel f64 sums.
+
+use alloc::vec;
+use alloc::vec::Vec;
+
+use crate::error::Error;
+use crate::oracle::{Radiance, Resolution};
+
+/// A `width x height` image with `channels` f64 values per pixel, row-major,
+/// row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Film {
+    resolution: Resolution,
+    channels: usize,
+    data: Vec<f64>,
+}
+
+impl Film {
+    /// A black film.
+    pub fn new(resolution: Resolution, channels: usize) -> Self {
+        Self {
+            resolution,
+            channels,
+            data: vec![0.0; resolution.pixel_count() * channels],
+        }
+    }
+
+    /// A film over existing values (`resolution.pixel_count() * channels` of them).
+    pub fn from_data(
+        resolution: Resolution,
+        channels: usize,
+        data: Vec<f64>,
+    ) -> Result<Self, Error> {
+        if channels == 0 || data.len() != resolution.pixel_count() * channels {
+            return Err(Error::ShapeMismatch {
+                left: (resolution.width, resolution.height, channels),
+                right: (data.len() as u32, 1, 1),
+            });
+        }
+        Ok(Self {
+            resolution,
+            channels,
+            data,
+        })
+    }
+
+    /// Size in pixels.
+    pub fn resolution(&self) -> Resolution {
+        self.resolution
+    }
+
+    /// Values per pixel.
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    /// All values, row-major, channels interleaved.
+    pub fn data(&self) -> &[f64] {
+        &self.data
+    }
+
+    /// All values, mutably.
+    pub fn data_mut(&mut self) -> &mut [f64] {
+        &mut self.data
+    }
+
+    /// The values of pixel `(x, y)`.
+    pub fn pixel(&self, x: u32, y: u32) -> &[f64] {
+        let i = (y as usize * self.resolution.width as usize + x as usize) * self.channels;
+        &self.data[i..i + self.channels]
+    }
+
+    /// Adds `weight * radiance` to the pixel with index `pixel` (row-major).
+    /// The radiance must have this film's channel count.
+    #[inline]
+    pub fn add<R: Radiance>(&mut self, pixel: usize, weight: f64, radiance: &R) {
+        debug_assert_eq!(R::CHANNELS, self.channels);
+        let base = pixel * self.channels;
+        for (c, v) in self.data[base..base + self.channels].iter_mut().enumerate() {
+            *v += weight * radiance.channel(c) as f64;
+        }
+    }
+
+    /// Adds `other` pixel by pixel.
+    pub fn merge(&mut self, other: &Film) -> Result<(), Error> {
+        self.check_shape(other)?;
+        self.data
+            .iter_mut()
+            .zip(&other.data)
+            .for_each(|(a, b)| *a += b);
+        Ok(())
+    }
+
+    /// Multiplies every value by `s`.
+    pub fn scale(&mut self, s: f64) {
+        self.data.iter_mut().for_each(|v| *v *= s);
+    }
+
+    /// A copy multiplied by `s`.
+    pub fn scaled(&self, s: f64) -> Film {
+        let mut f = self.clone();
+        f.scale(s);
+        f
+    }
+
+    /// Luminance of pixel `index` (Rec. 709 for three channels, the value
+    /// itself for one, the mean otherwise).
+    pub fn luminance(&self, index: usize) -> f64 {
+        let p = &self.data[index * self.channels..(index + 1) * self.channels];
+        match p {
+            [v] => *v,
+            [r, g, b] => 0.2126 * r + 0.7152 * g + 0.0722 * b,
+            _ => p.iter().sum::<f64>() / p.len() as f64,
+        }
+    }
+
+    /// Mean of every value of channel `c` (a film's "total" in image units).
+    pub fn channel_mean(&self, c: usize) -> f64 {
+        self.data.iter().skip(c).step_by(self.channels).sum::<f64>()
+            / self.resolution.pixel_count() as f64
+    }
+
+    pub(crate) fn check_shape(&self, other: &Film) -> Result<(), Error> {
+        if self.resolution != other.resolution || self.channels != other.channels {
+            return Err(Error::ShapeMismatch {
+                left: (self.resolution.width, self.resolution.height, self.channels),
+                right: (
+                    other.resolution.width,
+                    other.resolution.height,
+                    other.channels,
+                ),
+            });
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::oracle::Rgb;
+
+    #[test]
+    fn add_merge_scale() {
+        let r = Resolution::new(2, 2);
+        let mut a = Film::new(r, 3);
+        a.add(3, 2.0, &Rgb([1.0, 2.0, 3.0]));
+        assert_eq!(a.pixel(1, 1), &[2.0, 4.0, 6.0]);
+        let mut b = Film::new(r, 3);
+        b.add(3, 1.0, &Rgb([1.0, 1.0, 1.0]));
+        b.merge(&a).unwrap();
+        assert_eq!(b.scaled(0.5).pixel(1, 1), &[1.5, 2.5, 3.5]);
+        assert!(b.merge(&Film::new(r, 1)).is_err());
+        assert!(Film::from_data(r, 3, alloc::vec![0.0; 5]).is_err());
+    }
+}

@@ -1,0 +1,50 @@
+//! # strata-engine
+//!
+//! A `no_std` + `alloc` Markov-chain Monte Carlo engine for light transport. It
+//! knows nothing of rays: it drives a [`PathOracle`](oracle::PathOracle) that maps
+//! a film point and a stream of numbers in `[0, 1)` to a path contribution.
+//!
+//! The pieces, by module:
+//!
+//! | module | owns |
+//! |---|---|
+//! | [`oracle`] | the oracle contract, [`Radiance`](oracle::Radiance), [`PathSample`](oracle::PathSample), purity checking |
+//! | [`sample`] | the [`Sampler`](sample::Sampler) trait, the lazily mutated primary-sample-space sampler, the independent sampler |
+//! | [`mutate`] | small-step kernels (Kelemen, Gaussian, adaptive) and their parameters |
+//! | [`target`] | importance functions (max channel, luminance, closures) |
+//! | [`chain`] | one Metropolis-Hastings chain with expected-values splatting |
+//! | [`bootstrap`] | start-up bias elimination (normalization `b*`, resampled chain starts) |
+//! | [`render`] | the drivers: independent MC and PSSMLT, budgets, observers |
+//! | [`film`] | f64 accumulation buffers |
+//! | [`metrics`] | MAPE, relMSE, L1, L2, MSE |
+//! | [`diagnose`] | autocorrelation and effective sample size |
+//! | [`analytic`] | targets and oracles with known answers |
+//!
+//! Features: `std` (default) adds time budgets; `parallel` runs chains on rayon.
+//! Results never depend on the number of threads.
+#![no_std]
+
+extern crate alloc;
+#[cfg(feature = "std")]
+extern crate std;
+
+pub mod analytic;
+pub mod bootstrap;
+pub mod chain;
+pub mod diagnose;
+pub mod error;
+pub mod film;
+pub mod metrics;
+pub mod mutate;
+pub mod oracle;
+pub mod render;
+pub mod rng;
+pub mod sample;
+pub mod target;
+
+pub use error::Error;
+pub use film::Film;
+pub use oracle::{
+    FilmPoint, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb, Temperature,
+};
+pub use sample::Sampler;

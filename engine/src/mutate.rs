@@ -1,0 +1,447 @@
+//! Mutation kernels of primary sample space MLT (seed 002, sec. 4.2.1).
+//!
+//! Every small step perturbs each coordinate of the primary sample by an
+//! independent offset `d`, symmetric about zero, and wraps the result onto
+//! `[0, 1)`: the proposal is symmetric (`q(u -> v) = q(v -> u)`), so it cancels
+//! in the Metropolis-Hastings acceptance (eq. 3.2). A large step replaces the
+//! whole vector by a uniform one (also symmetric). Offsets of several steps
+//! compose by addition on the circle, which is what the lazy sampler uses to
+//! catch up coordinates that were not read for a while.
+
+use rand_core::Rng;
+
+use crate::error::{Error, check_positive, check_probability};
+use crate::rng::uniform_f64;
+
+/// Kelemen's exponential small step (Kelemen et al. 2002; seed 002 sec. 4.2.1):
+/// `d = ±s2 · exp(-ln(s2/s1) · ξ)`, so `|d|` is log-uniform in `[s1, s2]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Kelemen {
+    s1: f64,
+    s2: f64,
+}
+
+impl Kelemen {
+    /// The common default, `s1 = 1/1024`, `s2 = 1/64`.
+    pub const DEFAULT: Kelemen = Kelemen {
+        s1: 1.0 / 1024.0,
+        s2: 1.0 / 64.0,
+    };
+    /// The sizes of seed 001 (sec. 4, "minimum 1/1024, maximum 1/32").
+    pub const SEED_001: Kelemen = Kelemen {
+        s1: 1.0 / 1024.0,
+        s2: 1.0 / 32.0,
+    };
+
+    /// A kernel with `0 < s1 < s2 <= 0.5`.
+    pub fn new(s1: f64, s2: f64) -> Result<Self, Error> {
+        check_positive("s1", s1)?;
+        if !(s2.is_finite() && s2 > s1 && s2 <= 0.5) {
+            return Err(Error::invalid("s2", s2, "s1 < s2 <= 0.5"));
+        }
+        Ok(Self { s1, s2 })
+    }
+
+    /// Smallest step size.
+    pub fn s1(&self) -> f64 {
+        self.s1
+    }
+
+    /// Largest step size.
+    pub fn s2(&self) -> f64 {
+        self.s2
+    }
+
+    /// One offset.
+    #[inline]
+    pub fn offset<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        let sign = uniform_f64(rng);
+        let xi = uniform_f64(rng);
+        let d = self.s2 * libm::exp(-libm::log(self.s2 / self.s1) * xi);
+        if sign < 0.5 { d } else { -d }
+    }
+
+    /// `P(|d| <= x)` for one step.
+    pub fn abs_cdf(&self, x: f64) -> f64 {
+        if x < self.s1 {
+            0.0
+        } else if x >= self.s2 {
+            1.0
+        } else {
+            1.0 - libm::log(self.s2 / x) / libm::log(self.s2 / self.s1)
+        }
+    }
+}
+
+/// Gaussian small step with standard deviation `sigma` (pbrt-v4's MLTSampler).
+/// `n` steps are exactly one step of standard deviation `sigma·sqrt(n)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Gaussian {
+    sigma: f64,
+}
+
+impl Gaussian {
+    /// `sigma = 0.01`.
+    pub const DEFAULT: Gaussian = Gaussian { sigma: 0.01 };
+
+    /// A kernel with `0 < sigma <= 1`.
+    pub fn new(sigma: f64) -> Result<Self, Error> {
+        if !(sigma.is_finite() && sigma > 0.0 && sigma <= 1.0) {
+            return Err(Error::invalid("sigma", sigma, "0 < sigma <= 1"));
+        }
+        Ok(Self { sigma })
+    }
+
+    /// Standard deviation of one step.
+    pub fn sigma(&self) -> f64 {
+        self.sigma
+    }
+
+    /// The sum of `n` steps' offsets, drawn exactly.
+    #[inline]
+    pub fn offset_of_steps<R: Rng + ?Sized>(&self, n: u64, rng: &mut R) -> f64 {
+        // Box-Muller; 1 - u keeps the logarithm finite.
+        let u1 = 1.0 - uniform_f64(rng);
+        let u2 = uniform_f64(rng);
+        let normal = libm::sqrt(-2.0 * libm::log(u1)) * libm::cos(core::f64::consts::TAU * u2);
+        normal * self.sigma * libm::sqrt(n as f64)
+    }
+
+    /// `P(|d| <= x)` for one step.
+    pub fn abs_cdf(&self, x: f64) -> f64 {
+        if x <= 0.0 {
+            0.0
+        } else {
+            libm::erf(x / (self.sigma * core::f64::consts::SQRT_2))
+        }
+    }
+}
+
+/// The adaptive kernel of seed 002 (app. 6.B, eq. 6.8, after Hachisuka and
+/// Jensen 2011): `d = (2ξ)^(1/θ)` if `ξ < 0.5`, else `-(2ξ - 1)^(1/θ)`, so
+/// `P(|d| <= x) = x^θ`. `θ` is adapted toward the acceptance rate
+/// `target_acceptance` by eq. 4.10, `θ_{i+1} = θ_i + (A_i - A*) / i`, whose
+/// steps shrink as `1/i` (diminishing adaptation, eq. 4.9).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Adaptive {
+    initial_theta: f64,
+    target_acceptance: f64,
+    min_theta: f64,
+}
+
+impl Adaptive {
+    /// `θ_0 = 0.05`, `A* = 0.234` (Rosenthal's optimum cited in sec. 4.4.2), `θ >= 1e-4`.
+    pub const DEFAULT: Adaptive = Adaptive {
+        initial_theta: 0.05,
+        target_acceptance: 0.234,
+        min_theta: 1e-4,
+    };
+
+    /// A kernel starting at `initial_theta` in `(0, 1]` adapting toward the
+    /// acceptance rate `target_acceptance` in `(0, 1)`.
+    pub fn new(initial_theta: f64, target_acceptance: f64) -> Result<Self, Error> {
+        if !(initial_theta.is_finite() && initial_theta > 0.0 && initial_theta <= 1.0) {
+            return Err(Error::invalid(
+                "initial_theta",
+                initial_theta,
+                "0 < theta <= 1",
+            ));
+        }
+        if !(target_acceptance > 0.0 && target_acceptance < 1.0) {
+            return Err(Error::invalid(
+                "target_acceptance",
+                target_acceptance,
+                "a value in (0, 1)",
+            ));
+        }
+        let min_theta = Self::DEFAULT.min_theta.min(initial_theta);
+        Ok(Self {
+            initial_theta,
+            target_acceptance,
+            min_theta,
+        })
+    }
+
+    /// `θ_0`.
+    pub fn initial_theta(&self) -> f64 {
+        self.initial_theta
+    }
+
+    /// `A*`.
+    pub fn target_acceptance(&self) -> f64 {
+        self.target_acceptance
+    }
+
+    /// One offset at parameter `theta` (eq. 6.8).
+    #[inline]
+    pub fn offset<R: Rng + ?Sized>(theta: f64, rng: &mut R) -> f64 {
+        let xi = uniform_f64(rng);
+        if xi < 0.5 {
+            libm::pow(2.0 * xi, 1.0 / theta)
+        } else {
+            -libm::pow(2.0 * xi - 1.0, 1.0 / theta)
+        }
+    }
+
+    /// `P(|d| <= x)` for one step at parameter `theta`.
+    pub fn abs_cdf(theta: f64, x: f64) -> f64 {
+        if x <= 0.0 {
+            0.0
+        } else if x >= 1.0 {
+            1.0
+        } else {
+            libm::pow(x, theta)
+        }
+    }
+}
+
+/// The running state of an adaptive kernel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdaptiveState {
+    theta: f64,
+    small_steps: u64,
+    acceptance_sum: f64,
+}
+
+impl AdaptiveState {
+    /// The state before the first step.
+    pub fn new(kernel: &Adaptive) -> Self {
+        Self {
+            theta: kernel.initial_theta,
+            small_steps: 0,
+            acceptance_sum: 0.0,
+        }
+    }
+
+    /// The current `θ`.
+    pub fn theta(&self) -> f64 {
+        self.theta
+    }
+
+    /// Eq. 4.10 after a small step whose acceptance probability was
+    /// `acceptance`. `A_i` is the running mean of the acceptance probabilities
+    /// of all small steps so far (their expected value: a Rao-Blackwellized
+    /// acceptance rate). `θ` stays in `[min_theta, 1]`.
+    pub fn update(&mut self, kernel: &Adaptive, acceptance: f64) {
+        self.small_steps += 1;
+        self.acceptance_sum += acceptance;
+        let i = self.small_steps as f64;
+        let rate = self.acceptance_sum / i;
+        self.theta =
+            (self.theta + (rate - kernel.target_acceptance) / i).clamp(kernel.min_theta, 1.0);
+    }
+}
+
+/// Which small step a chain uses.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SmallStep {
+    /// Kelemen's exponential step.
+    Kelemen(Kelemen),
+    /// Gaussian step.
+    Gaussian(Gaussian),
+    /// The adaptive step of eq. 6.8.
+    Adaptive(Adaptive),
+}
+
+impl Default for SmallStep {
+    fn default() -> Self {
+        SmallStep::Kelemen(Kelemen::DEFAULT)
+    }
+}
+
+impl SmallStep {
+    /// `P(lo <= d < hi)` for one unwrapped step's offset `d` (for the adaptive
+    /// kernel, at its initial `θ`). Used to build exact transition matrices.
+    pub fn offset_probability(&self, lo: f64, hi: f64) -> f64 {
+        let abs_cdf = |x: f64| match self {
+            SmallStep::Kelemen(k) => k.abs_cdf(x),
+            SmallStep::Gaussian(g) => g.abs_cdf(x),
+            SmallStep::Adaptive(a) => Adaptive::abs_cdf(a.initial_theta, x),
+        };
+        // Symmetric and without an atom at 0: P(d < t) = (1 + sign(t) F(|t|)) / 2.
+        let cdf = |t: f64| 0.5 + 0.5 * t.signum() * abs_cdf(t.abs());
+        (cdf(hi) - cdf(lo)).max(0.0)
+    }
+}
+
+/// Everything that defines a chain's proposals.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MutationParams {
+    /// The small-step kernel.
+    pub small_step: SmallStep,
+    /// Probability of a large step (a fresh uniform primary sample); 0.3 in
+    /// seeds 001 and 002.
+    pub large_step_probability: f64,
+}
+
+impl Default for MutationParams {
+    fn default() -> Self {
+        Self {
+            small_step: SmallStep::default(),
+            large_step_probability: 0.3,
+        }
+    }
+}
+
+impl MutationParams {
+    /// Checks every parameter (kernels built with their `new` are already valid;
+    /// this also catches hand-built values).
+    pub fn validate(&self) -> Result<(), Error> {
+        check_probability("large_step_probability", self.large_step_probability)?;
+        match self.small_step {
+            SmallStep::Kelemen(k) => Kelemen::new(k.s1, k.s2).map(drop),
+            SmallStep::Gaussian(g) => Gaussian::new(g.sigma).map(drop),
+            SmallStep::Adaptive(a) => Adaptive::new(a.initial_theta, a.target_acceptance).map(drop),
+        }
+    }
+}
+
+/// `v` wrapped onto `[0, 1)` and rounded to f32. A value that rounds up to 1.0
+/// is 0.0: the two are the same point of the circle.
+#[inline]
+pub fn wrap_unit(v: f64) -> f32 {
+    let w = (v - libm::floor(v)) as f32;
+    if w < 1.0 { w } else { 0.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::{Domain, stream};
+
+    #[test]
+    fn invalid_parameters_are_typed_errors() {
+        assert!(matches!(
+            Kelemen::new(0.1, 0.05),
+            Err(Error::InvalidParameter { name: "s2", .. })
+        ));
+        assert!(matches!(
+            Kelemen::new(0.0, 0.05),
+            Err(Error::InvalidParameter { name: "s1", .. })
+        ));
+        assert!(Kelemen::new(f64::NAN, 0.05).is_err());
+        assert!(Gaussian::new(-1.0).is_err());
+        assert!(Adaptive::new(0.0, 0.234).is_err());
+        assert!(Adaptive::new(0.5, 1.0).is_err());
+        let p = MutationParams {
+            large_step_probability: 1.5,
+            ..Default::default()
+        };
+        assert!(matches!(
+            p.validate(),
+            Err(Error::InvalidParameter {
+                name: "large_step_probability",
+                ..
+            })
+        ));
+        let p = MutationParams {
+            small_step: SmallStep::Kelemen(Kelemen { s1: 0.2, s2: 0.1 }),
+            ..Default::default()
+        };
+        assert!(p.validate().is_err());
+    }
+
+    #[test]
+    fn wrapping_never_reaches_one() {
+        assert_eq!(wrap_unit(1.0), 0.0);
+        assert_eq!(wrap_unit(-1e-12), 0.0);
+        assert!(wrap_unit(-1e-6) < 1.0 && wrap_unit(-1e-6) > 0.99);
+        assert_eq!(wrap_unit(2.25), 0.25);
+    }
+
+    /// Each kernel's sampler agrees with its stated distribution (the exact
+    /// invariance tests rely on the stated one): Kolmogorov-Smirnov on |d|.
+    #[test]
+    fn offsets_follow_their_stated_distributions() {
+        let n = 20_000;
+        // KS critical value at alpha = 0.001: 1.95 / sqrt(n).
+        let critical = 1.95 / libm::sqrt(n as f64);
+        let mut rng = stream(3, Domain::User, 0);
+        let kelemen = Kelemen::DEFAULT;
+        let gaussian = Gaussian::DEFAULT;
+        let theta = 0.3;
+        type Case<'a> = (
+            &'a str,
+            alloc::boxed::Box<dyn Fn(&mut rand_pcg::Pcg32) -> f64 + 'a>,
+            alloc::boxed::Box<dyn Fn(f64) -> f64 + 'a>,
+        );
+        let cases: [Case; 3] = [
+            (
+                "kelemen",
+                alloc::boxed::Box::new(|r| kelemen.offset(r)),
+                alloc::boxed::Box::new(|x| kelemen.abs_cdf(x)),
+            ),
+            (
+                "gaussian",
+                alloc::boxed::Box::new(|r| gaussian.offset_of_steps(1, r)),
+                alloc::boxed::Box::new(|x| gaussian.abs_cdf(x)),
+            ),
+            (
+                "adaptive",
+                alloc::boxed::Box::new(|r| Adaptive::offset(theta, r)),
+                alloc::boxed::Box::new(|x| Adaptive::abs_cdf(theta, x)),
+            ),
+        ];
+        for (name, draw, cdf) in cases.iter() {
+            let mut positive = 0usize;
+            let mut abs: alloc::vec::Vec<f64> = (0..n)
+                .map(|_| {
+                    let d = draw(&mut rng);
+                    positive += (d > 0.0) as usize;
+                    d.abs()
+                })
+                .collect();
+            abs.sort_by(f64::total_cmp);
+            let ks = abs
+                .iter()
+                .enumerate()
+                .map(|(i, &x)| {
+                    let f = cdf(x);
+                    (f - i as f64 / n as f64)
+                        .abs()
+                        .max((f - (i + 1) as f64 / n as f64).abs())
+                })
+                .fold(0.0, f64::max);
+            assert!(ks < critical, "{name}: KS statistic {ks} >= {critical}");
+            // Symmetry: the sign is a fair coin (|z| < 4).
+            let z = (positive as f64 - n as f64 / 2.0) / libm::sqrt(n as f64 / 4.0);
+            assert!(z.abs() < 4.0, "{name}: sign imbalance z = {z}");
+        }
+    }
+
+    #[test]
+    fn gaussian_steps_compose_exactly() {
+        // Var of n steps = n sigma^2.
+        let g = Gaussian::new(0.02).unwrap();
+        let mut rng = stream(4, Domain::User, 0);
+        let n = 50_000;
+        let var = (0..n)
+            .map(|_| g.offset_of_steps(9, &mut rng).powi(2))
+            .sum::<f64>()
+            / n as f64;
+        let expected = 9.0 * 0.02f64 * 0.02;
+        // Sample variance of a normal: relative sd sqrt(2/n) ~ 0.6 %; allow 5 sd.
+        assert!(
+            (var / expected - 1.0).abs() < 5.0 * libm::sqrt(2.0 / n as f64),
+            "var {var} vs {expected}"
+        );
+    }
+
+    #[test]
+    fn adaptation_moves_theta_toward_the_target_rate() {
+        let k = Adaptive::DEFAULT;
+        let mut s = AdaptiveState::new(&k);
+        for _ in 0..100 {
+            s.update(&k, 0.9);
+        }
+        assert!(
+            s.theta() > k.initial_theta(),
+            "high acceptance must widen the kernel"
+        );
+        let mut s = AdaptiveState::new(&k);
+        for _ in 0..100 {
+            s.update(&k, 0.0);
+        }
+        assert!(s.theta() < k.initial_theta() && s.theta() >= 1e-4);
+    }
+}

@@ -1,0 +1,382 @@
+//! The oracle contract: what a renderer implements so the engine can drive it.
+//!
+//! A [`PathOracle`] turns a film point and numbers drawn from a [`Sampler`] into
+//! one path contribution. The engine chooses the film point (so it can stratify
+//! and replay samples in other pixels) and owns every random number (so it can
+//! mutate them: primary sample space MLT, seed 002 sec. 4.2.1).
+//!
+//! # Purity
+//! `trace` must be a pure function of `(film, the numbers drawn, temperature)`:
+//! the same film point and the same sequence of numbers (with the same stream
+//! switches) must give the same [`PathSample`], bit for bit. The engine relies
+//! on it to replay a state, to re-evaluate a state at another temperature and
+//! to reproduce a render from its seed. [`check_purity`] tests an oracle for it,
+//! and debug builds assert it when a chain is started from a bootstrap
+//! candidate.
+
+use alloc::vec::Vec;
+use core::fmt::Debug;
+
+use crate::rng::{self, Domain};
+use crate::sample::Sampler;
+
+/// Film size in pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Resolution {
+    /// Pixels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+}
+
+impl Resolution {
+    /// A `width` x `height` film.
+    pub const fn new(width: u32, height: u32) -> Self {
+        Self { width, height }
+    }
+
+    /// Number of pixels.
+    pub const fn pixel_count(self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    /// Index of the pixel containing `p`, clamped to the film.
+    #[inline]
+    pub fn pixel_index(self, p: FilmPoint) -> usize {
+        let x = (p.x.max(0.0) as u32).min(self.width.saturating_sub(1));
+        let y = (p.y.max(0.0) as u32).min(self.height.saturating_sub(1));
+        y as usize * self.width as usize + x as usize
+    }
+
+    /// The film point at primary-sample coordinates `u` in `[0, 1)^2`, always
+    /// strictly inside the film even after f32 rounding.
+    #[inline]
+    pub fn film_point(self, u: [f32; 2]) -> FilmPoint {
+        let scale = |u: f32, n: u32| {
+            let v = (u as f64 * n as f64) as f32;
+            if v < n as f32 { v } else { f32_below(n as f32) }
+        };
+        FilmPoint {
+            x: scale(u[0], self.width),
+            y: scale(u[1], self.height),
+        }
+    }
+}
+
+/// The largest f32 below a positive `v`.
+fn f32_below(v: f32) -> f32 {
+    f32::from_bits(v.to_bits() - 1)
+}
+
+/// A continuous position on the film, in pixels: `x` in `[0, width)`, `y` in `[0, height)`.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct FilmPoint {
+    /// Horizontal position in pixels.
+    pub x: f32,
+    /// Vertical position in pixels (row 0 at the top).
+    pub y: f32,
+}
+
+/// Temperature handed to the oracle. `1` is the untempered, exact target; larger
+/// values ask the oracle for a smoother one (e.g. roughened BSDFs at the
+/// connecting vertex, seed 002 sec. 5.2, eq. 5.5).
+#[derive(Clone, Copy, Debug, PartialEq, PartialOrd)]
+pub struct Temperature(pub f32);
+
+impl Temperature {
+    /// The exact target.
+    pub const ONE: Temperature = Temperature(1.0);
+}
+
+impl Default for Temperature {
+    fn default() -> Self {
+        Self::ONE
+    }
+}
+
+/// Bits an oracle may set on a path (which object it touched, which lobe it
+/// used...), so importance functions can weight paths without a second trace
+/// (seed 004 sec. 4, importance "shaders").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct PathFlags(pub u32);
+
+impl PathFlags {
+    /// No flag set.
+    pub const NONE: PathFlags = PathFlags(0);
+
+    /// Whether every bit of `other` is set.
+    pub const fn contains(self, other: PathFlags) -> bool {
+        self.0 & other.0 == other.0
+    }
+}
+
+/// One path's contribution as seen by the engine.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PathSample<R> {
+    /// The path contribution f/p (radiance arriving at the film point).
+    pub radiance: R,
+    /// Oracle-defined flags.
+    pub flags: PathFlags,
+}
+
+impl<R> PathSample<R> {
+    /// A sample with no flags.
+    pub fn new(radiance: R) -> Self {
+        Self {
+            radiance,
+            flags: PathFlags::NONE,
+        }
+    }
+}
+
+/// A radiance value: RGB for renderers, a scalar for analytic targets.
+///
+/// Values must be finite and non-negative; the engine excludes (and counts)
+/// anything else instead of splatting it.
+pub trait Radiance: Copy + Default + Debug + PartialEq + Send + Sync + 'static {
+    /// Number of channels stored in a [`Film`](crate::film::Film).
+    const CHANNELS: usize;
+    /// Channel `i` (`i < CHANNELS`).
+    fn channel(&self, i: usize) -> f32;
+    /// Photometric luminance (Rec. 709 weights for RGB).
+    fn luminance(&self) -> f32;
+    /// The largest channel (the importance of seed 001's experiments).
+    fn max_channel(&self) -> f32 {
+        (0..Self::CHANNELS)
+            .map(|i| self.channel(i))
+            .fold(0.0, f32::max)
+    }
+    /// Finite and non-negative in every channel.
+    fn is_valid(&self) -> bool {
+        (0..Self::CHANNELS).all(|i| {
+            let c = self.channel(i);
+            c.is_finite() && c >= 0.0
+        })
+    }
+}
+
+impl Radiance for f32 {
+    const CHANNELS: usize = 1;
+    fn channel(&self, _i: usize) -> f32 {
+        *self
+    }
+    fn luminance(&self) -> f32 {
+        *self
+    }
+}
+
+/// Linear RGB radiance.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Rgb(pub [f32; 3]);
+
+impl Rgb {
+    /// Black.
+    pub const BLACK: Rgb = Rgb([0.0; 3]);
+
+    /// Component-wise `self * s`.
+    pub fn scale(self, s: f32) -> Rgb {
+        Rgb(self.0.map(|c| c * s))
+    }
+}
+
+impl Radiance for Rgb {
+    const CHANNELS: usize = 3;
+    fn channel(&self, i: usize) -> f32 {
+        self.0[i]
+    }
+    fn luminance(&self) -> f32 {
+        0.2126 * self.0[0] + 0.7152 * self.0[1] + 0.0722 * self.0[2]
+    }
+}
+
+/// A renderer as the engine sees it.
+pub trait PathOracle: Sync {
+    /// RGB for renderers, `f32` for scalar targets.
+    type Radiance: Radiance;
+
+    /// The film the engine renders into.
+    fn resolution(&self) -> Resolution;
+
+    /// Trace one path through `film`, drawing every other random decision from
+    /// `sampler`. Must be pure (see the module docs).
+    fn trace<S: Sampler + ?Sized>(
+        &self,
+        film: FilmPoint,
+        sampler: &mut S,
+        temperature: Temperature,
+    ) -> PathSample<Self::Radiance>;
+}
+
+/// What [`check_purity`] found.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PurityViolation<R> {
+    /// The trace whose numbers were recorded.
+    pub first: PathSample<R>,
+    /// The replay of the same numbers.
+    pub replay: PathSample<R>,
+    /// Numbers drawn by the first trace.
+    pub drawn: usize,
+}
+
+/// Traces `film` twice with the same numbers (and stream switches) and checks
+/// that the two samples are bit-identical, for `trials` random number streams
+/// derived from `seed`. An oracle that passes may still be impure elsewhere,
+/// but one that fails is certainly wrong.
+pub fn check_purity<O: PathOracle>(
+    oracle: &O,
+    film: FilmPoint,
+    temperature: Temperature,
+    seed: u64,
+    trials: u32,
+) -> Result<(), PurityViolation<O::Radiance>> {
+    for trial in 0..trials {
+        let mut recorder = Recording {
+            rng: rng::stream(seed, Domain::User, trial as u64),
+            log: Vec::new(),
+        };
+        let first = oracle.trace(film, &mut recorder, temperature);
+        let drawn = recorder
+            .log
+            .iter()
+            .filter(|e| matches!(e, Draw::Number(_)))
+            .count();
+        let mut replayer = Replaying {
+            log: &recorder.log,
+            at: 0,
+        };
+        let replay = oracle.trace(film, &mut replayer, temperature);
+        let same = first.flags == replay.flags
+            && (0..O::Radiance::CHANNELS).all(|i| {
+                first.radiance.channel(i).to_bits() == replay.radiance.channel(i).to_bits()
+            });
+        if !same || replayer.at != recorder.log.len() {
+            return Err(PurityViolation {
+                first,
+                replay,
+                drawn,
+            });
+        }
+    }
+    Ok(())
+}
+
+#[derive(Clone, Copy)]
+enum Draw {
+    Number(f32),
+    Stream(u8),
+}
+
+struct Recording {
+    rng: rand_pcg::Pcg32,
+    log: Vec<Draw>,
+}
+
+impl Sampler for Recording {
+    fn next_1d(&mut self) -> f32 {
+        let u = rng::uniform_f32(&mut self.rng);
+        self.log.push(Draw::Number(u));
+        u
+    }
+    fn start_stream(&mut self, stream: u8) {
+        self.log.push(Draw::Stream(stream));
+    }
+}
+
+/// Replays a recording; when the oracle departs from it (draws where it
+/// switched stream, or draws more), it gets 0.5 and the mismatch is detected
+/// through `at`.
+struct Replaying<'a> {
+    log: &'a [Draw],
+    at: usize,
+}
+
+impl Sampler for Replaying<'_> {
+    fn next_1d(&mut self) -> f32 {
+        match self.log.get(self.at) {
+            Some(Draw::Number(u)) => {
+                self.at += 1;
+                *u
+            }
+            _ => {
+                self.at = usize::MAX;
+                0.5
+            }
+        }
+    }
+    fn start_stream(&mut self, stream: u8) {
+        match self.log.get(self.at) {
+            Some(Draw::Stream(s)) if *s == stream => self.at += 1,
+            _ => self.at = usize::MAX,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::sync::atomic::{AtomicU32, Ordering};
+
+    struct Pure;
+    impl PathOracle for Pure {
+        type Radiance = f32;
+        fn resolution(&self) -> Resolution {
+            Resolution::new(1, 1)
+        }
+        fn trace<S: Sampler + ?Sized>(
+            &self,
+            f: FilmPoint,
+            s: &mut S,
+            _: Temperature,
+        ) -> PathSample<f32> {
+            let mut v = f.x;
+            while s.next_1d() < 0.7 {
+                v += s.next_1d();
+            }
+            PathSample::new(v)
+        }
+    }
+
+    /// Depends on hidden state: a counter bumped per call.
+    struct Impure(AtomicU32);
+    impl PathOracle for Impure {
+        type Radiance = f32;
+        fn resolution(&self) -> Resolution {
+            Resolution::new(1, 1)
+        }
+        fn trace<S: Sampler + ?Sized>(
+            &self,
+            _: FilmPoint,
+            s: &mut S,
+            _: Temperature,
+        ) -> PathSample<f32> {
+            let n = self.0.fetch_add(1, Ordering::Relaxed);
+            PathSample::new(s.next_1d() + n as f32)
+        }
+    }
+
+    #[test]
+    fn purity_check_accepts_pure_and_rejects_impure_oracles() {
+        let p = FilmPoint { x: 0.25, y: 0.5 };
+        assert!(check_purity(&Pure, p, Temperature::ONE, 7, 50).is_ok());
+        assert!(check_purity(&Impure(AtomicU32::new(0)), p, Temperature::ONE, 7, 1).is_err());
+    }
+
+    #[test]
+    fn film_points_stay_inside_the_film() {
+        let r = Resolution::new(1000, 3);
+        let below_one = f32_below(1.0);
+        let p = r.film_point([below_one, below_one]);
+        assert!(p.x < 1000.0 && p.y < 3.0);
+        assert_eq!(r.pixel_index(p), r.pixel_count() - 1);
+        assert_eq!(r.pixel_index(FilmPoint { x: -1.0, y: 1e9 }), 2 * 1000);
+    }
+
+    #[test]
+    fn invalid_radiance_is_detected() {
+        assert!(!f32::NAN.is_valid());
+        assert!(!(-1.0f32).is_valid());
+        assert!(!Rgb([0.0, f32::INFINITY, 0.0]).is_valid());
+        assert!(Rgb([0.0, 1.0, 2.0]).is_valid());
+        assert_eq!(Rgb([0.0, 1.0, 2.0]).max_channel(), 2.0);
+    }
+}

@@ -152,18 +152,15 @@ impl<R: Radiance> Chain<R> {
         let proposed = evaluate(importance, traced, film);
 
         let current = self.current.importance;
-        let acceptance = if current > 0.0 {
-            (proposed.importance / current).min(1.0)
-        } else {
-            1.0
-        };
-        let proposed_weight = kelemen_weight(
-            acceptance + large as u8 as f64,
+        let acceptance = acceptance(current, proposed.importance);
+        let [proposed_weight, current_weight] = splat_weights(
+            acceptance,
+            large,
+            current,
             proposed.importance,
             normalization,
             p_large,
         );
-        let current_weight = kelemen_weight(1.0 - acceptance, current, normalization, p_large);
         if proposed_weight > 0.0 {
             splat(film, proposed.sample.radiance, proposed_weight);
         }
@@ -195,14 +192,40 @@ impl<R: Radiance> Chain<R> {
     }
 }
 
-/// `numerator / (I/b + p)`, zero when the numerator is (even if `I = p = 0`).
+/// The Metropolis-Hastings acceptance probability of a symmetric proposal
+/// (seed 002 eq. 3.2): `min(1, I(y)/I(x))`, and 1 when `I(x) = 0`.
 #[inline]
-fn kelemen_weight(numerator: f64, importance: f64, normalization: f64, p_large: f64) -> f64 {
-    if numerator <= 0.0 {
-        0.0
+pub fn acceptance(current: f64, proposed: f64) -> f64 {
+    if current > 0.0 {
+        (proposed / current).min(1.0)
     } else {
-        numerator / (importance / normalization + p_large)
+        1.0
     }
+}
+
+/// Kelemen's weights `[w(y), w(x)]` of the proposal and the current state (see
+/// the module docs); a weight is zero when its numerator is, even if
+/// `I/b + p = 0`.
+#[inline]
+pub fn splat_weights(
+    acceptance: f64,
+    large_step: bool,
+    current: f64,
+    proposed: f64,
+    normalization: f64,
+    p_large: f64,
+) -> [f64; 2] {
+    let weight = |numerator: f64, importance: f64| {
+        if numerator <= 0.0 {
+            0.0
+        } else {
+            numerator / (importance / normalization + p_large)
+        }
+    };
+    [
+        weight(acceptance + large_step as u8 as f64, proposed),
+        weight(1.0 - acceptance, current),
+    ]
 }
 
 /// Draws a uniform primary sample from `rng` (a large step) and evaluates it.

@@ -16,39 +16,56 @@ pub fn mean_and_variance(series: &[f64]) -> (f64, f64) {
 
 /// Autocorrelations `ρ_0 = 1, ρ_1, ..., ρ_max_lag` (empty for a constant series).
 pub fn autocorrelation(series: &[f64], max_lag: usize) -> Vec<f64> {
-    let (mean, var) = mean_and_variance(series);
-    if !(var > 0.0) {
+    let Some(lag) = Lags::new(series) else {
         return Vec::new();
-    }
-    let n = series.len();
-    (0..=max_lag.min(n.saturating_sub(1)))
-        .map(|k| {
-            let c: f64 = series[..n - k]
-                .iter()
-                .zip(&series[k..])
-                .map(|(a, b)| (a - mean) * (b - mean))
-                .sum();
-            c / (n as f64 * var)
-        })
+    };
+    (0..=max_lag.min(series.len().saturating_sub(1)))
+        .map(|k| lag.rho(k))
         .collect()
 }
 
+/// Computes single autocorrelations of a centred series on demand.
+struct Lags<'a> {
+    series: &'a [f64],
+    mean: f64,
+    variance: f64,
+}
+
+impl<'a> Lags<'a> {
+    fn new(series: &'a [f64]) -> Option<Self> {
+        let (mean, variance) = mean_and_variance(series);
+        (variance > 0.0).then_some(Self {
+            series,
+            mean,
+            variance,
+        })
+    }
+
+    fn rho(&self, k: usize) -> f64 {
+        let n = self.series.len();
+        let m = self.mean;
+        let c: f64 = self.series[..n - k]
+            .iter()
+            .zip(&self.series[k..])
+            .map(|(a, b)| (a - m) * (b - m))
+            .sum();
+        c / (n as f64 * self.variance)
+    }
+}
+
 /// Integrated autocorrelation time `τ = 1 + 2 Σ ρ_k`, truncated by Geyer's
-/// initial positive sequence (pairs `ρ_{2m} + ρ_{2m+1}` summed while positive).
-/// Returns 1 for a constant or too short series.
+/// initial positive sequence (pairs `ρ_{2m} + ρ_{2m+1}` summed while
+/// positive); lags are computed only as far as the sequence reaches, so the
+/// cost is `O(n τ)`. Returns 1 for a constant or too short series.
 pub fn integrated_autocorrelation_time(series: &[f64]) -> f64 {
     let n = series.len();
-    if n < 4 {
+    let Some(lags) = Lags::new(series) else {
         return 1.0;
-    }
-    let rho = autocorrelation(series, (n / 2).min(20_000));
-    if rho.is_empty() {
-        return 1.0;
-    }
+    };
     let mut tau = -1.0;
     let mut m = 0;
-    while 2 * m + 1 < rho.len() {
-        let pair = rho[2 * m] + rho[2 * m + 1];
+    while 2 * m + 1 < n / 2 {
+        let pair = lags.rho(2 * m) + lags.rho(2 * m + 1);
         if pair <= 0.0 {
             break;
         }

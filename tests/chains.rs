@@ -1,0 +1,156 @@
+//! Long chains against targets with known distributions (fixed seeds). For
+//! every histogram bin `k` the fraction of time the chain spends there is an
+//! MCMC mean of the indicator series; its standard error is
+//! `sqrt(p_k (1 - p_k) τ_k / n)` with `τ_k` the integrated autocorrelation
+//! time of that series (Geyer's initial positive sequence). Each bin must lie
+//! within 4.5 standard errors: with 16 to 25 bins the chance that a correct
+//! sampler fails is below 1e-3 (Bonferroni), while a sampler that leaves the
+//! target invariant only approximately fails.
+
+use strata::engine::analytic::{Component, GaussianMixture, Parabola};
+use strata::engine::bootstrap::Bootstrap;
+use strata::engine::diagnose::integrated_autocorrelation_time;
+use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
+use strata::engine::target::MaxChannel;
+use strata::engine::{PathOracle, Resolution};
+
+fn kernels() -> Vec<(&'static str, SmallStep)> {
+    vec![
+        ("kelemen", SmallStep::Kelemen(Kelemen::DEFAULT)),
+        ("kelemen-seed001", SmallStep::Kelemen(Kelemen::SEED_001)),
+        ("gaussian", SmallStep::Gaussian(Gaussian::DEFAULT)),
+        ("adaptive", SmallStep::Adaptive(Adaptive::DEFAULT)),
+    ]
+}
+
+/// Runs one chain for `steps` steps and returns the bin of its state after each.
+fn run_chain<O: PathOracle>(
+    oracle: &O,
+    params: MutationParams,
+    seed: u64,
+    steps: usize,
+    bin: impl Fn(f32, f32) -> usize,
+) -> Vec<usize> {
+    let bootstrap = Bootstrap::run(oracle, &MaxChannel, &params, seed, 1000).unwrap();
+    let mut chain = bootstrap.start_chain(oracle, &MaxChannel, params, 0);
+    let b = bootstrap.normalization();
+    (0..steps)
+        .map(|_| {
+            chain.step(oracle, &MaxChannel, b, |_, _, _| {});
+            let f = chain.current().film;
+            bin(f.x, f.y)
+        })
+        .collect()
+}
+
+/// Largest |z| over bins, with autocorrelation-adjusted standard errors.
+fn worst_z(states: &[usize], expected: &[f64]) -> (f64, usize) {
+    let n = states.len() as f64;
+    let mut worst = (0.0, 0);
+    for (k, &p) in expected.iter().enumerate() {
+        let series: Vec<f64> = states.iter().map(|&s| (s == k) as u8 as f64).collect();
+        let observed = series.iter().sum::<f64>() / n;
+        let tau = integrated_autocorrelation_time(&series);
+        let se = (p * (1.0 - p) * tau / n).sqrt();
+        let z = ((observed - p) / se).abs();
+        if z > worst.0 {
+            worst = (z, k);
+        }
+    }
+    worst
+}
+
+#[test]
+fn chains_sample_the_one_dimensional_target() {
+    // π(u) = (u - 0.5)^2 of seed 002 sec. 3.3, 16 bins.
+    let bins = 16;
+    let oracle = Parabola { bins: 1 };
+    let expected: Vec<f64> = (0..bins)
+        .map(|k| Parabola::probability(k as f64 / bins as f64, (k + 1) as f64 / bins as f64))
+        .collect();
+    for (name, step) in kernels() {
+        for p_large in [0.0, 0.3] {
+            let params = MutationParams {
+                small_step: step,
+                large_step_probability: p_large,
+            };
+            let states = run_chain(&oracle, params, 11, 400_000, |x, _| {
+                ((x * bins as f32) as usize).min(bins - 1)
+            });
+            let (z, k) = worst_z(&states, &expected);
+            assert!(
+                z < 4.5,
+                "{name}, p_large {p_large}: bin {k} is {z:.2} standard errors off"
+            );
+        }
+    }
+}
+
+#[test]
+fn chains_sample_a_two_dimensional_gaussian_mixture() {
+    // Four separated modes in [0,1]^2, one of them narrow, on a 5x5 grid of bins.
+    let mode = |w: f64, m: [f64; 2], s: [f64; 2]| Component {
+        weight: w,
+        mean: m.to_vec(),
+        sigma: s.to_vec(),
+    };
+    let mixture = GaussianMixture {
+        components: vec![
+            mode(0.4, [0.25, 0.3], [0.08, 0.05]),
+            mode(0.3, [0.7, 0.7], [0.06, 0.1]),
+            mode(0.2, [0.75, 0.2], [0.03, 0.03]),
+            mode(0.1, [0.2, 0.8], [0.1, 0.1]),
+        ],
+        resolution: Resolution::new(1, 1),
+    };
+    let g = 5;
+    let total = mixture.box_integral(&[0.0, 0.0], &[1.0, 1.0], 1.0);
+    let expected: Vec<f64> = (0..g * g)
+        .map(|k| {
+            let (i, j) = ((k % g) as f64, (k / g) as f64);
+            let h = 1.0 / g as f64;
+            mixture.box_integral(&[i * h, j * h], &[(i + 1.0) * h, (j + 1.0) * h], 1.0) / total
+        })
+        .collect();
+    for (name, step) in kernels() {
+        let params = MutationParams {
+            small_step: step,
+            large_step_probability: 0.3,
+        };
+        let cell = |v: f32| ((v * g as f32) as usize).min(g - 1);
+        let states = run_chain(&mixture, params, 12, 600_000, |x, y| cell(y) * g + cell(x));
+        let (z, k) = worst_z(&states, &expected);
+        assert!(z < 4.5, "{name}: bin {k} is {z:.2} standard errors off");
+    }
+}
+
+/// The same test must fail for a chain that is wrong: replacing the target by
+/// a slightly different one (a 10 % tilt) is caught.
+#[test]
+fn the_goodness_of_fit_test_detects_a_wrong_target() {
+    struct Tilted;
+    impl PathOracle for Tilted {
+        type Radiance = f32;
+        fn resolution(&self) -> Resolution {
+            Resolution::new(1, 1)
+        }
+        fn trace<S: strata::engine::Sampler + ?Sized>(
+            &self,
+            f: strata::engine::FilmPoint,
+            _: &mut S,
+            _: strata::engine::Temperature,
+        ) -> strata::engine::PathSample<f32> {
+            let u = f.x;
+            strata::engine::PathSample::new((u - 0.5) * (u - 0.5) * (0.95 + 0.1 * u))
+        }
+    }
+    let bins = 16;
+    let expected: Vec<f64> = (0..bins)
+        .map(|k| Parabola::probability(k as f64 / bins as f64, (k + 1) as f64 / bins as f64))
+        .collect();
+    let params = MutationParams::default();
+    let states = run_chain(&Tilted, params, 11, 400_000, |x, _| {
+        ((x * bins as f32) as usize).min(bins - 1)
+    });
+    assert!(worst_z(&states, &expected).0 > 4.5);
+}

@@ -1,1 +1,91 @@
-fn main() {}
+//! Engine benchmarks: one Metropolis-Hastings step with a trivial oracle, per
+//! kernel and dimension; and MC vs PSSMLT cost per path on the procedural
+//! oracle. `cargo bench --bench engine`; summary in docs/BENCHMARKS.md.
+
+use std::hint::black_box;
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use strata::engine::analytic::ProceduralImage;
+use strata::engine::bootstrap::Bootstrap;
+use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
+use strata::engine::render::{
+    Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
+};
+use strata::engine::target::MaxChannel;
+use strata::engine::{FilmPoint, PathOracle, PathSample, Resolution, Sampler, Temperature};
+
+/// Reads `dims` numbers and returns their mean: as cheap as an oracle gets.
+struct Trivial {
+    dims: usize,
+}
+
+impl PathOracle for Trivial {
+    type Radiance = f32;
+    fn resolution(&self) -> Resolution {
+        Resolution::new(64, 64)
+    }
+    fn trace<S: Sampler + ?Sized>(
+        &self,
+        _: FilmPoint,
+        s: &mut S,
+        _: Temperature,
+    ) -> PathSample<f32> {
+        let sum: f32 = (0..self.dims).map(|_| s.next_1d()).sum();
+        PathSample::new(0.1 + sum / self.dims as f32)
+    }
+}
+
+fn mh_step(c: &mut Criterion) {
+    let mut group = c.benchmark_group("mh_step");
+    let kernels = [
+        ("kelemen", SmallStep::Kelemen(Kelemen::DEFAULT)),
+        ("gaussian", SmallStep::Gaussian(Gaussian::DEFAULT)),
+        ("adaptive", SmallStep::Adaptive(Adaptive::DEFAULT)),
+    ];
+    for dims in [8usize, 32] {
+        let oracle = Trivial { dims };
+        for (name, small_step) in kernels {
+            let params = MutationParams {
+                small_step,
+                large_step_probability: 0.3,
+            };
+            let bootstrap = Bootstrap::run(&oracle, &MaxChannel, &params, 1, 256).unwrap();
+            let mut chain = bootstrap.start_chain(&oracle, &MaxChannel, params, 0);
+            let b = bootstrap.normalization();
+            group.throughput(Throughput::Elements(1));
+            group.bench_function(BenchmarkId::new(name, dims), |bench| {
+                bench.iter(|| {
+                    chain.step(&oracle, &MaxChannel, b, |p, r, w| {
+                        black_box((p, r, w));
+                    })
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
+fn per_path(c: &mut Criterion) {
+    let image = ProceduralImage::showcase(Resolution::new(128, 96));
+    let budget = Budget::samples_per_pixel(16, image.resolution);
+    let mut group = c.benchmark_group("per_path_procedural");
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(16 * 128 * 96));
+    group.bench_function("mc", |b| {
+        b.iter(|| render_mc(&image, &McSettings { seed: 1, budget }, &Silent).unwrap())
+    });
+    let settings = PssmltSettings {
+        seed: 1,
+        budget,
+        chains: 256,
+        bootstrap_candidates: 4096,
+        ..Default::default()
+    };
+    group.bench_function("pssmlt", |b| {
+        b.iter(|| render_pssmlt(&image, &MaxChannel, &settings, &Silent).unwrap())
+    });
+    group.finish();
+}
+
+criterion_group!(benches, mh_step, per_path);
+criterion_main!(benches);

@@ -2,3 +2,6 @@
 
 pub use strata_engine as engine;
 pub use strata_native as native;
+
+#[cfg(feature = "image-io")]
+pub mod io;

@@ -428,17 +428,15 @@ mod tests {
                     let x = (px as f64 + (i as f64 + 0.5) / n as f64) / 8.0;
                     let y = (py as f64 + (j as f64 + 0.5) / n as f64) / 6.0;
                     let v = img.image_value(x, y);
-                    for c in 0..3 {
-                        sum[c] += v.0[c] as f64 / (n * n) as f64;
+                    for (acc, value) in sum.iter_mut().zip(v.0) {
+                        *acc += value as f64 / (n * n) as f64;
                     }
                 }
             }
-            for c in 0..3 {
-                let exact = reference.pixel(px, py)[c];
+            for (c, (numeric, exact)) in sum.iter().zip(reference.pixel(px, py)).enumerate() {
                 assert!(
-                    (sum[c] - exact).abs() < 2e-3 * (1.0 + exact),
-                    "pixel ({px},{py}) c{c}: {} vs {exact}",
-                    sum[c]
+                    (numeric - exact).abs() < 2e-3 * (1.0 + exact),
+                    "pixel ({px},{py}) c{c}: {numeric} vs {exact}"
                 );
             }
         }

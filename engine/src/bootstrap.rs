@@ -74,8 +74,15 @@ impl Bootstrap {
                 total
             })
             .collect();
-        if !(total > 0.0) {
+        if total <= 0.0 {
             return Err(Error::AllCandidatesBlack { candidates });
+        }
+        if !total.is_finite() {
+            return Err(Error::invalid(
+                "importance",
+                total,
+                "candidate importances whose sum fits in an f64",
+            ));
         }
         Ok(Self {
             seed,

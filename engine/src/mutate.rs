@@ -19,6 +19,8 @@ use crate::rng::uniform_f64;
 pub struct Kelemen {
     s1: f64,
     s2: f64,
+    /// `ln(s2 / s1)`, precomputed.
+    log_ratio: f64,
 }
 
 impl Kelemen {
@@ -26,11 +28,13 @@ impl Kelemen {
     pub const DEFAULT: Kelemen = Kelemen {
         s1: 1.0 / 1024.0,
         s2: 1.0 / 64.0,
+        log_ratio: 4.0 * core::f64::consts::LN_2,
     };
     /// The sizes of seed 001 (sec. 4, "minimum 1/1024, maximum 1/32").
     pub const SEED_001: Kelemen = Kelemen {
         s1: 1.0 / 1024.0,
         s2: 1.0 / 32.0,
+        log_ratio: 5.0 * core::f64::consts::LN_2,
     };
 
     /// A kernel with `0 < s1 < s2 <= 0.5`.
@@ -39,7 +43,11 @@ impl Kelemen {
         if !(s2.is_finite() && s2 > s1 && s2 <= 0.5) {
             return Err(Error::invalid("s2", s2, "s1 < s2 <= 0.5"));
         }
-        Ok(Self { s1, s2 })
+        Ok(Self {
+            s1,
+            s2,
+            log_ratio: libm::log(s2 / s1),
+        })
     }
 
     /// Smallest step size.
@@ -55,10 +63,11 @@ impl Kelemen {
     /// One offset.
     #[inline]
     pub fn offset<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
-        let sign = uniform_f64(rng);
-        let xi = uniform_f64(rng);
-        let d = self.s2 * libm::exp(-libm::log(self.s2 / self.s1) * xi);
-        if sign < 0.5 { d } else { -d }
+        // One draw: the top bit is the sign, the low 53 bits are ξ.
+        let bits = rng.next_u64();
+        let xi = (bits & ((1 << 53) - 1)) as f64 * (1.0 / (1u64 << 53) as f64);
+        let d = self.s2 * exp_neg(self.log_ratio * xi);
+        if bits >> 63 == 0 { d } else { -d }
     }
 
     /// `P(|d| <= x)` for one step.
@@ -68,9 +77,30 @@ impl Kelemen {
         } else if x >= self.s2 {
             1.0
         } else {
-            1.0 - libm::log(self.s2 / x) / libm::log(self.s2 / self.s1)
+            1.0 - libm::log(self.s2 / x) / self.log_ratio
         }
     }
+}
+
+/// `e^-x` for `0 <= x <= 700`, to a relative error below 1e-8. With
+/// `y = x / ln 2 = n + f` (`n` whole, `f` in `[0, 1)`), `e^-x = 2^-n · 2^-1/2 ·
+/// e^t` where `t = (1/2 - f) ln 2` lies in `[-0.35, 0.35]`; `e^t` is its degree-8
+/// Taylor polynomial evaluated by Estrin's scheme (a short dependency chain).
+/// Kelemen's step calls this for every coordinate of every small step, where
+/// `libm::exp` dominated the engine's cost.
+#[inline]
+fn exp_neg(x: f64) -> f64 {
+    use core::f64::consts::{FRAC_1_SQRT_2, LN_2, LOG2_E};
+    let y = x * LOG2_E;
+    let n = y as u64; // trunc = floor for y >= 0
+    let t = (0.5 - (y - n as f64)) * LN_2;
+    let t2 = t * t;
+    let t4 = t2 * t2;
+    let low = (1.0 + t) + t2 * (1.0 / 2.0 + t * (1.0 / 6.0));
+    let high = (1.0 / 24.0 + t * (1.0 / 120.0)) + t2 * (1.0 / 720.0 + t * (1.0 / 5040.0));
+    let e_t = low + t4 * (high + t4 * (1.0 / 40320.0));
+    // 2^-n as an f64 exponent (n <= 1022 here).
+    e_t * FRAC_1_SQRT_2 * f64::from_bits((1023 - n.min(1022)) << 52)
 }
 
 /// Gaussian small step with standard deviation `sigma` (pbrt-v4's MLTSampler).
@@ -100,11 +130,13 @@ impl Gaussian {
     /// The sum of `n` steps' offsets, drawn exactly.
     #[inline]
     pub fn offset_of_steps<R: Rng + ?Sized>(&self, n: u64, rng: &mut R) -> f64 {
-        // Box-Muller; 1 - u keeps the logarithm finite.
-        let u1 = 1.0 - uniform_f64(rng);
-        let u2 = uniform_f64(rng);
-        let normal = libm::sqrt(-2.0 * libm::log(u1)) * libm::cos(core::f64::consts::TAU * u2);
-        normal * self.sigma * libm::sqrt(n as f64)
+        unit_normals(rng)[0] * self.scale_of_steps(n)
+    }
+
+    /// Standard deviation of the sum of `n` steps, `sigma·sqrt(n)`.
+    #[inline]
+    pub fn scale_of_steps(&self, n: u64) -> f64 {
+        self.sigma * libm::sqrt(n as f64)
     }
 
     /// `P(|d| <= x)` for one step.
@@ -114,6 +146,51 @@ impl Gaussian {
         } else {
             libm::erf(x / (self.sigma * core::f64::consts::SQRT_2))
         }
+    }
+}
+
+/// Two independent standard normal numbers (Box-Muller; `1 - u` keeps the
+/// logarithm finite).
+#[inline]
+pub fn unit_normals<R: Rng + ?Sized>(rng: &mut R) -> [f64; 2] {
+    let u1 = 1.0 - uniform_f64(rng);
+    let u2 = uniform_f64(rng);
+    let r = libm::sqrt(-2.0 * libm::log(u1));
+    let (sin, cos) = libm::sincos(core::f64::consts::TAU * u2);
+    [r * cos, r * sin]
+}
+
+/// A batch of independent random offsets drawn ahead of use. Each offset is a
+/// short chain of dependent floating-point operations; drawing 32 at a time
+/// lets the processor overlap them instead of waiting on each.
+#[derive(Clone, Debug)]
+pub struct OffsetBatch {
+    values: [f64; OffsetBatch::LEN],
+    next: usize,
+}
+
+impl Default for OffsetBatch {
+    fn default() -> Self {
+        Self {
+            values: [0.0; Self::LEN],
+            next: Self::LEN,
+        }
+    }
+}
+
+impl OffsetBatch {
+    /// Offsets per batch.
+    pub const LEN: usize = 32;
+
+    /// The next value, refilling the batch with `fill` when it is spent.
+    #[inline]
+    pub fn next(&mut self, fill: impl FnOnce(&mut [f64; Self::LEN])) -> f64 {
+        if self.next == Self::LEN {
+            fill(&mut self.values);
+            self.next = 0;
+        }
+        self.next += 1;
+        self.values[self.next - 1]
     }
 }
 
@@ -289,7 +366,17 @@ impl MutationParams {
     pub fn validate(&self) -> Result<(), Error> {
         check_probability("large_step_probability", self.large_step_probability)?;
         match self.small_step {
-            SmallStep::Kelemen(k) => Kelemen::new(k.s1, k.s2).map(drop),
+            SmallStep::Kelemen(k) => {
+                Kelemen::new(k.s1, k.s2)?;
+                // A hand-built value must also carry the matching ln(s2/s1).
+                let consistent =
+                    (k.log_ratio - libm::log(k.s2 / k.s1)).abs() <= 1e-12 * k.log_ratio.abs();
+                if consistent {
+                    Ok(())
+                } else {
+                    Err(Error::invalid("s2", k.s2, "a kernel built by Kelemen::new"))
+                }
+            }
             SmallStep::Gaussian(g) => Gaussian::new(g.sigma).map(drop),
             SmallStep::Adaptive(a) => Adaptive::new(a.initial_theta, a.target_acceptance).map(drop),
         }
@@ -300,7 +387,12 @@ impl MutationParams {
 /// is 0.0: the two are the same point of the circle.
 #[inline]
 pub fn wrap_unit(v: f64) -> f32 {
-    let w = (v - libm::floor(v)) as f32;
+    // v - floor(v) for |v| < 2^63, without a libm call.
+    let mut w = v - v as i64 as f64;
+    if w < 0.0 {
+        w += 1.0;
+    }
+    let w = w as f32;
     if w < 1.0 { w } else { 0.0 }
 }
 
@@ -335,7 +427,11 @@ mod tests {
             })
         ));
         let p = MutationParams {
-            small_step: SmallStep::Kelemen(Kelemen { s1: 0.2, s2: 0.1 }),
+            small_step: SmallStep::Kelemen(Kelemen {
+                s1: 0.2,
+                s2: 0.1,
+                log_ratio: 0.1,
+            }),
             ..Default::default()
         };
         assert!(p.validate().is_err());
@@ -406,6 +502,18 @@ mod tests {
             // Symmetry: the sign is a fair coin (|z| < 4).
             let z = (positive as f64 - n as f64 / 2.0) / libm::sqrt(n as f64 / 4.0);
             assert!(z.abs() < 4.0, "{name}: sign imbalance z = {z}");
+        }
+    }
+
+    #[test]
+    fn fast_exponential_is_accurate() {
+        for i in 0..=10_000 {
+            let x = i as f64 * 0.0037;
+            let (fast, exact) = (exp_neg(x), libm::exp(-x));
+            assert!(
+                (fast / exact - 1.0).abs() < 1e-8,
+                "e^-{x}: {fast} vs {exact}"
+            );
         }
     }
 

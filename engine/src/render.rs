@@ -383,8 +383,7 @@ struct ChainWork<R> {
 /// (bands in parallel), and within a band chain by chain in chain order: the
 /// order of additions to every pixel is fixed, whatever the thread count.
 struct SplatBands {
-    width: usize,
-    rows_per_band: usize,
+    pixels_per_band: usize,
     count: usize,
 }
 
@@ -394,9 +393,9 @@ impl SplatBands {
     fn new(resolution: Resolution) -> Self {
         let height = resolution.height as usize;
         let rows_per_band = height.div_ceil(Self::MAX_BANDS);
+        let width = resolution.width as usize;
         Self {
-            width: resolution.width as usize,
-            rows_per_band,
+            pixels_per_band: width * rows_per_band,
             count: height.div_ceil(rows_per_band),
         }
     }
@@ -407,13 +406,13 @@ impl SplatBands {
 
     #[inline]
     fn band_of(&self, pixel: usize) -> usize {
-        pixel / self.width / self.rows_per_band
+        pixel / self.pixels_per_band
     }
 
     fn merge<R: Radiance>(&self, work: &mut [ChainWork<R>], film: &mut Film) {
         let channels = film.channels();
-        let band_len = self.rows_per_band * self.width * channels;
-        let first_pixel = |band: usize| band * self.rows_per_band * self.width;
+        let band_len = self.pixels_per_band * channels;
+        let first_pixel = |band: usize| band * self.pixels_per_band;
         let add_band = |(band, values): (usize, &mut [f64])| {
             let base = first_pixel(band);
             for w in work.iter() {

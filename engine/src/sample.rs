@@ -15,7 +15,9 @@ use alloc::vec::Vec;
 
 use rand_pcg::Pcg32;
 
-use crate::mutate::{Adaptive, AdaptiveState, SmallStep, wrap_unit};
+use crate::mutate::{
+    Adaptive, AdaptiveState, Gaussian, Kelemen, OffsetBatch, SmallStep, unit_normals, wrap_unit,
+};
 use crate::oracle::{FilmPoint, Resolution};
 use crate::rng::uniform_f32;
 
@@ -91,8 +93,10 @@ struct Coordinate {
 /// The small-step kernel with whatever running state it needs.
 #[derive(Clone, Debug)]
 enum Kernel {
-    Kelemen(crate::mutate::Kelemen),
-    Gaussian(crate::mutate::Gaussian),
+    /// Offsets drawn in batches.
+    Kelemen(Kelemen, OffsetBatch),
+    /// Unit normals drawn in batches, scaled by `sigma·sqrt(steps)`.
+    Gaussian(Gaussian, OffsetBatch),
     Adaptive {
         kernel: Adaptive,
         state: AdaptiveState,
@@ -109,8 +113,8 @@ const THETA_HISTORY_LIMIT: usize = 4096;
 impl Kernel {
     fn new(step: SmallStep) -> Self {
         match step {
-            SmallStep::Kelemen(k) => Kernel::Kelemen(k),
-            SmallStep::Gaussian(g) => Kernel::Gaussian(g),
+            SmallStep::Kelemen(k) => Kernel::Kelemen(k, OffsetBatch::default()),
+            SmallStep::Gaussian(g) => Kernel::Gaussian(g, OffsetBatch::default()),
             SmallStep::Adaptive(a) => Kernel::Adaptive {
                 kernel: a,
                 state: AdaptiveState::new(&a),
@@ -121,11 +125,20 @@ impl Kernel {
     }
 
     /// `value` moved by the small steps of iterations `from + 1 ..= to`.
-    fn advance(&self, value: f32, from: u64, to: u64, rng: &mut Pcg32) -> f32 {
+    fn advance(&mut self, value: f32, from: u64, to: u64, rng: &mut Pcg32) -> f32 {
         let steps = to - from;
         let offset = match self {
-            Kernel::Gaussian(g) => g.offset_of_steps(steps, rng),
-            Kernel::Kelemen(k) => (0..steps).map(|_| k.offset(rng)).sum(),
+            Kernel::Gaussian(g, batch) => {
+                let normal = batch.next(|values| {
+                    for pair in values.chunks_exact_mut(2) {
+                        pair.copy_from_slice(&unit_normals(rng));
+                    }
+                });
+                normal * g.scale_of_steps(steps)
+            }
+            Kernel::Kelemen(k, batch) => (0..steps)
+                .map(|_| batch.next(|values| values.iter_mut().for_each(|v| *v = k.offset(rng))))
+                .sum(),
             Kernel::Adaptive {
                 state,
                 history,

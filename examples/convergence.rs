@@ -11,7 +11,9 @@ use std::path::PathBuf;
 use clap::Parser;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
 use strata::engine::metrics::{self, ImageErrors};
-use strata::engine::render::{Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt};
+use strata::engine::render::{
+    Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
+};
 use strata::engine::target::MaxChannel;
 use strata::engine::{Film, PathOracle, Resolution};
 
@@ -29,15 +31,29 @@ struct Args {
     out: PathBuf,
 }
 
-fn mean_errors<O: PathOracle>(oracle: &O, reference: &Film, spp: u64, runs: u64, pssmlt: bool) -> ImageErrors {
+fn mean_errors<O: PathOracle>(
+    oracle: &O,
+    reference: &Film,
+    spp: u64,
+    runs: u64,
+    pssmlt: bool,
+) -> ImageErrors {
     let mut sum = ImageErrors::default();
     for seed in 0..runs {
         let budget = Budget::samples_per_pixel(spp, oracle.resolution());
         let film = if pssmlt {
-            let settings = PssmltSettings { seed, budget, ..Default::default() };
-            render_pssmlt(oracle, &MaxChannel, &settings, &Silent).expect("render").film
+            let settings = PssmltSettings {
+                seed,
+                budget,
+                ..Default::default()
+            };
+            render_pssmlt(oracle, &MaxChannel, &settings, &Silent)
+                .expect("render")
+                .film
         } else {
-            render_mc(oracle, &McSettings { seed, budget }, &Silent).expect("render").film
+            render_mc(oracle, &McSettings { seed, budget }, &Silent)
+                .expect("render")
+                .film
         };
         let e = metrics::compare(&film, reference).expect("same shape");
         sum.mape += e.mape / runs as f64;
@@ -57,14 +73,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut csv = String::from("scene,method,spp,mape,rel_mse,l1,l2,mse\n");
     println!("| scene | method | spp | MAPE | relMSE | L1 | L2 |\n|---|---|---|---|---|---|---|");
     let scenes: [(&str, &dyn Fn(u64, bool) -> ImageErrors); 2] = [
-        ("procedural", &|spp, p| mean_errors(&procedural, &procedural.reference(), spp, args.runs, p)),
-        ("mixture", &|spp, p| mean_errors(&mixture, &mixture.reference(1.0), spp, args.runs, p)),
+        ("procedural", &|spp, p| {
+            mean_errors(&procedural, &procedural.reference(), spp, args.runs, p)
+        }),
+        ("mixture", &|spp, p| {
+            mean_errors(&mixture, &mixture.reference(1.0), spp, args.runs, p)
+        }),
     ];
     for (scene, measure) in scenes {
         for &spp in &args.spp {
             for (method, pssmlt) in [("mc", false), ("pssmlt", true)] {
                 let e = measure(spp, pssmlt);
-                writeln!(csv, "{scene},{method},{spp},{},{},{},{},{}", e.mape, e.rel_mse, e.l1, e.l2, e.mse)?;
+                writeln!(
+                    csv,
+                    "{scene},{method},{spp},{},{},{},{},{}",
+                    e.mape, e.rel_mse, e.l1, e.l2, e.mse
+                )?;
                 println!(
                     "| {scene} | {method} | {spp} | {:.4} | {:.5} | {:.5} | {:.5} |",
                     e.mape, e.rel_mse, e.l1, e.l2

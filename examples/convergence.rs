@@ -72,7 +72,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mixture = GaussianMixture::random(12, 4, (0.02, 0.1), resolution, 0);
     let mut csv = String::from("scene,method,spp,mape,rel_mse,l1,l2,mse\n");
     println!("| scene | method | spp | MAPE | relMSE | L1 | L2 |\n|---|---|---|---|---|---|---|");
-    let scenes: [(&str, &dyn Fn(u64, bool) -> ImageErrors); 2] = [
+    type Measure<'a> = &'a dyn Fn(u64, bool) -> ImageErrors;
+    let scenes: [(&str, Measure); 2] = [
         ("procedural", &|spp, p| {
             mean_errors(&procedural, &procedural.reference(), spp, args.runs, p)
         }),

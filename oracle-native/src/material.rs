@@ -1,0 +1,877 @@
+//! Materials and their BSDFs, in a local shading frame where `z` is the normal.
+//!
+//! Microfacet lobes use the GGX (Trowbridge-Reitz) distribution with
+//! height-correlated Smith masking (Walter et al. 2007); rough dielectrics
+//! follow Walter et al.'s generalized half vector. Every BSDF can be
+//! *tempered* (seed 002 sec. 5.2, eq. 5.5): its roughness `ρ` becomes
+//! `sqrt(T)·max(ρ, ρ_min)` with `ρ_min = 1e-4` for specular surfaces, so
+//! specular lobes widen into glossy ones as the temperature rises.
+
+use std::f32::consts::{FRAC_1_PI, PI};
+
+use glam::{Vec2, Vec3};
+
+/// Smallest roughness a tempered specular surface gets (seed 002 eq. 5.5).
+pub const MIN_TEMPERED_ROUGHNESS: f32 = 1e-4;
+
+/// A spatially varying color.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Texture {
+    /// One color everywhere.
+    Constant(Vec3),
+    /// An image, linear RGB, row 0 at the top, repeated outside `[0, 1]`.
+    Image {
+        /// Width in texels.
+        width: u32,
+        /// Height in texels.
+        height: u32,
+        /// Linear RGB texels.
+        texels: Vec<Vec3>,
+        /// `(u, v)` scale.
+        scale: Vec2,
+    },
+    /// Two colors in a checkerboard of `scale` checks per unit of `(u, v)`.
+    Checkerboard {
+        /// Color of even checks.
+        even: Vec3,
+        /// Color of odd checks.
+        odd: Vec3,
+        /// Checks per unit.
+        scale: Vec2,
+    },
+}
+
+impl Texture {
+    /// The color at texture coordinates `uv` (bilinear for images).
+    pub fn eval(&self, uv: Vec2) -> Vec3 {
+        match self {
+            Texture::Constant(c) => *c,
+            Texture::Checkerboard { even, odd, scale } => {
+                let p = uv * *scale;
+                if (p.x.floor() as i64 + p.y.floor() as i64) % 2 == 0 {
+                    *even
+                } else {
+                    *odd
+                }
+            }
+            Texture::Image {
+                width,
+                height,
+                texels,
+                scale,
+            } => {
+                let (w, h) = (*width as i64, *height as i64);
+                // pbrt's v points up the image.
+                let p = uv * *scale;
+                let x = p.x * w as f32 - 0.5;
+                let y = (1.0 - p.y) * h as f32 - 0.5;
+                let (x0, y0) = (x.floor(), y.floor());
+                let (fx, fy) = (x - x0, y - y0);
+                let texel =
+                    |i: i64, j: i64| texels[(j.rem_euclid(h) * w + i.rem_euclid(w)) as usize];
+                let (i, j) = (x0 as i64, y0 as i64);
+                texel(i, j) * (1.0 - fx) * (1.0 - fy)
+                    + texel(i + 1, j) * fx * (1.0 - fy)
+                    + texel(i, j + 1) * (1.0 - fx) * fy
+                    + texel(i + 1, j + 1) * fx * fy
+            }
+        }
+    }
+}
+
+/// What a conductor reflects.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ConductorFresnel {
+    /// Complex index of refraction `eta + i k`, per RGB channel.
+    Complex {
+        /// Real part.
+        eta: Vec3,
+        /// Imaginary part (absorption).
+        k: Vec3,
+    },
+    /// A constant reflectance (an ideal mirror with color `Kr`).
+    Constant(Vec3),
+}
+
+/// A surface material.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Material {
+    /// Lambertian reflection.
+    Diffuse {
+        /// Albedo.
+        reflectance: Texture,
+    },
+    /// Metal: GGX reflection, or a perfect mirror when `alpha == 0`.
+    Conductor {
+        /// Fresnel term.
+        fresnel: ConductorFresnel,
+        /// GGX roughness α.
+        alpha: f32,
+    },
+    /// Glass: GGX reflection and refraction, or smooth when `alpha == 0`.
+    Dielectric {
+        /// Relative index of refraction (inside / outside).
+        eta: f32,
+        /// GGX roughness α.
+        alpha: f32,
+    },
+    /// pbrt-v3's plastic: Lambertian plus a GGX lobe with dielectric Fresnel (η = 1.5).
+    Plastic {
+        /// Diffuse albedo.
+        diffuse: Texture,
+        /// Specular color.
+        specular: Vec3,
+        /// GGX roughness α.
+        alpha: f32,
+    },
+}
+
+impl Material {
+    /// The BSDF at texture coordinates `uv`.
+    pub fn bsdf(&self, uv: Vec2) -> Bsdf {
+        match self {
+            Material::Diffuse { reflectance } => Bsdf::Diffuse(reflectance.eval(uv)),
+            Material::Conductor { fresnel, alpha } => Bsdf::Conductor {
+                fresnel: *fresnel,
+                alpha: *alpha,
+            },
+            Material::Dielectric { eta, alpha } => Bsdf::Dielectric {
+                eta: *eta,
+                alpha: *alpha,
+            },
+            Material::Plastic {
+                diffuse,
+                specular,
+                alpha,
+            } => Bsdf::Plastic {
+                kd: diffuse.eval(uv),
+                ks: *specular,
+                alpha: *alpha,
+            },
+        }
+    }
+}
+
+/// pbrt-v3's `RoughnessToAlpha` for GGX (`remaproughness true`).
+pub fn roughness_to_alpha(roughness: f32) -> f32 {
+    let x = roughness.max(1e-3).ln();
+    1.62142 + 0.819955 * x + 0.1734 * x * x + 0.0171201 * x * x * x + 0.000640711 * x * x * x * x
+}
+
+/// A BSDF at one shading point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Bsdf {
+    /// Lambertian, two-sided.
+    Diffuse(Vec3),
+    /// Conductor, two-sided.
+    Conductor {
+        /// Fresnel term.
+        fresnel: ConductorFresnel,
+        /// GGX α (0: specular).
+        alpha: f32,
+    },
+    /// Dielectric interface.
+    Dielectric {
+        /// Inside / outside index.
+        eta: f32,
+        /// GGX α (0: specular).
+        alpha: f32,
+    },
+    /// Diffuse plus glossy coat, two-sided.
+    Plastic {
+        /// Diffuse albedo.
+        kd: Vec3,
+        /// Specular color.
+        ks: Vec3,
+        /// GGX α.
+        alpha: f32,
+    },
+}
+
+/// A sampled direction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BsdfSample {
+    /// Incident direction (local frame).
+    pub wi: Vec3,
+    /// BSDF value (for a specular event, the weight of the delta).
+    pub f: Vec3,
+    /// Density in solid angle (for a specular event, the discrete probability).
+    pub pdf: f32,
+    /// Whether `wi` was chosen by a delta lobe.
+    pub specular: bool,
+}
+
+impl Bsdf {
+    /// The tempered BSDF (seed 002 eq. 5.5): at `temperature > 1` every
+    /// roughness becomes `sqrt(T)·max(α, 1e-4)`, then at least `floor` (the
+    /// declining regularization of sec. 5.4). At `T = 1` and `floor = 0` it is
+    /// unchanged.
+    pub fn tempered(self, temperature: f32, floor: f32) -> Bsdf {
+        let widen = |alpha: f32| {
+            let a = if temperature > 1.0 {
+                temperature.sqrt() * alpha.max(MIN_TEMPERED_ROUGHNESS)
+            } else {
+                alpha
+            };
+            a.max(floor).min(1.0)
+        };
+        match self {
+            Bsdf::Diffuse(_) => self,
+            Bsdf::Conductor { fresnel, alpha } => Bsdf::Conductor {
+                fresnel,
+                alpha: widen(alpha),
+            },
+            Bsdf::Dielectric { eta, alpha } => Bsdf::Dielectric {
+                eta,
+                alpha: widen(alpha),
+            },
+            Bsdf::Plastic { kd, ks, alpha } => Bsdf::Plastic {
+                kd,
+                ks,
+                alpha: widen(alpha),
+            },
+        }
+    }
+
+    /// Whether the BSDF is a pure delta (no `eval`, only `sample`).
+    pub fn is_specular(&self) -> bool {
+        matches!(self, Bsdf::Conductor { alpha, .. } | Bsdf::Dielectric { alpha, .. } if *alpha == 0.0)
+    }
+
+    /// Whether the surface can transmit light.
+    pub fn transmits(&self) -> bool {
+        matches!(self, Bsdf::Dielectric { .. })
+    }
+
+    /// `f(wo, wi)` (zero for delta lobes).
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        let (wo, wi) = self.two_sided(wo, wi);
+        match *self {
+            Bsdf::Diffuse(r) => {
+                if wo.z > 0.0 && wi.z > 0.0 {
+                    r * FRAC_1_PI
+                } else {
+                    Vec3::ZERO
+                }
+            }
+            Bsdf::Conductor { fresnel, alpha } => {
+                if alpha == 0.0 || wo.z <= 0.0 || wi.z <= 0.0 {
+                    return Vec3::ZERO;
+                }
+                let m = (wo + wi).normalize();
+                let ggx = Ggx(alpha);
+                conductor_fresnel(fresnel, wo.dot(m))
+                    * (ggx.d(m) * ggx.g(wo, wi) / (4.0 * wo.z * wi.z))
+            }
+            Bsdf::Dielectric { eta, alpha } => {
+                if alpha == 0.0 {
+                    return Vec3::ZERO;
+                }
+                Vec3::splat(rough_dielectric(eta, alpha, wo, wi).map_or(0.0, |d| d.f))
+            }
+            Bsdf::Plastic { kd, ks, alpha } => {
+                if wo.z <= 0.0 || wi.z <= 0.0 {
+                    return Vec3::ZERO;
+                }
+                let m = (wo + wi).normalize();
+                let ggx = Ggx(alpha);
+                let specular = ks
+                    * (fr_dielectric(wo.dot(m), PLASTIC_ETA) * ggx.d(m) * ggx.g(wo, wi)
+                        / (4.0 * wo.z * wi.z));
+                kd * FRAC_1_PI + specular
+            }
+        }
+    }
+
+    /// Density of `sample` choosing `wi` (zero for delta lobes).
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        let (wo, wi) = self.two_sided(wo, wi);
+        match *self {
+            Bsdf::Diffuse(_) => {
+                if wo.z > 0.0 && wi.z > 0.0 {
+                    wi.z * FRAC_1_PI
+                } else {
+                    0.0
+                }
+            }
+            Bsdf::Conductor { alpha, .. } => {
+                if alpha == 0.0 || wo.z <= 0.0 || wi.z <= 0.0 {
+                    return 0.0;
+                }
+                Ggx(alpha).reflection_pdf(wo, (wo + wi).normalize())
+            }
+            Bsdf::Dielectric { eta, alpha } => {
+                if alpha == 0.0 {
+                    return 0.0;
+                }
+                rough_dielectric(eta, alpha, wo, wi).map_or(0.0, |d| d.pdf)
+            }
+            Bsdf::Plastic { alpha, .. } => {
+                if wo.z <= 0.0 || wi.z <= 0.0 {
+                    return 0.0;
+                }
+                0.5 * (wi.z * FRAC_1_PI + Ggx(alpha).reflection_pdf(wo, (wo + wi).normalize()))
+            }
+        }
+    }
+
+    /// Samples `wi` given `wo`, from one number `uc` (lobe choice) and two `u`.
+    pub fn sample(&self, wo: Vec3, uc: f32, u: [f32; 2]) -> Option<BsdfSample> {
+        let flip = !self.transmits() && wo.z < 0.0;
+        let wo_up = if flip {
+            Vec3::new(wo.x, wo.y, -wo.z)
+        } else {
+            wo
+        };
+        let mut s = match *self {
+            Bsdf::Diffuse(r) => {
+                let wi = crate::geometry::cosine_hemisphere(u);
+                (wi.z > 0.0 && wo_up.z > 0.0).then(|| BsdfSample {
+                    wi,
+                    f: r * FRAC_1_PI,
+                    pdf: wi.z * FRAC_1_PI,
+                    specular: false,
+                })
+            }
+            Bsdf::Conductor { fresnel, alpha } => {
+                if wo_up.z <= 0.0 {
+                    return None;
+                }
+                if alpha == 0.0 {
+                    let wi = Vec3::new(-wo_up.x, -wo_up.y, wo_up.z);
+                    let f = conductor_fresnel(fresnel, wo_up.z) / wo_up.z;
+                    Some(BsdfSample {
+                        wi,
+                        f,
+                        pdf: 1.0,
+                        specular: true,
+                    })
+                } else {
+                    let m = Ggx(alpha).sample_m(u);
+                    let wi = reflect(wo_up, m);
+                    (wi.z > 0.0).then(|| BsdfSample {
+                        wi,
+                        f: self.eval(wo_up, wi),
+                        pdf: self.pdf(wo_up, wi),
+                        specular: false,
+                    })
+                }
+            }
+            Bsdf::Dielectric { eta, alpha } => {
+                if alpha == 0.0 {
+                    smooth_dielectric(eta, wo, uc)
+                } else {
+                    let m = Ggx(alpha).sample_m(u);
+                    if wo.dot(m) * wo.z <= 0.0 {
+                        // A back-facing microfacet: its refraction could land
+                        // where a front-facing one does, which `pdf` (one
+                        // normal per direction) does not count.
+                        return None;
+                    }
+                    let r = fr_dielectric(wo.dot(m), eta);
+                    let (wi, reflected) = if uc < r {
+                        (reflect(wo, m), true)
+                    } else {
+                        (refract(wo, m, eta)?.0, false)
+                    };
+                    // A reflection must stay on wo's side and a refraction
+                    // cross; otherwise `pdf` would attribute wi to another lobe.
+                    if (wi.z * wo.z > 0.0) != reflected {
+                        return None;
+                    }
+                    let d = rough_dielectric(eta, alpha, wo, wi)?;
+                    (d.pdf > 0.0).then_some(BsdfSample {
+                        wi,
+                        f: Vec3::splat(d.f),
+                        pdf: d.pdf,
+                        specular: false,
+                    })
+                }
+            }
+            Bsdf::Plastic { alpha, .. } => {
+                if wo_up.z <= 0.0 {
+                    return None;
+                }
+                let wi = if uc < 0.5 {
+                    crate::geometry::cosine_hemisphere(u)
+                } else {
+                    reflect(wo_up, Ggx(alpha).sample_m(u))
+                };
+                (wi.z > 0.0).then(|| BsdfSample {
+                    wi,
+                    f: self.eval(wo_up, wi),
+                    pdf: self.pdf(wo_up, wi),
+                    specular: false,
+                })
+            }
+        }?;
+        if flip {
+            s.wi.z = -s.wi.z;
+        }
+        (s.pdf > 0.0 && s.pdf.is_finite()).then_some(s)
+    }
+
+    /// Opaque BSDFs are two-sided: mirror both directions to `wo`'s side.
+    fn two_sided(&self, wo: Vec3, wi: Vec3) -> (Vec3, Vec3) {
+        if !self.transmits() && wo.z < 0.0 {
+            (Vec3::new(wo.x, wo.y, -wo.z), Vec3::new(wi.x, wi.y, -wi.z))
+        } else {
+            (wo, wi)
+        }
+    }
+}
+
+const PLASTIC_ETA: f32 = 1.5;
+
+/// The GGX distribution with roughness α.
+#[derive(Clone, Copy, Debug)]
+struct Ggx(f32);
+
+impl Ggx {
+    /// `D(m)` for `m` in the upper hemisphere.
+    fn d(&self, m: Vec3) -> f32 {
+        if m.z <= 0.0 {
+            return 0.0;
+        }
+        let a2 = self.0 * self.0;
+        let c2 = m.z * m.z;
+        let t = c2 * (a2 - 1.0) + 1.0;
+        a2 / (PI * t * t)
+    }
+
+    /// Smith Λ.
+    fn lambda(&self, v: Vec3) -> f32 {
+        let c2 = v.z * v.z;
+        if c2 <= 0.0 {
+            return f32::INFINITY;
+        }
+        let tan2 = (1.0 - c2).max(0.0) / c2;
+        0.5 * ((1.0 + self.0 * self.0 * tan2).sqrt() - 1.0)
+    }
+
+    /// Height-correlated masking-shadowing.
+    fn g(&self, wo: Vec3, wi: Vec3) -> f32 {
+        1.0 / (1.0 + self.lambda(wo) + self.lambda(wi))
+    }
+
+    /// A normal with density `D(m) cos θ_m`.
+    fn sample_m(&self, u: [f32; 2]) -> Vec3 {
+        let tan2 = self.0 * self.0 * u[0] / (1.0 - u[0]).max(1e-12);
+        let cos = 1.0 / (1.0 + tan2).sqrt();
+        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        let phi = 2.0 * PI * u[1];
+        Vec3::new(sin * phi.cos(), sin * phi.sin(), cos)
+    }
+
+    /// Density of a reflected direction whose half vector is `m`.
+    fn reflection_pdf(&self, wo: Vec3, m: Vec3) -> f32 {
+        let c = wo.dot(m).abs();
+        if c == 0.0 {
+            0.0
+        } else {
+            self.d(m) * m.z / (4.0 * c)
+        }
+    }
+}
+
+fn reflect(wo: Vec3, m: Vec3) -> Vec3 {
+    2.0 * wo.dot(m) * m - wo
+}
+
+/// Refraction of `wi` through a surface with normal `n` (any side) and
+/// relative index `eta` (inside over outside, `n` pointing outside): the
+/// refracted direction and the ratio of indices it crossed (`η_t/η_i`), or
+/// `None` for total internal reflection.
+fn refract(wi: Vec3, n: Vec3, eta: f32) -> Option<(Vec3, f32)> {
+    let mut cos_i = n.dot(wi);
+    let (mut eta, mut n) = (eta, n);
+    if cos_i < 0.0 {
+        eta = 1.0 / eta;
+        cos_i = -cos_i;
+        n = -n;
+    }
+    let sin2_t = (1.0 - cos_i * cos_i).max(0.0) / (eta * eta);
+    if sin2_t >= 1.0 {
+        return None;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    Some((-wi / eta + (cos_i / eta - cos_t) * n, eta))
+}
+
+/// Unpolarized Fresnel reflectance of a dielectric interface (`cos_i` signed:
+/// negative means arriving from inside).
+pub fn fr_dielectric(cos_i: f32, eta: f32) -> f32 {
+    let mut cos_i = cos_i.clamp(-1.0, 1.0);
+    let mut eta = eta;
+    if cos_i < 0.0 {
+        eta = 1.0 / eta;
+        cos_i = -cos_i;
+    }
+    let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
+    if sin2_t >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    let r_parl = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let r_perp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    0.5 * (r_parl * r_parl + r_perp * r_perp)
+}
+
+/// Fresnel reflectance of a conductor (pbrt-v3's `FrConductor`, per channel).
+fn conductor_fresnel(fresnel: ConductorFresnel, cos_i: f32) -> Vec3 {
+    match fresnel {
+        ConductorFresnel::Constant(c) => c,
+        ConductorFresnel::Complex { eta, k } => {
+            let c = cos_i.clamp(0.0, 1.0);
+            let channel = |eta: f32, k: f32| {
+                let cos2 = c * c;
+                let sin2 = 1.0 - cos2;
+                let (eta2, k2) = (eta * eta, k * k);
+                let t0 = eta2 - k2 - sin2;
+                let a2b2 = (t0 * t0 + 4.0 * eta2 * k2).sqrt();
+                let t1 = a2b2 + cos2;
+                let a = (0.5 * (a2b2 + t0)).max(0.0).sqrt();
+                let t2 = 2.0 * c * a;
+                let rs = (t1 - t2) / (t1 + t2);
+                let t3 = cos2 * a2b2 + sin2 * sin2;
+                let t4 = t2 * sin2;
+                let rp = rs * (t3 - t4) / (t3 + t4);
+                0.5 * (rp + rs)
+            };
+            Vec3::new(
+                channel(eta.x, k.x),
+                channel(eta.y, k.y),
+                channel(eta.z, k.z),
+            )
+        }
+    }
+}
+
+/// A smooth dielectric: reflect with probability `F`, refract otherwise.
+fn smooth_dielectric(eta: f32, wo: Vec3, uc: f32) -> Option<BsdfSample> {
+    let r = fr_dielectric(wo.z, eta);
+    if uc < r {
+        let wi = Vec3::new(-wo.x, -wo.y, wo.z);
+        return Some(BsdfSample {
+            wi,
+            f: Vec3::splat(r / wi.z.abs()),
+            pdf: r,
+            specular: true,
+        });
+    }
+    let (wi, etap) = refract(wo, Vec3::Z, eta)?;
+    let t = 1.0 - r;
+    // Radiance is scaled by 1/η² when crossing into a denser medium.
+    Some(BsdfSample {
+        wi,
+        f: Vec3::splat(t / wi.z.abs() / (etap * etap)),
+        pdf: t,
+        specular: true,
+    })
+}
+
+struct DielectricEval {
+    f: f32,
+    pdf: f32,
+}
+
+/// Value and density of a rough dielectric (Walter et al. 2007, in the form
+/// of pbrt-v4's `DielectricBxDF`, with `D(m) cos θ_m` sampling of normals).
+fn rough_dielectric(eta: f32, alpha: f32, wo: Vec3, wi: Vec3) -> Option<DielectricEval> {
+    let (co, ci) = (wo.z, wi.z);
+    if co == 0.0 || ci == 0.0 {
+        return None;
+    }
+    let reflect = co * ci > 0.0;
+    let etap = if reflect {
+        1.0
+    } else if co > 0.0 {
+        eta
+    } else {
+        1.0 / eta
+    };
+    let mut m = wi * etap + wo;
+    if m.length_squared() == 0.0 {
+        return None;
+    }
+    m = m.normalize();
+    if m.z < 0.0 {
+        m = -m;
+    }
+    if m.dot(wi) * ci < 0.0 || m.dot(wo) * co < 0.0 {
+        return None;
+    }
+    let ggx = Ggx(alpha);
+    let r = fr_dielectric(wo.dot(m), eta);
+    let pdf_m = ggx.d(m) * m.z;
+    if reflect {
+        let f = ggx.d(m) * ggx.g(wo, wi) * r / (4.0 * ci * co).abs();
+        let pdf = pdf_m / (4.0 * wo.dot(m).abs()) * r;
+        Some(DielectricEval { f, pdf })
+    } else {
+        let denom = wi.dot(m) + wo.dot(m) / etap;
+        let denom2 = denom * denom;
+        let f = ggx.d(m)
+            * (1.0 - r)
+            * ggx.g(wo, wi)
+            * (wi.dot(m) * wo.dot(m) / (denom2 * ci * co)).abs()
+            / (etap * etap);
+        let pdf = pdf_m * wi.dot(m).abs() / denom2 * (1.0 - r);
+        Some(DielectricEval { f, pdf })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use strata_engine::rng::{Domain, stream, uniform_f32};
+
+    fn bsdfs() -> Vec<(&'static str, Bsdf)> {
+        let gold = ConductorFresnel::Complex {
+            eta: Vec3::new(0.143, 0.374, 1.442),
+            k: Vec3::new(3.983, 2.385, 1.603),
+        };
+        vec![
+            ("diffuse", Bsdf::Diffuse(Vec3::new(0.8, 0.5, 0.2))),
+            (
+                "rough gold",
+                Bsdf::Conductor {
+                    fresnel: gold,
+                    alpha: 0.3,
+                },
+            ),
+            (
+                "glossy gold",
+                Bsdf::Conductor {
+                    fresnel: gold,
+                    alpha: 0.05,
+                },
+            ),
+            (
+                "rough glass",
+                Bsdf::Dielectric {
+                    eta: 1.5,
+                    alpha: 0.3,
+                },
+            ),
+            (
+                "glossy glass",
+                Bsdf::Dielectric {
+                    eta: 1.33,
+                    alpha: 0.08,
+                },
+            ),
+            (
+                "plastic",
+                Bsdf::Plastic {
+                    kd: Vec3::new(0.5, 0.5, 0.5),
+                    ks: Vec3::ONE,
+                    alpha: 0.2,
+                },
+            ),
+        ]
+    }
+
+    fn directions() -> Vec<Vec3> {
+        vec![
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(0.5, 0.1, 0.8).normalize(),
+            Vec3::new(-0.9, 0.2, 0.3).normalize(),
+            Vec3::new(0.3, -0.4, -0.7).normalize(),
+        ]
+    }
+
+    fn uniform_sphere(u: [f32; 2]) -> Vec3 {
+        let z = 1.0 - 2.0 * u[0];
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        let phi = 2.0 * PI * u[1];
+        Vec3::new(r * phi.cos(), r * phi.sin(), z)
+    }
+
+    /// `sample` returns what `eval` and `pdf` say, and its pdf integrates
+    /// (numerically, over the sphere) to the probability that it succeeds.
+    #[test]
+    fn sampling_matches_evaluation_and_pdfs_integrate() {
+        let mut rng = stream(1, Domain::User, 0);
+        let mut u = || uniform_f32(&mut rng);
+        for (name, bsdf) in bsdfs() {
+            for wo in directions() {
+                let n = 200_000;
+                let mut successes = 0;
+                let mut weight_sum = 0.0f64;
+                let mut weight_sq = 0.0f64;
+                for _ in 0..n {
+                    let Some(s) = bsdf.sample(wo, u(), [u(), u()]) else {
+                        continue;
+                    };
+                    successes += 1;
+                    let pdf = bsdf.pdf(wo, s.wi);
+                    assert!(
+                        (pdf / s.pdf - 1.0).abs() < 2e-3,
+                        "{name}: pdf {pdf} vs sampled {}",
+                        s.pdf
+                    );
+                    let f = bsdf.eval(wo, s.wi);
+                    assert!(
+                        (f - s.f).abs().max_element() <= 2e-3 * f.max_element().max(1e-3),
+                        "{name}: f {f} vs {}",
+                        s.f
+                    );
+                    // Energy, not radiance: undo the 1/η'^2 radiance scaling of
+                    // a refraction (η' = η entering, 1/η leaving).
+                    let radiance_scale = match bsdf {
+                        Bsdf::Dielectric { eta, .. } if s.wi.z * wo.z < 0.0 => {
+                            let etap = if wo.z > 0.0 { eta } else { 1.0 / eta };
+                            etap * etap
+                        }
+                        _ => 1.0,
+                    };
+                    let w = (s.f.max_element() * s.wi.z.abs() / s.pdf * radiance_scale) as f64;
+                    weight_sum += w;
+                    weight_sq += w * w;
+                }
+                let p_success = successes as f64 / n as f64;
+                // ∫ pdf dω by uniform sphere sampling: mean of 4π pdf.
+                let m = 400_000;
+                let values: Vec<f64> = (0..m)
+                    .map(|_| (4.0 * PI * bsdf.pdf(wo, uniform_sphere([u(), u()]))) as f64)
+                    .collect();
+                let integral = values.iter().sum::<f64>() / m as f64;
+                let sd = (values.iter().map(|v| (v - integral).powi(2)).sum::<f64>()
+                    / m as f64
+                    / m as f64)
+                    .sqrt();
+                assert!(
+                    (integral - p_success).abs()
+                        < 5.0 * sd + 5.0 * (p_success / n as f64).sqrt() + 2e-3,
+                    "{name}, wo {wo}: ∫pdf = {integral} ± {sd} but sampling succeeds with {p_success}"
+                );
+                // Energy: E[f cos / pdf] <= 1 (per channel max), within 5 sd.
+                let albedo = weight_sum / n as f64;
+                let sd = ((weight_sq / n as f64 - albedo * albedo).max(0.0) / n as f64).sqrt();
+                assert!(
+                    albedo <= 1.0 + 5.0 * sd + 1e-3,
+                    "{name}, wo {wo}: albedo {albedo} ± {sd} > 1"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn reflection_is_reciprocal() {
+        let mut rng = stream(2, Domain::User, 0);
+        for (name, bsdf) in bsdfs() {
+            for _ in 0..2000 {
+                let a = uniform_sphere([uniform_f32(&mut rng), uniform_f32(&mut rng)]);
+                let b = uniform_sphere([uniform_f32(&mut rng), uniform_f32(&mut rng)]);
+                if a.z * b.z <= 0.0 {
+                    continue; // transmission is reciprocal only up to η², checked below
+                }
+                let (f1, f2) = (bsdf.eval(a, b), bsdf.eval(b, a));
+                assert!(
+                    (f1 - f2).abs().max_element() <= 1e-4 * f1.max_element().max(1.0),
+                    "{name}: {f1} vs {f2}"
+                );
+            }
+        }
+        // Transmission: f(wo, wi) η_o^2 ... = f(wi, wo) η_i^2 (radiance scaling).
+        let glass = Bsdf::Dielectric {
+            eta: 1.5,
+            alpha: 0.3,
+        };
+        let (outside, inside) = (
+            Vec3::new(0.2, 0.1, 0.9).normalize(),
+            Vec3::new(-0.1, 0.05, -0.95).normalize(),
+        );
+        let (f_in, f_out) = (glass.eval(outside, inside), glass.eval(inside, outside));
+        assert!(
+            f_in.x > 0.0 && (f_in.x * 1.5 * 1.5 / f_out.x - 1.0).abs() < 1e-3,
+            "{f_in} vs {f_out}"
+        );
+    }
+
+    #[test]
+    fn tempering_at_t_one_changes_nothing_and_widens_above() {
+        for (_, bsdf) in bsdfs() {
+            assert_eq!(bsdf.tempered(1.0, 0.0), bsdf);
+        }
+        let mirror = Bsdf::Conductor {
+            fresnel: ConductorFresnel::Constant(Vec3::ONE),
+            alpha: 0.0,
+        };
+        assert_eq!(mirror.tempered(1.0, 0.0), mirror);
+        assert!(mirror.is_specular());
+        let hot = mirror.tempered(100.0, 0.0);
+        assert_eq!(
+            hot,
+            Bsdf::Conductor {
+                fresnel: ConductorFresnel::Constant(Vec3::ONE),
+                alpha: 10.0 * MIN_TEMPERED_ROUGHNESS
+            }
+        );
+        assert!(!hot.is_specular());
+        let rough = Bsdf::Dielectric {
+            eta: 1.5,
+            alpha: 0.1,
+        }
+        .tempered(4.0, 0.0);
+        assert_eq!(
+            rough,
+            Bsdf::Dielectric {
+                eta: 1.5,
+                alpha: 0.2
+            }
+        );
+        // Regularization floor.
+        assert_eq!(
+            Bsdf::Dielectric {
+                eta: 1.5,
+                alpha: 0.0
+            }
+            .tempered(1.0, 0.05),
+            Bsdf::Dielectric {
+                eta: 1.5,
+                alpha: 0.05
+            }
+        );
+    }
+
+    #[test]
+    fn smooth_surfaces_sample_their_deltas() {
+        let glass = Bsdf::Dielectric {
+            eta: 1.5,
+            alpha: 0.0,
+        };
+        let wo = Vec3::new(0.0, 0.0, 1.0);
+        let r = glass.sample(wo, 0.0, [0.5, 0.5]).unwrap();
+        assert!(r.specular && (r.pdf - 0.04).abs() < 1e-4 && (r.wi - wo).length() < 1e-6);
+        let t = glass.sample(wo, 0.5, [0.5, 0.5]).unwrap();
+        assert!(
+            (t.wi + wo).length() < 1e-6 && (t.f.x * t.wi.z.abs() / t.pdf - 1.0 / 2.25).abs() < 1e-4
+        );
+        assert_eq!(glass.eval(wo, -wo), Vec3::ZERO);
+        assert!((fr_dielectric(1.0, 1.5) - 0.04).abs() < 1e-6);
+        assert_eq!(fr_dielectric(-0.1, 1.5), 1.0); // total internal reflection
+    }
+
+    #[test]
+    fn textures() {
+        let check = Texture::Checkerboard {
+            even: Vec3::ZERO,
+            odd: Vec3::ONE,
+            scale: Vec2::splat(2.0),
+        };
+        assert_eq!(check.eval(Vec2::new(0.1, 0.1)), Vec3::ZERO);
+        assert_eq!(check.eval(Vec2::new(0.6, 0.1)), Vec3::ONE);
+        let img = Texture::Image {
+            width: 2,
+            height: 1,
+            texels: vec![Vec3::ZERO, Vec3::ONE],
+            scale: Vec2::ONE,
+        };
+        assert!((img.eval(Vec2::new(0.5, 0.5)).x - 0.5).abs() < 1e-6);
+        // pbrt-v3's polynomial: 1.62142 at roughness 1, 0.1389 at 0.01 (the metal default).
+        assert!((roughness_to_alpha(1.0) - 1.62142).abs() < 1e-5);
+        assert!((roughness_to_alpha(0.01) - 0.1389).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,199 @@
+//! Unidirectional path tracing with next-event estimation and multiple
+//! importance sampling (power heuristic), as used for every method of seed
+//! 001, behind the engine's [`PathOracle`] contract.
+//!
+//! Every random decision comes from the engine's sampler, seven numbers per
+//! bounce whether used or not (light choice, point on the light, lobe choice,
+//! direction, Russian roulette), so a coordinate of the primary sample keeps
+//! its meaning from one path to the next: mutations stay local.
+//!
+//! Tempering (seed 002 sec. 5.2): at temperature `T > 1` the BSDF at each
+//! connecting vertex — where next-event estimation joins the camera subpath
+//! to a light — is roughened to `sqrt(T)·max(ρ, 1e-4)` (eq. 5.5), and at
+//! least to the regularization floor `ρ0·γ^n` (sec. 5.4). Paths are still
+//! continued with the original BSDF. At `T = 1` with no floor the estimator
+//! is the exact, unbiased path tracer; above, it is a smoother target that
+//! is still a pure function of the numbers drawn.
+
+use glam::Vec3;
+use strata_engine::{FilmPoint, PathFlags, PathOracle, PathSample, Resolution, Rgb, Sampler, Temperature};
+
+use crate::geometry::{Frame, Intersector, Ray, power_heuristic, uniform_triangle};
+use crate::scene::{NO_LIGHT, Scene};
+
+/// Set on paths with at least one specular scattering event.
+pub const SPECULAR_PATH: PathFlags = PathFlags(1);
+/// Set on paths whose camera ray sees an emitter directly.
+pub const DIRECT_EMITTER: PathFlags = PathFlags(2);
+
+/// Russian roulette starts after this many bounces.
+const ROULETTE_DEPTH: u32 = 3;
+
+/// The declining regularization of seed 002 sec. 5.4: a roughness floor
+/// `initial·decay^step` at connecting vertices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Regularization {
+    /// `ρ0`.
+    pub initial: f32,
+    /// `γ` in `(0, 1]`.
+    pub decay: f32,
+    /// `n`, advanced by the caller between rounds of a render.
+    pub step: u32,
+}
+
+impl Regularization {
+    /// The current floor `ρ0·γ^n`.
+    pub fn floor(&self) -> f32 {
+        self.initial * self.decay.powi(self.step.min(i32::MAX as u32) as i32)
+    }
+}
+
+/// A path tracer over a scene and a ray backend.
+pub struct PathTracer<I> {
+    scene: Scene,
+    accel: I,
+    /// Optional roughness floor at connecting vertices.
+    pub regularization: Option<Regularization>,
+}
+
+impl<I: Intersector> PathTracer<I> {
+    /// A tracer for `scene` with `accel` built over `scene.triangles`.
+    pub fn new(scene: Scene, accel: I) -> Self {
+        Self { scene, accel, regularization: None }
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The ray backend.
+    pub fn intersector(&self) -> &I {
+        &self.accel
+    }
+
+    fn radiance<S: Sampler + ?Sized>(&self, film: FilmPoint, sampler: &mut S, temperature: f32) -> (Vec3, PathFlags) {
+        let scene = &self.scene;
+        let floor = self.regularization.map_or(0.0, |r| r.floor());
+        let (origin, direction) = scene.camera.ray(film.x, film.y);
+        let mut ray = Ray::new(origin, direction);
+        let mut beta = Vec3::ONE;
+        let mut radiance = Vec3::ZERO;
+        let mut flags = PathFlags::NONE;
+        let mut specular_bounce = true;
+        let mut previous_pdf = 0.0f32;
+        let mut previous_point = origin;
+        for depth in 0..=scene.max_depth {
+            let u_light = sampler.next_1d();
+            let u_point = sampler.next_2d();
+            let u_lobe = sampler.next_1d();
+            let u_direction = sampler.next_2d();
+            let u_roulette = sampler.next_1d();
+
+            let Some(hit) = self.accel.closest_hit(&ray) else {
+                if let Some(env) = scene.environment {
+                    radiance += beta * env;
+                }
+                break;
+            };
+            let tri = hit.triangle as usize;
+            let (p, mut n_shading, uv) = scene.surface(hit.triangle, hit.uv);
+            let n_geometric = scene.front[tri];
+            let wo_world = -ray.direction.normalize();
+
+            let light = scene.light_of[tri];
+            if light != NO_LIGHT && n_geometric.dot(wo_world) > 0.0 {
+                let emitted = scene.lights[light as usize].radiance;
+                if depth == 0 {
+                    flags.0 |= DIRECT_EMITTER.0;
+                }
+                let weight = if specular_bounce {
+                    1.0
+                } else {
+                    let d2 = (p - previous_point).length_squared();
+                    let light_pdf = scene.light_probability(light) / scene.lights[light as usize].area * d2
+                        / n_geometric.dot(wo_world);
+                    power_heuristic(previous_pdf, light_pdf)
+                };
+                radiance += beta * emitted * weight;
+            }
+            if depth == scene.max_depth {
+                break;
+            }
+
+            if n_shading.dot(n_geometric) < 0.0 {
+                n_shading = -n_shading;
+            }
+            let frame = Frame::new(n_shading);
+            let bsdf = scene.materials[scene.material_of[tri] as usize].bsdf(uv);
+            let wo = frame.to_local(wo_world);
+
+            // Next-event estimation through the (tempered) connecting BSDF.
+            let connecting = bsdf.tempered(temperature, floor);
+            if !connecting.is_specular()
+                && let Some((light, p_select)) = scene.choose_light(u_light)
+            {
+                let b = uniform_triangle(u_point);
+                let lt = light.triangle as usize;
+                let [v0, v1, v2] = scene.triangles[lt];
+                let q = v0 * (1.0 - b.x - b.y) + v1 * b.x + v2 * b.y;
+                let to_light = q - p;
+                let d2 = to_light.length_squared();
+                let wi_world = to_light / d2.sqrt();
+                let cos_light = -scene.front[lt].dot(wi_world);
+                if cos_light > 0.0 && d2 > 0.0 {
+                    let wi = frame.to_local(wi_world);
+                    let f = connecting.eval(wo, wi) * wi.z.abs();
+                    if f.max_element() > 0.0 {
+                        let from = offset(p, n_geometric, wi_world);
+                        let to = offset(q, scene.front[lt], -wi_world);
+                        if !self.accel.occluded(&Ray::between(from, to)) {
+                            let light_pdf = p_select / light.area * d2 / cos_light;
+                            let weight = power_heuristic(light_pdf, connecting.pdf(wo, wi));
+                            radiance += beta * f * light.radiance * (weight / light_pdf);
+                        }
+                    }
+                }
+            }
+
+            // Continue with the original BSDF.
+            let Some(s) = bsdf.sample(wo, u_lobe, u_direction) else { break };
+            let wi_world = frame.to_world(s.wi);
+            beta *= s.f * (s.wi.z.abs() / s.pdf);
+            if s.specular {
+                flags.0 |= SPECULAR_PATH.0;
+            }
+            specular_bounce = s.specular;
+            previous_pdf = s.pdf;
+            previous_point = p;
+            if depth + 1 >= ROULETTE_DEPTH {
+                let survive = beta.max_element().min(0.95);
+                if u_roulette >= survive {
+                    break;
+                }
+                beta /= survive;
+            }
+            ray = Ray::new(offset(p, n_geometric, wi_world), wi_world);
+        }
+        (radiance, flags)
+    }
+}
+
+/// `p` moved off its surface (normal `n`) toward direction `w`.
+fn offset(p: Vec3, n: Vec3, w: Vec3) -> Vec3 {
+    let eps = 1e-4 * (1.0 + p.abs().max_element());
+    p + n * if n.dot(w) >= 0.0 { eps } else { -eps }
+}
+
+impl<I: Intersector> PathOracle for PathTracer<I> {
+    type Radiance = Rgb;
+
+    fn resolution(&self) -> Resolution {
+        self.scene.camera.resolution
+    }
+
+    fn trace<S: Sampler + ?Sized>(&self, film: FilmPoint, sampler: &mut S, temperature: Temperature) -> PathSample<Rgb> {
+        let (l, flags) = self.radiance(film, sampler, temperature.0);
+        PathSample { radiance: Rgb(l.to_array()), flags }
+    }
+}

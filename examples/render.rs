@@ -137,7 +137,11 @@ fn run(args: &Args) -> AnyResult<()> {
                 let scene = match builtin::by_name(name, resolution) {
                     Some(scene) => scene,
                     None => {
-                        let mut scene = strata::native::pbrt::load(std::path::Path::new(name))?;
+                        let loaded = strata::native::pbrt::load(std::path::Path::new(name))?;
+                        for skipped in &loaded.ignored {
+                            eprintln!("note: {name}: ignored {skipped}");
+                        }
+                        let mut scene = loaded.scene;
                         if args.width.is_some() || args.height.is_some() {
                             scene.camera.resolution = resolution;
                         }

@@ -136,18 +136,18 @@ pub fn door(resolution: Resolution) -> Scene {
     s.add_mesh(&quad(v(2., 0., -3.), v(2., 0., 4.), v(2., 2.4, 4.), v(2., 2.4, -3.)), wall, None);
     s.add_mesh(&quad(v(-2., 0., -3.), v(2., 0., -3.), v(2., 2.4, -3.), v(-2., 2.4, -3.)), wall, None);
     s.add_mesh(&quad(v(2., 0., 4.), v(-2., 0., 4.), v(-2., 2.4, 4.), v(2., 2.4, 4.)), wall, None);
-    // The dividing wall at z = -1 with a door gap x in [0.3, 0.45], y < 2.
+    // The dividing wall at z = -1 with a door gap x in [0.2, 0.5], y < 2.
     let divider = [
-        cuboid(v(-2., 0., -1.05), v(0.3, 2.4, -0.95)),
-        cuboid(v(0.45, 0., -1.05), v(2., 2.4, -0.95)),
-        cuboid(v(0.3, 2.0, -1.05), v(0.45, 2.4, -0.95)),
+        cuboid(v(-2., 0., -1.05), v(0.2, 2.4, -0.95)),
+        cuboid(v(0.5, 0., -1.05), v(2., 2.4, -0.95)),
+        cuboid(v(0.2, 2.0, -1.05), v(0.5, 2.4, -0.95)),
     ];
     for part in divider {
         s.add_mesh(&part, wall, None);
     }
     // The light: facing away from the door, toward the back room's far wall.
     let light = quad(v(-0.8, 1.2, -1.6), v(-0.8, 1.8, -1.6), v(0.8, 1.8, -1.6), v(0.8, 1.2, -1.6));
-    s.add_mesh(&light, black, Some(v(30.0, 26.0, 20.0)));
+    s.add_mesh(&light, black, Some(v(60.0, 52.0, 40.0)));
     s.max_depth = 16;
     s
 }

@@ -6,11 +6,49 @@ pub mod builtin;
 pub mod bvh;
 pub mod geometry;
 pub mod material;
+pub mod obj;
 pub mod pbrt;
+pub mod ply;
 pub mod scene;
 pub mod tracer;
 
 pub use bvh::BvhIntersector;
+
+use std::path::{Path, PathBuf};
+
+/// A scene file that could not be loaded: which file, which line (0 when
+/// not tied to a line) and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneError {
+    /// The file.
+    pub file: PathBuf,
+    /// 1-based line, or 0.
+    pub line: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl SceneError {
+    pub(crate) fn at(file: &Path, line: usize, message: String) -> Self {
+        Self { file: file.to_path_buf(), line, message }
+    }
+
+    pub(crate) fn io(file: &Path, e: std::io::Error) -> Self {
+        Self::at(file, 0, e.to_string())
+    }
+}
+
+impl std::fmt::Display for SceneError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.line > 0 {
+            write!(f, "{}:{}: {}", self.file.display(), self.line, self.message)
+        } else {
+            write!(f, "{}: {}", self.file.display(), self.message)
+        }
+    }
+}
+
+impl std::error::Error for SceneError {}
 pub use geometry::{Hit, Intersector, Ray};
 pub use scene::{Camera, Mesh, Scene};
 pub use tracer::PathTracer;

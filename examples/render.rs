@@ -121,7 +121,9 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> AnyResult<()> {
     let Backend::Native = args.backend;
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(args.threads).build()?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads)
+        .build()?;
     let resolution = Resolution::new(args.width.unwrap_or(256), args.height.unwrap_or(256));
     let (output, reference) = pool.install(|| -> AnyResult<_> {
         Ok(match args.scene.as_str() {
@@ -154,13 +156,22 @@ fn run(args: &Args) -> AnyResult<()> {
     })?;
     write(&output.film, args)?;
     let s = &output.stats;
-    println!("paths: {} (+{} bootstrap), invalid: {}", s.samples, s.bootstrap_samples, s.invalid_samples);
+    println!(
+        "paths: {} (+{} bootstrap), invalid: {}",
+        s.samples, s.bootstrap_samples, s.invalid_samples
+    );
     if let Some(b) = s.normalization {
-        println!("b* = {b:.6}, acceptance = {:.3}", s.chains.acceptance_rate());
+        println!(
+            "b* = {b:.6}, acceptance = {:.3}",
+            s.chains.acceptance_rate()
+        );
     }
     if let Some(reference) = reference {
         let e = metrics::compare(&output.film, &reference)?;
-        println!("vs exact: MAPE {:.4}  relMSE {:.5}  L1 {:.5}  L2 {:.5}", e.mape, e.rel_mse, e.l1, e.l2);
+        println!(
+            "vs exact: MAPE {:.4}  relMSE {:.5}  L1 {:.5}  L2 {:.5}",
+            e.mape, e.rel_mse, e.l1, e.l2
+        );
     }
     Ok(())
 }

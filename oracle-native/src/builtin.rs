@@ -35,27 +35,68 @@ pub fn quad(a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> Mesh {
 /// An axis-aligned box from `lo` to `hi`, faces pointing out.
 pub fn cuboid(lo: Vec3, hi: Vec3) -> Mesh {
     let p = |x: bool, y: bool, z: bool| {
-        Vec3::new(if x { hi.x } else { lo.x }, if y { hi.y } else { lo.y }, if z { hi.z } else { lo.z })
+        Vec3::new(
+            if x { hi.x } else { lo.x },
+            if y { hi.y } else { lo.y },
+            if z { hi.z } else { lo.z },
+        )
     };
     let faces = [
-        [p(false, false, false), p(false, true, false), p(true, true, false), p(true, false, false)], // -z
-        [p(false, false, true), p(true, false, true), p(true, true, true), p(false, true, true)],     // +z
-        [p(false, false, false), p(false, false, true), p(false, true, true), p(false, true, false)], // -x
-        [p(true, false, false), p(true, true, false), p(true, true, true), p(true, false, true)],     // +x
-        [p(false, false, false), p(true, false, false), p(true, false, true), p(false, false, true)], // -y
-        [p(false, true, false), p(false, true, true), p(true, true, true), p(true, true, false)],     // +y
+        [
+            p(false, false, false),
+            p(false, true, false),
+            p(true, true, false),
+            p(true, false, false),
+        ], // -z
+        [
+            p(false, false, true),
+            p(true, false, true),
+            p(true, true, true),
+            p(false, true, true),
+        ], // +z
+        [
+            p(false, false, false),
+            p(false, false, true),
+            p(false, true, true),
+            p(false, true, false),
+        ], // -x
+        [
+            p(true, false, false),
+            p(true, true, false),
+            p(true, true, true),
+            p(true, false, true),
+        ], // +x
+        [
+            p(false, false, false),
+            p(true, false, false),
+            p(true, false, true),
+            p(false, false, true),
+        ], // -y
+        [
+            p(false, true, false),
+            p(false, true, true),
+            p(true, true, true),
+            p(true, true, false),
+        ], // +y
     ];
     merge(faces.iter().map(|f| quad(f[0], f[1], f[2], f[3])))
 }
 
 /// A UV sphere with smooth normals.
 pub fn sphere(center: Vec3, radius: f32, rings: u32, segments: u32) -> Mesh {
-    let mut m = Mesh { normals: Some(Vec::new()), ..Default::default() };
+    let mut m = Mesh {
+        normals: Some(Vec::new()),
+        ..Default::default()
+    };
     for i in 0..=rings {
         let theta = std::f32::consts::PI * i as f32 / rings as f32;
         for j in 0..=segments {
             let phi = std::f32::consts::TAU * j as f32 / segments as f32;
-            let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+            let n = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            );
             m.positions.push(center + radius * n);
             m.normals.as_mut().expect("set above").push(n);
         }
@@ -63,7 +104,12 @@ pub fn sphere(center: Vec3, radius: f32, rings: u32, segments: u32) -> Mesh {
     let row = segments + 1;
     for i in 0..rings {
         for j in 0..segments {
-            let (a, b, c, d) = (i * row + j, i * row + j + 1, (i + 1) * row + j + 1, (i + 1) * row + j);
+            let (a, b, c, d) = (
+                i * row + j,
+                i * row + j + 1,
+                (i + 1) * row + j + 1,
+                (i + 1) * row + j,
+            );
             m.indices.push([a, b, c]);
             m.indices.push([a, c, d]);
         }
@@ -72,42 +118,105 @@ pub fn sphere(center: Vec3, radius: f32, rings: u32, segments: u32) -> Mesh {
 }
 
 fn merge(meshes: impl Iterator<Item = Mesh>) -> Mesh {
-    let mut out = Mesh { uvs: Some(Vec::new()), ..Default::default() };
+    let mut out = Mesh {
+        uvs: Some(Vec::new()),
+        ..Default::default()
+    };
     for m in meshes {
         let base = out.positions.len() as u32;
         out.positions.extend(&m.positions);
-        out.uvs.as_mut().expect("set above").extend(m.uvs.unwrap_or_else(|| vec![Vec2::ZERO; m.positions.len()]));
-        out.indices.extend(m.indices.iter().map(|t| t.map(|i| i + base)));
+        out.uvs
+            .as_mut()
+            .expect("set above")
+            .extend(m.uvs.unwrap_or_else(|| vec![Vec2::ZERO; m.positions.len()]));
+        out.indices
+            .extend(m.indices.iter().map(|t| t.map(|i| i + base)));
     }
     out
 }
 
 fn diffuse(scene: &mut Scene, c: Vec3) -> u32 {
-    scene.add_material(Material::Diffuse { reflectance: Texture::Constant(c) })
+    scene.add_material(Material::Diffuse {
+        reflectance: Texture::Constant(c),
+    })
 }
 
 /// The Cornell box of `../shared/scenes/cornell-box` (same geometry, camera
 /// and light), built procedurally.
 pub fn cornell(resolution: Resolution) -> Scene {
-    let camera = Camera::look_at(Vec3::new(0.0, 1.0, 6.8), Vec3::new(0.0, 1.0, 0.0), Vec3::Y, 19.5, resolution);
+    let camera = Camera::look_at(
+        Vec3::new(0.0, 1.0, 6.8),
+        Vec3::new(0.0, 1.0, 0.0),
+        Vec3::Y,
+        19.5,
+        resolution,
+    );
     let mut s = Scene::new(camera);
     let white = diffuse(&mut s, Vec3::new(0.725, 0.71, 0.68));
     let red = diffuse(&mut s, Vec3::new(0.63, 0.065, 0.05));
     let green = diffuse(&mut s, Vec3::new(0.14, 0.45, 0.091));
     let black = diffuse(&mut s, Vec3::ZERO);
     let v = Vec3::new;
-    s.add_mesh(&quad(v(-1., 0., -1.), v(-1., 0., 1.), v(1., 0., 1.), v(1., 0., -1.)), white, None); // floor
-    s.add_mesh(&quad(v(1., 2., 1.), v(-1., 2., 1.), v(-1., 2., -1.), v(1., 2., -1.)), white, None); // ceiling
-    s.add_mesh(&quad(v(-1., 0., -1.), v(1., 0., -1.), v(1., 2., -1.), v(-1., 2., -1.)), white, None); // back
-    s.add_mesh(&quad(v(1., 0., -1.), v(1., 0., 1.), v(1., 2., 1.), v(1., 2., -1.)), green, None); // right
-    s.add_mesh(&quad(v(-1., 0., 1.), v(-1., 0., -1.), v(-1., 2., -1.), v(-1., 2., 1.)), red, None); // left
+    s.add_mesh(
+        &quad(
+            v(-1., 0., -1.),
+            v(-1., 0., 1.),
+            v(1., 0., 1.),
+            v(1., 0., -1.),
+        ),
+        white,
+        None,
+    ); // floor
+    s.add_mesh(
+        &quad(
+            v(1., 2., 1.),
+            v(-1., 2., 1.),
+            v(-1., 2., -1.),
+            v(1., 2., -1.),
+        ),
+        white,
+        None,
+    ); // ceiling
+    s.add_mesh(
+        &quad(
+            v(-1., 0., -1.),
+            v(1., 0., -1.),
+            v(1., 2., -1.),
+            v(-1., 2., -1.),
+        ),
+        white,
+        None,
+    ); // back
+    s.add_mesh(
+        &quad(v(1., 0., -1.), v(1., 0., 1.), v(1., 2., 1.), v(1., 2., -1.)),
+        green,
+        None,
+    ); // right
+    s.add_mesh(
+        &quad(
+            v(-1., 0., 1.),
+            v(-1., 0., -1.),
+            v(-1., 2., -1.),
+            v(-1., 2., 1.),
+        ),
+        red,
+        None,
+    ); // left
     let short = cuboid(v(-0.3, 0.0, -0.3), v(0.3, 0.6, 0.3));
-    let short = short.transformed(&(Mat4::from_translation(v(0.33, 0.0, 0.37)) * Mat4::from_rotation_y(-0.29)));
+    let short = short
+        .transformed(&(Mat4::from_translation(v(0.33, 0.0, 0.37)) * Mat4::from_rotation_y(-0.29)));
     s.add_mesh(&short, white, None);
     let tall = cuboid(v(-0.3, 0.0, -0.3), v(0.3, 1.2, 0.3));
-    let tall = tall.transformed(&(Mat4::from_translation(v(-0.335, 0.0, -0.29)) * Mat4::from_rotation_y(0.34)));
+    let tall = tall.transformed(
+        &(Mat4::from_translation(v(-0.335, 0.0, -0.29)) * Mat4::from_rotation_y(0.34)),
+    );
     s.add_mesh(&tall, white, None);
-    let light = quad(v(-0.24, 1.98, -0.22), v(0.23, 1.98, -0.22), v(0.23, 1.98, 0.16), v(-0.24, 1.98, 0.16));
+    let light = quad(
+        v(-0.24, 1.98, -0.22),
+        v(0.23, 1.98, -0.22),
+        v(0.23, 1.98, 0.16),
+        v(-0.24, 1.98, 0.16),
+    );
     s.add_mesh(&light, black, Some(v(17.0, 12.0, 4.0)));
     s.max_depth = 16;
     s
@@ -117,7 +226,13 @@ pub fn cornell(resolution: Resolution) -> Scene {
 /// hangs in a second room behind it (the kind of visibility of seed 001's
 /// "Veach-door").
 pub fn door(resolution: Resolution) -> Scene {
-    let camera = Camera::look_at(Vec3::new(0.0, 1.0, 3.8), Vec3::new(0.0, 0.9, 0.0), Vec3::Y, 50.0, resolution);
+    let camera = Camera::look_at(
+        Vec3::new(0.0, 1.0, 3.8),
+        Vec3::new(0.0, 0.9, 0.0),
+        Vec3::Y,
+        50.0,
+        resolution,
+    );
     let mut s = Scene::new(camera);
     let wall = diffuse(&mut s, Vec3::new(0.7, 0.68, 0.65));
     let floor = s.add_material(Material::Diffuse {
@@ -130,12 +245,66 @@ pub fn door(resolution: Resolution) -> Scene {
     let black = diffuse(&mut s, Vec3::ZERO);
     let v = Vec3::new;
     // Front room: x in [-2, 2], y in [0, 2.4], z in [-1, 4]; back room: z in [-3, -1].
-    s.add_mesh(&quad(v(-2., 0., -3.), v(-2., 0., 4.), v(2., 0., 4.), v(2., 0., -3.)), floor, None);
-    s.add_mesh(&quad(v(2., 2.4, 4.), v(-2., 2.4, 4.), v(-2., 2.4, -3.), v(2., 2.4, -3.)), wall, None);
-    s.add_mesh(&quad(v(-2., 0., 4.), v(-2., 0., -3.), v(-2., 2.4, -3.), v(-2., 2.4, 4.)), wall, None);
-    s.add_mesh(&quad(v(2., 0., -3.), v(2., 0., 4.), v(2., 2.4, 4.), v(2., 2.4, -3.)), wall, None);
-    s.add_mesh(&quad(v(-2., 0., -3.), v(2., 0., -3.), v(2., 2.4, -3.), v(-2., 2.4, -3.)), wall, None);
-    s.add_mesh(&quad(v(2., 0., 4.), v(-2., 0., 4.), v(-2., 2.4, 4.), v(2., 2.4, 4.)), wall, None);
+    s.add_mesh(
+        &quad(
+            v(-2., 0., -3.),
+            v(-2., 0., 4.),
+            v(2., 0., 4.),
+            v(2., 0., -3.),
+        ),
+        floor,
+        None,
+    );
+    s.add_mesh(
+        &quad(
+            v(2., 2.4, 4.),
+            v(-2., 2.4, 4.),
+            v(-2., 2.4, -3.),
+            v(2., 2.4, -3.),
+        ),
+        wall,
+        None,
+    );
+    s.add_mesh(
+        &quad(
+            v(-2., 0., 4.),
+            v(-2., 0., -3.),
+            v(-2., 2.4, -3.),
+            v(-2., 2.4, 4.),
+        ),
+        wall,
+        None,
+    );
+    s.add_mesh(
+        &quad(
+            v(2., 0., -3.),
+            v(2., 0., 4.),
+            v(2., 2.4, 4.),
+            v(2., 2.4, -3.),
+        ),
+        wall,
+        None,
+    );
+    s.add_mesh(
+        &quad(
+            v(-2., 0., -3.),
+            v(2., 0., -3.),
+            v(2., 2.4, -3.),
+            v(-2., 2.4, -3.),
+        ),
+        wall,
+        None,
+    );
+    s.add_mesh(
+        &quad(
+            v(2., 0., 4.),
+            v(-2., 0., 4.),
+            v(-2., 2.4, 4.),
+            v(2., 2.4, 4.),
+        ),
+        wall,
+        None,
+    );
     // The dividing wall at z = -1 with a door gap x in [0.2, 0.5], y < 2.
     let divider = [
         cuboid(v(-2., 0., -1.05), v(0.2, 2.4, -0.95)),
@@ -146,7 +315,12 @@ pub fn door(resolution: Resolution) -> Scene {
         s.add_mesh(&part, wall, None);
     }
     // The light: facing away from the door, toward the back room's far wall.
-    let light = quad(v(-0.8, 1.2, -1.6), v(-0.8, 1.8, -1.6), v(0.8, 1.8, -1.6), v(0.8, 1.2, -1.6));
+    let light = quad(
+        v(-0.8, 1.2, -1.6),
+        v(-0.8, 1.8, -1.6),
+        v(0.8, 1.8, -1.6),
+        v(0.8, 1.2, -1.6),
+    );
     s.add_mesh(&light, black, Some(v(60.0, 52.0, 40.0)));
     s.max_depth = 16;
     s
@@ -154,10 +328,25 @@ pub fn door(resolution: Resolution) -> Scene {
 
 /// A diffuse plane under a constant environment (seed 001 fig. 2).
 pub fn envplane(resolution: Resolution) -> Scene {
-    let camera = Camera::look_at(Vec3::new(0.0, 2.0, 4.0), Vec3::ZERO, Vec3::Y, 45.0, resolution);
+    let camera = Camera::look_at(
+        Vec3::new(0.0, 2.0, 4.0),
+        Vec3::ZERO,
+        Vec3::Y,
+        45.0,
+        resolution,
+    );
     let mut s = Scene::new(camera);
     let grey = diffuse(&mut s, Vec3::splat(0.5));
-    s.add_mesh(&quad(Vec3::new(-3., 0., -3.), Vec3::new(-3., 0., 3.), Vec3::new(3., 0., 3.), Vec3::new(3., 0., -3.)), grey, None);
+    s.add_mesh(
+        &quad(
+            Vec3::new(-3., 0., -3.),
+            Vec3::new(-3., 0., 3.),
+            Vec3::new(3., 0., 3.),
+            Vec3::new(3., 0., -3.),
+        ),
+        grey,
+        None,
+    );
     s.environment = Some(Vec3::ONE);
     s.max_depth = 8;
     s
@@ -167,17 +356,52 @@ pub fn envplane(resolution: Resolution) -> Scene {
 /// mirror behind it in which the caustic is seen again (the specular paths
 /// that tempering, seed 002 sec. 5.2, is for).
 pub fn caustic(resolution: Resolution) -> Scene {
-    let camera = Camera::look_at(Vec3::new(0.0, 1.6, 4.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, 40.0, resolution);
+    let camera = Camera::look_at(
+        Vec3::new(0.0, 1.6, 4.0),
+        Vec3::new(0.0, 0.5, 0.0),
+        Vec3::Y,
+        40.0,
+        resolution,
+    );
     let mut s = Scene::new(camera);
     let floor = diffuse(&mut s, Vec3::splat(0.6));
     let black = diffuse(&mut s, Vec3::ZERO);
-    let glass = s.add_material(Material::Dielectric { eta: 1.5, alpha: 0.0 });
-    let mirror = s.add_material(Material::Conductor { fresnel: ConductorFresnel::Constant(Vec3::splat(0.95)), alpha: 0.0 });
+    let glass = s.add_material(Material::Dielectric {
+        eta: 1.5,
+        alpha: 0.0,
+    });
+    let mirror = s.add_material(Material::Conductor {
+        fresnel: ConductorFresnel::Constant(Vec3::splat(0.95)),
+        alpha: 0.0,
+    });
     let v = Vec3::new;
-    s.add_mesh(&quad(v(-4., 0., -4.), v(-4., 0., 4.), v(4., 0., 4.), v(4., 0., -4.)), floor, None);
-    s.add_mesh(&quad(v(-2., 0., -1.5), v(2., 0., -1.5), v(2., 2.5, -1.5), v(-2., 2.5, -1.5)), mirror, None);
+    s.add_mesh(
+        &quad(
+            v(-4., 0., -4.),
+            v(-4., 0., 4.),
+            v(4., 0., 4.),
+            v(4., 0., -4.),
+        ),
+        floor,
+        None,
+    );
+    s.add_mesh(
+        &quad(
+            v(-2., 0., -1.5),
+            v(2., 0., -1.5),
+            v(2., 2.5, -1.5),
+            v(-2., 2.5, -1.5),
+        ),
+        mirror,
+        None,
+    );
     s.add_mesh(&sphere(v(0.0, 0.5, 0.0), 0.5, 24, 48), glass, None);
-    let light = quad(v(0.9, 2.5, 0.7), v(1.2, 2.5, 0.7), v(1.2, 2.5, 1.0), v(0.9, 2.5, 1.0));
+    let light = quad(
+        v(0.9, 2.5, 0.7),
+        v(1.2, 2.5, 0.7),
+        v(1.2, 2.5, 1.0),
+        v(0.9, 2.5, 1.0),
+    );
     s.add_mesh(&light, black, Some(v(400.0, 380.0, 340.0)));
     s.max_depth = 16;
     s

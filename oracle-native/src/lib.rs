@@ -30,7 +30,11 @@ pub struct SceneError {
 
 impl SceneError {
     pub(crate) fn at(file: &Path, line: usize, message: String) -> Self {
-        Self { file: file.to_path_buf(), line, message }
+        Self {
+            file: file.to_path_buf(),
+            line,
+            message,
+        }
     }
 
     pub(crate) fn io(file: &Path, e: std::io::Error) -> Self {

@@ -35,7 +35,15 @@ pub fn load(path: &Path) -> Result<Loaded, SceneError> {
     let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
     let tokens = tokenize(&text).map_err(|(line, m)| SceneError::at(path, line, m))?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    Parser { path: path.to_path_buf(), dir, tokens, at: 0, state: State::default(), out: Output::default() }.run()
+    Parser {
+        path: path.to_path_buf(),
+        dir,
+        tokens,
+        at: 0,
+        state: State::default(),
+        out: Output::default(),
+    }
+    .run()
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -96,7 +104,9 @@ fn tokenize(text: &str) -> Result<Vec<(Token, usize)>, (usize, String)> {
                 }
                 let token = match word.parse::<f64>() {
                     Ok(v) => Token::Num(v),
-                    Err(_) if word.chars().next().is_some_and(|c| c.is_ascii_alphabetic()) => Token::Word(word),
+                    Err(_) if word.chars().next().is_some_and(|c| c.is_ascii_alphabetic()) => {
+                        Token::Word(word)
+                    }
                     Err(_) => return Err((line, format!("unexpected `{word}`"))),
                 };
                 out.push((token, line));
@@ -236,10 +246,17 @@ impl Parser {
                             Some(Token::Num(x)) => nums.push(x),
                             Some(Token::Str(s)) => strs.push(s),
                             Some(Token::Word(w)) if w == "true" || w == "false" => strs.push(w),
-                            other => return self.err(format!("unexpected {other:?} in parameter `{name}`")),
+                            other => {
+                                return self
+                                    .err(format!("unexpected {other:?} in parameter `{name}`"));
+                            }
                         }
                     }
-                    if strs.is_empty() { Value::Nums(nums) } else { Value::Strs(strs) }
+                    if strs.is_empty() {
+                        Value::Nums(nums)
+                    } else {
+                        Value::Strs(strs)
+                    }
                 }
                 Some(Token::Num(x)) => Value::Nums(vec![x]),
                 Some(Token::Str(s)) => Value::Strs(vec![s]),
@@ -302,7 +319,9 @@ impl Parser {
                     let ty = self.string()?;
                     let p = self.params()?;
                     if ty != "perspective" {
-                        self.out.ignored.insert(format!("Camera \"{ty}\" (treated as perspective)"));
+                        self.out
+                            .ignored
+                            .insert(format!("Camera \"{ty}\" (treated as perspective)"));
                     }
                     self.out.camera_from_world = Some(self.state.ctm);
                     self.out.fov = p.num("fov").unwrap_or(90.0) as f32;
@@ -310,7 +329,10 @@ impl Parser {
                 "Film" => {
                     let _ = self.string()?;
                     let p = self.params()?;
-                    let (w, h) = (p.num("xresolution").unwrap_or(640.0), p.num("yresolution").unwrap_or(480.0));
+                    let (w, h) = (
+                        p.num("xresolution").unwrap_or(640.0),
+                        p.num("yresolution").unwrap_or(480.0),
+                    );
                     if !(w >= 1.0 && h >= 1.0 && w <= 65536.0 && h <= 65536.0) {
                         return self.err(format!("film resolution {w}x{h} out of range"));
                     }
@@ -326,7 +348,9 @@ impl Parser {
                 "Sampler" | "PixelFilter" | "Accelerator" | "SurfaceIntegrator" => {
                     let _ = self.string()?;
                     let _ = self.params()?;
-                    self.out.ignored.insert(format!("{directive} (the engine chooses)"));
+                    self.out
+                        .ignored
+                        .insert(format!("{directive} (the engine chooses)"));
                 }
                 "Texture" => self.texture()?,
                 "MakeNamedMaterial" => {
@@ -335,7 +359,9 @@ impl Parser {
                     let ty = p.string("type").unwrap_or("matte").to_string();
                     let m = self.material(&ty, &p)?;
                     self.out.materials.push(m);
-                    self.out.named.insert(name, self.out.materials.len() as u32 - 1);
+                    self.out
+                        .named
+                        .insert(name, self.out.materials.len() as u32 - 1);
                 }
                 "NamedMaterial" => {
                     let name = self.string()?;
@@ -364,7 +390,8 @@ impl Parser {
                     let ty = self.string()?;
                     let p = self.params()?;
                     if ty == "infinite" && p.string("mapname").is_none() {
-                        let l = p.rgb("L").unwrap_or(Vec3::ONE) * p.rgb("scale").unwrap_or(Vec3::ONE);
+                        let l =
+                            p.rgb("L").unwrap_or(Vec3::ONE) * p.rgb("scale").unwrap_or(Vec3::ONE);
                         self.out.environment = Some(self.checked_color(l, "L")?);
                     } else {
                         self.out.ignored.insert(format!("LightSource \"{ty}\""));
@@ -373,7 +400,10 @@ impl Parser {
                 "Shape" => self.shape()?,
                 other => {
                     // Skip an unknown directive's arguments.
-                    while matches!(self.peek(), Some(Token::Str(_) | Token::Num(_) | Token::Open | Token::Close)) {
+                    while matches!(
+                        self.peek(),
+                        Some(Token::Str(_) | Token::Num(_) | Token::Open | Token::Close)
+                    ) {
                         self.next();
                     }
                     self.out.ignored.insert(other.to_string());
@@ -402,14 +432,29 @@ impl Parser {
             return self.err("degenerate LookAt");
         }
         let new_up = dir.cross(right);
-        Ok(Mat4::from_cols(right.extend(0.0), new_up.extend(0.0), dir.extend(0.0), eye.extend(1.0)).inverse())
+        Ok(Mat4::from_cols(
+            right.extend(0.0),
+            new_up.extend(0.0),
+            dir.extend(0.0),
+            eye.extend(1.0),
+        )
+        .inverse())
     }
 
     fn checked_color(&self, c: Vec3, name: &str) -> Result<Vec3, SceneError> {
-        if c.is_finite() && c.min_element() >= 0.0 { Ok(c) } else { self.err(format!("`{name}` must be finite and >= 0, got {c}")) }
+        if c.is_finite() && c.min_element() >= 0.0 {
+            Ok(c)
+        } else {
+            self.err(format!("`{name}` must be finite and >= 0, got {c}"))
+        }
     }
 
-    fn color_or_texture(&self, p: &Params, name: &str, default: Vec3) -> Result<Texture, SceneError> {
+    fn color_or_texture(
+        &self,
+        p: &Params,
+        name: &str,
+        default: Vec3,
+    ) -> Result<Texture, SceneError> {
         if p.ty(name) == Some("texture") {
             let t = p.string(name).unwrap_or_default();
             return match self.out.textures.get(t) {
@@ -417,25 +462,39 @@ impl Parser {
                 None => self.err(format!("unknown texture `{t}`")),
             };
         }
-        Ok(Texture::Constant(self.checked_color(p.rgb(name).unwrap_or(default), name)?))
+        Ok(Texture::Constant(
+            self.checked_color(p.rgb(name).unwrap_or(default), name)?,
+        ))
     }
 
     fn roughness(&self, p: &Params, default: f64) -> f32 {
-        let r = p.num("roughness").or_else(|| p.num("uroughness")).unwrap_or(default) as f32;
+        let r = p
+            .num("roughness")
+            .or_else(|| p.num("uroughness"))
+            .unwrap_or(default) as f32;
         let remap = p.bool("remaproughness").unwrap_or(true);
         let alpha = if remap { roughness_to_alpha(r) } else { r };
-        if alpha.is_finite() { alpha.clamp(0.0, 1.0) } else { 0.0 }
+        if alpha.is_finite() {
+            alpha.clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
     }
 
     fn material(&mut self, ty: &str, p: &Params) -> Result<Material, SceneError> {
         Ok(match ty {
-            "matte" => Material::Diffuse { reflectance: self.color_or_texture(p, "Kd", Vec3::splat(0.5))? },
+            "matte" => Material::Diffuse {
+                reflectance: self.color_or_texture(p, "Kd", Vec3::splat(0.5))?,
+            },
             "metal" => {
                 // pbrt-v3's defaults: copper.
                 let eta = p.rgb("eta").unwrap_or(Vec3::new(0.2004, 0.9240, 1.1022));
                 let k = p.rgb("k").unwrap_or(Vec3::new(3.9129, 2.4528, 2.1421));
                 Material::Conductor {
-                    fresnel: ConductorFresnel::Complex { eta: self.checked_color(eta, "eta")?, k: self.checked_color(k, "k")? },
+                    fresnel: ConductorFresnel::Complex {
+                        eta: self.checked_color(eta, "eta")?,
+                        k: self.checked_color(k, "k")?,
+                    },
                     alpha: self.roughness(p, 0.01),
                 }
             }
@@ -444,10 +503,15 @@ impl Parser {
                 if !(eta.is_finite() && eta > 0.0) {
                     return self.err(format!("glass index must be > 0, got {eta}"));
                 }
-                Material::Dielectric { eta, alpha: self.roughness(p, 0.0) }
+                Material::Dielectric {
+                    eta,
+                    alpha: self.roughness(p, 0.0),
+                }
             }
             "mirror" => Material::Conductor {
-                fresnel: ConductorFresnel::Constant(self.checked_color(p.rgb("Kr").unwrap_or(Vec3::splat(0.9)), "Kr")?),
+                fresnel: ConductorFresnel::Constant(
+                    self.checked_color(p.rgb("Kr").unwrap_or(Vec3::splat(0.9)), "Kr")?,
+                ),
                 alpha: 0.0,
             },
             "plastic" => Material::Plastic {
@@ -456,8 +520,12 @@ impl Parser {
                 alpha: self.roughness(p, 0.1).max(1e-3),
             },
             other => {
-                self.out.ignored.insert(format!("material \"{other}\" (rendered as matte)"));
-                Material::Diffuse { reflectance: Texture::Constant(Vec3::splat(0.5)) }
+                self.out
+                    .ignored
+                    .insert(format!("material \"{other}\" (rendered as matte)"));
+                Material::Diffuse {
+                    reflectance: Texture::Constant(Vec3::splat(0.5)),
+                }
             }
         })
     }
@@ -467,13 +535,21 @@ impl Parser {
         let _kind = self.string()?;
         let class = self.string()?;
         let p = self.params()?;
-        let scale = Vec2::new(p.num("uscale").unwrap_or(1.0) as f32, p.num("vscale").unwrap_or(1.0) as f32);
+        let scale = Vec2::new(
+            p.num("uscale").unwrap_or(1.0) as f32,
+            p.num("vscale").unwrap_or(1.0) as f32,
+        );
         let tex = match class.as_str() {
             "imagemap" => {
                 let file = p.string("filename").unwrap_or_default();
                 let path = self.dir.join(file);
-                let img = image::open(&path)
-                    .map_err(|e| SceneError::at(&self.path, self.line(), format!("texture {}: {e}", path.display())))?;
+                let img = image::open(&path).map_err(|e| {
+                    SceneError::at(
+                        &self.path,
+                        self.line(),
+                        format!("texture {}: {e}", path.display()),
+                    )
+                })?;
                 let gamma = p.bool("gamma").unwrap_or(true);
                 let rgb = img.into_rgb8();
                 let decode = |c: u8| {
@@ -489,17 +565,26 @@ impl Parser {
                 Texture::Image {
                     width: rgb.width(),
                     height: rgb.height(),
-                    texels: rgb.pixels().map(|p| Vec3::new(decode(p[0]), decode(p[1]), decode(p[2]))).collect(),
+                    texels: rgb
+                        .pixels()
+                        .map(|p| Vec3::new(decode(p[0]), decode(p[1]), decode(p[2])))
+                        .collect(),
                     scale,
                 }
             }
             "checkerboard" => {
                 let color = |n: &str, d: f32| p.rgb(n).unwrap_or(Vec3::splat(d));
-                Texture::Checkerboard { even: color("tex1", 1.0), odd: color("tex2", 0.0), scale }
+                Texture::Checkerboard {
+                    even: color("tex1", 1.0),
+                    odd: color("tex2", 0.0),
+                    scale,
+                }
             }
             "constant" => Texture::Constant(p.rgb("value").unwrap_or(Vec3::ONE)),
             other => {
-                self.out.ignored.insert(format!("texture \"{other}\" (rendered as constant 0.5)"));
+                self.out
+                    .ignored
+                    .insert(format!("texture \"{other}\" (rendered as constant 0.5)"));
                 Texture::Constant(Vec3::splat(0.5))
             }
         };
@@ -509,7 +594,9 @@ impl Parser {
 
     /// Line of the last token read (the last line at the end of the file).
     fn line(&self) -> usize {
-        self.tokens.get(self.at.min(self.tokens.len()).saturating_sub(1)).map_or(0, |t| t.1)
+        self.tokens
+            .get(self.at.min(self.tokens.len()).saturating_sub(1))
+            .map_or(0, |t| t.1)
     }
 
     fn shape(&mut self) -> Result<(), SceneError> {
@@ -524,21 +611,34 @@ impl Parser {
                 }
                 let positions: Vec<Vec3> = pos.chunks_exact(3).map(vec3).collect();
                 let n = positions.len();
-                if idx.iter().any(|&i| i < 0.0 || i as usize >= n || i.fract() != 0.0) {
+                if idx
+                    .iter()
+                    .any(|&i| i < 0.0 || i as usize >= n || i.fract() != 0.0)
+                {
                     return self.err(format!("trianglemesh index out of range (0..{n})"));
                 }
-                let normals = p.nums("N").filter(|v| v.len() == 3 * n).map(|v| v.chunks_exact(3).map(vec3).collect());
+                let normals = p
+                    .nums("N")
+                    .filter(|v| v.len() == 3 * n)
+                    .map(|v| v.chunks_exact(3).map(vec3).collect());
                 // "float uv" (older pbrt-v3), "point2 uv" or "st".
                 let uvs = p
                     .nums("uv")
                     .or_else(|| p.nums("st"))
                     .filter(|v| v.len() == 2 * n)
-                    .map(|v| v.chunks_exact(2).map(|c| Vec2::new(c[0] as f32, c[1] as f32)).collect());
+                    .map(|v| {
+                        v.chunks_exact(2)
+                            .map(|c| Vec2::new(c[0] as f32, c[1] as f32))
+                            .collect()
+                    });
                 Mesh {
                     positions,
                     normals,
                     uvs,
-                    indices: idx.chunks_exact(3).map(|c| [c[0] as u32, c[1] as u32, c[2] as u32]).collect(),
+                    indices: idx
+                        .chunks_exact(3)
+                        .map(|c| [c[0] as u32, c[1] as u32, c[2] as u32])
+                        .collect(),
                 }
             }
             "plymesh" => {
@@ -559,7 +659,9 @@ impl Parser {
         let material = match self.state.material {
             Some(m) => m,
             None => {
-                self.out.materials.push(Material::Diffuse { reflectance: Texture::Constant(Vec3::splat(0.5)) });
+                self.out.materials.push(Material::Diffuse {
+                    reflectance: Texture::Constant(Vec3::splat(0.5)),
+                });
                 let m = self.out.materials.len() as u32 - 1;
                 self.state.material = Some(m);
                 m
@@ -574,7 +676,11 @@ impl Parser {
             return Err(SceneError::at(&self.path, 0, "no Camera directive".into()));
         };
         let resolution = self.out.resolution.unwrap_or(Resolution::new(640, 480));
-        let camera = Camera { camera_to_world: camera_from_world.inverse(), fov_degrees: self.out.fov, resolution };
+        let camera = Camera {
+            camera_to_world: camera_from_world.inverse(),
+            fov_degrees: self.out.fov,
+            resolution,
+        };
         let mut scene = Scene::new(camera);
         scene.materials = self.out.materials;
         for (mesh, material, emission) in &self.out.meshes {
@@ -582,7 +688,10 @@ impl Parser {
         }
         scene.environment = self.out.environment;
         scene.max_depth = self.out.max_depth.unwrap_or(16);
-        Ok(Loaded { scene, ignored: self.out.ignored })
+        Ok(Loaded {
+            scene,
+            ignored: self.out.ignored,
+        })
     }
 }
 
@@ -595,7 +704,8 @@ mod tests {
     use super::*;
 
     fn load_str(text: &str) -> Result<Loaded, SceneError> {
-        let dir = std::env::temp_dir().join(format!("strata-pbrt-{}-{}", std::process::id(), text.len()));
+        let dir =
+            std::env::temp_dir().join(format!("strata-pbrt-{}-{}", std::process::id(), text.len()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("scene.pbrt");
         std::fs::write(&path, text).unwrap();
@@ -636,20 +746,37 @@ WorldEnd
     #[test]
     fn malformed_files_name_the_line() {
         let cases = [
-            ("Camera \"perspective\"\nWorldBegin\nShape \"trianglemesh\" \"integer indices\" [ 0 1 5 ] \"point P\" [ 0 0 0 1 0 0 0 1 0 ]\n", 3),
-            ("Camera \"perspective\"\nWorldBegin\nNamedMaterial \"missing\"\n", 3),
+            (
+                "Camera \"perspective\"\nWorldBegin\nShape \"trianglemesh\" \"integer indices\" [ 0 1 5 ] \"point P\" [ 0 0 0 1 0 0 0 1 0 ]\n",
+                3,
+            ),
+            (
+                "Camera \"perspective\"\nWorldBegin\nNamedMaterial \"missing\"\n",
+                3,
+            ),
             ("Camera \"perspective\"\n\nTranslate 1 2\n", 3),
             ("Camera \"perspective\" \"float fov [ 30 ]\n", 1),
             ("AttributeEnd\n", 1),
-            ("Camera \"perspective\"\nWorldBegin\nShape \"plymesh\" \"string filename\" \"nope.ply\"\n", 0),
+            (
+                "Camera \"perspective\"\nWorldBegin\nShape \"plymesh\" \"string filename\" \"nope.ply\"\n",
+                0,
+            ),
         ];
         for (text, line) in cases {
             let e = load_str(text).unwrap_err();
-            assert!(e.file.ends_with("scene.pbrt") || e.file.ends_with("nope.ply"), "{e}");
+            assert!(
+                e.file.ends_with("scene.pbrt") || e.file.ends_with("nope.ply"),
+                "{e}"
+            );
             if line > 0 {
                 assert_eq!(e.line, line, "{text}: {e}");
             }
         }
-        assert!(load(Path::new("/nonexistent/scene.pbrt")).unwrap_err().to_string().contains("/nonexistent/scene.pbrt"));
+        assert!(
+            load(Path::new("/nonexistent/scene.pbrt"))
+                .unwrap_err()
+                .to_string()
+                .contains("/nonexistent/scene.pbrt")
+        );
     }
 }

@@ -5,8 +5,8 @@ use std::path::Path;
 
 use glam::{Vec2, Vec3};
 
-use crate::scene::Mesh;
 use crate::SceneError;
+use crate::scene::Mesh;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Format {
@@ -88,7 +88,11 @@ impl Reader<'_> {
         macro_rules! num {
             ($t:ty) => {{
                 let a = raw.try_into().ok()?;
-                (if le { <$t>::from_le_bytes(a) } else { <$t>::from_be_bytes(a) }) as f64
+                (if le {
+                    <$t>::from_le_bytes(a)
+                } else {
+                    <$t>::from_be_bytes(a)
+                }) as f64
             }};
         }
         Some(match s {
@@ -113,7 +117,8 @@ pub fn read(path: &Path) -> Result<Mesh, SceneError> {
 /// Parses PLY bytes; errors carry the header line (or 0 for the body).
 pub fn parse(bytes: &[u8]) -> Result<Mesh, (usize, String)> {
     let header_end = find(bytes, b"end_header").ok_or((1, "no end_header".to_string()))?;
-    let header = std::str::from_utf8(&bytes[..header_end]).map_err(|_| (1, "header is not text".to_string()))?;
+    let header = std::str::from_utf8(&bytes[..header_end])
+        .map_err(|_| (1, "header is not text".to_string()))?;
     let mut body_start = header_end + "end_header".len();
     while body_start < bytes.len() && bytes[body_start] != b'\n' {
         body_start += 1;
@@ -138,19 +143,30 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, (usize, String)> {
                 })
             }
             ["element", name, count] => {
-                let count = count.parse().map_err(|_| (line_no, format!("bad element count `{count}`")))?;
-                elements.push(Element { name: name.to_string(), count, properties: Vec::new() });
+                let count = count
+                    .parse()
+                    .map_err(|_| (line_no, format!("bad element count `{count}`")))?;
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    properties: Vec::new(),
+                });
             }
             ["property", "list", count, item, name] => {
                 let (Some(c), Some(t)) = (Scalar::parse(count), Scalar::parse(item)) else {
                     return Err((line_no, format!("unknown list types `{count} {item}`")));
                 };
-                let e = elements.last_mut().ok_or((line_no, "property before element".to_string()))?;
+                let e = elements
+                    .last_mut()
+                    .ok_or((line_no, "property before element".to_string()))?;
                 e.properties.push(Property::List(name.to_string(), c, t));
             }
             ["property", ty, name] => {
-                let t = Scalar::parse(ty).ok_or((line_no, format!("unknown property type `{ty}`")))?;
-                let e = elements.last_mut().ok_or((line_no, "property before element".to_string()))?;
+                let t =
+                    Scalar::parse(ty).ok_or((line_no, format!("unknown property type `{ty}`")))?;
+                let e = elements
+                    .last_mut()
+                    .ok_or((line_no, "property before element".to_string()))?;
                 e.properties.push(Property::Scalar(name.to_string(), t));
             }
             ["comment", ..] | ["obj_info", ..] | [] => {}
@@ -160,11 +176,20 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, (usize, String)> {
     let format = format.ok_or((1, "missing format line".to_string()))?;
     let body = &bytes[body_start.min(bytes.len())..];
     let tokens = if format == Format::Ascii {
-        std::str::from_utf8(body).map_err(|_| (0, "ASCII body is not text".to_string()))?.split_whitespace().collect()
+        std::str::from_utf8(body)
+            .map_err(|_| (0, "ASCII body is not text".to_string()))?
+            .split_whitespace()
+            .collect()
     } else {
         Vec::new()
     };
-    let mut reader = Reader { format, bytes: body, at: 0, tokens, token: 0 };
+    let mut reader = Reader {
+        format,
+        bytes: body,
+        at: 0,
+        tokens,
+        token: 0,
+    };
     let truncated = || (0, "file ends before all elements were read".to_string());
     let mut mesh = Mesh::default();
     let (mut normals, mut uvs) = (Vec::new(), Vec::new());
@@ -192,13 +217,19 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, (usize, String)> {
                     }
                     Property::List(name, count_type, item_type) => {
                         let n = reader.read(*count_type).ok_or_else(truncated)? as usize;
-                        let items: Vec<f64> =
-                            (0..n).map(|_| reader.read(*item_type)).collect::<Option<_>>().ok_or_else(truncated)?;
-                        if e.name == "face" && (name == "vertex_indices" || name == "vertex_index") {
+                        let items: Vec<f64> = (0..n)
+                            .map(|_| reader.read(*item_type))
+                            .collect::<Option<_>>()
+                            .ok_or_else(truncated)?;
+                        if e.name == "face" && (name == "vertex_indices" || name == "vertex_index")
+                        {
                             for k in 1..n.saturating_sub(1) {
                                 let tri = [items[0], items[k], items[k + 1]];
                                 if tri.iter().any(|&i| i < 0.0 || i >= u32::MAX as f64) {
-                                    return Err((0, format!("negative or huge vertex index in face {tri:?}")));
+                                    return Err((
+                                        0,
+                                        format!("negative or huge vertex index in face {tri:?}"),
+                                    ));
                                 }
                                 mesh.indices.push(tri.map(|i| i as u32));
                             }
@@ -207,7 +238,8 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, (usize, String)> {
                 }
             }
             if e.name == "vertex" {
-                mesh.positions.push(Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32));
+                mesh.positions
+                    .push(Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32));
                 if seen[3] && seen[4] && seen[5] {
                     normals.push(Vec3::new(v[3] as f32, v[4] as f32, v[5] as f32));
                 }
@@ -264,9 +296,19 @@ mod tests {
         let bad_type = ASCII.replace("property float y", "property quux y");
         assert_eq!(parse(bad_type.as_bytes()).unwrap_err().0, 6);
         let truncated = &ASCII[..ASCII.len() - 8];
-        assert!(parse(truncated.as_bytes()).unwrap_err().1.contains("ends before"));
+        assert!(
+            parse(truncated.as_bytes())
+                .unwrap_err()
+                .1
+                .contains("ends before")
+        );
         let out_of_range = ASCII.replace("4 0 1 2 3", "3 0 1 9");
-        assert!(parse(out_of_range.as_bytes()).unwrap_err().1.contains("vertex 9"));
+        assert!(
+            parse(out_of_range.as_bytes())
+                .unwrap_err()
+                .1
+                .contains("vertex 9")
+        );
         assert!(parse(b"").is_err());
     }
 }

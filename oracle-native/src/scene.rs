@@ -25,10 +25,13 @@ pub struct Mesh {
 impl Mesh {
     /// The mesh transformed by `m` (normals by its inverse transpose).
     pub fn transformed(mut self, m: &Mat4) -> Mesh {
-        self.positions.iter_mut().for_each(|p| *p = m.transform_point3(*p));
+        self.positions
+            .iter_mut()
+            .for_each(|p| *p = m.transform_point3(*p));
         let normal_matrix = m.inverse().transpose();
         if let Some(ns) = &mut self.normals {
-            ns.iter_mut().for_each(|n| *n = normal_matrix.transform_vector3(*n).normalize_or_zero());
+            ns.iter_mut()
+                .for_each(|n| *n = normal_matrix.transform_vector3(*n).normalize_or_zero());
         }
         self
     }
@@ -50,12 +53,27 @@ impl Camera {
     /// A camera at `eye` looking at `target`, `up` pointing up in the image
     /// and the right-handed world's `dir × up` to the image's right. (pbrt's
     /// `LookAt` mirrors this; the pbrt loader builds its own matrix.)
-    pub fn look_at(eye: Vec3, target: Vec3, up: Vec3, fov_degrees: f32, resolution: Resolution) -> Self {
+    pub fn look_at(
+        eye: Vec3,
+        target: Vec3,
+        up: Vec3,
+        fov_degrees: f32,
+        resolution: Resolution,
+    ) -> Self {
         let dir = (target - eye).normalize();
         let right = dir.cross(up.normalize()).normalize();
         let new_up = right.cross(dir);
-        let camera_to_world = Mat4::from_cols(right.extend(0.0), new_up.extend(0.0), dir.extend(0.0), eye.extend(1.0));
-        Self { camera_to_world, fov_degrees, resolution }
+        let camera_to_world = Mat4::from_cols(
+            right.extend(0.0),
+            new_up.extend(0.0),
+            dir.extend(0.0),
+            eye.extend(1.0),
+        );
+        Self {
+            camera_to_world,
+            fov_degrees,
+            resolution,
+        }
     }
 
     /// The primary ray through film point `(x, y)` in pixels (row 0 at the top).
@@ -63,11 +81,18 @@ impl Camera {
         let (w, h) = (self.resolution.width as f32, self.resolution.height as f32);
         let aspect = w / h;
         let tan = (self.fov_degrees.to_radians() * 0.5).tan();
-        let (sx, sy) = if aspect >= 1.0 { (aspect, 1.0) } else { (1.0, 1.0 / aspect) };
+        let (sx, sy) = if aspect >= 1.0 {
+            (aspect, 1.0)
+        } else {
+            (1.0, 1.0 / aspect)
+        };
         let cx = (2.0 * x / w - 1.0) * sx * tan;
         let cy = (1.0 - 2.0 * y / h) * sy * tan;
         let origin = self.camera_to_world.transform_point3(Vec3::ZERO);
-        let dir = self.camera_to_world.transform_vector3(Vec3::new(cx, cy, 1.0)).normalize();
+        let dir = self
+            .camera_to_world
+            .transform_vector3(Vec3::new(cx, cy, 1.0))
+            .normalize();
         (origin, dir)
     }
 }
@@ -146,7 +171,10 @@ impl Scene {
     pub fn add_mesh(&mut self, mesh: &Mesh, material: u32, emission: Option<Vec3>) -> usize {
         let mut skipped = 0;
         for idx in &mesh.indices {
-            let Some(v) = idx.map(|i| mesh.positions.get(i as usize).copied()).into_iter().collect::<Option<Vec<_>>>()
+            let Some(v) = idx
+                .map(|i| mesh.positions.get(i as usize).copied())
+                .into_iter()
+                .collect::<Option<Vec<_>>>()
             else {
                 skipped += 1;
                 continue;
@@ -161,7 +189,9 @@ impl Scene {
             let mut ng = cross.normalize();
             let shading = mesh.normals.as_ref().and_then(|ns| {
                 let n = idx.map(|i| ns.get(i as usize).copied().unwrap_or(ng));
-                n.iter().all(|n| n.is_finite() && n.length_squared() > 0.0).then_some(n)
+                n.iter()
+                    .all(|n| n.is_finite() && n.length_squared() > 0.0)
+                    .then_some(n)
             });
             if let Some(n) = shading
                 && ng.dot(n[0] + n[1] + n[2]) < 0.0
@@ -182,7 +212,11 @@ impl Scene {
             match emission {
                 Some(radiance) if radiance.max_element() > 0.0 => {
                     self.light_of.push(self.lights.len() as u32);
-                    self.lights.push(AreaLight { triangle: index, radiance, area });
+                    self.lights.push(AreaLight {
+                        triangle: index,
+                        radiance,
+                        area,
+                    });
                 }
                 _ => self.light_of.push(NO_LIGHT),
             }
@@ -207,7 +241,10 @@ impl Scene {
     /// Chooses a light with probability proportional to its power; returns it
     /// and that probability.
     pub fn choose_light(&self, u: f32) -> Option<(&AreaLight, f32)> {
-        let i = self.light_cdf.partition_point(|&c| c <= u).min(self.lights.len().checked_sub(1)?);
+        let i = self
+            .light_cdf
+            .partition_point(|&c| c <= u)
+            .min(self.lights.len().checked_sub(1)?);
         Some((&self.lights[i], self.light_probability(i as u32)))
     }
 

@@ -16,7 +16,9 @@
 //! is still a pure function of the numbers drawn.
 
 use glam::Vec3;
-use strata_engine::{FilmPoint, PathFlags, PathOracle, PathSample, Resolution, Rgb, Sampler, Temperature};
+use strata_engine::{
+    FilmPoint, PathFlags, PathOracle, PathSample, Resolution, Rgb, Sampler, Temperature,
+};
 
 use crate::geometry::{Frame, Intersector, Ray, power_heuristic, uniform_triangle};
 use crate::scene::{NO_LIGHT, Scene};
@@ -59,7 +61,11 @@ pub struct PathTracer<I> {
 impl<I: Intersector> PathTracer<I> {
     /// A tracer for `scene` with `accel` built over `scene.triangles`.
     pub fn new(scene: Scene, accel: I) -> Self {
-        Self { scene, accel, regularization: None }
+        Self {
+            scene,
+            accel,
+            regularization: None,
+        }
     }
 
     /// The scene.
@@ -72,7 +78,12 @@ impl<I: Intersector> PathTracer<I> {
         &self.accel
     }
 
-    fn radiance<S: Sampler + ?Sized>(&self, film: FilmPoint, sampler: &mut S, temperature: f32) -> (Vec3, PathFlags) {
+    fn radiance<S: Sampler + ?Sized>(
+        &self,
+        film: FilmPoint,
+        sampler: &mut S,
+        temperature: f32,
+    ) -> (Vec3, PathFlags) {
         let scene = &self.scene;
         let floor = self.regularization.map_or(0.0, |r| r.floor());
         let (origin, direction) = scene.camera.ray(film.x, film.y);
@@ -111,8 +122,9 @@ impl<I: Intersector> PathTracer<I> {
                     1.0
                 } else {
                     let d2 = (p - previous_point).length_squared();
-                    let light_pdf = scene.light_probability(light) / scene.lights[light as usize].area * d2
-                        / n_geometric.dot(wo_world);
+                    let light_pdf =
+                        scene.light_probability(light) / scene.lights[light as usize].area * d2
+                            / n_geometric.dot(wo_world);
                     power_heuristic(previous_pdf, light_pdf)
                 };
                 radiance += beta * emitted * weight;
@@ -157,7 +169,9 @@ impl<I: Intersector> PathTracer<I> {
             }
 
             // Continue with the original BSDF.
-            let Some(s) = bsdf.sample(wo, u_lobe, u_direction) else { break };
+            let Some(s) = bsdf.sample(wo, u_lobe, u_direction) else {
+                break;
+            };
             let wi_world = frame.to_world(s.wi);
             beta *= s.f * (s.wi.z.abs() / s.pdf);
             if s.specular {
@@ -192,8 +206,16 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
         self.scene.camera.resolution
     }
 
-    fn trace<S: Sampler + ?Sized>(&self, film: FilmPoint, sampler: &mut S, temperature: Temperature) -> PathSample<Rgb> {
+    fn trace<S: Sampler + ?Sized>(
+        &self,
+        film: FilmPoint,
+        sampler: &mut S,
+        temperature: Temperature,
+    ) -> PathSample<Rgb> {
         let (l, flags) = self.radiance(film, sampler, temperature.0);
-        PathSample { radiance: Rgb(l.to_array()), flags }
+        PathSample {
+            radiance: Rgb(l.to_array()),
+            flags,
+        }
     }
 }

@@ -1,6 +1,7 @@
 //! Engine overhead: PSSMLT vs MC cost per path on the same oracle, measured
 //! in one run, interleaved (MC, PSSMLT, MC, PSSMLT, ...) so machine noise
-//! hits both; reports the ratio of medians and writes it to a JSON file.
+//! hits both; reports the ratio of medians for the procedural oracle and for
+//! the native path tracer on the Cornell box, and writes them to a JSON file.
 //!
 //! ```text
 //! cargo run --release --example overhead -- --out out/bench/overhead.json
@@ -10,12 +11,13 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Parser;
-use strata::engine::Resolution;
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::render::{
     Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
 };
 use strata::engine::target::MaxChannel;
+use strata::engine::{PathOracle, Resolution};
+use strata::native::{builtin, native_tracer};
 
 /// Measure PSSMLT's cost per path relative to MC.
 #[derive(Parser, Debug)]
@@ -39,13 +41,13 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args = Args::parse();
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads)
-        .build()?;
-    let image = ProceduralImage::showcase(Resolution::new(256, 192));
-    let budget = Budget::samples_per_pixel(args.spp, image.resolution);
+/// Median ns per path of MC and PSSMLT (bootstrap included) on `oracle`.
+fn measure<O: PathOracle>(
+    oracle: &O,
+    spp: u64,
+    repeats: usize,
+) -> Result<(f64, f64), strata::engine::Error> {
+    let budget = Budget::samples_per_pixel(spp, oracle.resolution());
     let settings = PssmltSettings {
         seed: 1,
         budget,
@@ -54,40 +56,56 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..Default::default()
     };
     let (mut mc, mut pss) = (Vec::new(), Vec::new());
-    pool.install(|| -> Result<(), strata::engine::Error> {
-        for _ in 0..args.repeats {
-            let t = Instant::now();
-            let out = render_mc(&image, &McSettings { seed: 1, budget }, &Silent)?;
-            mc.push(t.elapsed().as_secs_f64() / out.stats.samples as f64);
-            let t = Instant::now();
-            let out = render_pssmlt(&image, &MaxChannel, &settings, &Silent)?;
-            pss.push(
-                t.elapsed().as_secs_f64()
-                    / (out.stats.samples + out.stats.bootstrap_samples) as f64,
-            );
-        }
-        Ok(())
+    for _ in 0..repeats {
+        let t = Instant::now();
+        let out = render_mc(oracle, &McSettings { seed: 1, budget }, &Silent)?;
+        mc.push(t.elapsed().as_secs_f64() * 1e9 / out.stats.samples as f64);
+        let t = Instant::now();
+        let out = render_pssmlt(oracle, &MaxChannel, &settings, &Silent)?;
+        pss.push(
+            t.elapsed().as_secs_f64() * 1e9
+                / (out.stats.samples + out.stats.bootstrap_samples) as f64,
+        );
+    }
+    Ok((median(mc), median(pss)))
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args = Args::parse();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads)
+        .build()?;
+    let procedural = ProceduralImage::showcase(Resolution::new(256, 192));
+    let cornell = native_tracer(builtin::cornell(Resolution::new(128, 128)));
+    let rows = pool.install(|| -> Result<_, strata::engine::Error> {
+        Ok([
+            (
+                "procedural 256x192",
+                measure(&procedural, args.spp, args.repeats)?,
+            ),
+            (
+                "cornell 128x128 (native tracer)",
+                measure(&cornell, args.spp / 4, args.repeats)?,
+            ),
+        ])
     })?;
-    let (mc, pss) = (median(mc), median(pss));
-    let ratio = pss / mc;
-    println!(
-        "MC {:.1} ns/path, PSSMLT {:.1} ns/path, ratio {ratio:.3}",
-        mc * 1e9,
-        pss * 1e9
-    );
+    let mut json = Vec::new();
+    for (name, (mc, pss)) in rows {
+        let ratio = pss / mc;
+        println!("{name}: MC {mc:.1} ns/path, PSSMLT {pss:.1} ns/path, ratio {ratio:.3}");
+        json.push(format!(
+            "{{\"oracle\": \"{name}\", \"mc_ns_per_path\": {mc:.2}, \"pssmlt_ns_per_path\": {pss:.2}, \"ratio\": {ratio:.4}}}"
+        ));
+    }
     if let Some(dir) = args.out.parent() {
         std::fs::create_dir_all(dir)?;
     }
-    std::fs::write(
-        &args.out,
-        format!(
-            "{{\"oracle\": \"procedural 256x192\", \"spp\": {}, \"threads\": {}, \"mc_ns_per_path\": {:.2}, \"pssmlt_ns_per_path\": {:.2}, \"ratio\": {ratio:.4}}}\n",
-            args.spp,
-            pool.current_num_threads(),
-            mc * 1e9,
-            pss * 1e9
-        ),
-    )?;
+    let text = format!(
+        "{{\"threads\": {}, \"results\": [{}]}}\n",
+        pool.current_num_threads(),
+        json.join(", ")
+    );
+    std::fs::write(&args.out, text)?;
     println!("wrote {}", args.out.display());
     Ok(())
 }

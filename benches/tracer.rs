@@ -1,0 +1,137 @@
+//! Native path tracer throughput: BVH build, closest-hit and occlusion rays,
+//! paths per second on the built-in scenes, veach-ajar (when
+//! `$STRATA_SCENES` has it) and a ~1M-triangle mesh.
+//! `cargo bench --bench tracer`; summary in docs/BENCHMARKS.md.
+
+use std::hint::black_box;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use glam::Vec3;
+use strata::engine::rng::{Domain, stream, uniform_f32};
+use strata::engine::sample::IndependentSampler;
+use strata::engine::{FilmPoint, PathOracle, Resolution, Temperature};
+use strata::native::builtin::{self, sphere};
+use strata::native::material::{Material, Texture};
+use strata::native::{BvhIntersector, Camera, Intersector, Ray, Scene, native_tracer, pbrt};
+
+const RAYS: usize = 10_000;
+const PATHS: usize = 2_000;
+
+/// A ~1M-triangle sphere in front of a camera, lit by a quad.
+fn big_mesh_scene(res: Resolution) -> Scene {
+    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 40.0, res);
+    let mut s = Scene::new(camera);
+    let m = s.add_material(Material::Diffuse {
+        reflectance: Texture::Constant(Vec3::splat(0.7)),
+    });
+    s.add_mesh(&sphere(Vec3::ZERO, 1.0, 500, 1000), m, None);
+    let light = builtin::quad(
+        Vec3::new(-1., 2., -1.),
+        Vec3::new(1., 2., -1.),
+        Vec3::new(1., 2., 1.),
+        Vec3::new(-1., 2., 1.),
+    );
+    let dark = s.add_material(Material::Diffuse {
+        reflectance: Texture::Constant(Vec3::ZERO),
+    });
+    s.add_mesh(&light, dark, Some(Vec3::splat(5.0)));
+    s
+}
+
+fn scenes() -> Vec<(String, Scene)> {
+    let res = Resolution::new(128, 128);
+    let mut v: Vec<(String, Scene)> = builtin::NAMES
+        .iter()
+        .map(|n| (n.to_string(), builtin::by_name(n, res).expect("built-in")))
+        .collect();
+    let dir = std::env::var_os("STRATA_SCENES")
+        .map_or_else(|| PathBuf::from("../shared/scenes"), PathBuf::from);
+    match pbrt::load(&dir.join("veach-ajar/scene.pbrt")) {
+        Ok(l) => v.push(("veach-ajar".into(), l.scene)),
+        Err(e) => eprintln!("skipping veach-ajar: {e}"),
+    }
+    v.push(("mesh-1M".into(), big_mesh_scene(res)));
+    v
+}
+
+/// Camera rays through random film points (the rays a path starts with).
+fn camera_rays(scene: &Scene) -> Vec<Ray> {
+    let mut rng = stream(1, Domain::User, 0);
+    let r = scene.camera.resolution;
+    (0..RAYS)
+        .map(|_| {
+            let (o, d) = scene.camera.ray(
+                uniform_f32(&mut rng) * r.width as f32,
+                uniform_f32(&mut rng) * r.height as f32,
+            );
+            Ray::new(o, d)
+        })
+        .collect()
+}
+
+fn rays(c: &mut Criterion) {
+    let mut g = c.benchmark_group("rays");
+    g.sample_size(10)
+        .measurement_time(Duration::from_secs(2))
+        .throughput(Throughput::Elements(RAYS as u64));
+    for (name, scene) in scenes() {
+        let bvh = BvhIntersector::new(&scene.triangles);
+        let rays = camera_rays(&scene);
+        g.bench_function(format!("closest/{name}"), |b| {
+            b.iter(|| rays.iter().filter(|r| bvh.closest_hit(r).is_some()).count())
+        });
+        // Occlusion along the first 90 % of each camera ray's closest hit distance (or 10 units).
+        let shadow: Vec<Ray> = rays
+            .iter()
+            .map(|r| Ray {
+                t_max: bvh.closest_hit(r).map_or(10.0, |h| 0.9 * h.t),
+                ..*r
+            })
+            .collect();
+        g.bench_function(format!("occluded/{name}"), |b| {
+            b.iter(|| shadow.iter().filter(|r| bvh.occluded(r)).count())
+        });
+    }
+    g.finish();
+}
+
+fn paths(c: &mut Criterion) {
+    let mut g = c.benchmark_group("paths");
+    g.sample_size(10)
+        .measurement_time(Duration::from_secs(3))
+        .throughput(Throughput::Elements(PATHS as u64));
+    for (name, scene) in scenes() {
+        let tracer = native_tracer(scene);
+        let r = tracer.resolution();
+        let mut sampler = IndependentSampler::new(stream(2, Domain::User, 0));
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                for i in 0..PATHS {
+                    let p = FilmPoint {
+                        x: (i as u32 % r.width) as f32 + 0.5,
+                        y: (i as u32 / r.width % r.height) as f32 + 0.5,
+                    };
+                    black_box(tracer.trace(p, &mut sampler, Temperature::ONE));
+                }
+            })
+        });
+    }
+    g.finish();
+}
+
+fn build(c: &mut Criterion) {
+    let scene = big_mesh_scene(Resolution::new(8, 8));
+    let mut g = c.benchmark_group("bvh_build");
+    g.sample_size(10)
+        .measurement_time(Duration::from_secs(10))
+        .throughput(Throughput::Elements(scene.triangles.len() as u64));
+    g.bench_function("mesh-1M", |b| {
+        b.iter(|| BvhIntersector::new(black_box(&scene.triangles)))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, rays, paths, build);
+criterion_main!(benches);

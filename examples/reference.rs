@@ -1,0 +1,133 @@
+//! Compares a long render of `cornell-box` with the independent renderer's
+//! converged image shipped beside it (`TungstenRender.exr`, 1024x1024): the
+//! reference is box-downsampled to the render's resolution, then the program
+//! reports the ratio of image means per channel and relMSE/MAPE, and writes
+//! them to a JSON file with both images as PNG.
+//!
+//! ```text
+//! cargo run --release --example reference -- --spp 1024 --size 256
+//! ```
+//! Scenes are found in `$STRATA_SCENES` (default `../shared/scenes`).
+
+use std::path::PathBuf;
+
+use clap::Parser;
+use strata::engine::render::{Budget, McSettings, Silent, render_mc};
+use strata::engine::{Film, Resolution, metrics};
+use strata::native::{native_tracer, pbrt};
+
+/// Render cornell-box and compare with Tungsten's converged image.
+#[derive(Parser, Debug)]
+struct Args {
+    /// Paths per pixel.
+    #[arg(long, default_value_t = 1024)]
+    spp: u64,
+    /// Square render size (must divide 1024).
+    #[arg(long, default_value_t = 256)]
+    size: u32,
+    /// Seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Output directory.
+    #[arg(long, default_value = "out/reference")]
+    out: PathBuf,
+}
+
+fn scenes_dir() -> PathBuf {
+    std::env::var_os("STRATA_SCENES")
+        .map_or_else(|| PathBuf::from("../shared/scenes"), PathBuf::from)
+}
+
+/// Box-filters `film` down by an integer factor.
+fn downsample(film: &Film, factor: u32) -> Film {
+    let r = film.resolution();
+    let out_res = Resolution::new(r.width / factor, r.height / factor);
+    let c = film.channels();
+    let mut data = vec![0.0; out_res.pixel_count() * c];
+    let w = 1.0 / (factor * factor) as f64;
+    for y in 0..r.height {
+        for x in 0..r.width {
+            let o = ((y / factor) * out_res.width + x / factor) as usize * c;
+            for (k, v) in film.pixel(x, y).iter().enumerate() {
+                data[o + k] += v * w;
+            }
+        }
+    }
+    Film::from_data(out_res, c, data).expect("shape computed above")
+}
+
+/// relMSE and mean luminance ratio over pixels that are neither an emitter
+/// (luminance > 5 in either image) nor next to one: Tungsten's film used
+/// pbrt's triangle filter, which spreads the emitter into its neighbours,
+/// while strata's film is box-filtered.
+fn away_from_emitters(film: &Film, reference: &Film) -> (f64, f64, usize) {
+    let r = film.resolution();
+    let (w, h) = (r.width as i64, r.height as i64);
+    let bright = |x: i64, y: i64| {
+        let i = (y.clamp(0, h - 1) * w + x.clamp(0, w - 1)) as usize;
+        film.luminance(i) > 5.0 || reference.luminance(i) > 5.0
+    };
+    let (mut rel, mut sum_a, mut sum_r, mut n) = (0.0, 0.0, 0.0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            if (-1..=1).any(|dy| (-1..=1).any(|dx| bright(x + dx, y + dy))) {
+                continue;
+            }
+            let i = (y * w + x) as usize;
+            let (a, b) = (film.luminance(i), reference.luminance(i));
+            rel += (a - b) * (a - b) / (b * b + metrics::EPSILON);
+            sum_a += a;
+            sum_r += b;
+            n += 1;
+        }
+    }
+    (rel / n as f64, sum_a / sum_r, r.pixel_count() - n)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args = Args::parse();
+    let dir = scenes_dir().join("cornell-box");
+    if !dir.join("scene.pbrt").exists() {
+        return Err(format!(
+            "cornell-box not found in {} (set STRATA_SCENES)",
+            dir.display()
+        )
+        .into());
+    }
+    let reference = strata::io::read_film(dir.join("TungstenRender.exr"))?;
+    if reference.resolution().width % args.size != 0 {
+        return Err(format!("--size must divide {}", reference.resolution().width).into());
+    }
+    let reference = downsample(&reference, reference.resolution().width / args.size);
+    let mut scene = pbrt::load(&dir.join("scene.pbrt"))?.scene;
+    scene.camera.resolution = Resolution::new(args.size, args.size);
+    let tracer = native_tracer(scene);
+    let start = std::time::Instant::now();
+    let budget = Budget::samples_per_pixel(args.spp, tracer.scene().camera.resolution);
+    let film = render_mc(
+        &tracer,
+        &McSettings {
+            seed: args.seed,
+            budget,
+        },
+        &Silent,
+    )?
+    .film;
+    let seconds = start.elapsed().as_secs_f64();
+    let ratio: Vec<f64> = (0..3)
+        .map(|c| film.channel_mean(c) / reference.channel_mean(c))
+        .collect();
+    let e = metrics::compare(&film, &reference)?;
+    let (rel_mse_away, ratio_away, excluded) = away_from_emitters(&film, &reference);
+    std::fs::create_dir_all(&args.out)?;
+    strata::io::write_png(&film, 0.0, args.out.join("strata.png"))?;
+    strata::io::write_png(&reference, 0.0, args.out.join("tungsten.png"))?;
+    strata::io::write_exr(&film, args.out.join("strata.exr"))?;
+    let json = format!(
+        "{{\"scene\": \"cornell-box\", \"size\": {}, \"spp\": {}, \"seconds\": {seconds:.1}, \"mean_ratio_rgb\": [{:.5}, {:.5}, {:.5}], \"rel_mse\": {:.6}, \"mape\": {:.5}, \"l1\": {:.6}, \"away_from_emitters\": {{\"excluded_pixels\": {excluded}, \"rel_mse\": {rel_mse_away:.7}, \"mean_ratio\": {ratio_away:.5}}}}}\n",
+        args.size, args.spp, ratio[0], ratio[1], ratio[2], e.rel_mse, e.mape, e.l1
+    );
+    std::fs::write(args.out.join("cornell-box.json"), &json)?;
+    print!("{json}");
+    Ok(())
+}

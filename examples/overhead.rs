@@ -1,7 +1,9 @@
 //! Engine overhead: PSSMLT vs MC cost per path on the same oracle, measured
 //! in one run, interleaved (MC, PSSMLT, MC, PSSMLT, ...) so machine noise
 //! hits both; reports the ratio of medians for the procedural oracle and for
-//! the native path tracer on the Cornell box, and writes them to a JSON file.
+//! the native path tracer on the Cornell box, with Kelemen's small step
+//! (exact catch-up replays every missed step) and the Gaussian one (catch-up
+//! in one draw), and writes them to a JSON file.
 //!
 //! ```text
 //! cargo run --release --example overhead -- --out out/bench/overhead.json
@@ -12,6 +14,7 @@ use std::time::Instant;
 
 use clap::Parser;
 use strata::engine::analytic::ProceduralImage;
+use strata::engine::mutate::{Gaussian, Kelemen, MutationParams, SmallStep};
 use strata::engine::render::{
     Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
 };
@@ -46,14 +49,19 @@ fn measure<O: PathOracle>(
     oracle: &O,
     spp: u64,
     repeats: usize,
+    small_step: SmallStep,
 ) -> Result<(f64, f64), strata::engine::Error> {
     let budget = Budget::samples_per_pixel(spp, oracle.resolution());
+    let mutation = MutationParams {
+        small_step,
+        ..Default::default()
+    };
     let settings = PssmltSettings {
         seed: 1,
         budget,
         chains: 256,
         bootstrap_candidates: 16_384,
-        ..Default::default()
+        mutation,
     };
     let (mut mc, mut pss) = (Vec::new(), Vec::new());
     for _ in 0..repeats {
@@ -77,15 +85,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .build()?;
     let procedural = ProceduralImage::showcase(Resolution::new(256, 192));
     let cornell = native_tracer(builtin::cornell(Resolution::new(128, 128)));
+    let (kelemen, gaussian) = (
+        SmallStep::Kelemen(Kelemen::DEFAULT),
+        SmallStep::Gaussian(Gaussian::DEFAULT),
+    );
     let rows = pool.install(|| -> Result<_, strata::engine::Error> {
         Ok([
             (
-                "procedural 256x192",
-                measure(&procedural, args.spp, args.repeats)?,
+                "procedural 256x192, Kelemen",
+                measure(&procedural, args.spp, args.repeats, kelemen)?,
             ),
             (
-                "cornell 128x128 (native tracer)",
-                measure(&cornell, args.spp / 4, args.repeats)?,
+                "procedural 256x192, Gaussian",
+                measure(&procedural, args.spp, args.repeats, gaussian)?,
+            ),
+            (
+                "cornell 128x128 (native tracer), Kelemen",
+                measure(&cornell, args.spp / 4, args.repeats, kelemen)?,
+            ),
+            (
+                "cornell 128x128 (native tracer), Gaussian",
+                measure(&cornell, args.spp / 4, args.repeats, gaussian)?,
             ),
         ])
     })?;

@@ -150,6 +150,11 @@ fn run(args: &Args) -> AnyResult<()> {
                         scene
                     }
                 };
+                println!(
+                    "{name}: {} triangles, {} emissive",
+                    scene.triangles.len(),
+                    scene.lights.len()
+                );
                 (render(&native_tracer(scene), args)?, None)
             }
         })

@@ -11,13 +11,18 @@ use crate::scene::{Mesh, Scene};
 /// Adds the meshes of the OBJ file at `path` to `scene`; each MTL material
 /// becomes a Lambertian material (its `Kd`), and `Ke > 0` makes an area light.
 pub fn add_obj(scene: &mut Scene, path: &Path) -> Result<(), SceneError> {
+    // tobj accepts some malformed statements silently; check them first.
+    let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
+    if let Some(line) = first_bad_line(&text) {
+        return Err(SceneError::at(path, line, "malformed OBJ statement".into()));
+    }
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
         ..Default::default()
     };
     let (models, materials) =
-        tobj::load_obj(path, &options).map_err(|e| SceneError::at(path, 0, e.to_string()))?;
+        tobj::load_obj(path, &options).map_err(|e| SceneError::at(path, 0, format!("OBJ: {e}")))?;
     let materials = materials.unwrap_or_default();
     let default = scene.add_material(Material::Diffuse {
         reflectance: Texture::Constant(Vec3::splat(0.5)),
@@ -72,4 +77,89 @@ pub fn add_obj(scene: &mut Scene, path: &Path) -> Result<(), SceneError> {
         scene.add_mesh(&mesh, material, emission);
     }
     Ok(())
+}
+
+/// The first line (1-based) whose statement tobj cannot parse: a vertex,
+/// normal or texture coordinate with non-numeric or too few values, or a face
+/// with fewer than three vertices or non-integer indices.
+fn first_bad_line(text: &str) -> Option<usize> {
+    text.lines()
+        .position(|line| {
+            let mut words = line.split_whitespace();
+            let numbers_ok = |words: std::str::SplitWhitespace, min: usize| {
+                let v: Vec<&str> = words.collect();
+                v.len() < min || v.iter().any(|w| w.parse::<f32>().is_err())
+            };
+            match words.next() {
+                Some("v") => numbers_ok(words, 3),
+                Some("vn") => numbers_ok(words, 3),
+                Some("vt") => numbers_ok(words, 1),
+                Some("f") => {
+                    let v: Vec<&str> = words.collect();
+                    v.len() < 3
+                        || v.iter().any(|w| {
+                            w.split('/')
+                                .next()
+                                .is_none_or(|i| i.parse::<i64>().is_err())
+                        })
+                }
+                _ => false,
+            }
+        })
+        .map(|i| i + 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Camera;
+    use strata_engine::Resolution;
+
+    fn with_file<T>(name: &str, text: &str, f: impl FnOnce(&Path) -> T) -> T {
+        let dir = std::env::temp_dir().join(format!("strata-obj-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let r = f(&path);
+        std::fs::remove_dir_all(&dir).unwrap();
+        r
+    }
+
+    fn scene() -> Scene {
+        Scene::new(Camera::look_at(
+            glam::Vec3::Z,
+            glam::Vec3::ZERO,
+            glam::Vec3::Y,
+            45.0,
+            Resolution::new(4, 4),
+        ))
+    }
+
+    #[test]
+    fn obj_quad_loads() {
+        let mut s = scene();
+        with_file(
+            "quad.obj",
+            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n",
+            |p| add_obj(&mut s, p),
+        )
+        .unwrap();
+        assert_eq!(s.triangles.len(), 2);
+    }
+
+    #[test]
+    fn malformed_obj_names_the_line() {
+        let mut s = scene();
+        let e = with_file("bad.obj", "v 0 0 0\nv 1 0 0\nv 1 x 0\nf 1 2 3\n", |p| {
+            add_obj(&mut s, p)
+        })
+        .unwrap_err();
+        assert_eq!(e.line, 3, "{e}");
+        assert!(e.file.ends_with("bad.obj"));
+        let e = with_file("short.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2\n", |p| {
+            add_obj(&mut s, p)
+        })
+        .unwrap_err();
+        assert_eq!(e.line, 4, "{e}");
+    }
 }

@@ -222,7 +222,7 @@ fn render<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<RenderOutput> {
     };
     bar.finish_and_clear();
     println!(
-        "{:?} {:?}: {:.2} s",
+        "{} {:?}: {:.2} s",
         args.scene,
         args.method,
         start.elapsed().as_secs_f64()

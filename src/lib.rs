@@ -1,5 +1,6 @@
 #![doc = include_str!("../README.md")]
 
+pub use strata_embree as embree;
 pub use strata_engine as engine;
 pub use strata_native as native;
 

@@ -80,14 +80,18 @@ impl Intersector for BvhIntersector {
         }
         let triangle = bvh.primitive_indices[hit.primitive_id as usize];
         // Barycentrics from the original vertices (one triangle per query);
-        // fall back to the centre if rounding puts the hit just outside.
+        // when rounding puts the hit just outside an edge, those of the
+        // closest point of the triangle.
+        let tri = &self.triangles[triangle as usize];
         let exact = Ray {
             t_min: 0.0,
             t_max: f32::INFINITY,
             ..*ray
         };
-        let uv = intersect_triangle(&exact, &self.triangles[triangle as usize])
-            .map_or(glam::Vec2::splat(1.0 / 3.0), |(_, uv)| uv);
+        let uv = intersect_triangle(&exact, tri).map_or_else(
+            || closest_barycentrics(ray.origin + hit.t * ray.direction, tri),
+            |(_, uv)| uv,
+        );
         Some(Hit {
             triangle,
             t: hit.t,
@@ -100,6 +104,42 @@ impl Intersector for BvhIntersector {
             !bvh.ray_traverse_miss(Self::obvhs_ray(ray), |r, i| self.ordered[i].intersect(r))
         })
     }
+}
+
+/// Barycentric weights `(u, v)` of vertices 1 and 2 for the point of
+/// triangle `t` closest to `p` (Ericson, Real-Time Collision Detection 5.1.5).
+fn closest_barycentrics(p: Vec3, t: &[Vec3; 3]) -> glam::Vec2 {
+    let [a, b, c] = *t;
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return glam::Vec2::ZERO;
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return glam::Vec2::X;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return glam::Vec2::new(d1 / (d1 - d3), 0.0);
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return glam::Vec2::Y;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return glam::Vec2::new(0.0, d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return glam::Vec2::new(1.0 - w, w);
+    }
+    let denom = 1.0 / (va + vb + vc);
+    glam::Vec2::new(vb * denom, vc * denom)
 }
 
 #[cfg(test)]

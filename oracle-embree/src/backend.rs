@@ -1,0 +1,204 @@
+//! The Embree 4 implementation (feature `embree`).
+
+use embree4_sys as rtc;
+use glam::{Vec2, Vec3};
+use strata_native::{Hit, Intersector, Ray};
+
+use crate::EmbreeError;
+
+/// Embree's ray-hit record, padded. embree4-sys 0.0.12 was generated from
+/// Embree 4.2's headers, where `RTCRayHit` is 80 bytes; Embree 4.3 added
+/// `instPrimID` to `RTCHit`, so the library installed here (4.4) writes 96
+/// bytes. Handing it an 80-byte struct would let it write 16 bytes past our
+/// memory. The fields we read precede the new one, so the layouts agree on
+/// them; the padding only gives Embree room. Embree also requires 16-byte
+/// alignment for the structures passed to `rtcIntersect1`.
+#[repr(C, align(16))]
+struct PaddedRayHit {
+    ray_hit: rtc::RTCRayHit,
+    _room_for_embree_4_3: [u8; 96 - std::mem::size_of::<rtc::RTCRayHit>()],
+}
+
+/// A ray for `rtcOccluded1`, which also requires 16-byte alignment.
+#[repr(C, align(16))]
+struct AlignedRay(rtc::RTCRay);
+
+const _: () = assert!(std::mem::size_of::<PaddedRayHit>() == 96);
+const _: () = assert!(std::mem::size_of::<rtc::RTCRay>() == 48);
+
+/// An Embree scene over one triangle geometry; primitive `i` is triangle `i`.
+pub struct EmbreeIntersector {
+    device: rtc::RTCDevice,
+    scene: rtc::RTCScene,
+}
+
+// SAFETY: Embree scenes are immutable after `rtcCommitScene` and Embree
+// documents `rtcIntersect1`/`rtcOccluded1` as thread-safe on a committed
+// scene; the device is only used again in `Drop`, which has `&mut self`.
+unsafe impl Send for EmbreeIntersector {}
+// SAFETY: see `Send`.
+unsafe impl Sync for EmbreeIntersector {}
+
+impl EmbreeIntersector {
+    /// Builds a high-quality BVH over `triangles`.
+    pub fn new(triangles: &[[Vec3; 3]]) -> Result<Self, EmbreeError> {
+        // SAFETY: every Embree object is created, checked and released here;
+        // the buffers Embree allocates are filled within their reported size.
+        unsafe {
+            let device = rtc::rtcNewDevice(std::ptr::null());
+            if device.is_null() {
+                return Err(EmbreeError::Embree {
+                    during: "rtcNewDevice",
+                    code: -1,
+                });
+            }
+            let scene = rtc::rtcNewScene(device);
+            let this = Self { device, scene };
+            this.check("rtcNewScene")?;
+            rtc::rtcSetSceneBuildQuality(scene, rtc::RTCBuildQuality::HIGH);
+            if !triangles.is_empty() {
+                let geometry = rtc::rtcNewGeometry(device, rtc::RTCGeometryType::TRIANGLE);
+                let n = triangles.len();
+                let vertices = rtc::rtcSetNewGeometryBuffer(
+                    geometry,
+                    rtc::RTCBufferType::VERTEX,
+                    0,
+                    rtc::RTCFormat::FLOAT3,
+                    12,
+                    3 * n,
+                ) as *mut f32;
+                let indices = rtc::rtcSetNewGeometryBuffer(
+                    geometry,
+                    rtc::RTCBufferType::INDEX,
+                    0,
+                    rtc::RTCFormat::UINT3,
+                    12,
+                    n,
+                ) as *mut u32;
+                this.check("rtcSetNewGeometryBuffer")?;
+                if vertices.is_null() || indices.is_null() {
+                    rtc::rtcReleaseGeometry(geometry);
+                    return Err(EmbreeError::Embree {
+                        during: "rtcSetNewGeometryBuffer",
+                        code: -1,
+                    });
+                }
+                let vertices = std::slice::from_raw_parts_mut(vertices, 9 * n);
+                let indices = std::slice::from_raw_parts_mut(indices, 3 * n);
+                for (i, t) in triangles.iter().enumerate() {
+                    for (k, v) in t.iter().enumerate() {
+                        vertices[9 * i + 3 * k..9 * i + 3 * k + 3].copy_from_slice(&v.to_array());
+                        indices[3 * i + k] = (3 * i + k) as u32;
+                    }
+                }
+                rtc::rtcCommitGeometry(geometry);
+                rtc::rtcAttachGeometry(scene, geometry);
+                rtc::rtcReleaseGeometry(geometry);
+                this.check("building the geometry")?;
+            }
+            rtc::rtcCommitScene(scene);
+            this.check("rtcCommitScene")?;
+            Ok(this)
+        }
+    }
+
+    fn check(&self, during: &'static str) -> Result<(), EmbreeError> {
+        // SAFETY: the device is valid for self's lifetime.
+        let e = unsafe { rtc::rtcGetDeviceError(self.device) };
+        if e == rtc::RTCError::NONE {
+            Ok(())
+        } else {
+            Err(EmbreeError::Embree {
+                during,
+                code: e as i32,
+            })
+        }
+    }
+}
+
+impl Drop for EmbreeIntersector {
+    fn drop(&mut self) {
+        // SAFETY: created in `new`, released once.
+        unsafe {
+            rtc::rtcReleaseScene(self.scene);
+            rtc::rtcReleaseDevice(self.device);
+        }
+    }
+}
+
+fn embree_ray(ray: &Ray) -> rtc::RTCRay {
+    rtc::RTCRay {
+        org_x: ray.origin.x,
+        org_y: ray.origin.y,
+        org_z: ray.origin.z,
+        tnear: ray.t_min,
+        dir_x: ray.direction.x,
+        dir_y: ray.direction.y,
+        dir_z: ray.direction.z,
+        time: 0.0,
+        tfar: ray.t_max,
+        mask: u32::MAX,
+        id: 0,
+        flags: 0,
+    }
+}
+
+/// Embree recommends flush-to-zero and denormals-are-zero on every thread
+/// that traces (denormal arithmetic is slow in its kernels); set once per
+/// thread.
+fn set_flush_denormals() {
+    thread_local!(static SET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) });
+    SET.with(|set| {
+        if !set.get() {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: only sets the FTZ (bit 15) and DAZ (bit 6) flags of this
+            // thread's MXCSR register.
+            #[allow(deprecated)]
+            unsafe {
+                use std::arch::x86_64::{_mm_getcsr, _mm_setcsr};
+                _mm_setcsr(_mm_getcsr() | 0x8040);
+            }
+            set.set(true);
+        }
+    });
+}
+
+impl Intersector for EmbreeIntersector {
+    fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
+        set_flush_denormals();
+        let mut padded = PaddedRayHit {
+            ray_hit: rtc::RTCRayHit {
+                ray: embree_ray(ray),
+                hit: rtc::RTCHit {
+                    Ng_x: 0.0,
+                    Ng_y: 0.0,
+                    Ng_z: 0.0,
+                    u: 0.0,
+                    v: 0.0,
+                    primID: u32::MAX,
+                    geomID: u32::MAX,
+                    instID: [u32::MAX],
+                },
+            },
+            _room_for_embree_4_3: [0; 96 - std::mem::size_of::<rtc::RTCRayHit>()],
+        };
+        // SAFETY: the scene is committed; `padded` is 96 bytes, 16-aligned.
+        unsafe { rtc::rtcIntersect1(self.scene, &mut padded.ray_hit, std::ptr::null_mut()) };
+        let h = &padded.ray_hit;
+        (h.hit.geomID != u32::MAX).then(|| Hit {
+            triangle: h.hit.primID,
+            t: h.ray.tfar,
+            uv: Vec2::new(h.hit.u, h.hit.v),
+        })
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        set_flush_denormals();
+        let mut r = AlignedRay(embree_ray(ray));
+        // SAFETY: the scene is committed; RTCRay has the same 48-byte layout in
+        // Embree 4.2 and 4.4, 16-aligned here. Embree sets tfar to -inf when
+        // the ray is occluded.
+        unsafe { rtc::rtcOccluded1(self.scene, &mut r.0, std::ptr::null_mut()) };
+        r.0.tfar == f32::NEG_INFINITY
+    }
+}

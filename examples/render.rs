@@ -17,6 +17,7 @@ use std::time::{Duration, Instant};
 
 use clap::{Parser, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
+use strata::embree::EmbreeIntersector;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
 use strata::engine::metrics;
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
@@ -25,7 +26,7 @@ use strata::engine::render::{
 };
 use strata::engine::target::MaxChannel;
 use strata::engine::{Film, PathOracle, Resolution};
-use strata::native::{builtin, native_tracer};
+use strata::native::{PathTracer, builtin, native_tracer};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum Method {
@@ -46,6 +47,8 @@ enum Kernel {
 enum Backend {
     /// The pure-Rust obvhs BVH.
     Native,
+    /// Embree 4 (build with `--features embree` after scripts/install-embree.sh).
+    Embree,
 }
 
 /// Render a scene with strata.
@@ -120,7 +123,6 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args) -> AnyResult<()> {
-    let Backend::Native = args.backend;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads)
         .build()?;
@@ -155,7 +157,13 @@ fn run(args: &Args) -> AnyResult<()> {
                     scene.triangles.len(),
                     scene.lights.len()
                 );
-                (render(&native_tracer(scene), args)?, None)
+                match args.backend {
+                    Backend::Native => (render(&native_tracer(scene), args)?, None),
+                    Backend::Embree => {
+                        let embree = EmbreeIntersector::new(&scene.triangles)?;
+                        (render(&PathTracer::new(scene, embree), args)?, None)
+                    }
+                }
             }
         })
     })?;

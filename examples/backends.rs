@@ -1,0 +1,176 @@
+//! Embree vs native (obvhs) throughput on the same scenes and the same rays,
+//! measured in one run, interleaved, medians of several repetitions; writes
+//! the ratios to a JSON file. Needs `--features embree`.
+//!
+//! ```text
+//! cargo run --release --features embree --example backends -- --out out/bench/backends.json
+//! ```
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Parser;
+use glam::Vec3;
+use strata::embree::EmbreeIntersector;
+use strata::engine::rng::{Domain, stream, uniform_f32};
+use strata::engine::sample::IndependentSampler;
+use strata::engine::{FilmPoint, PathOracle, Resolution, Temperature};
+use strata::native::builtin::{self, sphere};
+use strata::native::material::{Material, Texture};
+use strata::native::{BvhIntersector, Camera, Intersector, PathTracer, Ray, Scene, pbrt};
+
+/// Compare ray backends.
+#[derive(Parser, Debug)]
+struct Args {
+    /// Rays per measurement.
+    #[arg(long, default_value_t = 200_000)]
+    rays: usize,
+    /// Paths per measurement.
+    #[arg(long, default_value_t = 40_000)]
+    paths: usize,
+    /// Interleaved repetitions.
+    #[arg(long, default_value_t = 5)]
+    repeats: usize,
+    /// JSON output.
+    #[arg(long, default_value = "out/bench/backends.json")]
+    out: PathBuf,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Median rate (per second) of `work` over repetitions; the two closures are
+/// interleaved by the caller.
+fn rate(seconds: &[f64], count: usize) -> f64 {
+    count as f64 / median(seconds.to_vec())
+}
+
+fn scenes() -> Vec<(String, Scene)> {
+    let res = Resolution::new(128, 128);
+    let mut v: Vec<(String, Scene)> = builtin::NAMES
+        .iter()
+        .map(|n| (n.to_string(), builtin::by_name(n, res).expect("built-in")))
+        .collect();
+    let dir = std::env::var_os("STRATA_SCENES")
+        .map_or_else(|| PathBuf::from("../shared/scenes"), PathBuf::from);
+    match pbrt::load(&dir.join("veach-ajar/scene.pbrt")) {
+        Ok(l) => v.push(("veach-ajar".into(), l.scene)),
+        Err(e) => eprintln!("skipping veach-ajar: {e}"),
+    }
+    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 40.0, res);
+    let mut big = Scene::new(camera);
+    let m = big.add_material(Material::Diffuse {
+        reflectance: Texture::Constant(Vec3::splat(0.7)),
+    });
+    big.add_mesh(&sphere(Vec3::ZERO, 1.0, 500, 1000), m, None);
+    let light = builtin::quad(
+        Vec3::new(-1., 2., -1.),
+        Vec3::new(1., 2., -1.),
+        Vec3::new(1., 2., 1.),
+        Vec3::new(-1., 2., 1.),
+    );
+    let dark = big.add_material(Material::Diffuse {
+        reflectance: Texture::Constant(Vec3::ZERO),
+    });
+    big.add_mesh(&light, dark, Some(Vec3::splat(5.0)));
+    v.push(("mesh-1M".into(), big));
+    v
+}
+
+fn time(f: impl FnOnce() -> usize) -> f64 {
+    let t = Instant::now();
+    std::hint::black_box(f());
+    t.elapsed().as_secs_f64()
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args = Args::parse();
+    let mut rows = Vec::new();
+    println!("| scene | closest hit, Embree / native | occlusion | paths |");
+    for (name, scene) in scenes() {
+        let r = scene.camera.resolution;
+        let mut rng = stream(5, Domain::User, 0);
+        let rays: Vec<Ray> = (0..args.rays)
+            .map(|_| {
+                let (o, d) = scene.camera.ray(
+                    uniform_f32(&mut rng) * r.width as f32,
+                    uniform_f32(&mut rng) * r.height as f32,
+                );
+                Ray::new(o, d)
+            })
+            .collect();
+        let native = PathTracer::new(scene.clone(), BvhIntersector::new(&scene.triangles));
+        let embree = PathTracer::new(scene.clone(), EmbreeIntersector::new(&scene.triangles)?);
+        let shadow: Vec<Ray> = rays
+            .iter()
+            .map(|ray| Ray {
+                t_max: native
+                    .intersector()
+                    .closest_hit(ray)
+                    .map_or(10.0, |h| 0.9 * h.t),
+                ..*ray
+            })
+            .collect();
+        let closest =
+            |b: &dyn Intersector| rays.iter().filter(|r| b.closest_hit(r).is_some()).count();
+        let occluded = |b: &dyn Intersector| shadow.iter().filter(|r| b.occluded(r)).count();
+        let paths = |t: &dyn Fn(FilmPoint, &mut IndependentSampler) -> f32| {
+            let mut s = IndependentSampler::new(stream(6, Domain::User, 0));
+            let mut rng = stream(7, Domain::User, 0);
+            (0..args.paths)
+                .map(|_| {
+                    let p = FilmPoint {
+                        x: uniform_f32(&mut rng) * r.width as f32,
+                        y: uniform_f32(&mut rng) * r.height as f32,
+                    };
+                    t(p, &mut s) as usize
+                })
+                .sum::<usize>()
+        };
+        let trace_native =
+            |p, s: &mut IndependentSampler| native.trace(p, s, Temperature::ONE).radiance.0[1];
+        let trace_embree =
+            |p, s: &mut IndependentSampler| embree.trace(p, s, Temperature::ONE).radiance.0[1];
+        let (mut cn, mut ce, mut on, mut oe, mut pn, mut pe) =
+            (vec![], vec![], vec![], vec![], vec![], vec![]);
+        for _ in 0..args.repeats {
+            cn.push(time(|| closest(native.intersector())));
+            ce.push(time(|| closest(embree.intersector())));
+            on.push(time(|| occluded(native.intersector())));
+            oe.push(time(|| occluded(embree.intersector())));
+            pn.push(time(|| paths(&trace_native)));
+            pe.push(time(|| paths(&trace_embree)));
+        }
+        let (rc_n, rc_e) = (rate(&cn, args.rays), rate(&ce, args.rays));
+        let (ro_n, ro_e) = (rate(&on, args.rays), rate(&oe, args.rays));
+        let (rp_n, rp_e) = (rate(&pn, args.paths), rate(&pe, args.paths));
+        println!(
+            "| {name} | {:.2} ({:.2} / {:.2} M rays/s) | {:.2} ({:.2} / {:.2}) | {:.2} ({:.3} / {:.3} M paths/s) |",
+            rc_e / rc_n,
+            rc_e / 1e6,
+            rc_n / 1e6,
+            ro_e / ro_n,
+            ro_e / 1e6,
+            ro_n / 1e6,
+            rp_e / rp_n,
+            rp_e / 1e6,
+            rp_n / 1e6
+        );
+        rows.push(format!(
+            "{{\"scene\": \"{name}\", \"triangles\": {}, \"closest_rays_per_s\": {{\"embree\": {rc_e:.0}, \"native\": {rc_n:.0}}}, \"occlusion_rays_per_s\": {{\"embree\": {ro_e:.0}, \"native\": {ro_n:.0}}}, \"paths_per_s\": {{\"embree\": {rp_e:.0}, \"native\": {rp_n:.0}}}, \"native_over_embree_paths\": {:.4}}}",
+            scene.triangles.len(),
+            rp_n / rp_e
+        ));
+    }
+    if let Some(dir) = args.out.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    std::fs::write(
+        &args.out,
+        format!("{{\"threads\": 1, \"results\": [{}]}}\n", rows.join(", ")),
+    )?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}

@@ -202,3 +202,58 @@ impl Intersector for EmbreeIntersector {
         r.0.tfar == f32::NEG_INFINITY
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn finds_the_triangle_and_its_barycentrics() {
+        let tris = [
+            [Vec3::ZERO, Vec3::X, Vec3::Y],
+            [
+                Vec3::new(0.0, 0.0, -1.0),
+                Vec3::new(1.0, 0.0, -1.0),
+                Vec3::new(0.0, 1.0, -1.0),
+            ],
+        ];
+        let e = EmbreeIntersector::new(&tris).unwrap();
+        let ray = Ray::new(Vec3::new(0.25, 0.5, 1.0), -Vec3::Z);
+        let hit = e.closest_hit(&ray).unwrap();
+        assert_eq!(hit.triangle, 0);
+        assert!((hit.t - 1.0).abs() < 1e-6 && (hit.uv - Vec2::new(0.25, 0.5)).length() < 1e-6);
+        assert!(e.occluded(&ray));
+        assert!(!e.occluded(&Ray { t_max: 0.5, ..ray }));
+        let past = Ray { t_min: 1.5, ..ray };
+        assert_eq!(e.closest_hit(&past).unwrap().triangle, 1);
+        assert!(
+            e.closest_hit(&Ray::new(Vec3::new(3.0, 3.0, 1.0), -Vec3::Z))
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn an_empty_scene_never_hits() {
+        let e = EmbreeIntersector::new(&[]).unwrap();
+        assert!(e.closest_hit(&Ray::new(Vec3::ZERO, Vec3::X)).is_none());
+        assert!(!e.occluded(&Ray::new(Vec3::ZERO, Vec3::X)));
+    }
+
+    #[test]
+    fn intersectors_are_usable_from_many_threads() {
+        let e = EmbreeIntersector::new(&[[Vec3::ZERO, Vec3::X, Vec3::Y]]).unwrap();
+        std::thread::scope(|s| {
+            for i in 0..4 {
+                let e = &e;
+                s.spawn(move || {
+                    let x = 0.1 + 0.05 * i as f32;
+                    assert_eq!(
+                        e.closest_hit(&Ray::new(Vec3::new(x, 0.1, 1.0), -Vec3::Z))
+                            .map(|h| h.triangle),
+                        Some(0)
+                    );
+                });
+            }
+        });
+    }
+}

@@ -4,56 +4,20 @@
 //! `cargo bench --bench tracer`; summary in docs/BENCHMARKS.md.
 
 use std::hint::black_box;
-use std::path::PathBuf;
 use std::time::Duration;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use glam::Vec3;
 use strata::engine::rng::{Domain, stream, uniform_f32};
 use strata::engine::sample::IndependentSampler;
 use strata::engine::{FilmPoint, PathOracle, Resolution, Temperature};
-use strata::native::builtin::{self, sphere};
-use strata::native::material::{Material, Texture};
-use strata::native::{BvhIntersector, Camera, Intersector, Ray, Scene, native_tracer, pbrt};
+use strata::native::builtin;
+use strata::native::{BvhIntersector, Intersector, Ray, Scene, native_tracer};
 
 const RAYS: usize = 10_000;
 const PATHS: usize = 2_000;
 
-/// A ~1M-triangle sphere in front of a camera, lit by a quad.
-fn big_mesh_scene(res: Resolution) -> Scene {
-    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 40.0, res);
-    let mut s = Scene::new(camera);
-    let m = s.add_material(Material::Diffuse {
-        reflectance: Texture::Constant(Vec3::splat(0.7)),
-    });
-    s.add_mesh(&sphere(Vec3::ZERO, 1.0, 500, 1000), m, None);
-    let light = builtin::quad(
-        Vec3::new(-1., 2., -1.),
-        Vec3::new(1., 2., -1.),
-        Vec3::new(1., 2., 1.),
-        Vec3::new(-1., 2., 1.),
-    );
-    let dark = s.add_material(Material::Diffuse {
-        reflectance: Texture::Constant(Vec3::ZERO),
-    });
-    s.add_mesh(&light, dark, Some(Vec3::splat(5.0)));
-    s
-}
-
 fn scenes() -> Vec<(String, Scene)> {
-    let res = Resolution::new(128, 128);
-    let mut v: Vec<(String, Scene)> = builtin::NAMES
-        .iter()
-        .map(|n| (n.to_string(), builtin::by_name(n, res).expect("built-in")))
-        .collect();
-    let dir = std::env::var_os("STRATA_SCENES")
-        .map_or_else(|| PathBuf::from("../shared/scenes"), PathBuf::from);
-    match pbrt::load(&dir.join("veach-ajar/scene.pbrt")) {
-        Ok(l) => v.push(("veach-ajar".into(), l.scene)),
-        Err(e) => eprintln!("skipping veach-ajar: {e}"),
-    }
-    v.push(("mesh-1M".into(), big_mesh_scene(res)));
-    v
+    builtin::benchmark_set(Resolution::new(128, 128))
 }
 
 /// Camera rays through random film points (the rays a path starts with).
@@ -122,7 +86,7 @@ fn paths(c: &mut Criterion) {
 }
 
 fn build(c: &mut Criterion) {
-    let scene = big_mesh_scene(Resolution::new(8, 8));
+    let scene = builtin::dense_sphere(Resolution::new(8, 8), 500, 1000);
     let mut g = c.benchmark_group("bvh_build");
     g.sample_size(10)
         .measurement_time(Duration::from_secs(10))

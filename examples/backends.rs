@@ -10,14 +10,12 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Parser;
-use glam::Vec3;
 use strata::embree::EmbreeIntersector;
 use strata::engine::rng::{Domain, stream, uniform_f32};
 use strata::engine::sample::IndependentSampler;
 use strata::engine::{FilmPoint, PathOracle, Resolution, Temperature};
-use strata::native::builtin::{self, sphere};
-use strata::native::material::{Material, Texture};
-use strata::native::{BvhIntersector, Camera, Intersector, PathTracer, Ray, Scene, pbrt};
+use strata::native::builtin;
+use strata::native::{BvhIntersector, Intersector, PathTracer, Ray};
 
 /// Compare ray backends.
 #[derive(Parser, Debug)]
@@ -47,38 +45,6 @@ fn rate(seconds: &[f64], count: usize) -> f64 {
     count as f64 / median(seconds.to_vec())
 }
 
-fn scenes() -> Vec<(String, Scene)> {
-    let res = Resolution::new(128, 128);
-    let mut v: Vec<(String, Scene)> = builtin::NAMES
-        .iter()
-        .map(|n| (n.to_string(), builtin::by_name(n, res).expect("built-in")))
-        .collect();
-    let dir = std::env::var_os("STRATA_SCENES")
-        .map_or_else(|| PathBuf::from("../shared/scenes"), PathBuf::from);
-    match pbrt::load(&dir.join("veach-ajar/scene.pbrt")) {
-        Ok(l) => v.push(("veach-ajar".into(), l.scene)),
-        Err(e) => eprintln!("skipping veach-ajar: {e}"),
-    }
-    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 40.0, res);
-    let mut big = Scene::new(camera);
-    let m = big.add_material(Material::Diffuse {
-        reflectance: Texture::Constant(Vec3::splat(0.7)),
-    });
-    big.add_mesh(&sphere(Vec3::ZERO, 1.0, 500, 1000), m, None);
-    let light = builtin::quad(
-        Vec3::new(-1., 2., -1.),
-        Vec3::new(1., 2., -1.),
-        Vec3::new(1., 2., 1.),
-        Vec3::new(-1., 2., 1.),
-    );
-    let dark = big.add_material(Material::Diffuse {
-        reflectance: Texture::Constant(Vec3::ZERO),
-    });
-    big.add_mesh(&light, dark, Some(Vec3::splat(5.0)));
-    v.push(("mesh-1M".into(), big));
-    v
-}
-
 fn time(f: impl FnOnce() -> usize) -> f64 {
     let t = Instant::now();
     std::hint::black_box(f());
@@ -89,7 +55,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = Args::parse();
     let mut rows = Vec::new();
     println!("| scene | closest hit, Embree / native | occlusion | paths |");
-    for (name, scene) in scenes() {
+    for (name, scene) in builtin::benchmark_set(Resolution::new(128, 128)) {
         let r = scene.camera.resolution;
         let mut rng = stream(5, Domain::User, 0);
         let rays: Vec<Ray> = (0..args.rays)

@@ -33,11 +33,6 @@ struct Args {
     out: PathBuf,
 }
 
-fn scenes_dir() -> PathBuf {
-    std::env::var_os("STRATA_SCENES")
-        .map_or_else(|| PathBuf::from("../shared/scenes"), PathBuf::from)
-}
-
 /// Box-filters `film` down by an integer factor.
 fn downsample(film: &Film, factor: u32) -> Film {
     let r = film.resolution();
@@ -86,7 +81,7 @@ fn away_from_emitters(film: &Film, reference: &Film) -> (f64, f64, usize) {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = Args::parse();
-    let dir = scenes_dir().join("cornell-box");
+    let dir = pbrt::scenes_dir().join("cornell-box");
     if !dir.join("scene.pbrt").exists() {
         return Err(format!(
             "cornell-box not found in {} (set STRATA_SCENES)",

@@ -9,9 +9,8 @@ use strata::embree::EmbreeIntersector;
 use strata::engine::render::{Budget, McSettings, Silent, render_mc};
 use strata::engine::rng::{Domain, stream, uniform_f32};
 use strata::engine::{Film, Resolution};
-use strata::native::builtin::{self, sphere};
-use strata::native::material::{Material, Texture};
-use strata::native::{BvhIntersector, Camera, Hit, Intersector, PathTracer, Ray, Scene};
+use strata::native::builtin;
+use strata::native::{BvhIntersector, Hit, Intersector, PathTracer, Ray, Scene};
 
 fn scenes() -> Vec<(&'static str, Scene)> {
     let res = Resolution::new(64, 48);
@@ -19,13 +18,7 @@ fn scenes() -> Vec<(&'static str, Scene)> {
         .iter()
         .map(|n| (*n, builtin::by_name(n, res).unwrap()))
         .collect();
-    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 40.0, res);
-    let mut big = Scene::new(camera);
-    let m = big.add_material(Material::Diffuse {
-        reflectance: Texture::Constant(Vec3::splat(0.7)),
-    });
-    big.add_mesh(&sphere(Vec3::ZERO, 1.0, 500, 1000), m, None);
-    v.push(("mesh-1M", big));
+    v.push(("mesh-1M", builtin::dense_sphere(res, 500, 1000)));
     v
 }
 

@@ -8,8 +8,7 @@ use strata::engine::Resolution;
 use strata::native::pbrt;
 
 fn scene_file(name: &str) -> Option<PathBuf> {
-    let dir = std::env::var_os("STRATA_SCENES")
-        .map_or_else(|| PathBuf::from("../shared/scenes"), PathBuf::from);
+    let dir = pbrt::scenes_dir();
     let path = dir.join(name).join("scene.pbrt");
     if path.exists() {
         Some(path)

@@ -117,6 +117,46 @@ pub fn sphere(center: Vec3, radius: f32, rings: u32, segments: u32) -> Mesh {
     m
 }
 
+/// A benchmark scene: a sphere of `2·rings·segments` triangles (1M at
+/// 500 x 1000) in front of the camera, lit by a quad above it.
+pub fn dense_sphere(resolution: Resolution, rings: u32, segments: u32) -> Scene {
+    let camera = Camera::look_at(
+        Vec3::new(0.0, 0.0, 3.0),
+        Vec3::ZERO,
+        Vec3::Y,
+        40.0,
+        resolution,
+    );
+    let mut s = Scene::new(camera);
+    let grey = diffuse(&mut s, Vec3::splat(0.7));
+    s.add_mesh(&sphere(Vec3::ZERO, 1.0, rings, segments), grey, None);
+    let black = diffuse(&mut s, Vec3::ZERO);
+    let light = quad(
+        Vec3::new(-1., 2., -1.),
+        Vec3::new(1., 2., -1.),
+        Vec3::new(1., 2., 1.),
+        Vec3::new(-1., 2., 1.),
+    );
+    s.add_mesh(&light, black, Some(Vec3::splat(5.0)));
+    s
+}
+
+/// The scenes the throughput benchmarks use: the built-ins, `veach-ajar`
+/// when the shared scenes are present (a note on stderr otherwise) and a
+/// 1M-triangle [`dense_sphere`].
+pub fn benchmark_set(resolution: Resolution) -> Vec<(String, Scene)> {
+    let mut v: Vec<(String, Scene)> = NAMES
+        .iter()
+        .filter_map(|n| by_name(n, resolution).map(|s| (n.to_string(), s)))
+        .collect();
+    match crate::pbrt::load_shared("veach-ajar") {
+        Ok(l) => v.push(("veach-ajar".into(), l.scene)),
+        Err(e) => eprintln!("skipping veach-ajar: {e}"),
+    }
+    v.push(("mesh-1M".into(), dense_sphere(resolution, 500, 1000)));
+    v
+}
+
 fn merge(meshes: impl Iterator<Item = Mesh>) -> Mesh {
     let mut out = Mesh {
         uvs: Some(Vec::new()),

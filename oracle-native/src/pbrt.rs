@@ -21,6 +21,19 @@ use crate::material::{ConductorFresnel, Material, Texture, roughness_to_alpha};
 use crate::scene::{Camera, Mesh, Scene};
 use crate::{SceneError, ply};
 
+/// Where the shared test scenes live: `$STRATA_SCENES`, or `../shared/scenes`
+/// (relative to the working directory, as when running from the repository
+/// root). They are not part of this repository.
+pub fn scenes_dir() -> PathBuf {
+    std::env::var_os("STRATA_SCENES")
+        .map_or_else(|| PathBuf::from("../shared/scenes"), PathBuf::from)
+}
+
+/// Loads `name/scene.pbrt` from [`scenes_dir`].
+pub fn load_shared(name: &str) -> Result<Loaded, SceneError> {
+    load(&scenes_dir().join(name).join("scene.pbrt"))
+}
+
 /// A loaded scene and what the loader skipped.
 #[derive(Debug)]
 pub struct Loaded {

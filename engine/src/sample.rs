@@ -648,6 +648,25 @@ mod tests {
     }
 
     #[test]
+    fn a_restarted_replay_reads_the_same_state_again() {
+        let mut s = MltSampler::new(SmallStep::default(), stream(7, Domain::User, 0));
+        let res = Resolution::new(8, 8);
+        let mut p = s.propose(true);
+        p.film_point(res);
+        let drawn = read_n(&mut p, 5);
+        p.accept(1.0);
+        let mut r = s.replay();
+        r.film_point(res);
+        assert_eq!(read_n(&mut r, 5), drawn);
+        r.restart();
+        assert_eq!(read_n(&mut r, 7)[..5], drawn[..], "the same state, then two fresh coordinates");
+        r.restart();
+        let again = read_n(&mut r, 7);
+        assert_eq!(again[..5], drawn[..]);
+        assert!(again[5..].iter().all(|v| (0.0..1.0).contains(v)));
+    }
+
+    #[test]
     fn film_points_come_from_the_film_stream() {
         let mut s = MltSampler::new(SmallStep::default(), stream(6, Domain::User, 0));
         let res = Resolution::new(64, 32);

@@ -659,7 +659,11 @@ mod tests {
         r.film_point(res);
         assert_eq!(read_n(&mut r, 5), drawn);
         r.restart();
-        assert_eq!(read_n(&mut r, 7)[..5], drawn[..], "the same state, then two fresh coordinates");
+        assert_eq!(
+            read_n(&mut r, 7)[..5],
+            drawn[..],
+            "the same state, then two fresh coordinates"
+        );
         r.restart();
         let again = read_n(&mut r, 7);
         assert_eq!(again[..5], drawn[..]);

@@ -15,6 +15,7 @@
 //! | [`chain`] | one Metropolis-Hastings chain with expected-values splatting |
 //! | [`bootstrap`] | start-up bias elimination (normalization `b*`, resampled chain starts) |
 //! | [`render`] | the drivers: independent MC and PSSMLT, budgets, observers |
+//! | [`exchange`] | replica exchange: ladders, every exchange move of seed 002 ch. 5, ensembles, their driver |
 //! | [`film`] | f64 accumulation buffers |
 //! | [`metrics`] | MAPE, relMSE, L1, L2, MSE |
 //! | [`diagnose`] | autocorrelation and effective sample size |
@@ -33,6 +34,7 @@ pub mod bootstrap;
 pub mod chain;
 pub mod diagnose;
 pub mod error;
+pub mod exchange;
 pub mod film;
 pub mod metrics;
 pub mod mutate;
@@ -40,6 +42,7 @@ pub mod oracle;
 pub mod render;
 pub mod rng;
 pub mod sample;
+mod splat;
 pub mod target;
 
 pub use error::Error;

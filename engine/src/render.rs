@@ -19,6 +19,7 @@ use crate::mutate::MutationParams;
 use crate::oracle::{FilmPoint, PathOracle, Radiance, Resolution, Temperature};
 use crate::rng::{self, Domain};
 use crate::sample::{IndependentSampler, Sampler};
+use crate::splat::{Splat, SplatBands, SplatSource};
 use crate::target::Importance;
 
 /// When a render stops.
@@ -300,12 +301,7 @@ where
         run_round(&mut work, |w| {
             for _ in 0..steps {
                 w.chain.step(oracle, importance, b, |p, radiance, weight| {
-                    let pixel = resolution.pixel_index(p);
-                    w.splats[bands.band_of(pixel)].push(Splat {
-                        pixel: pixel as u32,
-                        weight,
-                        radiance,
-                    });
+                    bands.push(&mut w.splats, p, radiance, weight);
                 });
             }
         });
@@ -346,7 +342,7 @@ where
     })
 }
 
-fn checked_resolution<O: PathOracle>(oracle: &O) -> Result<Resolution, Error> {
+pub(crate) fn checked_resolution<O: PathOracle>(oracle: &O) -> Result<Resolution, Error> {
     let r = oracle.resolution();
     if r.pixel_count() == 0 {
         Err(Error::EmptyResolution)
@@ -355,7 +351,13 @@ fn checked_resolution<O: PathOracle>(oracle: &O) -> Result<Resolution, Error> {
     }
 }
 
-fn report(observer: &dyn Observer, film: &Film, samples: u64, fraction: f64, scale: f64) {
+pub(crate) fn report(
+    observer: &dyn Observer,
+    film: &Film,
+    samples: u64,
+    fraction: f64,
+    scale: f64,
+) {
     observer.progress(&Progress {
         samples,
         fraction: fraction.clamp(0.0, 1.0),
@@ -365,85 +367,22 @@ fn report(observer: &dyn Observer, film: &Film, samples: u64, fraction: f64, sca
     }
 }
 
-/// One weighted contribution waiting to be added to the film.
-#[derive(Clone, Copy, Debug)]
-struct Splat<R> {
-    pixel: u32,
-    weight: f64,
-    radiance: R,
-}
-
 /// A chain and its splats of the current round, bucketed by film band.
 struct ChainWork<R> {
     chain: Chain<R>,
     splats: Vec<Vec<Splat<R>>>,
 }
 
-/// Horizontal bands of the film. Each round's splats are added band by band
-/// (bands in parallel), and within a band chain by chain in chain order: the
-/// order of additions to every pixel is fixed, whatever the thread count.
-struct SplatBands {
-    pixels_per_band: usize,
-    count: usize,
-}
-
-impl SplatBands {
-    const MAX_BANDS: usize = 32;
-
-    fn new(resolution: Resolution) -> Self {
-        let height = resolution.height as usize;
-        let rows_per_band = height.div_ceil(Self::MAX_BANDS);
-        let width = resolution.width as usize;
-        Self {
-            pixels_per_band: width * rows_per_band,
-            count: height.div_ceil(rows_per_band),
-        }
+impl<R> SplatSource<R> for ChainWork<R> {
+    fn splats(&self) -> &[Vec<Splat<R>>] {
+        &self.splats
     }
-
-    fn empty_buffers<R>(&self) -> Vec<Vec<Splat<R>>> {
-        (0..self.count).map(|_| Vec::new()).collect()
-    }
-
-    #[inline]
-    fn band_of(&self, pixel: usize) -> usize {
-        pixel / self.pixels_per_band
-    }
-
-    fn merge<R: Radiance>(&self, work: &mut [ChainWork<R>], film: &mut Film) {
-        let channels = film.channels();
-        let band_len = self.pixels_per_band * channels;
-        let first_pixel = |band: usize| band * self.pixels_per_band;
-        let add_band = |(band, values): (usize, &mut [f64])| {
-            let base = first_pixel(band);
-            for w in work.iter() {
-                for s in &w.splats[band] {
-                    let at = (s.pixel as usize - base) * channels;
-                    for (c, v) in values[at..at + channels].iter_mut().enumerate() {
-                        *v += s.weight * s.radiance.channel(c) as f64;
-                    }
-                }
-            }
-        };
-        #[cfg(feature = "parallel")]
-        {
-            use rayon::prelude::*;
-            film.data_mut()
-                .par_chunks_mut(band_len)
-                .enumerate()
-                .for_each(add_band);
-        }
-        #[cfg(not(feature = "parallel"))]
-        film.data_mut()
-            .chunks_mut(band_len)
-            .enumerate()
-            .for_each(add_band);
-        for w in work.iter_mut() {
-            w.splats.iter_mut().for_each(Vec::clear);
-        }
+    fn splats_mut(&mut self) -> &mut [Vec<Splat<R>>] {
+        &mut self.splats
     }
 }
 
-fn run_round<W: Send>(work: &mut [W], f: impl Fn(&mut W) + Sync + Send) {
+pub(crate) fn run_round<W: Send>(work: &mut [W], f: impl Fn(&mut W) + Sync + Send) {
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
@@ -454,7 +393,7 @@ fn run_round<W: Send>(work: &mut [W], f: impl Fn(&mut W) + Sync + Send) {
 }
 
 /// Wall clock for time budgets; a no-op for sample budgets or without `std`.
-struct Clock {
+pub(crate) struct Clock {
     #[cfg(feature = "std")]
     start: std::time::Instant,
     #[cfg(feature = "std")]
@@ -462,7 +401,7 @@ struct Clock {
 }
 
 impl Clock {
-    fn start(budget: Budget) -> Self {
+    pub(crate) fn start(budget: Budget) -> Self {
         #[cfg(feature = "std")]
         {
             let limit = match budget {
@@ -481,14 +420,14 @@ impl Clock {
         }
     }
 
-    fn seconds(&self) -> f64 {
+    pub(crate) fn seconds(&self) -> f64 {
         #[cfg(feature = "std")]
         return self.start.elapsed().as_secs_f64();
         #[cfg(not(feature = "std"))]
         0.0
     }
 
-    fn fraction(&self) -> f64 {
+    pub(crate) fn fraction(&self) -> f64 {
         #[cfg(feature = "std")]
         if let Some(limit) = self.limit {
             return self.seconds() / limit.as_secs_f64().max(1e-9);
@@ -496,7 +435,7 @@ impl Clock {
         1.0
     }
 
-    fn expired(&self) -> bool {
+    pub(crate) fn expired(&self) -> bool {
         self.fraction() >= 1.0
     }
 }

@@ -17,6 +17,8 @@ pub enum Domain {
     ChainStart = 0x94d0_49bb_1331_11eb,
     /// Independent MC sampling of work unit `i`.
     Independent = 0xd6e8_feb8_6659_fd93,
+    /// Ensemble `i`'s exchange decisions (replica exchange).
+    Exchange = 0xe703_7ed1_a0b4_28db,
     /// Anything a test or caller wants to seed.
     User = 0xa076_1d64_78bd_642f,
 }

@@ -428,6 +428,13 @@ impl Proposal<'_> {
         resolution.film_point(u)
     }
 
+    /// Restarts at the oracle's stream 0, to trace the same proposal again
+    /// (e.g. at another temperature): numbers read again are the same, numbers
+    /// read for the first time are mutated as usual.
+    pub fn restart(&mut self) {
+        self.cursor.oracle_stream(0);
+    }
+
     /// Whether this is a large step.
     pub fn is_large_step(&self) -> bool {
         self.sampler.large_step

@@ -1,11 +1,5 @@
-//! PSSMLT and MC images of oracles with closed-form pixel integrals.
-//!
-//! Tolerances come from the estimators' own variance: `R` independent renders
-//! (seeds 0..R) give, for every pixel and channel, a mean and its standard
-//! error `s / sqrt(R)`. Each pixel must be within `Z_PIXEL` standard errors of
-//! the exact value (Student t with R - 1 = 31 degrees of freedom: the chance
-//! that any of ~1000 values of a correct estimator exceeds 6.5 is below 1e-3),
-//! and each channel's image mean within `Z_TOTAL`.
+//! PSSMLT and MC images of oracles with closed-form pixel integrals
+//! (tolerances from the estimators' own variance, see `common::check`).
 
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
 use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
@@ -15,52 +9,8 @@ use strata::engine::render::{
 use strata::engine::target::{Luminance, MaxChannel};
 use strata::engine::{Film, Resolution};
 
-const RUNS: u64 = 32;
-const Z_PIXEL: f64 = 6.5;
-const Z_TOTAL: f64 = 4.5;
-
-/// Checks the mean of `runs` against `reference`; returns the largest pixel z.
-fn check(label: &str, runs: &[Film], reference: &Film) -> f64 {
-    let r = runs.len() as f64;
-    let n = reference.data().len();
-    let channels = reference.channels();
-    let mut worst: f64 = 0.0;
-    for i in 0..n {
-        let values: Vec<f64> = runs.iter().map(|f| f.data()[i]).collect();
-        let mean = values.iter().sum::<f64>() / r;
-        let var = values.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (r - 1.0);
-        let exact = reference.data()[i];
-        let se = (var / r).sqrt();
-        if se == 0.0 {
-            assert!(
-                (mean - exact).abs() <= 1e-6 * exact.abs().max(1e-6),
-                "{label}: value {i} deterministic and wrong"
-            );
-            continue;
-        }
-        let z = (mean - exact).abs() / se;
-        worst = worst.max(z);
-        assert!(
-            z < Z_PIXEL,
-            "{label}: value {i} (pixel {}, channel {}): {mean} vs exact {exact}, z = {z:.2}",
-            i / channels,
-            i % channels
-        );
-    }
-    for c in 0..channels {
-        let totals: Vec<f64> = runs.iter().map(|f| f.channel_mean(c)).collect();
-        let mean = totals.iter().sum::<f64>() / r;
-        let se =
-            (totals.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (r - 1.0) / r).sqrt();
-        let exact = reference.channel_mean(c);
-        let z = (mean - exact).abs() / se;
-        assert!(
-            z < Z_TOTAL,
-            "{label}: channel {c} mean {mean} vs exact {exact}, z = {z:.2}"
-        );
-    }
-    worst
-}
+mod common;
+use common::{RUNS, check};
 
 fn pssmlt(seed: u64, spp: u64, resolution: Resolution, mutation: MutationParams) -> PssmltSettings {
     PssmltSettings {

@@ -1,0 +1,58 @@
+//! Shared by the image tests: checking the mean of independent renders
+//! against closed-form pixel values.
+//!
+//! Tolerances come from the estimators' own variance: `R` independent renders
+//! (seeds 0..R) give, for every pixel and channel, a mean and its standard
+//! error `s / sqrt(R)`. Each pixel must be within `Z_PIXEL` standard errors of
+//! the exact value (Student t with R - 1 = 31 degrees of freedom: the chance
+//! that any of ~1000 values of a correct estimator exceeds 6.5 is below 1e-3),
+//! and each channel's image mean within `Z_TOTAL`.
+
+use strata::engine::Film;
+
+pub const RUNS: u64 = 32;
+const Z_PIXEL: f64 = 6.5;
+const Z_TOTAL: f64 = 4.5;
+
+/// Checks the mean of `runs` against `reference`; returns the largest pixel z.
+pub fn check(label: &str, runs: &[Film], reference: &Film) -> f64 {
+    let r = runs.len() as f64;
+    let n = reference.data().len();
+    let channels = reference.channels();
+    let mut worst: f64 = 0.0;
+    for i in 0..n {
+        let values: Vec<f64> = runs.iter().map(|f| f.data()[i]).collect();
+        let mean = values.iter().sum::<f64>() / r;
+        let var = values.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (r - 1.0);
+        let exact = reference.data()[i];
+        let se = (var / r).sqrt();
+        if se == 0.0 {
+            assert!(
+                (mean - exact).abs() <= 1e-6 * exact.abs().max(1e-6),
+                "{label}: value {i} deterministic and wrong"
+            );
+            continue;
+        }
+        let z = (mean - exact).abs() / se;
+        worst = worst.max(z);
+        assert!(
+            z < Z_PIXEL,
+            "{label}: value {i} (pixel {}, channel {}): {mean} vs exact {exact}, z = {z:.2}",
+            i / channels,
+            i % channels
+        );
+    }
+    for c in 0..channels {
+        let totals: Vec<f64> = runs.iter().map(|f| f.channel_mean(c)).collect();
+        let mean = totals.iter().sum::<f64>() / r;
+        let se =
+            (totals.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (r - 1.0) / r).sqrt();
+        let exact = reference.channel_mean(c);
+        let z = (mean - exact).abs() / se;
+        assert!(
+            z < Z_TOTAL,
+            "{label}: channel {c} mean {mean} vs exact {exact}, z = {z:.2}"
+        );
+    }
+    worst
+}

@@ -3,6 +3,7 @@
 //!
 //! ```text
 //! cargo run --release --example render -- --scene procedural --method pssmlt --spp 64 --out out/procedural
+//! cargo run --release --example render -- --scene caustic --method replica --exchange is-permutation --spp 64
 //! ```
 //!
 //! Scenes: the path tracer's built-ins (`cornell`, `door`, `envplane`,
@@ -19,6 +20,9 @@ use clap::{Parser, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use strata::embree::EmbreeIntersector;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
+use strata::engine::exchange::{
+    EnsembleSettings, ExchangeKind, ReplicaSettings, Tempering, render_replica,
+};
 use strata::engine::metrics;
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
 use strata::engine::render::{
@@ -34,6 +38,28 @@ enum Method {
     Mc,
     /// Primary sample space MLT.
     Pssmlt,
+    /// Replica-exchange MLT (seed 002 ch. 5).
+    Replica,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Move {
+    None,
+    Neighbor,
+    IsPermutation,
+    IsSwap,
+    OriginalEem,
+    FrequentEem,
+    Ees,
+    NonReversible,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum TemperingArg {
+    /// pi^(1/T), any oracle.
+    Power,
+    /// The oracle roughens (the path tracer's BSDFs at connecting vertices).
+    Oracle,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -91,6 +117,24 @@ struct Args {
     /// PSSMLT large-step probability.
     #[arg(long, default_value_t = 0.3)]
     large_step: f64,
+    /// Replica exchange: the exchange move.
+    #[arg(long, value_enum, default_value = "is-permutation")]
+    exchange: Move,
+    /// Replica exchange: how chains are tempered.
+    #[arg(long, value_enum, default_value = "oracle")]
+    tempering: TemperingArg,
+    /// Replica exchange: chains per ensemble (temperatures 1..t-max, log-spaced).
+    #[arg(long, default_value_t = 8)]
+    replicas: usize,
+    /// Replica exchange: highest temperature.
+    #[arg(long, default_value_t = 2500.0)]
+    t_max: f64,
+    /// Replica exchange: ensembles run in parallel.
+    #[arg(long, default_value_t = 32)]
+    ensembles: u32,
+    /// Replica exchange: sweeps per ensemble spent equalizing the ladder first.
+    #[arg(long, default_value_t = 0)]
+    tune_ladder: u64,
     /// Exposure (stops) of the PNG.
     #[arg(long, default_value_t = 0.0)]
     exposure: f32,
@@ -227,6 +271,7 @@ fn render<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<RenderOutput> {
             };
             render_pssmlt(oracle, &MaxChannel, &settings, &observer)?
         }
+        Method::Replica => render_replica_exchange(oracle, args, budget, &observer)?,
     };
     bar.finish_and_clear();
     println!(
@@ -236,6 +281,66 @@ fn render<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<RenderOutput> {
         start.elapsed().as_secs_f64()
     );
     Ok(output)
+}
+
+fn render_replica_exchange<O: PathOracle>(
+    oracle: &O,
+    args: &Args,
+    budget: Budget,
+    observer: &Bar,
+) -> AnyResult<RenderOutput>
+where
+    O::Radiance: Send + Sync + 'static,
+{
+    let mut ensemble = EnsembleSettings::geometric(args.replicas, args.t_max)?;
+    ensemble.tempering = match args.tempering {
+        TemperingArg::Power => Tempering::Power,
+        TemperingArg::Oracle => Tempering::Oracle,
+    };
+    ensemble.mutation.large_step_probability = args.large_step;
+    let exchange = match args.exchange {
+        Move::None => ExchangeKind::None,
+        Move::Neighbor => ExchangeKind::NeighborSwap,
+        Move::IsPermutation => ExchangeKind::IsPermutation,
+        Move::IsSwap => ExchangeKind::IsSwap,
+        Move::OriginalEem => ExchangeKind::OriginalEquiEnergy { rings: 8 },
+        Move::FrequentEem => ExchangeKind::FrequentEquiEnergy { rings: 8 },
+        Move::Ees => ExchangeKind::all(1000)[6],
+        Move::NonReversible => ExchangeKind::NonReversible,
+    };
+    let settings = ReplicaSettings {
+        seed: args.seed,
+        budget,
+        ensembles: args.ensembles,
+        ensemble,
+        exchange,
+        ladder_tuning_sweeps: args.tune_ladder,
+    };
+    let out = render_replica(oracle, &MaxChannel, &settings, observer)?;
+    let x = &out.exchange;
+    let t = out.ladder.temperatures();
+    println!(
+        "{} ensembles x {} chains, T = {:.3?}; round trips {}; mean change probability {:.3}",
+        args.ensembles,
+        t.len(),
+        t,
+        x.round_trips(),
+        x.mean_change_probability()
+    );
+    let rejection: Vec<String> = x
+        .neighbor_rejection()
+        .iter()
+        .map(|r| format!("{r:.2}"))
+        .collect();
+    println!(
+        "neighbour swap rejection per pair: [{}]",
+        rejection.join(", ")
+    );
+    Ok(RenderOutput {
+        film: out.film,
+        stats: out.stats,
+        cancelled: out.cancelled,
+    })
 }
 
 fn write(film: &Film, args: &Args) -> AnyResult<()> {

@@ -94,10 +94,10 @@ fn mode_of(m: &GaussianMixture, x: &[f64]) -> usize {
     let single = |c: &strata::engine::analytic::Component| {
         let mut e = 0.0;
         let mut s = c.weight;
-        for d in 0..x.len() {
-            let z = (x[d] - c.mean[d]) / c.sigma[d];
+        for ((&x, &m), &sd) in x.iter().zip(&c.mean).zip(&c.sigma) {
+            let z = (x - m) / sd;
             e -= 0.5 * z * z;
-            s /= c.sigma[d];
+            s /= sd;
         }
         s.ln() + e
     };
@@ -214,8 +214,8 @@ fn run_direct(scenario: &Scenario, run: u64, args: &Args, z: f64, exact: f64) ->
         let c = &m.components[k];
         // Rejection: draw the Gaussian until it falls in the cube.
         loop {
-            for d in 0..dims {
-                x[d] = c.mean[d] + c.sigma[d] * unit_normals(&mut rng)[0];
+            for ((x, &m), &sd) in x.iter_mut().zip(&c.mean).zip(&c.sigma) {
+                *x = m + sd * unit_normals(&mut rng)[0];
             }
             if x.iter().all(|v| (0.0..1.0).contains(v)) {
                 break;

@@ -6,6 +6,7 @@
 //! `D_i = {u : π(u) ∈ [H_i, H_{i+1})}` (eq. 5.12); states in the same ring
 //! have similar values, so exchanging them is likely to be accepted.
 
+use alloc::boxed::Box;
 use alloc::vec::Vec;
 
 use super::{Exchange, Jump, Move, Tempered};
@@ -153,7 +154,8 @@ impl<S: Tempered + Clone> Move<S> for EquiEnergy {
 /// the value of the next colder chain's target (the key of its rings).
 #[derive(Clone, Debug)]
 struct Reservoir<S> {
-    entries: Vec<(f64, S)>,
+    /// Boxed so that keeping the order costs a move of pointers, not states.
+    entries: Vec<(f64, Box<S>)>,
     seen: u64,
 }
 
@@ -231,14 +233,14 @@ impl<S> EquiEnergySampler<S> {
         records.sort_by(|a, b| a.0.total_cmp(&b.0));
         let r = &mut self.reservoirs[chain];
         r.seen = records.len() as u64;
-        r.entries = records;
+        r.entries = records.into_iter().map(|(k, s)| (k, Box::new(s))).collect();
     }
 
     /// The index range of the ring of `value` among `entries` (sorted by key).
     /// The levels are the keys at the `rings` quantiles of the records; a ring
     /// is the set of keys between two levels, so membership depends on the
     /// value alone (ties included).
-    fn ring_range(&self, entries: &[(f64, S)], value: f64) -> core::ops::Range<usize> {
+    fn ring_range(&self, entries: &[(f64, Box<S>)], value: f64) -> core::ops::Range<usize> {
         let n = entries.len();
         let level = |k: usize| entries[k * n / self.rings].0;
         let ring = (1..self.rings).take_while(|&k| level(k) <= value).count();
@@ -271,7 +273,7 @@ impl<S: Tempered + Clone> Move<S> for EquiEnergySampler<S> {
         let entries = &self.reservoirs[source].entries;
         let range = self.ring_range(entries, u);
         let k = ex.decisions().uniform_index(range.len())?;
-        let proposal = entries[range.start + k].1.clone();
+        let proposal = S::clone(&entries[range.start + k].1);
         let num = proposal.value(chain) * ex.value(source, chain);
         let den = u * proposal.value(source);
         let acceptance = if den > 0.0 { (num / den).min(1.0) } else { 1.0 };
@@ -310,6 +312,6 @@ impl<S: Tempered + Clone> Move<S> for EquiEnergySampler<S> {
             reservoir.entries.remove(out);
         }
         let at = reservoir.entries.partition_point(|e| e.0 <= key);
-        reservoir.entries.insert(at, (key, ex.state(chain).clone()));
+        reservoir.entries.insert(at, (key, Box::new(ex.state(chain).clone())));
     }
 }

@@ -399,36 +399,42 @@ fn random_log_values(m: usize, seed: u64) -> Vec<f64> {
 
 #[test]
 fn permutations_are_drawn_with_the_probabilities_of_eq_5_7() {
-    for m in 1..=6 {
-        let v = random_log_values(m, m as u64);
-        // Brute force: every permutation's product, normalized.
-        let mut brute = std::collections::HashMap::new();
-        let mut total = 0.0;
-        for_each_permutation(m, |o| {
-            let p: f64 = o
+    // Spread 1: ordinary values. Spread 300: products span thousands of
+    // orders of magnitude and the sampler falls back to its log table.
+    for spread in [1.0, 300.0] {
+        for m in 1..=6 {
+            let v: Vec<f64> = random_log_values(m, m as u64)
                 .iter()
-                .enumerate()
-                .map(|(i, &k)| v[i * m + k])
-                .sum::<f64>()
-                .exp();
-            total += p;
-            brute.insert(o.to_vec(), p);
-        });
-        let mut sampler = PermutationSampler::new(m).unwrap();
-        sampler.normalize(&v);
-        let exact = Enumerator::all(|e| {
-            let mut o = vec![0; m];
-            assert!(sampler.sample(&v, e, &mut o));
-            o
-        });
-        assert_eq!(
-            exact.len(),
-            brute.len(),
-            "M = {m}: every permutation reachable"
-        );
-        for (o, p) in exact {
-            let want = brute[&o] / total;
-            assert!((p - want).abs() < 1e-12, "M = {m}, {o:?}: {p} vs {want}");
+                .map(|x| spread * x)
+                .collect();
+            // Brute force: every permutation's log product, normalized.
+            let mut brute = std::collections::HashMap::new();
+            for_each_permutation(m, |o| {
+                let log_p: f64 = o.iter().enumerate().map(|(i, &k)| v[i * m + k]).sum();
+                brute.insert(o.to_vec(), log_p);
+            });
+            let max = brute.values().copied().fold(f64::NEG_INFINITY, f64::max);
+            let total: f64 = brute.values().map(|l| (l - max).exp()).sum();
+            let mut sampler = PermutationSampler::new(m).unwrap();
+            sampler.normalize(&v);
+            let exact = Enumerator::all(|e| {
+                let mut o = vec![0; m];
+                assert!(sampler.sample(e, &mut o));
+                o
+            });
+            let mut covered = 0.0;
+            for (o, p) in exact {
+                let want = (brute[&o] - max).exp() / total;
+                assert!(
+                    (p - want).abs() < 1e-12,
+                    "spread {spread}, M = {m}, {o:?}: {p} vs {want}"
+                );
+                covered += want;
+            }
+            assert!(
+                (covered - 1.0).abs() < 1e-12,
+                "spread {spread}, M = {m}: {covered}"
+            );
         }
     }
 }
@@ -457,7 +463,7 @@ fn permutation_draws_pass_a_chi_square_test() {
     let mut rng = stream(5, Domain::User, 5);
     let mut o = vec![0; m];
     for _ in 0..draws {
-        sampler.sample(&v, &mut rng, &mut o);
+        sampler.sample(&mut rng, &mut o);
         counts[index[&o]] += 1;
     }
     let chi2: f64 = counts

@@ -312,6 +312,8 @@ impl<S: Tempered + Clone> Move<S> for EquiEnergySampler<S> {
             reservoir.entries.remove(out);
         }
         let at = reservoir.entries.partition_point(|e| e.0 <= key);
-        reservoir.entries.insert(at, (key, Box::new(ex.state(chain).clone())));
+        reservoir
+            .entries
+            .insert(at, (key, Box::new(ex.state(chain).clone())));
     }
 }

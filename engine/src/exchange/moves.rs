@@ -80,10 +80,7 @@ impl<S: Tempered + Clone> Move<S> for IsPermutation {
             }
         }
         self.sampler.normalize(&self.log_values);
-        if self
-            .sampler
-            .sample(&self.log_values, ex.decisions(), &mut self.permutation)
-        {
+        if self.sampler.sample(ex.decisions(), &mut self.permutation) {
             ex.permute(&self.permutation);
         }
     }

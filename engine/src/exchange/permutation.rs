@@ -10,11 +10,20 @@
 //! F_full = 1,    F_S = Σ_{k ∉ S} π_{|S|}(u_k) · F_{S ∪ {k}},    b_O = F_∅
 //! ```
 //!
-//! (ComputeCommonFactor, fig. 5.26, here as a loop over subsets instead of a
-//! memoized recursion). Sampling (SampleSuffix, fig. 5.27) then picks, level
-//! by level, the state `k` of chain `|S|` with probability
-//! `π_{|S|}(u_k) F_{S ∪ {k}} / F_S`. Everything is in log space: products of
-//! `M` target values over- or underflow long before `M` becomes large.
+//! (ComputeCommonFactor, fig. 5.26, here as a loop over subsets, level by
+//! level, instead of a memoized recursion). Sampling (SampleSuffix, fig.
+//! 5.27) then picks, level by level, the state `k` of chain `|S|` with
+//! probability `π_{|S|}(u_k) F_{S ∪ {k}} / F_S`.
+//!
+//! Numerics: products of `M` target values over- or underflow long before `M`
+//! becomes large, so the values arrive as logarithms. Every row, then every
+//! column, is scaled by its largest entry (each permutation uses every row
+//! and every column once, so this multiplies all permutations alike), and
+//! every level of the table is scaled by its largest entry (this multiplies
+//! all choices of one level alike). The table is then filled with plain
+//! multiply-adds. If a product still underflows (entries spread over more
+//! than ~300 orders of magnitude), the table is filled again in log space
+//! (log-sum-exp), which is exact but an order of magnitude slower.
 
 use alloc::vec;
 use alloc::vec::Vec;
@@ -26,24 +35,64 @@ use crate::error::Error;
 /// numbers (8 MiB at 20).
 pub const MAX_PERMUTATION_CHAINS: usize = 20;
 
-/// `ln Σ exp(x)` over the terms, `-∞` for none (or all `-∞`).
+/// `log_values` scaled so that every row, then every column, has largest
+/// entry 1, exponentiated into `scaled`; returns the log of the factor taken
+/// out (`-∞` if some row or column is all zero).
+fn scale_rows_and_columns(log_values: &[f64], chains: usize, scaled: &mut [f64]) -> f64 {
+    let mut log_scale = 0.0;
+    let mut shifted = log_values.to_vec();
+    for row in shifted.chunks_exact_mut(chains) {
+        let max = row.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        row.iter_mut().for_each(|v| *v -= max);
+        log_scale += max;
+    }
+    for k in 0..chains {
+        let max = (0..chains)
+            .map(|i| shifted[i * chains + k])
+            .fold(f64::NEG_INFINITY, f64::max);
+        (0..chains).for_each(|i| shifted[i * chains + k] -= max);
+        log_scale += max;
+    }
+    if !log_scale.is_finite() {
+        scaled.iter_mut().for_each(|v| *v = 0.0);
+        return f64::NEG_INFINITY;
+    }
+    for (o, v) in scaled.iter_mut().zip(&shifted) {
+        *o = libm::exp(*v);
+    }
+    log_scale
+}
+
+/// `ln Σ exp(t)` over the terms, `-∞` for none.
 fn log_sum_exp(terms: impl Iterator<Item = f64> + Clone) -> f64 {
     let max = terms.clone().fold(f64::NEG_INFINITY, f64::max);
     if max == f64::NEG_INFINITY {
         return max;
     }
-    if max == f64::INFINITY {
-        return max;
-    }
     max + libm::log(terms.map(|t| libm::exp(t - max)).sum::<f64>())
+}
+
+/// How the table holds `F_S`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Table {
+    /// `F_S` divided by its level's largest, over the scaled values.
+    Linear,
+    /// `ln F_S` over the raw log values.
+    Log,
 }
 
 /// The subset table of one ensemble size, reused from sweep to sweep.
 #[derive(Clone, Debug)]
 pub struct PermutationSampler {
     chains: usize,
-    /// `ln F_S` indexed by the bit set `S` of used states.
-    log_factor: Vec<f64>,
+    /// `F_S`, indexed by the bit set `S` of used states (see [`Table`]).
+    factor: Vec<f64>,
+    table: Table,
+    /// Bit sets grouped by size: `by_level[l]` lists the sets with `l` bits.
+    by_level: Vec<Vec<u32>>,
+    scaled: Vec<f64>,
+    log_values: Vec<f64>,
+    log_normalization: f64,
     weights: Vec<f64>,
 }
 
@@ -58,9 +107,18 @@ impl PermutationSampler {
                 "between 1 and 20 chains for importance-sampled permutations (the table holds 2^chains numbers)",
             ));
         }
+        let mut by_level = vec![Vec::new(); chains + 1];
+        for set in 0..1u32 << chains {
+            by_level[set.count_ones() as usize].push(set);
+        }
         Ok(Self {
             chains,
-            log_factor: vec![0.0; 1 << chains],
+            factor: vec![0.0; 1 << chains],
+            table: Table::Linear,
+            by_level,
+            scaled: vec![0.0; chains * chains],
+            log_values: vec![0.0; chains * chains],
+            log_normalization: f64::NEG_INFINITY,
             weights: vec![0.0; chains],
         })
     }
@@ -71,46 +129,93 @@ impl PermutationSampler {
     }
 
     /// Fills the table from `log_values[i * M + k] = ln π_i(u_k)` and returns
-    /// `ln b_O` (eq. 5.21).
+    /// `ln b_O` (eq. 5.21); `-∞` when every permutation has probability zero.
     pub fn normalize(&mut self, log_values: &[f64]) -> f64 {
         let m = self.chains;
         debug_assert_eq!(log_values.len(), m * m);
-        let full = (1usize << m) - 1;
-        self.log_factor[full] = 0.0;
-        for set in (0..full).rev() {
-            let level = set.count_ones() as usize;
-            let row = &log_values[level * m..(level + 1) * m];
-            let table = &self.log_factor;
-            let terms = (0..m)
-                .filter(move |k| set & (1 << k) == 0)
-                .map(move |k| row[k] + table[set | (1 << k)]);
-            self.log_factor[set] = log_sum_exp(terms);
+        self.log_values.copy_from_slice(log_values);
+        let scale = scale_rows_and_columns(log_values, m, &mut self.scaled);
+        self.log_normalization = match self.fill_linear() {
+            Some(log_f) => scale + log_f,
+            None => self.fill_log(),
+        };
+        self.log_normalization
+    }
+
+    /// The level-scaled table; `None` if a product underflowed.
+    fn fill_linear(&mut self) -> Option<f64> {
+        let m = self.chains;
+        self.table = Table::Linear;
+        let mut log_f = 0.0;
+        self.factor[(1 << m) - 1] = 1.0;
+        for level in (0..m).rev() {
+            let row = &self.scaled[level * m..(level + 1) * m];
+            let mut largest = 0.0f64;
+            for &set in &self.by_level[level] {
+                let set = set as usize;
+                let mut f = 0.0;
+                for (k, &v) in row.iter().enumerate() {
+                    if set & (1 << k) == 0 {
+                        let next = self.factor[set | (1 << k)];
+                        let term = v * next;
+                        if term < f64::MIN_POSITIVE && v > 0.0 && next > 0.0 {
+                            return None;
+                        }
+                        f += term;
+                    }
+                }
+                self.factor[set] = f;
+                largest = largest.max(f);
+            }
+            if largest == 0.0 {
+                return Some(f64::NEG_INFINITY);
+            }
+            for &set in &self.by_level[level] {
+                self.factor[set as usize] /= largest;
+            }
+            log_f += libm::log(largest);
         }
-        self.log_factor[0]
+        Some(log_f)
+    }
+
+    /// The table of `ln F_S` by log-sum-exp; returns `ln b_O`.
+    fn fill_log(&mut self) -> f64 {
+        let m = self.chains;
+        self.table = Table::Log;
+        self.factor[(1 << m) - 1] = 0.0;
+        for level in (0..m).rev() {
+            let row = &self.log_values[level * m..(level + 1) * m];
+            for &set in &self.by_level[level] {
+                let set = set as usize;
+                let factor = &self.factor;
+                let terms = (0..m)
+                    .filter(move |k| set & (1 << k) == 0)
+                    .map(move |k| row[k] + factor[set | (1 << k)]);
+                self.factor[set] = log_sum_exp(terms);
+            }
+        }
+        self.factor[0]
     }
 
     /// Draws `o` with probability eq. 5.7 into `out` (`out[i] = o(i)`), using
-    /// the table of the last [`normalize`](Self::normalize) on the same
-    /// values. Returns `false`, leaving `out` untouched, when `b_O = 0`.
-    pub fn sample(
-        &mut self,
-        log_values: &[f64],
-        decisions: &mut dyn Decisions,
-        out: &mut [usize],
-    ) -> bool {
+    /// the table of the last [`normalize`](Self::normalize). Returns `false`,
+    /// leaving `out` untouched, when `b_O = 0`.
+    pub fn sample(&mut self, decisions: &mut dyn Decisions, out: &mut [usize]) -> bool {
         let m = self.chains;
-        if !(self.log_factor[0] > f64::NEG_INFINITY && self.log_factor[0].is_finite()) {
+        if self.log_normalization == f64::NEG_INFINITY {
             return false;
         }
         let mut set = 0usize;
         for level in 0..m {
-            let row = &log_values[level * m..(level + 1) * m];
-            let here = self.log_factor[set];
+            let here = self.factor[set];
             for (k, w) in self.weights.iter_mut().enumerate() {
-                *w = if set & (1 << k) == 0 {
-                    libm::exp(row[k] + self.log_factor[set | (1 << k)] - here)
-                } else {
+                let next = set | (1 << k);
+                *w = if set & (1 << k) != 0 {
                     0.0
+                } else if self.table == Table::Linear {
+                    self.scaled[level * m + k] * self.factor[next]
+                } else {
+                    libm::exp(self.log_values[level * m + k] + self.factor[next] - here)
                 };
             }
             let Some(k) = decisions.choose(&self.weights) else {
@@ -123,19 +228,21 @@ impl PermutationSampler {
     }
 }
 
-/// `ln b_O` by enumerating all `M!` permutations: the reference the subset
-/// recursion is tested and benchmarked against.
+/// `ln b_O` by enumerating all `M!` permutations (with the same row and
+/// column scaling, products of `M` scaled values each):
+/// the reference the subset recursion is tested and benchmarked against.
 pub fn log_normalization_by_enumeration(log_values: &[f64], chains: usize) -> f64 {
-    let mut total = Vec::new();
+    let mut scaled = vec![0.0; chains * chains];
+    let log_scale = scale_rows_and_columns(log_values, chains, &mut scaled);
+    let mut total = 0.0;
     for_each_permutation(chains, |o| {
-        total.push(
-            o.iter()
-                .enumerate()
-                .map(|(i, &k)| log_values[i * chains + k])
-                .sum(),
-        );
+        total += o
+            .iter()
+            .enumerate()
+            .map(|(i, &k)| scaled[i * chains + k])
+            .product::<f64>();
     });
-    log_sum_exp(total.iter().copied())
+    log_scale + libm::log(total)
 }
 
 /// Calls `f` with every permutation of `0..n` (Heap's algorithm).
@@ -205,10 +312,60 @@ mod tests {
         assert!(log_b.is_finite() && log_b < -8000.0, "{log_b}");
         let mut rng = stream(9, Domain::User, 0);
         let mut o = vec![0; m];
-        assert!(s.sample(&v, &mut rng, &mut o));
+        assert!(s.sample(&mut rng, &mut o));
         let mut sorted = o.clone();
         sorted.sort();
         assert_eq!(sorted, (0..m).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn level_scaling_keeps_normalizations_whose_products_underflow() {
+        // Every chain prefers state 0 by e^400: each permutation multiplies
+        // one 1 and three e^-400, so b_O = 4! e^-1200 (zero as an f64).
+        let m = 4;
+        let v: Vec<f64> = (0..m * m)
+            .map(|i| if i % m == 0 { 0.0 } else { -400.0 })
+            .collect();
+        let mut s = PermutationSampler::new(m).unwrap();
+        let log_b = s.normalize(&v);
+        let exact = 24f64.ln() - 1200.0;
+        assert!((log_b - exact).abs() < 1e-9, "{log_b} vs {exact}");
+        let mut o = vec![0; m];
+        assert!(s.sample(&mut stream(3, Domain::User, 3), &mut o));
+    }
+
+    #[test]
+    fn the_log_table_agrees_with_the_linear_one() {
+        for m in 2..=7 {
+            let v = random_log_values(m, 40 + m as u64);
+            let mut linear = PermutationSampler::new(m).unwrap();
+            let log_b = linear.normalize(&v);
+            assert_eq!(linear.table, Table::Linear);
+            let mut log = linear.clone();
+            let log_b2 = log.fill_log();
+            assert!((log_b - log_b2).abs() < 1e-9, "M={m}: {log_b} vs {log_b2}");
+            let (mut r1, mut r2) = (stream(1, Domain::User, 9), stream(1, Domain::User, 9));
+            let (mut o1, mut o2) = (vec![0; m], vec![0; m]);
+            for _ in 0..200 {
+                linear.sample(&mut r1, &mut o1);
+                log.sample(&mut r2, &mut o2);
+                assert_eq!(o1, o2);
+            }
+        }
+    }
+
+    #[test]
+    fn values_spread_over_thousands_of_orders_fall_back_to_logs() {
+        let m = 6;
+        let v: Vec<f64> = random_log_values(m, 8).iter().map(|x| 100.0 * x).collect();
+        let mut s = PermutationSampler::new(m).unwrap();
+        let log_b = s.normalize(&v);
+        assert_eq!(s.table, Table::Log);
+        let slow = log_normalization_by_enumeration(&v, m);
+        assert!(
+            (log_b - slow).abs() < 1e-9 * slow.abs(),
+            "{log_b} vs {slow}"
+        );
     }
 
     #[test]
@@ -224,7 +381,7 @@ mod tests {
         let mut s = PermutationSampler::new(m).unwrap();
         assert_eq!(s.normalize(&v), f64::NEG_INFINITY);
         let mut o = vec![7; m];
-        assert!(!s.sample(&v, &mut stream(1, Domain::User, 1), &mut o));
+        assert!(!s.sample(&mut stream(1, Domain::User, 1), &mut o));
         assert_eq!(o, vec![7; m]);
     }
 }

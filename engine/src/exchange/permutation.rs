@@ -39,26 +39,27 @@ pub const MAX_PERMUTATION_CHAINS: usize = 20;
 /// entry 1, exponentiated into `scaled`; returns the log of the factor taken
 /// out (`-∞` if some row or column is all zero).
 fn scale_rows_and_columns(log_values: &[f64], chains: usize, scaled: &mut [f64]) -> f64 {
+    // Work in `scaled` as log values first, exponentiate at the end.
+    scaled.copy_from_slice(log_values);
     let mut log_scale = 0.0;
-    let mut shifted = log_values.to_vec();
-    for row in shifted.chunks_exact_mut(chains) {
+    for row in scaled.chunks_exact_mut(chains) {
         let max = row.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         row.iter_mut().for_each(|v| *v -= max);
         log_scale += max;
     }
     for k in 0..chains {
         let max = (0..chains)
-            .map(|i| shifted[i * chains + k])
+            .map(|i| scaled[i * chains + k])
             .fold(f64::NEG_INFINITY, f64::max);
-        (0..chains).for_each(|i| shifted[i * chains + k] -= max);
+        (0..chains).for_each(|i| scaled[i * chains + k] -= max);
         log_scale += max;
     }
     if !log_scale.is_finite() {
         scaled.iter_mut().for_each(|v| *v = 0.0);
         return f64::NEG_INFINITY;
     }
-    for (o, v) in scaled.iter_mut().zip(&shifted) {
-        *o = libm::exp(*v);
+    for v in scaled.iter_mut() {
+        *v = libm::exp(*v);
     }
     log_scale
 }
@@ -145,33 +146,38 @@ impl PermutationSampler {
     /// The level-scaled table; `None` if a product underflowed.
     fn fill_linear(&mut self) -> Option<f64> {
         let m = self.chains;
+        let full = (1usize << m) - 1;
         self.table = Table::Linear;
         let mut log_f = 0.0;
-        self.factor[(1 << m) - 1] = 1.0;
+        self.factor[full] = 1.0;
         for level in (0..m).rev() {
             let row = &self.scaled[level * m..(level + 1) * m];
             let mut largest = 0.0f64;
+            let mut underflow = false;
             for &set in &self.by_level[level] {
                 let set = set as usize;
                 let mut f = 0.0;
-                for (k, &v) in row.iter().enumerate() {
-                    if set & (1 << k) == 0 {
-                        let next = self.factor[set | (1 << k)];
-                        let term = v * next;
-                        if term < f64::MIN_POSITIVE && v > 0.0 && next > 0.0 {
-                            return None;
-                        }
-                        f += term;
-                    }
+                let mut free = full & !set;
+                while free != 0 {
+                    let k = free.trailing_zeros() as usize;
+                    free &= free - 1;
+                    let (v, next) = (row[k], self.factor[set | (1 << k)]);
+                    let term = v * next;
+                    underflow |= term < f64::MIN_POSITIVE && v > 0.0 && next > 0.0;
+                    f += term;
                 }
                 self.factor[set] = f;
                 largest = largest.max(f);
             }
+            if underflow {
+                return None;
+            }
             if largest == 0.0 {
                 return Some(f64::NEG_INFINITY);
             }
+            let inverse = 1.0 / largest;
             for &set in &self.by_level[level] {
-                self.factor[set as usize] /= largest;
+                self.factor[set as usize] *= inverse;
             }
             log_f += libm::log(largest);
         }
@@ -206,7 +212,7 @@ impl PermutationSampler {
             return false;
         }
         let mut set = 0usize;
-        for level in 0..m {
+        for (level, chosen) in out.iter_mut().enumerate().take(m) {
             let here = self.factor[set];
             for (k, w) in self.weights.iter_mut().enumerate() {
                 let next = set | (1 << k);
@@ -221,7 +227,7 @@ impl PermutationSampler {
             let Some(k) = decisions.choose(&self.weights) else {
                 return false;
             };
-            out[level] = k;
+            *chosen = k;
             set |= 1 << k;
         }
         true

@@ -255,7 +255,7 @@ pub fn rank_normalized_rhat(chains: &[Vec<f64>]) -> f64 {
         0.0
     } else {
         let h = sorted.len() / 2;
-        if sorted.len() % 2 == 0 {
+        if sorted.len().is_multiple_of(2) {
             0.5 * (sorted[h - 1] + sorted[h])
         } else {
             sorted[h]

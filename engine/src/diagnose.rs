@@ -233,7 +233,11 @@ fn split_rhat(chains: &[Vec<f64>]) -> f64 {
     let m = stats.len() as f64;
     let w = stats.iter().map(|s| s.1).sum::<f64>() / m;
     let grand = stats.iter().map(|s| s.0).sum::<f64>() / m;
-    let b_over_n = stats.iter().map(|s| (s.0 - grand).powi(2)).sum::<f64>() / (m - 1.0);
+    let b_over_n = stats
+        .iter()
+        .map(|s| (s.0 - grand) * (s.0 - grand))
+        .sum::<f64>()
+        / (m - 1.0);
     if w <= 0.0 {
         return if b_over_n > 0.0 { f64::INFINITY } else { 1.0 };
     }

@@ -15,6 +15,7 @@
 //! | [`chain`] | one Metropolis-Hastings chain with expected-values splatting |
 //! | [`bootstrap`] | start-up bias elimination (normalization `b*`, resampled chain starts) |
 //! | [`render`] | the drivers: independent MC and PSSMLT, budgets, observers |
+//! | [`stages`] | multi-stage MLT: importance equalized over a refining grid of image regions (seed 004 Alg. 2) |
 //! | [`exchange`] | replica exchange: ladders, every exchange move of seed 002 ch. 5, ensembles, their driver |
 //! | [`film`] | f64 accumulation buffers |
 //! | [`metrics`] | MAPE, relMSE, L1, L2, MSE |
@@ -43,6 +44,7 @@ pub mod render;
 pub mod rng;
 pub mod sample;
 mod splat;
+pub mod stages;
 pub mod target;
 
 pub use error::Error;

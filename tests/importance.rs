@@ -54,6 +54,7 @@ fn multistage_mlt_is_unbiased() {
             let s = MultiStageSettings {
                 pssmlt: settings(seed, res),
                 linear_stages: 10,
+                noise_aware: false,
             };
             let out = render_multistage(&image, &MaxChannel, &s, &Silent).unwrap();
             assert_eq!(out.stages.len(), 14);
@@ -61,4 +62,24 @@ fn multistage_mlt_is_unbiased() {
         })
         .collect();
     common::check("multi-stage", &runs, &image.reference());
+}
+
+#[test]
+fn noise_aware_mlt_is_unbiased() {
+    let image = ProceduralImage::showcase(Resolution::new(24, 16));
+    let res = image.resolution;
+    let runs: Vec<Film> = (0..common::RUNS)
+        .map(|seed| {
+            let s = MultiStageSettings {
+                pssmlt: settings(seed, res),
+                linear_stages: 10,
+                noise_aware: true,
+            };
+            render_multistage(&image, &MaxChannel, &s, &Silent)
+                .unwrap()
+                .output
+                .film
+        })
+        .collect();
+    common::check("noise-aware", &runs, &image.reference());
 }

@@ -11,14 +11,26 @@
 //! `linear_stages` steps; each stage gets a share of the budget proportional
 //! to `k`, and every stage's image counts toward the result (each is
 //! unbiased, so their sample-weighted mean is too).
+//!
+//! Noise-aware MLT (sec. 4.3.4-4.3.5) multiplies that importance by a per-pixel
+//! target proportional to the *visible* noise: every path also splats its
+//! squared deviation from the current estimate of its pixel, `(L(f) - Ī_j)²`,
+//! with the same weights as `f` (the variance integral, eq. 2-3: consistent,
+//! not unbiased, which does not matter for an importance); the target is
+//! `RMS / tvi(L_a)` with Ward et al.'s piecewise threshold-versus-intensity
+//! function at the region-averaged adaptation luminance, its contrast limited
+//! to `p95/p5 <= 2`, clamped to `[p5, p95]`, unsampled pixels set to `p95`, and
+//! smoothed by a bilateral filter. Every stage stays unbiased: only the
+//! importance changes.
 
 use alloc::vec;
 use alloc::vec::Vec;
 
 use crate::error::Error;
 use crate::film::Film;
-use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Resolution};
+use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Resolution, Temperature};
 use crate::render::{Budget, Observer, PssmltSettings, RenderOutput, RenderStats, render_pssmlt};
+use crate::sample::Sampler;
 use crate::target::{FnImportance, Importance};
 
 /// Settings of [`render_multistage`].
@@ -29,6 +41,9 @@ pub struct MultiStageSettings {
     pub pssmlt: PssmltSettings,
     /// Stages from half to full resolution (seed 004: 10).
     pub linear_stages: u32,
+    /// Noise-aware MLT (seed 004 sec. 4.3.4-4.3.5): also target the
+    /// estimated visual noise of each pixel.
+    pub noise_aware: bool,
 }
 
 impl Default for MultiStageSettings {
@@ -39,6 +54,7 @@ impl Default for MultiStageSettings {
                 ..PssmltSettings::default()
             },
             linear_stages: 10,
+            noise_aware: false,
         }
     }
 }
@@ -139,6 +155,171 @@ impl RegionMeans {
     }
 }
 
+/// A radiance with one more channel: the squared deviation of the path's
+/// luminance from the current estimate of its pixel (noise-aware MLT).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Probed<R> {
+    /// The path's radiance.
+    pub radiance: R,
+    /// `(L(f) - Ī_j)²`.
+    pub deviation: f32,
+}
+
+impl<R: Radiance> Radiance for Probed<R> {
+    const CHANNELS: usize = R::CHANNELS + 1;
+    fn channel(&self, i: usize) -> f32 {
+        if i < R::CHANNELS {
+            self.radiance.channel(i)
+        } else {
+            self.deviation
+        }
+    }
+    fn luminance(&self) -> f32 {
+        self.radiance.luminance()
+    }
+    fn max_channel(&self) -> f32 {
+        self.radiance.max_channel()
+    }
+}
+
+/// The oracle with its radiance [`Probed`] against `estimate` (luminance per pixel).
+struct ProbeOracle<'a, O> {
+    oracle: &'a O,
+    estimate: &'a [f64],
+}
+
+impl<O: PathOracle> PathOracle for ProbeOracle<'_, O> {
+    type Radiance = Probed<O::Radiance>;
+    fn resolution(&self) -> Resolution {
+        self.oracle.resolution()
+    }
+    fn trace<S: Sampler + ?Sized>(
+        &self,
+        film: FilmPoint,
+        sampler: &mut S,
+        t: Temperature,
+    ) -> PathSample<Self::Radiance> {
+        let s = self.oracle.trace(film, sampler, t);
+        let pixel = self.resolution().pixel_index(film);
+        let d = s.radiance.luminance() as f64 - self.estimate[pixel];
+        PathSample {
+            radiance: Probed {
+                radiance: s.radiance,
+                deviation: (d * d) as f32,
+            },
+            flags: s.flags,
+        }
+    }
+}
+
+/// Ward, Rushmeier and Piatko's (1997) piecewise threshold-versus-intensity
+/// function: the just-noticeable luminance difference at adaptation
+/// luminance `la` (cd/m²).
+pub fn tvi(la: f64) -> f64 {
+    let l = libm::log10(la.max(1e-10));
+    let log_threshold = if l < -3.94 {
+        -2.86
+    } else if l < -1.44 {
+        libm::pow(0.405 * l + 1.6, 2.18) - 2.86
+    } else if l < -0.0184 {
+        l - 0.395
+    } else if l < 1.9 {
+        libm::pow(0.249 * l + 0.65, 2.7) - 0.72
+    } else {
+        l - 1.255
+    };
+    libm::pow(10.0, log_threshold)
+}
+
+/// The `q`-quantile of `values` (sorted copy; nearest rank).
+fn quantile(values: &[f64], q: f64) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q) as usize]
+}
+
+/// The noise target of seed 004 sec. 4.3.5 per pixel (see the module docs).
+/// `mean` is the luminance estimate, `variance` the deviation estimate per
+/// pixel, `adaptation` the region-averaged luminance. Luminance is scaled so
+/// that the image mean is 100 cd/m², a display-like adaptation level (the
+/// seed does not say how scene units map to `tvi`'s).
+fn noise_target(
+    resolution: Resolution,
+    mean: &[f64],
+    variance: &[f64],
+    adaptation: &[f64],
+) -> Vec<f64> {
+    let image_mean = mean.iter().sum::<f64>() / mean.len().max(1) as f64;
+    let to_cd = if image_mean > 0.0 {
+        100.0 / image_mean
+    } else {
+        1.0
+    };
+    let error: Vec<f64> = variance
+        .iter()
+        .zip(adaptation)
+        .map(|(v, la)| libm::sqrt(v.max(0.0)) * to_cd / tvi(la * to_cd))
+        .collect();
+    let sampled: Vec<f64> = error
+        .iter()
+        .zip(mean)
+        .filter(|(e, m)| **m > 0.0 && **e > 0.0)
+        .map(|(e, _)| *e)
+        .collect();
+    if sampled.is_empty() {
+        return vec![1.0; error.len()];
+    }
+    let (p5, p95) = (quantile(&sampled, 0.05), quantile(&sampled, 0.95));
+    // Step 1: contrast p95/p5 at most 2, by a power law around p5.
+    let gamma = if p95 > 2.0 * p5 {
+        core::f64::consts::LN_2 / libm::log(p95 / p5)
+    } else {
+        1.0
+    };
+    let compress = |e: f64| p5 * libm::pow(e / p5, gamma);
+    let (low, high) = (p5, compress(p95));
+    // Step 2: clamp; unsampled pixels get the 95th percentile.
+    let target: Vec<f64> = error
+        .iter()
+        .zip(mean)
+        .map(|(&e, &m)| {
+            if m > 0.0 && e > 0.0 {
+                compress(e).clamp(low, high)
+            } else {
+                high
+            }
+        })
+        .collect();
+    // Step 3: bilateral filter (5x5, spatial sigma 1.5 px, range sigma 0.25
+    // in log target).
+    let (w, h) = (resolution.width as i64, resolution.height as i64);
+    let mut out = vec![0.0; target.len()];
+    for y in 0..h {
+        for x in 0..w {
+            let centre = libm::log(target[(y * w + x) as usize]);
+            let (mut sum, mut weights) = (0.0, 0.0);
+            for dy in -2..=2i64 {
+                for dx in -2..=2i64 {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx >= w || ny >= h {
+                        continue;
+                    }
+                    let t = target[(ny * w + nx) as usize];
+                    let dr = libm::log(t) - centre;
+                    let weight = libm::exp(
+                        -((dx * dx + dy * dy) as f64) / (2.0 * 1.5 * 1.5)
+                            - dr * dr / (2.0 * 0.0625),
+                    );
+                    sum += weight * t;
+                    weights += weight;
+                }
+            }
+            out[(y * w + x) as usize] = sum / weights;
+        }
+    }
+    out
+}
+
 /// Multi-stage MLT (seed 004 Alg. 2) over `importance` (the base importance,
 /// e.g. [`MaxChannel`](crate::target::MaxChannel)); see the module docs.
 pub fn render_multistage<O, I>(
@@ -151,44 +332,78 @@ where
     O: PathOracle,
     I: Importance<O::Radiance>,
 {
-    let total = match settings.pssmlt.budget {
-        Budget::Samples(n) => n,
-        #[cfg(feature = "std")]
-        Budget::Time(_) => {
-            return Err(Error::invalid(
-                "budget",
-                0.0,
-                "a sample budget (stages split it in proportion to their grid size)",
-            ));
-        }
+    #[allow(irrefutable_let_patterns)] // Budget has one variant without `std`.
+    let Budget::Samples(total) = settings.pssmlt.budget else {
+        return Err(Error::invalid(
+            "budget",
+            0.0,
+            "a sample budget (stages split it in proportion to their grid size)",
+        ));
     };
     settings.pssmlt.validate()?;
     let resolution = oracle.resolution();
     let n = resolution.width.max(resolution.height).max(1);
     let grids = stage_grids(n, settings.linear_stages);
     let weight_sum: u64 = grids.iter().map(|&k| k as u64).sum();
-    let mut sum = Film::new(resolution, O::Radiance::CHANNELS);
-    let mut estimate = Film::new(resolution, O::Radiance::CHANNELS);
+    let channels = O::Radiance::CHANNELS;
+    let pixels = resolution.pixel_count();
+    // Sample-weighted sums of every stage's image and deviation channel.
+    let mut sum = Film::new(resolution, channels);
+    let mut deviation_sum = vec![0.0; pixels];
+    let mut estimate = Film::new(resolution, channels);
+    let mut luminance = vec![0.0; pixels];
+    let mut variance = vec![0.0; pixels];
     let mut stats = RenderStats::default();
     let mut stages = Vec::with_capacity(grids.len());
     let mut cancelled = false;
     for (s, &k) in grids.iter().enumerate() {
         let budget = (total * k as u64 / weight_sum).max(1);
         let regions = RegionMeans::new(&estimate, k);
-        let staged = FnImportance(|sample: &PathSample<O::Radiance>, film: FilmPoint| {
-            importance.importance(sample, film) / regions.at(film)
-        });
+        let noise = if settings.noise_aware && stats.samples > 0 {
+            let adaptation: Vec<f64> = (0..pixels)
+                .map(|i| {
+                    let (x, y) = (i % resolution.width as usize, i / resolution.width as usize);
+                    regions.at(FilmPoint {
+                        x: x as f32 + 0.5,
+                        y: y as f32 + 0.5,
+                    })
+                })
+                .collect();
+            noise_target(resolution, &luminance, &variance, &adaptation)
+        } else {
+            vec![1.0; pixels]
+        };
         let mut stage_settings = settings.pssmlt;
         stage_settings.budget = Budget::Samples(budget);
         stage_settings.seed = settings
             .pssmlt
             .seed
             .wrapping_add((s as u64).wrapping_mul(0x9e37_79b9));
-        let out = render_pssmlt(oracle, &staged, &stage_settings, observer)?;
-        // The film is the stage's mean image; weight it by its samples.
-        let mut weighted = out.film.clone();
-        weighted.scale(out.stats.samples as f64);
-        sum.merge(&weighted)?;
+        let staged = FnImportance(
+            |sample: &PathSample<Probed<O::Radiance>>, film: FilmPoint| {
+                let inner = PathSample {
+                    radiance: sample.radiance.radiance,
+                    flags: sample.flags,
+                };
+                importance.importance(&inner, film) * noise[resolution.pixel_index(film)]
+                    / regions.at(film)
+            },
+        );
+        let probe = ProbeOracle {
+            oracle,
+            estimate: &luminance,
+        };
+        let out = render_pssmlt(&probe, &staged, &stage_settings, observer)?;
+        // Each stage's film is its mean image; weight it by its samples.
+        let n = out.stats.samples as f64;
+        for (i, dev) in deviation_sum.iter_mut().enumerate() {
+            let px = &out.film.data()[i * (channels + 1)..(i + 1) * (channels + 1)];
+            let target = &mut sum.data_mut()[i * channels..(i + 1) * channels];
+            for (t, v) in target.iter_mut().zip(px) {
+                *t += n * v;
+            }
+            *dev += n * px[channels];
+        }
         stats.samples += out.stats.samples;
         stats.bootstrap_samples += out.stats.bootstrap_samples;
         stats.invalid_samples += out.stats.invalid_samples;
@@ -198,7 +413,12 @@ where
             samples: out.stats.samples,
             normalization: out.stats.normalization.unwrap_or(0.0),
         });
-        estimate = sum.scaled(1.0 / stats.samples.max(1) as f64);
+        let inverse = 1.0 / stats.samples.max(1) as f64;
+        estimate = sum.scaled(inverse);
+        for i in 0..pixels {
+            luminance[i] = estimate.luminance(i);
+            variance[i] = deviation_sum[i] * inverse;
+        }
         if out.cancelled {
             cancelled = true;
             break;
@@ -217,6 +437,46 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tvi_is_nearly_continuous_and_increasing() {
+        let mut previous = 0.0;
+        for i in 0..=800 {
+            let la = libm::pow(10.0, -5.0 + i as f64 * 0.01);
+            let t = tvi(la);
+            // The published pieces meet within 3 % (at log La = -1.44 the
+            // threshold drops by 2.8 %).
+            assert!(t >= previous * 0.97, "tvi decreases at {la}");
+            if i > 0 {
+                // No jumps: a 0.01-decade step changes the threshold by < 5 %.
+                assert!(t < previous * 1.05, "tvi jumps at {la}: {previous} -> {t}");
+            }
+            previous = t;
+        }
+    }
+
+    #[test]
+    fn the_noise_target_has_limited_contrast_and_covers_unsampled_pixels() {
+        let res = Resolution::new(8, 8);
+        let n = 64;
+        let variance: Vec<f64> = (0..n).map(|i| 1e-4 * (1.0 + i as f64).powi(3)).collect();
+        let sampled = noise_target(res, &vec![1.0; n], &variance, &vec![1.0; n]);
+        let (lo, hi) = sampled
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(a, b), &t| (a.min(t), b.max(t)));
+        // The raw visual error spans 64^1.5 = 512x; the target at most 2x.
+        assert!(lo > 0.0 && hi / lo <= 2.0 + 1e-9, "{lo} .. {hi}");
+        // Pixel 0 has the least noise; unsampled, it is raised to the top.
+        let mut mean = vec![1.0; n];
+        mean[0] = 0.0;
+        let unsampled = noise_target(res, &mean, &variance, &vec![1.0; n]);
+        assert!(
+            unsampled[0] > 1.3 * sampled[0],
+            "{} vs {}",
+            unsampled[0],
+            sampled[0]
+        );
+    }
 
     #[test]
     fn stage_grids_follow_algorithm_2() {

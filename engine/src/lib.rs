@@ -19,7 +19,8 @@
 //! | [`exchange`] | replica exchange: ladders, every exchange move of seed 002 ch. 5, ensembles, their driver |
 //! | [`film`] | f64 accumulation buffers |
 //! | [`metrics`] | MAPE, relMSE, L1, L2, MSE |
-//! | [`diagnose`] | autocorrelation and effective sample size |
+//! | [`diagnose`] | autocorrelation, effective sample size, rank-normalized split R-hat |
+//! | [`convergence`] | the convergence constant of seed 003: predicted nMSE of an MCMC configuration (Alg. 1-2) |
 //! | [`analytic`] | targets and oracles with known answers |
 //!
 //! Features: `std` (default) adds time budgets; `parallel` runs chains on rayon.
@@ -33,6 +34,7 @@ extern crate std;
 pub mod analytic;
 pub mod bootstrap;
 pub mod chain;
+pub mod convergence;
 pub mod diagnose;
 pub mod error;
 pub mod exchange;

@@ -65,13 +65,13 @@ impl Ring {
     fn matrix(&self) -> Vec<Vec<f64>> {
         let k = self.states();
         let mut p = vec![vec![0.0; k]; k];
-        for x in 0..k {
+        for (x, row) in p.iter_mut().enumerate() {
             for d in [1, 2, k - 1, k - 2] {
                 let y = (x + d) % k;
-                p[x][y] += 0.25 * (self.g[y] / self.g[x]).min(1.0);
+                row[y] += 0.25 * (self.g[y] / self.g[x]).min(1.0);
             }
-            let stay: f64 = 1.0 - p[x].iter().sum::<f64>();
-            p[x][x] += stay;
+            let stay: f64 = 1.0 - row.iter().sum::<f64>();
+            row[x] += stay;
         }
         p
     }
@@ -298,7 +298,7 @@ fn a_roughened_target_stays_unbiased_with_a_larger_variance_term() {
     assert!(var(&rough) > var(&plain));
     // ...and the image from the roughened chain is unbiased: 200 runs.
     let n = 2000;
-    let mut means = vec![0.0; 8];
+    let mut means = [0.0; 8];
     let runs = 200;
     for run in 0..runs {
         let boot = Bootstrap::run(&oracle, &Rough, &mutation, 50 + run, 4096).unwrap();

@@ -340,6 +340,7 @@ where
         film: out.film,
         stats: out.stats,
         cancelled: out.cancelled,
+        visits: Vec::new(),
     })
 }
 

@@ -273,6 +273,41 @@ pub fn rank_normalized_rhat(chains: &[Vec<f64>]) -> f64 {
     bulk.max(tail)
 }
 
+/// A sample-density map: `visits` (per pixel, e.g.
+/// [`RenderOutput::visits`](crate::render::RenderOutput::visits)) as a
+/// one-channel film scaled to mean 1, so 1 is "uniform" and 4 is "four times
+/// the average number of samples". `None` if the shape does not match or
+/// nothing was visited.
+pub fn sample_density(
+    visits: &[u64],
+    resolution: crate::oracle::Resolution,
+) -> Option<crate::film::Film> {
+    if visits.len() != resolution.pixel_count() {
+        return None;
+    }
+    let total: u64 = visits.iter().sum();
+    if total == 0 {
+        return None;
+    }
+    let mean = total as f64 / visits.len() as f64;
+    let mut film = crate::film::Film::new(resolution, 1);
+    for (i, &v) in visits.iter().enumerate() {
+        film.add(i, v as f64 / mean, &1.0f32);
+    }
+    Some(film)
+}
+
+/// The coefficient of variation of a density map's values (0 for a perfectly
+/// even spread of samples).
+pub fn density_spread(density: &crate::film::Film) -> f64 {
+    let (mean, var) = mean_and_variance(density.data());
+    if mean > 0.0 {
+        libm::sqrt(var) / mean
+    } else {
+        0.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

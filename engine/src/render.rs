@@ -101,6 +101,10 @@ pub struct RenderOutput {
     pub stats: RenderStats,
     /// The observer stopped the render before its budget was spent.
     pub cancelled: bool,
+    /// Per pixel, how many chain states (one per step, after the step) fell
+    /// in it: where an MCMC method spends its samples. Empty for MC, whose
+    /// density is uniform.
+    pub visits: Vec<u64>,
 }
 
 /// Settings of [`render_mc`].
@@ -150,6 +154,7 @@ pub fn render_mc<O: PathOracle>(
         film,
         stats,
         cancelled,
+        visits: Vec::new(),
     })
 }
 
@@ -269,6 +274,7 @@ where
     let start = |i: usize| ChainWork {
         chain: bootstrap.start_chain(oracle, importance, settings.mutation, i as u64),
         splats: bands.empty_buffers(),
+        visited: Vec::new(),
     };
     #[cfg(feature = "parallel")]
     let mut work: Vec<ChainWork<O::Radiance>> = {
@@ -288,6 +294,7 @@ where
     let mut round = per_chain.map_or(1, |n| n.div_ceil(64).clamp(1, max_round));
     let clock = Clock::start(settings.budget);
     let mut film = Film::new(resolution, O::Radiance::CHANNELS);
+    let mut visits = alloc::vec![0u64; resolution.pixel_count()];
     let mut done = 0u64;
     let mut cancelled = false;
     let scale = |done: u64| resolution.pixel_count() as f64 / (done * chain_count as u64) as f64;
@@ -303,9 +310,18 @@ where
                 w.chain.step(oracle, importance, b, |p, radiance, weight| {
                     bands.push(&mut w.splats, p, radiance, weight);
                 });
+                w.visited
+                    .push(resolution.pixel_index(w.chain.current().film) as u32);
             }
         });
         bands.merge(&mut work, &mut film);
+        // Integer counts: the order of additions does not matter.
+        for w in work.iter_mut() {
+            for &p in &w.visited {
+                visits[p as usize] += 1;
+            }
+            w.visited.clear();
+        }
         done += steps;
         let fraction = per_chain.map_or_else(|| clock.fraction(), |n| done as f64 / n as f64);
         report(
@@ -339,6 +355,7 @@ where
         film,
         stats,
         cancelled,
+        visits,
     })
 }
 
@@ -371,6 +388,8 @@ pub(crate) fn report(
 struct ChainWork<R> {
     chain: Chain<R>,
     splats: Vec<Vec<Splat<R>>>,
+    /// Pixels of the states of this round.
+    visited: Vec<u32>,
 }
 
 impl<R> SplatSource<R> for ChainWork<R> {

@@ -354,6 +354,7 @@ where
     let mut luminance = vec![0.0; pixels];
     let mut variance = vec![0.0; pixels];
     let mut stats = RenderStats::default();
+    let mut visits = vec![0u64; pixels];
     let mut stages = Vec::with_capacity(grids.len());
     let mut cancelled = false;
     for (s, &k) in grids.iter().enumerate() {
@@ -404,6 +405,10 @@ where
             }
             *dev += n * px[channels];
         }
+        visits
+            .iter_mut()
+            .zip(&out.visits)
+            .for_each(|(a, b)| *a += b);
         stats.samples += out.stats.samples;
         stats.bootstrap_samples += out.stats.bootstrap_samples;
         stats.invalid_samples += out.stats.invalid_samples;
@@ -429,6 +434,7 @@ where
             film: estimate,
             stats,
             cancelled,
+            visits,
         },
         stages,
     })

@@ -43,6 +43,9 @@ struct Args {
     out: PathBuf,
 }
 
+/// A deferred render.
+type Render<'a> = Box<dyn Fn() -> Result<RenderOutput, strata::engine::Error> + 'a>;
+
 fn run<O: PathOracle>(
     oracle: &O,
     reference: Option<&Film>,
@@ -56,10 +59,7 @@ fn run<O: PathOracle>(
         bootstrap_candidates: 16_384,
         ..Default::default()
     };
-    let methods: [(
-        &str,
-        Box<dyn Fn() -> Result<RenderOutput, strata::engine::Error>>,
-    ); 3] = [
+    let methods: [(&str, Render<'_>); 3] = [
         (
             "pssmlt",
             Box::new(|| render_pssmlt(oracle, &MaxChannel, &pssmlt, &Silent)),

@@ -1,20 +1,28 @@
 //! Error against the exact image as the sample count grows, for MC and PSSMLT
-//! on the engine's analytic scenes. Writes a CSV and prints a Markdown table.
+//! on the engine's analytic scenes (a CSV and a Markdown table), and seed
+//! 003's prediction of an MCMC configuration's error against the measured
+//! error of independent runs (a CSV and a log-log plot, PNG).
 //!
 //! ```text
 //! cargo run --release --example convergence -- --out out/results/convergence.csv
 //! ```
+//!
+//! The plot needs a TrueType font at run time (`--font`, default DejaVu Sans,
+//! Debian package fonts-dejavu-core).
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Parser;
-use strata::engine::analytic::{GaussianMixture, ProceduralImage};
+use rayon::prelude::*;
+use strata::engine::analytic::{GaussianMixture, Parabola, ProceduralImage};
+use strata::engine::convergence::{ConvergenceSettings, predict_pssmlt, run_state_estimator};
 use strata::engine::metrics::{self, ImageErrors};
+use strata::engine::mutate::MutationParams;
 use strata::engine::render::{
     Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
 };
-use strata::engine::target::MaxChannel;
+use strata::engine::target::{Luminance, MaxChannel};
 use strata::engine::{Film, PathOracle, Resolution};
 
 /// Convergence of MC and PSSMLT on analytic scenes.
@@ -26,9 +34,198 @@ struct Args {
     /// Independent runs averaged per point.
     #[arg(long, default_value_t = 4)]
     runs: u64,
-    /// CSV output.
+    /// CSV output; the prediction's CSV and PNG go beside it.
     #[arg(long, default_value = "out/results/convergence.csv")]
     out: PathBuf,
+    /// Independent runs per point of the measured curves.
+    #[arg(long, default_value_t = 400)]
+    prediction_runs: u64,
+    /// Font for the plot's text.
+    #[arg(
+        long,
+        default_value = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf"
+    )]
+    font: PathBuf,
+}
+
+/// One MCMC configuration of the prediction study.
+struct Config {
+    label: &'static str,
+    mutation: MutationParams,
+    max_lag: u64,
+}
+
+/// Seed 003's predicted `MSE(n) = nMSE / n` (and the variance term alone)
+/// against the measured MSE of `runs` independent state-estimator chains,
+/// on the 1-D parabola with 8 pixels.
+fn prediction(args: &Args, dir: &Path) -> Result<(), Box<dyn std::error::Error>> {
+    let oracle = Parabola { bins: 8 };
+    let reference: Vec<f64> = oracle.reference().data().to_vec();
+    let configs = [
+        Config {
+            label: "large steps 0.3",
+            mutation: MutationParams::default(),
+            max_lag: 50,
+        },
+        Config {
+            label: "large steps 0.1",
+            mutation: MutationParams {
+                large_step_probability: 0.1,
+                ..MutationParams::default()
+            },
+            max_lag: 100,
+        },
+        Config {
+            label: "large steps 0.03",
+            mutation: MutationParams {
+                large_step_probability: 0.03,
+                ..MutationParams::default()
+            },
+            max_lag: 300,
+        },
+    ];
+    let lengths = [250u64, 500, 1000, 2000, 4000, 8000];
+    let mut csv = String::from("config,n,predicted_mse,variance_only_mse,measured_mse\n");
+    let mut curves = Vec::new();
+    println!(
+        "\n| configuration | predicted nMSE | variance term | measured nMSE (n = 8000) |\n|---|---|---|---|"
+    );
+    for c in &configs {
+        let p = predict_pssmlt(
+            &oracle,
+            &Luminance,
+            Parabola::INTEGRAL,
+            c.mutation,
+            &reference,
+            &ConvergenceSettings {
+                seed: 1,
+                starts: 100_000,
+                max_lag: c.max_lag,
+                rejection: None,
+            },
+        )?;
+        let variance_only = p.variance.iter().sum::<f64>() / p.variance.len() as f64;
+        let mut measured = Vec::new();
+        for &n in &lengths {
+            let mse: f64 = (0..args.prediction_runs)
+                .into_par_iter()
+                .map(|run| {
+                    let e = run_state_estimator(
+                        &oracle,
+                        &Luminance,
+                        Parabola::INTEGRAL,
+                        c.mutation,
+                        n,
+                        4096,
+                        run * 7919 + n,
+                    )
+                    .expect("the parabola is not black");
+                    e.iter()
+                        .zip(&reference)
+                        .map(|(a, b)| (a - b) * (a - b))
+                        .sum::<f64>()
+                        / e.len() as f64
+                })
+                .sum::<f64>()
+                / args.prediction_runs as f64;
+            writeln!(
+                csv,
+                "{},{n},{},{},{mse}",
+                c.label,
+                p.mse(n),
+                variance_only / n as f64
+            )?;
+            measured.push((n, mse));
+        }
+        let last = measured.last().map_or(0.0, |&(n, m)| n as f64 * m);
+        println!(
+            "| {} | {:.3} | {:.3} | {:.3} |",
+            c.label,
+            p.nmse(),
+            variance_only,
+            last
+        );
+        curves.push((c.label, p.nmse(), variance_only, measured));
+    }
+    std::fs::write(dir.join("prediction.csv"), csv)?;
+    plot(&curves, &args.font, &dir.join("prediction.png"))?;
+    println!("wrote {}", dir.join("prediction.png").display());
+    Ok(())
+}
+
+type Curve = (&'static str, f64, f64, Vec<(u64, f64)>);
+
+fn plot(curves: &[Curve], font: &Path, out: &Path) -> Result<(), Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    let bytes: &'static [u8] = Box::leak(std::fs::read(font)?.into_boxed_slice());
+    plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
+        .map_err(|_| "not a TrueType font")?;
+    let root = BitMapBackend::new(out, (900, 600)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    for (_, nmse, var, m) in curves {
+        for &(n, mse) in m {
+            for v in [mse, nmse / n as f64, var / n as f64] {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+    }
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "Seed 003: predicted vs measured MSE (parabola, 8 pixels)",
+            ("sans-serif", 22),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(
+            (200f64..10_000f64).log_scale(),
+            (lo * 0.7..hi * 1.4).log_scale(),
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("samples n")
+        .y_desc("MSE")
+        .label_style(("sans-serif", 14))
+        .draw()?;
+    let colors = [RED, BLUE, GREEN];
+    for ((label, nmse, var, measured), color) in curves.iter().zip(colors) {
+        let xs: Vec<f64> = measured.iter().map(|m| m.0 as f64).collect();
+        chart
+            .draw_series(LineSeries::new(
+                xs.iter().map(|&n| (n, nmse / n)),
+                color.stroke_width(2),
+            ))?
+            .label(format!("{label}: predicted L/n"))
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+        chart
+            .draw_series(LineSeries::new(
+                xs.iter().map(|&n| (n, var / n)),
+                color.mix(0.35),
+            ))?
+            .label(format!("{label}: variance term only"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.mix(0.35)));
+        chart
+            .draw_series(
+                measured
+                    .iter()
+                    .map(|&(n, m)| Circle::new((n as f64, m), 5, color.filled())),
+            )?
+            .label(format!("{label}: measured"))
+            .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerLeft)
+        .label_font(("sans-serif", 13))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
 }
 
 fn mean_errors<O: PathOracle>(
@@ -97,10 +294,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
     }
-    if let Some(dir) = args.out.parent() {
-        std::fs::create_dir_all(dir)?;
-    }
+    let dir = args.out.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)?;
     std::fs::write(&args.out, csv)?;
     println!("wrote {}", args.out.display());
-    Ok(())
+    prediction(&args, dir)
 }

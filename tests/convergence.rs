@@ -4,9 +4,8 @@
 //! independent MCMC runs on an analytic target (agreement within 10 %).
 
 use strata::engine::analytic::Parabola;
-use strata::engine::bootstrap::Bootstrap;
 use strata::engine::convergence::{
-    ConvergenceSettings, Observation, estimate_constants, predict_pssmlt,
+    ConvergenceSettings, Observation, estimate_constants, predict_pssmlt, run_state_estimator,
 };
 use strata::engine::mutate::MutationParams;
 use strata::engine::rng::{Domain, stream, uniform_f64};
@@ -188,22 +187,22 @@ fn the_estimator_matches_the_markov_matrix_value() {
 /// Plain state-estimator MCMC runs (`Î_j = (1/n) Σ w_j(x_s)`), started at
 /// (approximate) stationarity by the bootstrap, exact normalization.
 fn measured_nmse(oracle: &Parabola, mutation: MutationParams, n: u64, runs: u64) -> f64 {
-    let b = Parabola::INTEGRAL;
     let reference = oracle.reference();
     let pixels = oracle.resolution().pixel_count();
     let mut total = 0.0;
     for run in 0..runs {
-        let boot = Bootstrap::run(oracle, &Luminance, &mutation, 1000 + run, 4096).unwrap();
-        let mut chain = boot.start_chain(oracle, &Luminance, mutation, 0);
-        let mut sums = vec![0.0; pixels];
-        for _ in 0..n {
-            chain.step(oracle, &Luminance, b, |_, _, _| {});
-            let s = chain.current();
-            let j = oracle.resolution().pixel_index(s.film);
-            sums[j] += pixels as f64 * s.sample.radiance as f64 / (s.importance / b);
-        }
+        let estimate = run_state_estimator(
+            oracle,
+            &Luminance,
+            Parabola::INTEGRAL,
+            mutation,
+            n,
+            4096,
+            1000 + run,
+        )
+        .unwrap();
         total += (0..pixels)
-            .map(|j| (sums[j] / n as f64 - reference.data()[j]).powi(2))
+            .map(|j| (estimate[j] - reference.data()[j]).powi(2))
             .sum::<f64>()
             / pixels as f64;
     }
@@ -301,14 +300,10 @@ fn a_roughened_target_stays_unbiased_with_a_larger_variance_term() {
     let mut means = [0.0; 8];
     let runs = 200;
     for run in 0..runs {
-        let boot = Bootstrap::run(&oracle, &Rough, &mutation, 50 + run, 4096).unwrap();
-        let mut chain = boot.start_chain(&oracle, &Rough, mutation, 0);
-        for _ in 0..n {
-            chain.step(&oracle, &Rough, b_rough, |_, _, _| {});
-            let s = chain.current();
-            let j = oracle.resolution().pixel_index(s.film);
-            means[j] +=
-                8.0 * s.sample.radiance as f64 / (s.importance / b_rough) / (n * runs) as f64;
+        let estimate =
+            run_state_estimator(&oracle, &Rough, b_rough, mutation, n, 4096, 50 + run).unwrap();
+        for (m, e) in means.iter_mut().zip(&estimate) {
+            *m += e / runs as f64;
         }
     }
     let rough_l = rough.constants();

@@ -31,6 +31,7 @@ use alloc::vec::Vec;
 
 use rand_pcg::Pcg32;
 
+use crate::bootstrap::Bootstrap;
 use crate::chain::Chain;
 use crate::error::Error;
 use crate::mutate::MutationParams;
@@ -220,4 +221,39 @@ where
             observe(chain)
         },
     )
+}
+
+/// The estimator [`predict_pssmlt`] predicts, run once: a chain started by a
+/// bootstrap of `candidates` uniform samples (so close to stationarity), then
+/// `steps` steps, `Î_j = (1/n) Σ_s h_j f(x_s) / g(x_s)` with `g = I / b`.
+/// Returns `Î_j` per pixel (luminance). For measuring the error a
+/// prediction is compared with.
+pub fn run_state_estimator<O, I>(
+    oracle: &O,
+    importance: &I,
+    normalization: f64,
+    mutation: MutationParams,
+    steps: u64,
+    candidates: u64,
+    seed: u64,
+) -> Result<Vec<f64>, Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let resolution = oracle.resolution();
+    let pixels = resolution.pixel_count();
+    let bootstrap = Bootstrap::run(oracle, importance, &mutation, seed, candidates)?;
+    let mut chain = bootstrap.start_chain(oracle, importance, mutation, 0);
+    let mut sums = vec![0.0; pixels];
+    for _ in 0..steps {
+        chain.step(oracle, importance, normalization, |_, _, _| {});
+        let s = chain.current();
+        if s.importance > 0.0 {
+            sums[resolution.pixel_index(s.film)] += pixels as f64
+                * s.sample.radiance.luminance() as f64
+                / (s.importance / normalization);
+        }
+    }
+    Ok(sums.iter().map(|s| s / steps.max(1) as f64).collect())
 }

@@ -340,7 +340,7 @@ where
         film: out.film,
         stats: out.stats,
         cancelled: out.cancelled,
-        visits: Vec::new(),
+        visits: out.visits,
     })
 }
 

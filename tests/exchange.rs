@@ -619,6 +619,10 @@ fn replica_renders_do_not_depend_on_the_thread_count() {
     let (one, two) = (render(1), render(2));
     assert_eq!(one.film.data(), two.film.data());
     assert_eq!(one.ladder, two.ladder);
+    assert_eq!(one.visits, two.visits);
+    // Every chain's state is counted once per sweep; under power tempering a
+    // chain step is one trace, so the counts add up to the samples.
+    assert_eq!(one.visits.iter().sum::<u64>(), one.stats.samples);
 }
 
 #[test]

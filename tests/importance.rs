@@ -58,6 +58,11 @@ fn multistage_mlt_is_unbiased() {
             };
             let out = render_multistage(&image, &MaxChannel, &s, &Silent).unwrap();
             assert_eq!(out.stages.len(), 14);
+            // One counted state per chain step, over all stages.
+            assert_eq!(
+                out.output.visits.iter().sum::<u64>(),
+                out.output.stats.samples
+            );
             out.output.film
         })
         .collect();

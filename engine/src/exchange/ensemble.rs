@@ -804,12 +804,17 @@ pub struct ReplicaOutput {
     pub ladder: Ladder,
     /// The observer stopped the render early.
     pub cancelled: bool,
+    /// Per pixel, how many chain states (every chain, after every sweep) fell
+    /// in it (see [`RenderOutput::visits`](crate::render::RenderOutput::visits)).
+    pub visits: Vec<u64>,
 }
 
 struct EnsembleWork<R> {
     ensemble: Ensemble<R>,
     exchange: Box<dyn Move<Replica<R>> + Send + Sync>,
     splats: Vec<Vec<Splat<R>>>,
+    /// Pixels of the states of this round.
+    visited: Vec<u32>,
 }
 
 impl<R> SplatSource<R> for EnsembleWork<R> {
@@ -851,6 +856,7 @@ where
             ensemble: Ensemble::start(oracle, importance, &ensemble_settings, candidates, i as u64),
             exchange: settings.exchange.build(candidates)?,
             splats: bands.empty_buffers(),
+            visited: Vec::new(),
         })
     };
     let mut work = (0..count)
@@ -899,6 +905,7 @@ where
     let mut round = per_ensemble.map_or(1, |n| n.div_ceil(64).clamp(1, max_round));
     let clock = Clock::start(settings.budget);
     let mut film = Film::new(resolution, O::Radiance::CHANNELS);
+    let mut visits = vec![0u64; resolution.pixel_count()];
     let mut done = 0u64;
     let mut cancelled = false;
     let scale = |done: u64| resolution.pixel_count() as f64 / (done * count as u64) as f64;
@@ -918,9 +925,23 @@ where
                     w.exchange.as_mut(),
                     |p, radiance, weight| bands.push(splats, p, radiance, weight),
                 );
+                let visited = &mut w.visited;
+                visited.extend(
+                    w.ensemble
+                        .replicas()
+                        .iter()
+                        .map(|r| resolution.pixel_index(r.film()) as u32),
+                );
             }
         });
         bands.merge(&mut work, &mut film);
+        // Integer counts: the order of additions does not matter.
+        for w in work.iter_mut() {
+            for &p in &w.visited {
+                visits[p as usize] += 1;
+            }
+            w.visited.clear();
+        }
         done += sweeps;
         let fraction = per_ensemble.map_or_else(|| clock.fraction(), |n| done as f64 / n as f64);
         report(
@@ -964,5 +985,6 @@ where
         levels,
         ladder: ensemble_settings.ladder,
         cancelled,
+        visits,
     })
 }

@@ -16,6 +16,8 @@
 //! | [`bootstrap`] | start-up bias elimination (normalization `b*`, resampled chain starts) |
 //! | [`render`] | the drivers: independent MC and PSSMLT, budgets, observers |
 //! | [`stages`] | multi-stage MLT: importance equalized over a refining grid of image regions (seed 004 Alg. 2) |
+//! | [`tiles`] | the overlapping per-pixel tiles of stratified MCMC (seed 001 sec. 3) |
+//! | [`reconstruct`] | the tile normalizations from overlapping unscaled estimates: weighted iterative and log-domain solvers (seed 001 sec. 3.2) |
 //! | [`exchange`] | replica exchange: ladders, every exchange move of seed 002 ch. 5, ensembles, their driver |
 //! | [`film`] | f64 accumulation buffers |
 //! | [`metrics`] | MAPE, relMSE, L1, L2, MSE |
@@ -42,12 +44,14 @@ pub mod film;
 pub mod metrics;
 pub mod mutate;
 pub mod oracle;
+pub mod reconstruct;
 pub mod render;
 pub mod rng;
 pub mod sample;
 mod splat;
 pub mod stages;
 pub mod target;
+pub mod tiles;
 
 pub use error::Error;
 pub use film::Film;

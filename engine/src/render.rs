@@ -19,7 +19,7 @@ use crate::mutate::MutationParams;
 use crate::oracle::{FilmPoint, PathOracle, Radiance, Resolution, Temperature};
 use crate::rng::{self, Domain};
 use crate::sample::{IndependentSampler, Sampler};
-use crate::splat::{Splat, SplatBands, SplatSource};
+use crate::splat::{RoundBuffers, SplatBands, Worker};
 use crate::target::Importance;
 
 /// When a render stops.
@@ -273,8 +273,7 @@ where
     let bands = SplatBands::new(resolution);
     let start = |i: usize| ChainWork {
         chain: bootstrap.start_chain(oracle, importance, settings.mutation, i as u64),
-        splats: bands.empty_buffers(),
-        visited: Vec::new(),
+        buffers: RoundBuffers::new(&bands),
     };
     #[cfg(feature = "parallel")]
     let mut work: Vec<ChainWork<O::Radiance>> = {
@@ -284,63 +283,23 @@ where
     #[cfg(not(feature = "parallel"))]
     let mut work: Vec<ChainWork<O::Radiance>> = (0..chain_count).map(start).collect();
 
-    let per_chain = match settings.budget {
-        Budget::Samples(n) => Some(n.div_ceil(chain_count as u64).max(1)),
-        #[cfg(feature = "std")]
-        Budget::Time(_) => None,
-    };
-    // Rounds bound the splat buffers (2 splats per step) to ~2^22 entries.
-    let max_round = ((1u64 << 21) / chain_count as u64).max(1);
-    let mut round = per_chain.map_or(1, |n| n.div_ceil(64).clamp(1, max_round));
-    let clock = Clock::start(settings.budget);
-    let mut film = Film::new(resolution, O::Radiance::CHANNELS);
-    let mut visits = alloc::vec![0u64; resolution.pixel_count()];
-    let mut done = 0u64;
-    let mut cancelled = false;
-    let scale = |done: u64| resolution.pixel_count() as f64 / (done * chain_count as u64) as f64;
-    loop {
-        if observer.should_stop() {
-            cancelled = true;
-            break;
-        }
-        let steps = per_chain.map_or(round, |n| round.min(n - done));
-        let round_clock = Clock::start(settings.budget);
-        run_round(&mut work, |w| {
+    let rounds = run_rounds(
+        &mut work,
+        &bands,
+        settings.budget,
+        1,
+        observer,
+        |w, steps| {
             for _ in 0..steps {
+                let buffers = &mut w.buffers;
                 w.chain.step(oracle, importance, b, |p, radiance, weight| {
-                    bands.push(&mut w.splats, p, radiance, weight);
+                    buffers.splat(&bands, p, radiance, weight);
                 });
-                w.visited
-                    .push(resolution.pixel_index(w.chain.current().film) as u32);
+                w.buffers.visit(&bands, w.chain.current().film);
             }
-        });
-        bands.merge(&mut work, &mut film);
-        // Integer counts: the order of additions does not matter.
-        for w in work.iter_mut() {
-            for &p in &w.visited {
-                visits[p as usize] += 1;
-            }
-            w.visited.clear();
-        }
-        done += steps;
-        let fraction = per_chain.map_or_else(|| clock.fraction(), |n| done as f64 / n as f64);
-        report(
-            observer,
-            &film,
-            done * chain_count as u64,
-            fraction,
-            scale(done),
-        );
-        if per_chain.map_or_else(|| clock.expired(), |n| done >= n) {
-            break;
-        }
-        if per_chain.is_none() && round_clock.seconds() < 0.05 {
-            round = (round * 2).min(max_round);
-        }
-    }
-    if done > 0 {
-        film.scale(scale(done));
-    }
+        },
+    );
+    let done = rounds.units;
     let mut stats = RenderStats {
         samples: done * chain_count as u64,
         bootstrap_samples: bootstrap.candidates(),
@@ -352,11 +311,95 @@ where
     }
     stats.invalid_samples = stats.chains.invalid + bootstrap.invalid();
     Ok(RenderOutput {
-        film,
+        film: rounds.film,
         stats,
-        cancelled,
-        visits,
+        cancelled: rounds.cancelled,
+        visits: rounds.visits,
     })
+}
+
+/// What [`run_rounds`] accumulated.
+pub(crate) struct Rounds {
+    /// The normalized film.
+    pub film: Film,
+    /// States per pixel.
+    pub visits: Vec<u64>,
+    /// Units of work done by each worker.
+    pub units: u64,
+    /// The observer stopped the run.
+    pub cancelled: bool,
+}
+
+/// The loop shared by the MCMC drivers. Every worker runs `step(worker,
+/// units)` in parallel, round after round; one unit (a chain step, an
+/// ensemble sweep) costs `unit_samples` oracle traces and splats one
+/// estimate of the image, so the film is scaled by `W·H / (units ·
+/// workers)`. Rounds have sizes that depend only on the settings (sample
+/// budget), splats and visits are merged in worker order after each round,
+/// and the observer is called in between: the result does not depend on the
+/// thread count. Time budgets grow rounds while they take under 50 ms.
+pub(crate) fn run_rounds<R, W>(
+    work: &mut [W],
+    bands: &SplatBands,
+    budget: Budget,
+    unit_samples: u64,
+    observer: &dyn Observer,
+    step: impl Fn(&mut W, u64) + Sync + Send,
+) -> Rounds
+where
+    R: Radiance,
+    W: Worker<R> + Send + Sync,
+{
+    let resolution = bands.resolution();
+    let workers = work.len().max(1) as u64;
+    let per_worker = match budget {
+        Budget::Samples(n) => Some(n.div_ceil(workers * unit_samples).max(1)),
+        #[cfg(feature = "std")]
+        Budget::Time(_) => None,
+    };
+    // Rounds bound the splat buffers (a few splats per sample) to ~2^22 entries.
+    let max_round = ((1u64 << 21) / (workers * unit_samples)).max(1);
+    let mut round = per_worker.map_or(1, |n| n.div_ceil(64).clamp(1, max_round));
+    let clock = Clock::start(budget);
+    let mut film = Film::new(resolution, R::CHANNELS);
+    let mut visits = alloc::vec![0u64; resolution.pixel_count()];
+    let mut done = 0u64;
+    let mut cancelled = false;
+    let scale = |done: u64| resolution.pixel_count() as f64 / (done * workers) as f64;
+    loop {
+        if observer.should_stop() {
+            cancelled = true;
+            break;
+        }
+        let units = per_worker.map_or(round, |n| round.min(n - done));
+        let round_clock = Clock::start(budget);
+        run_round(work, |w| step(w, units));
+        bands.merge(work, &mut film, &mut visits);
+        done += units;
+        let fraction = per_worker.map_or_else(|| clock.fraction(), |n| done as f64 / n as f64);
+        report(
+            observer,
+            &film,
+            done * workers * unit_samples,
+            fraction,
+            scale(done),
+        );
+        if per_worker.map_or_else(|| clock.expired(), |n| done >= n) {
+            break;
+        }
+        if per_worker.is_none() && round_clock.seconds() < 0.05 {
+            round = (round * 2).min(max_round);
+        }
+    }
+    if done > 0 {
+        film.scale(scale(done));
+    }
+    Rounds {
+        film,
+        visits,
+        units: done,
+        cancelled,
+    }
 }
 
 pub(crate) fn checked_resolution<O: PathOracle>(oracle: &O) -> Result<Resolution, Error> {
@@ -368,13 +411,7 @@ pub(crate) fn checked_resolution<O: PathOracle>(oracle: &O) -> Result<Resolution
     }
 }
 
-pub(crate) fn report(
-    observer: &dyn Observer,
-    film: &Film,
-    samples: u64,
-    fraction: f64,
-    scale: f64,
-) {
+fn report(observer: &dyn Observer, film: &Film, samples: u64, fraction: f64, scale: f64) {
     observer.progress(&Progress {
         samples,
         fraction: fraction.clamp(0.0, 1.0),
@@ -384,20 +421,18 @@ pub(crate) fn report(
     }
 }
 
-/// A chain and its splats of the current round, bucketed by film band.
+/// A chain and what it produced in the current round.
 struct ChainWork<R> {
     chain: Chain<R>,
-    splats: Vec<Vec<Splat<R>>>,
-    /// Pixels of the states of this round.
-    visited: Vec<u32>,
+    buffers: RoundBuffers<R>,
 }
 
-impl<R> SplatSource<R> for ChainWork<R> {
-    fn splats(&self) -> &[Vec<Splat<R>>] {
-        &self.splats
+impl<R> Worker<R> for ChainWork<R> {
+    fn buffers(&self) -> &RoundBuffers<R> {
+        &self.buffers
     }
-    fn splats_mut(&mut self) -> &mut [Vec<Splat<R>>] {
-        &mut self.splats
+    fn buffers_mut(&mut self) -> &mut RoundBuffers<R> {
+        &mut self.buffers
     }
 }
 
@@ -412,7 +447,7 @@ pub(crate) fn run_round<W: Send>(work: &mut [W], f: impl Fn(&mut W) + Sync + Sen
 }
 
 /// Wall clock for time budgets; a no-op for sample budgets or without `std`.
-pub(crate) struct Clock {
+struct Clock {
     #[cfg(feature = "std")]
     start: std::time::Instant,
     #[cfg(feature = "std")]
@@ -420,7 +455,7 @@ pub(crate) struct Clock {
 }
 
 impl Clock {
-    pub(crate) fn start(budget: Budget) -> Self {
+    fn start(budget: Budget) -> Self {
         #[cfg(feature = "std")]
         {
             let limit = match budget {
@@ -439,14 +474,14 @@ impl Clock {
         }
     }
 
-    pub(crate) fn seconds(&self) -> f64 {
+    fn seconds(&self) -> f64 {
         #[cfg(feature = "std")]
         return self.start.elapsed().as_secs_f64();
         #[cfg(not(feature = "std"))]
         0.0
     }
 
-    pub(crate) fn fraction(&self) -> f64 {
+    fn fraction(&self) -> f64 {
         #[cfg(feature = "std")]
         if let Some(limit) = self.limit {
             return self.seconds() / limit.as_secs_f64().max(1e-9);
@@ -454,7 +489,7 @@ impl Clock {
         1.0
     }
 
-    pub(crate) fn expired(&self) -> bool {
+    fn expired(&self) -> bool {
         self.fraction() >= 1.0
     }
 }

@@ -40,10 +40,10 @@ use crate::error::{Error, check_probability};
 use crate::film::Film;
 use crate::mutate::MutationParams;
 use crate::oracle::{FilmPoint, PathOracle, Radiance, Temperature};
-use crate::render::{Budget, Clock, Observer, RenderStats, checked_resolution, report, run_round};
+use crate::render::{Budget, Observer, RenderStats, checked_resolution, run_round, run_rounds};
 use crate::rng::{self, Domain, uniform_f64};
 use crate::sample::{MltSampler, Replay};
-use crate::splat::{Splat, SplatBands, SplatSource};
+use crate::splat::{RoundBuffers, SplatBands, Worker};
 use crate::target::{Evaluated, Importance, evaluate};
 
 /// How the chains' targets are tempered.
@@ -812,17 +812,15 @@ pub struct ReplicaOutput {
 struct EnsembleWork<R> {
     ensemble: Ensemble<R>,
     exchange: Box<dyn Move<Replica<R>> + Send + Sync>,
-    splats: Vec<Vec<Splat<R>>>,
-    /// Pixels of the states of this round.
-    visited: Vec<u32>,
+    buffers: RoundBuffers<R>,
 }
 
-impl<R> SplatSource<R> for EnsembleWork<R> {
-    fn splats(&self) -> &[Vec<Splat<R>>] {
-        &self.splats
+impl<R> Worker<R> for EnsembleWork<R> {
+    fn buffers(&self) -> &RoundBuffers<R> {
+        &self.buffers
     }
-    fn splats_mut(&mut self) -> &mut [Vec<Splat<R>>] {
-        &mut self.splats
+    fn buffers_mut(&mut self) -> &mut RoundBuffers<R> {
+        &mut self.buffers
     }
 }
 
@@ -855,8 +853,7 @@ where
         Ok(EnsembleWork {
             ensemble: Ensemble::start(oracle, importance, &ensemble_settings, candidates, i as u64),
             exchange: settings.exchange.build(candidates)?,
-            splats: bands.empty_buffers(),
-            visited: Vec::new(),
+            buffers: RoundBuffers::new(&bands),
         })
     };
     let mut work = (0..count)
@@ -896,71 +893,28 @@ where
         }
     }
 
-    let per_ensemble = match settings.budget {
-        Budget::Samples(n) => Some(n.div_ceil(count as u64 * traces_per_sweep).max(1)),
-        #[cfg(feature = "std")]
-        Budget::Time(_) => None,
-    };
-    let max_round = ((1u64 << 21) / (count as u64 * traces_per_sweep)).max(1);
-    let mut round = per_ensemble.map_or(1, |n| n.div_ceil(64).clamp(1, max_round));
-    let clock = Clock::start(settings.budget);
-    let mut film = Film::new(resolution, O::Radiance::CHANNELS);
-    let mut visits = vec![0u64; resolution.pixel_count()];
-    let mut done = 0u64;
-    let mut cancelled = false;
-    let scale = |done: u64| resolution.pixel_count() as f64 / (done * count as u64) as f64;
-    loop {
-        if observer.should_stop() {
-            cancelled = true;
-            break;
-        }
-        let sweeps = per_ensemble.map_or(round, |n| round.min(n - done));
-        let round_clock = Clock::start(settings.budget);
-        run_round(&mut work, |w| {
+    let rounds = run_rounds(
+        &mut work,
+        &bands,
+        settings.budget,
+        traces_per_sweep,
+        observer,
+        |w, sweeps| {
             for _ in 0..sweeps {
-                let splats = &mut w.splats;
+                let buffers = &mut w.buffers;
                 w.ensemble.sweep(
                     oracle,
                     importance,
                     w.exchange.as_mut(),
-                    |p, radiance, weight| bands.push(splats, p, radiance, weight),
+                    |p, radiance, weight| buffers.splat(&bands, p, radiance, weight),
                 );
-                let visited = &mut w.visited;
-                visited.extend(
-                    w.ensemble
-                        .replicas()
-                        .iter()
-                        .map(|r| resolution.pixel_index(r.film()) as u32),
-                );
+                for r in w.ensemble.replicas() {
+                    w.buffers.visit(&bands, r.film());
+                }
             }
-        });
-        bands.merge(&mut work, &mut film);
-        // Integer counts: the order of additions does not matter.
-        for w in work.iter_mut() {
-            for &p in &w.visited {
-                visits[p as usize] += 1;
-            }
-            w.visited.clear();
-        }
-        done += sweeps;
-        let fraction = per_ensemble.map_or_else(|| clock.fraction(), |n| done as f64 / n as f64);
-        report(
-            observer,
-            &film,
-            done * count as u64 * traces_per_sweep,
-            fraction,
-            scale(done),
-        );
-        if per_ensemble.map_or_else(|| clock.expired(), |n| done >= n) {
-            break;
-        }
-        if per_ensemble.is_none() && round_clock.seconds() < 0.05 {
-            round = (round * 2).min(max_round);
-        }
-    }
-    if done > 0 {
-        film.scale(scale(done));
-    }
+        },
+    );
+    let done = rounds.units;
     let mut exchange = ExchangeStats::default();
     let m = ensemble_settings.ladder.len();
     let mut levels = vec![ChainStats::default(); m];
@@ -979,12 +933,12 @@ where
     }
     stats.invalid_samples = stats.chains.invalid + candidates.invalid();
     Ok(ReplicaOutput {
-        film,
+        film: rounds.film,
         stats,
         exchange,
         levels,
         ladder: ensemble_settings.ladder,
-        cancelled,
-        visits,
+        cancelled: rounds.cancelled,
+        visits: rounds.visits,
     })
 }

@@ -21,7 +21,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use strata::embree::EmbreeIntersector;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
 use strata::engine::exchange::{
-    EnsembleSettings, ExchangeKind, ReplicaSettings, Tempering, render_replica,
+    EnsembleSettings, ExchangeKind, Ladder, ReplicaSettings, Tempering, render_replica,
 };
 use strata::engine::metrics;
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
@@ -305,7 +305,7 @@ where
         Move::IsSwap => ExchangeKind::IsSwap,
         Move::OriginalEem => ExchangeKind::OriginalEquiEnergy { rings: 8 },
         Move::FrequentEem => ExchangeKind::FrequentEquiEnergy { rings: 8 },
-        Move::Ees => ExchangeKind::all(1000)[6],
+        Move::Ees => ExchangeKind::thesis_equi_energy_sampler(1000),
         Move::NonReversible => ExchangeKind::NonReversible,
     };
     let settings = ReplicaSettings {
@@ -333,8 +333,9 @@ where
         .map(|r| format!("{r:.2}"))
         .collect();
     println!(
-        "neighbour swap rejection per pair: [{}]",
-        rejection.join(", ")
+        "neighbour swap rejection per pair: [{}]; communication barrier {:.2}",
+        rejection.join(", "),
+        Ladder::barrier(&x.neighbor_rejection())
     );
     Ok(RenderOutput {
         film: out.film,

@@ -587,7 +587,10 @@ fn oracle_tempering_images_match_a_gaussian_mixture() {
     let mixture = GaussianMixture::random(6, 3, (0.03, 0.12), Resolution::new(12, 12), 4);
     let reference = mixture.reference(1.0);
     let res = mixture.resolution;
-    for kind in [ExchangeKind::NeighborSwap, ExchangeKind::all(50)[6]] {
+    for kind in [
+        ExchangeKind::NeighborSwap,
+        ExchangeKind::thesis_equi_energy_sampler(50),
+    ] {
         let runs: Vec<Film> = (0..common::RUNS)
             .map(|seed| {
                 let mut s = replica_settings(seed, 128, res, kind);

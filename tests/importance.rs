@@ -46,45 +46,32 @@ fn an_importance_shader_weighting_a_region_tenfold_is_unbiased() {
 }
 
 #[test]
-fn multistage_mlt_is_unbiased() {
+fn multistage_and_noise_aware_mlt_are_unbiased() {
     let image = ProceduralImage::showcase(Resolution::new(24, 16));
     let res = image.resolution;
-    let runs: Vec<Film> = (0..common::RUNS)
-        .map(|seed| {
-            let s = MultiStageSettings {
-                pssmlt: settings(seed, res),
-                linear_stages: 10,
-                noise_aware: false,
-            };
-            let out = render_multistage(&image, &MaxChannel, &s, &Silent).unwrap();
-            assert_eq!(out.stages.len(), 14);
-            // One counted state per chain step, over all stages.
-            assert_eq!(
-                out.output.visits.iter().sum::<u64>(),
-                out.output.stats.samples
-            );
-            out.output.film
-        })
-        .collect();
-    common::check("multi-stage", &runs, &image.reference());
-}
-
-#[test]
-fn noise_aware_mlt_is_unbiased() {
-    let image = ProceduralImage::showcase(Resolution::new(24, 16));
-    let res = image.resolution;
-    let runs: Vec<Film> = (0..common::RUNS)
-        .map(|seed| {
-            let s = MultiStageSettings {
-                pssmlt: settings(seed, res),
-                linear_stages: 10,
-                noise_aware: true,
-            };
-            render_multistage(&image, &MaxChannel, &s, &Silent)
-                .unwrap()
-                .output
-                .film
-        })
-        .collect();
-    common::check("noise-aware", &runs, &image.reference());
+    for noise_aware in [false, true] {
+        let runs: Vec<Film> = (0..common::RUNS)
+            .map(|seed| {
+                let s = MultiStageSettings {
+                    pssmlt: settings(seed, res),
+                    linear_stages: 10,
+                    noise_aware,
+                };
+                let out = render_multistage(&image, &MaxChannel, &s, &Silent).unwrap();
+                assert_eq!(out.stages.len(), 14);
+                // One counted state per chain step, over all stages.
+                assert_eq!(
+                    out.output.visits.iter().sum::<u64>(),
+                    out.output.stats.samples
+                );
+                out.output.film
+            })
+            .collect();
+        let label = if noise_aware {
+            "noise-aware"
+        } else {
+            "multi-stage"
+        };
+        common::check(label, &runs, &image.reference());
+    }
 }

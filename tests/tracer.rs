@@ -27,6 +27,21 @@ fn mean_se(films: &[Film], stat: impl Fn(&Film) -> f64) -> (f64, f64) {
     (mean, (var / n).sqrt())
 }
 
+/// Every channel's image mean agrees between MC runs and `other` runs within
+/// 4.5 combined standard errors, and MC's is not zero.
+fn assert_channel_means_agree(scene: &str, mc: &[Film], method: &str, other: &[Film]) {
+    for c in 0..3 {
+        let (a, sa) = mean_se(mc, |f| f.channel_mean(c));
+        let (b, sb) = mean_se(other, |f| f.channel_mean(c));
+        let z = (a - b).abs() / (sa * sa + sb * sb).sqrt();
+        assert!(
+            z < 4.5,
+            "{scene} channel {c}: MC {a} ± {sa}, {method} {b} ± {sb} (z = {z:.2})"
+        );
+        assert!(a > 0.0);
+    }
+}
+
 fn mc_runs<O: PathOracle>(oracle: &O, spp: u64, runs: u64) -> Vec<Film> {
     (0..runs)
         .map(|seed| {
@@ -238,16 +253,7 @@ fn pssmlt_and_mc_agree_on_cornell_and_door() {
                     .film
             })
             .collect();
-        for c in 0..3 {
-            let (a, sa) = mean_se(&mc, |f| f.channel_mean(c));
-            let (b, sb) = mean_se(&pss, |f| f.channel_mean(c));
-            let z = (a - b).abs() / (sa * sa + sb * sb).sqrt();
-            assert!(
-                z < 4.5,
-                "{name} channel {c}: MC {a} ± {sa}, PSSMLT {b} ± {sb} (z = {z:.2})"
-            );
-            assert!(a > 0.0);
-        }
+        assert_channel_means_agree(name, &mc, "PSSMLT", &pss);
     }
 }
 
@@ -278,14 +284,6 @@ fn replica_exchange_with_oracle_tempering_agrees_with_mc() {
                     .film
             })
             .collect();
-        for c in 0..3 {
-            let (a, sa) = mean_se(&mc, |f| f.channel_mean(c));
-            let (b, sb) = mean_se(&re, |f| f.channel_mean(c));
-            let z = (a - b).abs() / (sa * sa + sb * sb).sqrt();
-            assert!(
-                z < 4.5,
-                "{name} channel {c}: MC {a} ± {sa}, replica exchange {b} ± {sb} (z = {z:.2})"
-            );
-        }
+        assert_channel_means_agree(name, &mc, "replica exchange", &re);
     }
 }

@@ -703,14 +703,21 @@ impl ExchangeKind {
             ExchangeKind::IsSwap,
             ExchangeKind::OriginalEquiEnergy { rings: 8 },
             ExchangeKind::FrequentEquiEnergy { rings: 8 },
-            ExchangeKind::EquiEnergySampler {
-                p_jump: 0.1,
-                rings: 16,
-                capacity: 4096,
-                burn_in,
-            },
+            ExchangeKind::thesis_equi_energy_sampler(burn_in),
             ExchangeKind::NonReversible,
         ]
+    }
+
+    /// The adaptive equi-energy sampler with seed 002 sec. 5.3.7's settings
+    /// (`p_EEJ = 0.1`, 16 rings), 4096 recorded states per chain, recording
+    /// after `burn_in` sweeps.
+    pub fn thesis_equi_energy_sampler(burn_in: u64) -> ExchangeKind {
+        ExchangeKind::EquiEnergySampler {
+            p_jump: 0.1,
+            rings: 16,
+            capacity: 4096,
+            burn_in,
+        }
     }
 
     /// A short name for tables and command lines.

@@ -70,8 +70,10 @@ pub struct EquiEnergy {
     /// One set of levels per chain (for the original move only chain 0's is used).
     levels: Vec<EnergyLevels>,
     frequent: bool,
+    /// Scratch: chains in the chosen ring, occupied rings, each chain's ring.
     members: Vec<usize>,
     occupied: Vec<usize>,
+    rings: Vec<usize>,
 }
 
 impl EquiEnergy {
@@ -82,6 +84,7 @@ impl EquiEnergy {
             frequent: false,
             members: Vec::new(),
             occupied: Vec::new(),
+            rings: Vec::new(),
         }
     }
 
@@ -92,6 +95,7 @@ impl EquiEnergy {
             frequent: true,
             members: Vec::new(),
             occupied: Vec::new(),
+            rings: Vec::new(),
         }
     }
 
@@ -122,9 +126,10 @@ impl<S: Tempered + Clone> Move<S> for EquiEnergy {
             return;
         }
         let levels = &self.levels[0];
-        let rings: Vec<usize> = (0..ex.chains())
-            .map(|c| levels.ring(ex.value(0, c)))
-            .collect();
+        self.rings.clear();
+        self.rings
+            .extend((0..ex.chains()).map(|c| levels.ring(ex.value(0, c))));
+        let rings = &self.rings;
         self.occupied.clear();
         for r in 0..levels.rings() {
             if rings.iter().filter(|&&x| x == r).count() >= 2 {

@@ -175,6 +175,7 @@ mod tests {
         let betas = [1.0, 0.75, 0.5, 0.25];
         let l = Ladder::explicit(betas.iter().map(|b| 1.0 / b).collect()).unwrap();
         let e = l.equalized(&[0.3, 0.3, 0.3]).unwrap();
+        assert!((Ladder::barrier(&[0.3, 0.3, 0.3]) - 0.9).abs() < 1e-12);
         for (a, b) in l.temperatures().iter().zip(e.temperatures()) {
             assert!((a - b).abs() < 1e-12, "{a} vs {b}");
         }

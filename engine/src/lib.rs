@@ -38,6 +38,7 @@ pub mod bootstrap;
 pub mod chain;
 pub mod convergence;
 pub mod diagnose;
+pub mod erpt;
 pub mod error;
 pub mod exchange;
 pub mod film;
@@ -50,6 +51,7 @@ pub mod rng;
 pub mod sample;
 mod splat;
 pub mod stages;
+pub mod stratify;
 pub mod target;
 pub mod tiles;
 

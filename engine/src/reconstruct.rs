@@ -103,6 +103,26 @@ fn tile_means(tiles: &Tiles, values: &[f64]) -> Vec<f64> {
     })
 }
 
+/// The starting point of [`weighted`]: each tile's mean MC estimate over its
+/// mean unscaled estimate, `Î_s / Ḡ_s` (0 where `Ḡ_s = 0`).
+pub fn initial_normalizations(tiles: &Tiles, g: &[f64], mc: &[f64]) -> Vec<f64> {
+    let o = tiles.offsets().len();
+    let mc_mean = tile_means(tiles, mc);
+    map_indices(tiles.count(), |s| {
+        let (mut sum, mut count) = (0.0, 0);
+        for (off, _) in tiles.pixels(s) {
+            sum += g[s * o + off];
+            count += 1;
+        }
+        let g_mean = sum / count.max(1) as f64;
+        if g_mean > 0.0 {
+            mc_mean[s] / g_mean
+        } else {
+            0.0
+        }
+    })
+}
+
 /// The weighted iterative solver (eq. 13-16). `initial` is `b^0` (default:
 /// each tile's MC mean over its `G` mean, `Î_s / Ḡ_s`). Returns `b_s` per tile.
 pub fn weighted(
@@ -142,15 +162,7 @@ pub fn weighted(
                 "one normalization per tile",
             ));
         }
-        None => (0..n)
-            .map(|s| {
-                if g_mean[s] > 0.0 {
-                    mc_mean[s] / g_mean[s]
-                } else {
-                    0.0
-                }
-            })
-            .collect(),
+        None => initial_normalizations(tiles, g, mc),
     };
     let alpha = settings.alpha;
     let mut weights = vec![1.0; n];

@@ -411,7 +411,13 @@ pub(crate) fn checked_resolution<O: PathOracle>(oracle: &O) -> Result<Resolution
     }
 }
 
-fn report(observer: &dyn Observer, film: &Film, samples: u64, fraction: f64, scale: f64) {
+pub(crate) fn report(
+    observer: &dyn Observer,
+    film: &Film,
+    samples: u64,
+    fraction: f64,
+    scale: f64,
+) {
     observer.progress(&Progress {
         samples,
         fraction: fraction.clamp(0.0, 1.0),
@@ -447,7 +453,7 @@ pub(crate) fn run_round<W: Send>(work: &mut [W], f: impl Fn(&mut W) + Sync + Sen
 }
 
 /// Wall clock for time budgets; a no-op for sample budgets or without `std`.
-struct Clock {
+pub(crate) struct Clock {
     #[cfg(feature = "std")]
     start: std::time::Instant,
     #[cfg(feature = "std")]
@@ -455,7 +461,7 @@ struct Clock {
 }
 
 impl Clock {
-    fn start(budget: Budget) -> Self {
+    pub(crate) fn start(budget: Budget) -> Self {
         #[cfg(feature = "std")]
         {
             let limit = match budget {
@@ -474,14 +480,14 @@ impl Clock {
         }
     }
 
-    fn seconds(&self) -> f64 {
+    pub(crate) fn seconds(&self) -> f64 {
         #[cfg(feature = "std")]
         return self.start.elapsed().as_secs_f64();
         #[cfg(not(feature = "std"))]
         0.0
     }
 
-    fn fraction(&self) -> f64 {
+    pub(crate) fn fraction(&self) -> f64 {
         #[cfg(feature = "std")]
         if let Some(limit) = self.limit {
             return self.seconds() / limit.as_secs_f64().max(1e-9);
@@ -489,7 +495,7 @@ impl Clock {
         1.0
     }
 
-    fn expired(&self) -> bool {
+    pub(crate) fn expired(&self) -> bool {
         self.fraction() >= 1.0
     }
 }

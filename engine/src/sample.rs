@@ -235,6 +235,31 @@ impl MltSampler {
         }
     }
 
+    /// Gives `self` the mutation stream of `other` and `other` that of
+    /// `self`. Exchanging two states between chains (replica exchange, state
+    /// borrowing in stratified MCMC) swaps the samplers, then swaps their
+    /// streams back so each chain keeps its own.
+    pub fn swap_rng(&mut self, other: &mut MltSampler) {
+        core::mem::swap(&mut self.rng, &mut other.rng);
+    }
+
+    /// Sets the film stream's two coordinates of the current state to `u`
+    /// (each in `[0, 1)`), e.g. to re-express a film position as a jitter
+    /// within a pixel. Outside a proposal only.
+    pub fn set_film(&mut self, u: [f32; 2]) {
+        for index in self.streams[FILM_STREAM].len()..2 {
+            self.read(FILM_STREAM, index, false);
+        }
+        for (index, value) in u.into_iter().enumerate() {
+            self.streams[FILM_STREAM][index] = Coordinate {
+                value,
+                backup: value,
+                modified: self.iteration,
+                backup_modified: self.iteration,
+            };
+        }
+    }
+
     /// Opens a proposal: a large step (fresh uniform sample) if `large`, a
     /// small step otherwise.
     pub fn propose(&mut self, large: bool) -> Proposal<'_> {
@@ -373,6 +398,11 @@ impl MltSampler {
     }
 }
 
+/// The largest f32 below 1.
+fn f32_below_one() -> f32 {
+    f32::from_bits(1.0f32.to_bits() - 1)
+}
+
 /// Position within the streams.
 #[derive(Clone, Copy, Debug)]
 struct Cursor {
@@ -424,6 +454,26 @@ impl Proposal<'_> {
             self.sampler.read(FILM_STREAM, 0, true),
             self.sampler.read(FILM_STREAM, 1, true),
         ];
+        self.cursor.oracle_stream(0);
+        resolution.film_point(u)
+    }
+
+    /// The film position of this proposal restricted to pixel `pixel`: the
+    /// film stream's coordinates `u` become `(x + u) / width`, `(y + u) /
+    /// height` (stored, so the state keeps that position), i.e. a uniform
+    /// point of the pixel for a large step. Leaves the cursor at the start of
+    /// oracle stream 0.
+    pub fn film_point_in_pixel(&mut self, resolution: Resolution, pixel: usize) -> FilmPoint {
+        let width = resolution.width.max(1) as usize;
+        let cell = [pixel % width, pixel / width];
+        let size = [resolution.width, resolution.height];
+        let mut u = [0.0f32; 2];
+        for (i, u) in u.iter_mut().enumerate() {
+            let jitter = self.sampler.read(FILM_STREAM, i, true);
+            let value = ((cell[i] as f64 + jitter as f64) / size[i] as f64) as f32;
+            *u = value.min(f32_below_one());
+            self.sampler.streams[FILM_STREAM][i].value = *u;
+        }
         self.cursor.oracle_stream(0);
         resolution.film_point(u)
     }

@@ -10,7 +10,7 @@
 use alloc::vec::Vec;
 
 use crate::error::Error;
-use crate::oracle::Resolution;
+use crate::oracle::{FilmPoint, Resolution};
 
 /// The shape of every tile.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -99,6 +99,33 @@ impl Tiles {
         (0..self.offsets.len()).filter_map(move |o| self.pixel(tile, o).map(|p| (o, p)))
     }
 
+    /// The offset at which tile `tile` contains pixel `pixel`, if it does.
+    pub fn offset_of(&self, tile: usize, pixel: usize) -> Option<usize> {
+        (0..self.offsets.len()).find(|&o| self.pixel(tile, o) == Some(pixel))
+    }
+
+    /// The point at `jitter` (in `[0, 1)²`) inside pixel `pixel`: the same
+    /// jitter in every pixel of a tile replays one primary sample across it
+    /// (seed 001 sec. 3.1, coherent sampling). Always inside the pixel, even
+    /// where `x + jitter` would round up to the next pixel.
+    #[inline]
+    pub fn pixel_point(&self, pixel: usize, jitter: FilmPoint) -> FilmPoint {
+        let w = self.resolution.width as usize;
+        let inside = |cell: usize, j: f32| {
+            let (lo, hi) = (cell as f32, (cell + 1) as f32);
+            let v = lo + j;
+            if v < hi {
+                v
+            } else {
+                f32::from_bits(hi.to_bits() - 1)
+            }
+        };
+        FilmPoint {
+            x: inside(pixel % w, jitter.x),
+            y: inside(pixel / w, jitter.y),
+        }
+    }
+
     /// `(tile, offset)` of every tile containing pixel `pixel` (offsets are
     /// symmetric, so the tiles are `pixel - offset`).
     pub fn tiles_of(&self, pixel: usize) -> impl Iterator<Item = (usize, usize)> + '_ {
@@ -139,6 +166,18 @@ mod tests {
         let square = Tiles::new(Resolution::new(4, 4), TileShape::Square { radius: 1 }).unwrap();
         assert_eq!(square.pixels(5).count(), 9);
         assert!(Tiles::new(Resolution::new(0, 4), TileShape::Cross).is_err());
+        assert_eq!(t.offset_of(7, 8), Some(1));
+        assert_eq!(t.offset_of(7, 9), None);
+        let wide = Tiles::new(Resolution::new(40_000, 2), TileShape::Cross).unwrap();
+        let almost_one = f32::from_bits(1.0f32.to_bits() - 1);
+        let p = wide.pixel_point(
+            39_999,
+            FilmPoint {
+                x: almost_one,
+                y: 0.5,
+            },
+        );
+        assert!(p.x < 40_000.0 && p.x >= 39_999.0);
         assert!(Tiles::new(Resolution::new(4, 4), TileShape::Square { radius: 0 }).is_err());
     }
 }

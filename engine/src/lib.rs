@@ -17,6 +17,8 @@
 //! | [`render`] | the drivers: independent MC and PSSMLT, budgets, observers |
 //! | [`stages`] | multi-stage MLT: importance equalized over a refining grid of image regions (seed 004 Alg. 2) |
 //! | [`tiles`] | the overlapping per-pixel tiles of stratified MCMC (seed 001 sec. 3) |
+//! | [`stratify`] | stratified MCMC: tile chains with coherent sampling, global-chain initialization, local replica exchange, `render_stratified` (seed 001) |
+//! | [`erpt`] | energy redistribution path tracing in primary sample space (seed 001's baseline) |
 //! | [`reconstruct`] | the tile normalizations from overlapping unscaled estimates: weighted iterative and log-domain solvers (seed 001 sec. 3.2) |
 //! | [`exchange`] | replica exchange: ladders, every exchange move of seed 002 ch. 5, ensembles, their driver |
 //! | [`film`] | f64 accumulation buffers |

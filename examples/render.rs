@@ -4,6 +4,7 @@
 //! ```text
 //! cargo run --release --example render -- --scene procedural --method pssmlt --spp 64 --out out/procedural
 //! cargo run --release --example render -- --scene caustic --method replica --exchange is-permutation --spp 64
+//! cargo run --release --example render -- --scene door --method stratified --spp 64
 //! ```
 //!
 //! Scenes: the path tracer's built-ins (`cornell`, `door`, `envplane`,
@@ -20,15 +21,19 @@ use clap::{Parser, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use strata::embree::EmbreeIntersector;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
+use strata::engine::erpt::{ErptSettings, render_erpt};
 use strata::engine::exchange::{
     EnsembleSettings, ExchangeKind, Ladder, ReplicaSettings, Tempering, render_replica,
 };
 use strata::engine::metrics;
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
+use strata::engine::reconstruct::{LogSettings, WeightedSettings};
 use strata::engine::render::{
     Budget, McSettings, Observer, Progress, PssmltSettings, RenderOutput, render_mc, render_pssmlt,
 };
+use strata::engine::stratify::{Solver, StratifiedSettings, render_stratified};
 use strata::engine::target::MaxChannel;
+use strata::engine::tiles::TileShape;
 use strata::engine::{Film, PathOracle, Resolution};
 use strata::native::{PathTracer, builtin, native_tracer};
 
@@ -40,6 +45,18 @@ enum Method {
     Pssmlt,
     /// Replica-exchange MLT (seed 002 ch. 5).
     Replica,
+    /// Stratified MCMC (seed 001): one chain per pixel-centred tile.
+    Stratified,
+    /// Energy redistribution path tracing in primary sample space.
+    Erpt,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum SolverArg {
+    /// Weighted iterative solver (seed 001 eq. 13-16).
+    Weighted,
+    /// Log-domain solver (eq. 17-20).
+    Log,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -135,6 +152,18 @@ struct Args {
     /// Replica exchange: sweeps per ensemble spent equalizing the ladder first.
     #[arg(long, default_value_t = 0)]
     tune_ladder: u64,
+    /// Stratified MCMC: tile radius (0: the cross of seed 001; r: (2r+1)² squares).
+    #[arg(long, default_value_t = 0)]
+    tile_radius: u32,
+    /// Stratified MCMC: local replica exchange every this many sweeps (0: never).
+    #[arg(long, default_value_t = 1)]
+    exchange_every: u32,
+    /// Stratified MCMC: the reconstruction.
+    #[arg(long, value_enum, default_value = "weighted")]
+    solver: SolverArg,
+    /// ERPT: steps per chain.
+    #[arg(long, default_value_t = 100)]
+    chain_length: u32,
     /// Exposure (stops) of the PNG.
     #[arg(long, default_value_t = 0.0)]
     exposure: f32,
@@ -272,6 +301,54 @@ fn render<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<RenderOutput> {
             render_pssmlt(oracle, &MaxChannel, &settings, &observer)?
         }
         Method::Replica => render_replica_exchange(oracle, args, budget, &observer)?,
+        Method::Stratified => {
+            let settings = StratifiedSettings {
+                seed: args.seed,
+                budget,
+                shape: match args.tile_radius {
+                    0 => TileShape::Cross,
+                    radius => TileShape::Square { radius },
+                },
+                mutation: MutationParams {
+                    small_step: SmallStep::Kelemen(Kelemen::SEED_001),
+                    large_step_probability: args.large_step,
+                },
+                exchange_every: args.exchange_every,
+                solver: match args.solver {
+                    SolverArg::Weighted => Solver::Weighted(WeightedSettings::default()),
+                    SolverArg::Log => Solver::LogDomain(LogSettings::default()),
+                },
+                ..Default::default()
+            };
+            let out = render_stratified(oracle, &MaxChannel, &settings, &observer)?;
+            let s = &out.stratified;
+            println!(
+                "{} sweeps; paths: tiles {}, exchanges {}, initialization {}; tiles started by \
+                 global chains {}, borrowing {}, uniform draws {}, never {}; exchanges \
+                 accepted {}/{}",
+                s.sweeps,
+                s.tile_samples,
+                s.exchange_samples,
+                s.initialization_samples,
+                s.initialized_by_global_chains,
+                s.initialized_by_borrowing,
+                s.initialized_by_uniform_draws,
+                s.never_initialized,
+                s.exchange_accepted,
+                s.exchange_attempts
+            );
+            out.render
+        }
+        Method::Erpt => {
+            let settings = ErptSettings {
+                seed: args.seed,
+                budget,
+                chain_length: args.chain_length,
+                small_step: SmallStep::Kelemen(Kelemen::SEED_001),
+                ..Default::default()
+            };
+            render_erpt(oracle, &MaxChannel, &settings, &observer)?
+        }
     };
     bar.finish_and_clear();
     println!(

@@ -67,8 +67,9 @@ fn every_pixel_gets_exactly_the_configured_number_of_samples() {
             assert_eq!(v, sweeps * containing, "{shape:?}: pixel {j}");
         }
         let s = &out.stratified;
+        let stats = &out.render.stats;
         assert_eq!(
-            out.render.stats.samples,
+            stats.samples + stats.bootstrap_samples,
             s.tile_samples + s.exchange_samples + s.initialization_samples
         );
     }

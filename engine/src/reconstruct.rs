@@ -123,8 +123,121 @@ pub fn initial_normalizations(tiles: &Tiles, g: &[f64], mc: &[f64]) -> Vec<f64> 
     })
 }
 
-/// The weighted iterative solver (eq. 13-16). `initial` is `b^0` (default:
-/// each tile's MC mean over its `G` mean, `Î_s / Ḡ_s`). Returns `b_s` per tile.
+/// Per-tile values laid out as zero-padded planes (one per tile offset for
+/// the estimates), so that every tile's neighbours sit at fixed index
+/// distances: the solver's inner loops are branch-free over contiguous rows.
+struct Planes {
+    width: usize,
+    height: usize,
+    /// Padding on each side: twice the tile radius (tiles sharing a pixel are
+    /// at most that far apart).
+    pad: usize,
+    stride: usize,
+    /// Index distance of each offset's pixel from the tile centre.
+    offsets: Vec<isize>,
+}
+
+impl Planes {
+    fn new(tiles: &Tiles) -> Self {
+        let r = tiles.resolution();
+        let radius = tiles
+            .offsets()
+            .iter()
+            .map(|&(dx, dy)| dx.unsigned_abs().max(dy.unsigned_abs()) as usize)
+            .max()
+            .unwrap_or(0);
+        let pad = 2 * radius;
+        let stride = r.width as usize + 2 * pad;
+        let offsets = tiles
+            .offsets()
+            .iter()
+            .map(|&(dx, dy)| dy as isize * stride as isize + dx as isize)
+            .collect();
+        Self {
+            width: r.width as usize,
+            height: r.height as usize,
+            pad,
+            stride,
+            offsets,
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.stride * (self.height + 2 * self.pad)
+    }
+
+    /// Padded index of the first pixel of row `y`.
+    fn row(&self, y: usize) -> usize {
+        (y + self.pad) * self.stride + self.pad
+    }
+
+    /// Per-tile `values` (row-major, `stride_in` values per tile, taking
+    /// component `at`) as a padded plane.
+    fn pad(&self, values: &[f64], stride_in: usize, at: usize) -> Vec<f64> {
+        let mut plane = vec![0.0; self.len()];
+        for y in 0..self.height {
+            let base = self.row(y);
+            for x in 0..self.width {
+                plane[base + x] = values[(y * self.width + x) * stride_in + at];
+            }
+        }
+        plane
+    }
+
+    fn unpad(&self, plane: &[f64]) -> Vec<f64> {
+        let mut values = Vec::with_capacity(self.width * self.height);
+        for y in 0..self.height {
+            let base = self.row(y);
+            values.extend_from_slice(&plane[base..base + self.width]);
+        }
+        values
+    }
+
+    /// A new padded plane whose rows inside the film are written by
+    /// `f(row index, row)` (see [`fill_rows`](Self::fill_rows)).
+    fn map_rows(&self, f: impl Fn(usize, &mut [f64]) + Sync + Send) -> Vec<f64> {
+        let mut plane = vec![0.0; self.len()];
+        self.fill_rows(&mut plane, f);
+        plane
+    }
+
+    /// Zeroes every row of `plane` inside the film, then lets `f(row index,
+    /// row)` write it; rows in parallel under the `parallel` feature. The
+    /// padding stays as it is (zero).
+    fn fill_rows(&self, plane: &mut [f64], f: impl Fn(usize, &mut [f64]) + Sync + Send) {
+        let (pad, height, width) = (self.pad, self.height, self.width);
+        let row = |(r, row): (usize, &mut [f64])| {
+            if r >= pad && r < pad + height {
+                let inside = &mut row[pad..pad + width];
+                inside.fill(0.0);
+                f(self.row(r - pad), inside);
+            }
+        };
+        #[cfg(feature = "parallel")]
+        {
+            use rayon::prelude::*;
+            plane.par_chunks_mut(self.stride).enumerate().for_each(row);
+        }
+        #[cfg(not(feature = "parallel"))]
+        plane.chunks_mut(self.stride).enumerate().for_each(row);
+    }
+
+    /// The `width` values of `plane` from padded index `base + shift`.
+    #[inline]
+    fn at<'a>(&self, plane: &'a [f64], base: usize, shift: isize) -> &'a [f64] {
+        let start = (base as isize + shift) as usize;
+        &plane[start..start + self.width]
+    }
+}
+
+/// The smaller of two weights (a plain comparison, which vectorizes where
+/// `f64::min`'s NaN handling may not; weights are never NaN).
+#[inline(always)]
+fn lesser(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
+}
+
+/// The weighted iterative solver (eq. 13-16).
 pub fn weighted(
     tiles: &Tiles,
     g: &[f64],
@@ -144,16 +257,7 @@ pub fn weighted(
     }
     let n = tiles.count();
     let o = tiles.offsets().len();
-    let mc_mean = tile_means(tiles, mc);
-    let g_mean = map_indices(n, |s| {
-        let (mut sum, mut count) = (0.0, 0);
-        for (off, _) in tiles.pixels(s) {
-            sum += g[s * o + off];
-            count += 1;
-        }
-        sum / count.max(1) as f64
-    });
-    let mut b: Vec<f64> = match initial {
+    let b0 = match initial {
         Some(b0) if b0.len() == n => b0.to_vec(),
         Some(b0) => {
             return Err(Error::invalid(
@@ -164,62 +268,164 @@ pub fn weighted(
         }
         None => initial_normalizations(tiles, g, mc),
     };
-    let alpha = settings.alpha;
-    let mut weights = vec![1.0; n];
-    // Sums over the pixels k shared with other tiles t of w(s,t) F_{s,t}(k)
-    // and of w(s,t) G_s(k). Eq. 13 as printed divides by G_t(k); G_s(k) is
-    // the derivative of F_{s,t}(k) with respect to b_s, which makes each
-    // update a damped Jacobi step (it halves a tile's error when its
-    // neighbours are right) and stays stable when neighbouring
-    // normalizations differ by large factors, where the printed form
-    // oscillates and diverges (seen in the synthetic test below).
-    let overlap = |s: usize, b: &[f64], weights: &[f64], absolute: bool| -> (f64, f64) {
-        let (mut num, mut den) = (0.0, 0.0);
-        for (off, k) in tiles.pixels(s) {
-            let gs = g[s * o + off];
-            for (t, off_t) in tiles.tiles_of(k) {
-                if t == s {
-                    continue;
-                }
-                let gt = g[t * o + off_t];
-                let f = 0.5 * (gt * b[t] - gs * b[s]);
-                let w = weights[s].min(weights[t]);
-                if absolute {
-                    num += f.abs();
-                } else {
-                    num += w * f;
-                    den += w * gs;
-                }
+    let planes = Planes::new(tiles);
+    let gp: Vec<Vec<f64>> = (0..o).map(|off| planes.pad(g, o, off)).collect();
+    let counts = |count: &dyn Fn(usize) -> usize| -> Vec<f64> {
+        let inverse: Vec<f64> = (0..n).map(|i| 1.0 / count(i).max(1) as f64).collect();
+        planes.pad(&inverse, 1, 0)
+    };
+    // 1 / tiles containing each pixel (eq. 12), 1 / pixels of each tile.
+    let per_pixel = counts(&|j| tiles.tiles_of(j).count());
+    let per_tile = counts(&|s| tiles.pixels(s).count());
+    let inside = planes.pad(&vec![1.0; n], 1, 0);
+    let mc_mean = planes.pad(&tile_means(tiles, mc), 1, 0);
+    let g_mean = planes.map_rows(|base, row| {
+        for gp_o in &gp {
+            for (v, gv) in row.iter_mut().zip(planes.at(gp_o, base, 0)) {
+                *v += gv;
             }
         }
-        (num, den)
-    };
+        for (v, inv) in row.iter_mut().zip(planes.at(&per_tile, base, 0)) {
+            *v *= inv;
+        }
+    });
+    // Every (offset, other tile's offset) pair sharing a pixel: the other tile
+    // is at index distance d_o - d_o'.
+    let pairs: Vec<(usize, usize, isize)> = (0..o)
+        .flat_map(|a| (0..o).filter(move |&c| c != a).map(move |c| (a, c)))
+        .map(|(a, c)| (a, c, planes.offsets[a] - planes.offsets[c]))
+        .collect();
+    // The other tiles sharing a pixel with tile s sit at the distinct shifts
+    // d_o - d_o'; for each shift, the offsets o' at which that tile holds the
+    // shared pixels.
+    let mut shifts: Vec<(isize, Vec<usize>)> = Vec::new();
+    for &(_, c, shift) in &pairs {
+        match shifts.iter_mut().find(|(d, _)| *d == shift) {
+            Some((_, list)) => list.push(c),
+            None => shifts.push((shift, vec![c])),
+        }
+    }
+    let alpha = settings.alpha;
+    let mut b = planes.pad(&b0, 1, 0);
+    let mut weights = inside.clone();
+    let mut denominator = vec![0.0; planes.len()];
+    // Σ_{o'≠o} w(s, t) for the tile s's offset o: the own-value part of the
+    // sums of w(s,t) F_{s,t}(k), fixed between weight refreshes.
+    // Σ_o G_s(o) Σ_{t∋o, t≠s} w(s,t): the own-value part of the sums of
+    // w(s,t) F_{s,t}(k), fixed between weight refreshes.
+    let mut own = vec![0.0; planes.len()];
+    let (mut image, mut estimate, mut next) = (own.clone(), own.clone(), own.clone());
     let every = settings.reweight_every.max(1);
     for iteration in 0..settings.iterations {
-        let estimate = tile_means(tiles, &image(tiles, g, &b));
+        // Eq. 12, then each tile's mean of it.
+        planes.fill_rows(&mut image, |base, row| {
+            for (gp_o, &d) in gp.iter().zip(&planes.offsets) {
+                let (g, bs) = (planes.at(gp_o, base, -d), planes.at(&b, base, -d));
+                for ((v, g), b) in row.iter_mut().zip(g).zip(bs) {
+                    *v += g * b;
+                }
+            }
+            for (v, inv) in row.iter_mut().zip(planes.at(&per_pixel, base, 0)) {
+                *v *= inv;
+            }
+        });
+        planes.fill_rows(&mut estimate, |base, row| {
+            for &d in &planes.offsets {
+                for (v, i) in row.iter_mut().zip(planes.at(&image, base, d)) {
+                    *v += i;
+                }
+            }
+            for (v, inv) in row.iter_mut().zip(planes.at(&per_tile, base, 0)) {
+                *v *= inv;
+            }
+        });
         if iteration % every == 0 {
             // Eq. 15-16: w(s) = 1 / (e(s) + β1 β2^n), scaled so the largest
             // is 1 (the update is invariant to a common factor).
             let floor = (settings.beta1 * libm::pow(settings.beta2, iteration as f64)).max(1e-300);
-            let raw = map_indices(n, |s| {
-                let e = alpha * (estimate[s] - mc_mean[s]).abs() + overlap(s, &b, &weights, true).0;
-                1.0 / (e + floor)
+            let raw = planes.map_rows(|base, row| {
+                let est = planes.at(&estimate, base, 0);
+                let m = planes.at(&mc_mean, base, 0);
+                for ((v, e), m) in row.iter_mut().zip(est).zip(m) {
+                    *v = alpha * (e - m).abs();
+                }
+                let bs = planes.at(&b, base, 0);
+                for &(a, c, shift) in &pairs {
+                    let gs = planes.at(&gp[a], base, 0);
+                    let (gt, bt) = (planes.at(&gp[c], base, shift), planes.at(&b, base, shift));
+                    let it = planes.at(&inside, base, shift);
+                    let terms = gs.iter().zip(bs).zip(gt.iter().zip(bt)).zip(it);
+                    for (v, (((gs, bs), (gt, bt)), it)) in row.iter_mut().zip(terms) {
+                        *v += it * (0.5 * (gt * bt - gs * bs)).abs();
+                    }
+                }
+                for v in row.iter_mut() {
+                    *v = 1.0 / (*v + floor);
+                }
             });
             let max = raw.iter().copied().fold(0.0, f64::max);
-            weights = raw.iter().map(|w| w / max).collect();
+            weights = raw.iter().zip(&inside).map(|(w, i)| i * w / max).collect();
+            planes.fill_rows(&mut own, |base, row| {
+                let ws = planes.at(&weights, base, 0);
+                for &(a, _, shift) in &pairs {
+                    let gs = planes.at(&gp[a], base, 0);
+                    let wt = planes.at(&weights, base, shift);
+                    for (v, ((ws, wt), g)) in row.iter_mut().zip(ws.iter().zip(wt).zip(gs)) {
+                        *v += lesser(*ws, *wt) * g;
+                    }
+                }
+            });
+            // The denominator of eq. 13 (see below): α w(s) Ḡ_s + Σ w(s,t) G_s(k).
+            denominator = planes.map_rows(|base, row| {
+                let ws = planes.at(&weights, base, 0);
+                let gm = planes.at(&g_mean, base, 0);
+                let own = planes.at(&own, base, 0);
+                for (((v, w), gm), own) in row.iter_mut().zip(ws).zip(gm).zip(own) {
+                    *v = alpha * w * gm + own;
+                }
+            });
         }
-        b = map_indices(n, |s| {
-            let (num, den) = overlap(s, &b, &weights, false);
-            let num = alpha * weights[s] * (mc_mean[s] - estimate[s]) + num;
-            let den = alpha * weights[s] * g_mean[s] + den;
-            if den > 0.0 {
-                (b[s] + num / den).max(0.0)
-            } else {
-                b[s]
+        // Eq. 13 with the sums over the pixels k shared with other tiles t of
+        // w(s,t) F_{s,t}(k) and of w(s,t) G_s(k). Eq. 13 as printed divides
+        // by G_t(k); G_s(k) is the derivative of F_{s,t}(k) with respect to
+        // b_s, which makes each update a damped Jacobi step (it halves a
+        // tile's error when its neighbours are right) and stays stable when
+        // neighbouring normalizations differ by large factors, where the
+        // printed form oscillates and diverges (seen in the synthetic test
+        // below). The first sum is ½ Σ_t w(s,t) b_t Σ_{k shared} G_t(k) -
+        // ½ b_s Σ_k G_s(k) Σ_t w(s,t) (the second part is `own`).
+        planes.fill_rows(&mut next, |base, row| {
+            let ws = planes.at(&weights, base, 0);
+            let est = planes.at(&estimate, base, 0);
+            let m = planes.at(&mc_mean, base, 0);
+            let (bs, own) = (planes.at(&b, base, 0), planes.at(&own, base, 0));
+            for (((v, w), e), (m, (b, own))) in row
+                .iter_mut()
+                .zip(ws)
+                .zip(est)
+                .zip(m.iter().zip(bs.iter().zip(own)))
+            {
+                *v = alpha * w * (m - e) - 0.5 * b * own;
+            }
+            for (shift, others) in &shifts {
+                let wt = planes.at(&weights, base, *shift);
+                let bt = planes.at(&b, base, *shift);
+                for &c in others {
+                    let gt = planes.at(&gp[c], base, *shift);
+                    let terms = ws.iter().zip(wt).zip(gt.iter().zip(bt));
+                    for (v, ((ws, wt), (g, b))) in row.iter_mut().zip(terms) {
+                        *v += 0.5 * lesser(*ws, *wt) * g * b;
+                    }
+                }
+            }
+            let den = planes.at(&denominator, base, 0);
+            for ((v, b), d) in row.iter_mut().zip(bs).zip(den) {
+                *v = if *d > 0.0 { (b + *v / d).max(0.0) } else { *b };
             }
         });
+        core::mem::swap(&mut b, &mut next);
     }
-    Ok(b)
+    Ok(planes.unpad(&b))
 }
 
 /// Settings of the log-domain solver.

@@ -106,7 +106,8 @@ pub struct StratifiedSettings {
     /// Seed of every random stream.
     pub seed: u64,
     /// Paths traced in all (initialization, tile steps and exchanges). A
-    /// sample budget is turned into a whole number of sweeps (at least one).
+    /// sample budget is turned into the nearest whole number of sweeps (at
+    /// least one) at the cost of a sweep whose exchanges all trace.
     pub budget: Budget,
     /// The tile shape (cross by default).
     pub shape: TileShape,
@@ -161,7 +162,8 @@ pub struct StratifiedStats {
     pub tile_samples: u64,
     /// Paths traced to evaluate exchanged and borrowed states.
     pub exchange_samples: u64,
-    /// Paths traced by the initialization (bootstrap, global chains, replays).
+    /// Paths traced by the initialization (bootstrap included, global
+    /// chains, replays of installed states).
     pub initialization_samples: u64,
     /// Tiles initialized by a global chain.
     pub initialized_by_global_chains: u64,
@@ -635,7 +637,8 @@ struct Visit {
 }
 
 /// Runs the global chains until the coverage or the budget is reached and
-/// installs their states; returns paths traced.
+/// installs their states; returns paths traced, and how many of them the
+/// bootstrap traced.
 fn initialize<O, I>(
     ctx: &Context<'_, O, I>,
     chains: &mut [TileChain<O::Radiance>],
@@ -668,10 +671,12 @@ where
         Ok(b) => b,
         // A black scene (for these candidates): tiles fall back on uniform draws.
         Err(Error::AllCandidatesBlack { .. }) => {
-            return Ok((target.traces.load(Ordering::Relaxed), candidates));
+            let traced = target.traces.load(Ordering::Relaxed);
+            return Ok((traced, traced));
         }
         Err(e) => return Err(e),
     };
+    let bootstrap_traces = target.traces.load(Ordering::Relaxed);
     let b = bootstrap.normalization();
     let mut global: Vec<_> = (0..init.global_chains as u64)
         .map(|i| bootstrap.start_chain(&target, &MaxChannel, settings.mutation, i))
@@ -732,7 +737,10 @@ where
             0
         }
     });
-    Ok((target.traces.load(Ordering::Relaxed) + replays, candidates))
+    Ok((
+        target.traces.load(Ordering::Relaxed) + replays,
+        bootstrap_traces,
+    ))
 }
 
 /// Stratified MCMC (seed 001): see the module docs.
@@ -781,7 +789,7 @@ where
         ),
     };
     let clock = Clock::start(settings.budget);
-    let (traced, candidates) = initialize(
+    let (traced, bootstrap_traces) = initialize(
         &ctx,
         &mut chains,
         settings,
@@ -801,7 +809,8 @@ where
             } else {
                 0.0
             };
-            Some(((remaining as f64 / (step_cost as f64 + exchange_cost)) as u64).max(1))
+            let sweeps = remaining as f64 / (step_cost as f64 + exchange_cost);
+            Some((libm::round(sweeps) as u64).max(1))
         }
         #[cfg(feature = "std")]
         Budget::Time(_) => None,
@@ -891,8 +900,9 @@ where
     let render = RenderOutput {
         film,
         stats: RenderStats {
-            samples: stats.initialization_samples + stats.tile_samples + stats.exchange_samples,
-            bootstrap_samples: candidates * offsets as u64,
+            samples: stats.initialization_samples + stats.tile_samples + stats.exchange_samples
+                - bootstrap_traces,
+            bootstrap_samples: bootstrap_traces,
             invalid_samples: chain_stats.invalid + invalid,
             normalization: None,
             chains: chain_stats,

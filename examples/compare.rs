@@ -1,0 +1,349 @@
+//! Equal-time comparison of MC, PSSMLT, ERPT, stratified MCMC and
+//! replica-exchange MLT (seed 001 sec. 4, Table 1 and Fig. 8).
+//!
+//! Every method renders the scene with the same time budget, at several
+//! checkpoints (fractions of the budget, each a separate render), and is
+//! compared with a reference: a long MC render cached on disk
+//! (`reference_WxH_SPP.exr` in the output directory, reused when present).
+//! Writes every final image (EXR + PNG), `metrics.csv` (MAPE with ε = 0.01,
+//! relMSE, L1, L2 on luminance, seed 001's metrics) and `error_vs_time.png`.
+//!
+//! ```text
+//! cargo run --release --example compare -- --scene veach-ajar --width 160 --height 90 --time 60
+//! cargo run --release --example compare -- --scene envplane --time 10
+//! ```
+//!
+//! Scenes: the built-ins (`cornell`, `door`, `envplane`, `caustic`) or a
+//! directory of `$STRATA_SCENES` (default `../shared/scenes`): `cornell-box`,
+//! `veach-ajar`. The plot needs a TrueType font (`--font`, default DejaVu Sans).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use clap::{Parser, ValueEnum};
+use strata::engine::erpt::{ErptSettings, render_erpt};
+use strata::engine::exchange::{EnsembleSettings, ReplicaSettings, render_replica};
+use strata::engine::metrics::{self, ImageErrors};
+use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
+use strata::engine::render::{
+    Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
+};
+use strata::engine::stratify::{StratifiedSettings, render_stratified};
+use strata::engine::target::MaxChannel;
+use strata::engine::{Film, PathOracle, Resolution};
+use strata::native::{builtin, native_tracer, pbrt};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Method {
+    Mc,
+    Pssmlt,
+    Erpt,
+    Stratified,
+    Replica,
+}
+
+impl Method {
+    fn name(self) -> &'static str {
+        match self {
+            Method::Mc => "MC",
+            Method::Pssmlt => "PSSMLT",
+            Method::Erpt => "ERPT",
+            Method::Stratified => "stratified",
+            Method::Replica => "replica",
+        }
+    }
+}
+
+/// Equal-time comparison against a cached MC reference.
+#[derive(Parser, Debug)]
+struct Args {
+    /// A built-in scene or a directory of $STRATA_SCENES.
+    #[arg(long, default_value = "envplane")]
+    scene: String,
+    /// Image width (default: 128, or the pbrt file's own).
+    #[arg(long)]
+    width: Option<u32>,
+    /// Image height.
+    #[arg(long)]
+    height: Option<u32>,
+    /// Time budget per method, seconds.
+    #[arg(long, default_value_t = 10.0)]
+    time: f64,
+    /// Checkpoints, as fractions of the budget (each a separate render).
+    #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1")]
+    checkpoints: Vec<f64>,
+    /// Methods to compare.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "mc,pssmlt,erpt,stratified,replica")]
+    methods: Vec<Method>,
+    /// Paths per pixel of the MC reference.
+    #[arg(long, default_value_t = 8192)]
+    reference_spp: u64,
+    /// Seed of the compared renders (the reference uses seed + 1000).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Output directory (default out/compare/SCENE).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// TrueType font for the plot.
+    #[arg(
+        long,
+        default_value = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf"
+    )]
+    font: PathBuf,
+}
+
+type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
+
+/// One render of one method.
+struct Row {
+    method: Method,
+    budget: f64,
+    seconds: f64,
+    samples: u64,
+    errors: ImageErrors,
+}
+
+fn main() -> AnyResult<()> {
+    let args = Args::parse();
+    let scene = match builtin::by_name(
+        &args.scene,
+        Resolution::new(args.width.unwrap_or(128), args.height.unwrap_or(128)),
+    ) {
+        Some(scene) => scene,
+        None => {
+            let loaded = pbrt::load_shared(&args.scene)?;
+            let mut scene = loaded.scene;
+            let own = scene.camera.resolution;
+            if args.width.is_some() || args.height.is_some() {
+                scene.camera.resolution = Resolution::new(
+                    args.width.unwrap_or(own.width),
+                    args.height.unwrap_or(own.height),
+                );
+            }
+            scene
+        }
+    };
+    let tracer = native_tracer(scene);
+    let resolution = tracer.resolution();
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out/compare").join(&args.scene));
+    std::fs::create_dir_all(&dir)?;
+    let reference = reference(&tracer, &args, &dir)?;
+    println!(
+        "{}: {}x{}, {} s per method",
+        args.scene, resolution.width, resolution.height, args.time
+    );
+    let mut rows = Vec::new();
+    for &method in &args.methods {
+        for &fraction in &args.checkpoints {
+            let budget = args.time * fraction;
+            let start = Instant::now();
+            let (film, samples) = render(&tracer, method, budget, args.seed)?;
+            let seconds = start.elapsed().as_secs_f64();
+            let errors = metrics::compare(&film, &reference)?;
+            println!(
+                "{:>10} {budget:>7.1} s (took {seconds:.1}): MAPE {:.3e} relMSE {:.3e} L1 {:.3e} L2 {:.3e} ({samples} paths)",
+                method.name(),
+                errors.mape,
+                errors.rel_mse,
+                errors.l1,
+                errors.l2
+            );
+            if fraction == 1.0 || fraction == *args.checkpoints.last().unwrap_or(&1.0) {
+                let stem = dir.join(method.name());
+                strata::io::write_exr(&film, stem.with_extension("exr"))?;
+                strata::io::write_png(&film, 0.0, stem.with_extension("png"))?;
+            }
+            rows.push(Row {
+                method,
+                budget,
+                seconds,
+                samples,
+                errors,
+            });
+        }
+    }
+    let mut csv = std::fs::File::create(dir.join("metrics.csv"))?;
+    writeln!(csv, "method,budget_s,seconds,paths,mape,rel_mse,l1,l2")?;
+    for r in &rows {
+        writeln!(
+            csv,
+            "{},{:.3},{:.3},{},{:.6},{:.6},{:.6},{:.6}",
+            r.method.name(),
+            r.budget,
+            r.seconds,
+            r.samples,
+            r.errors.mape,
+            r.errors.rel_mse,
+            r.errors.l1,
+            r.errors.l2
+        )?;
+    }
+    if let Err(e) = plot(&rows, &args, &dir.join("error_vs_time.png")) {
+        eprintln!("note: no plot ({e})");
+    }
+    println!("wrote {}", dir.display());
+    Ok(())
+}
+
+/// The cached long MC render, or a new one.
+fn reference<O: PathOracle<Radiance = strata::engine::Rgb>>(
+    oracle: &O,
+    args: &Args,
+    dir: &Path,
+) -> AnyResult<Film> {
+    let r = oracle.resolution();
+    let path = dir.join(format!(
+        "reference_{}x{}_{}.exr",
+        r.width, r.height, args.reference_spp
+    ));
+    if path.exists() {
+        println!("reference: {}", path.display());
+        return Ok(strata::io::read_film(&path)?);
+    }
+    let start = Instant::now();
+    let settings = McSettings {
+        seed: args.seed + 1000,
+        budget: Budget::samples_per_pixel(args.reference_spp, r),
+    };
+    let film = render_mc(oracle, &settings, &Silent)?.film;
+    strata::io::write_exr(&film, &path)?;
+    strata::io::write_png(&film, 0.0, path.with_extension("png"))?;
+    println!(
+        "reference: {} spp MC in {:.0} s -> {}",
+        args.reference_spp,
+        start.elapsed().as_secs_f64(),
+        path.display()
+    );
+    Ok(film)
+}
+
+/// Seed 001 sec. 4: Kelemen small steps from 1/1024 to 1/32, large steps 0.3.
+fn mutation() -> MutationParams {
+    MutationParams {
+        small_step: SmallStep::Kelemen(Kelemen::SEED_001),
+        large_step_probability: 0.3,
+    }
+}
+
+fn render<O: PathOracle>(
+    oracle: &O,
+    method: Method,
+    seconds: f64,
+    seed: u64,
+) -> AnyResult<(Film, u64)> {
+    let budget = Budget::Time(Duration::from_secs_f64(seconds));
+    let out = match method {
+        Method::Mc => render_mc(oracle, &McSettings { seed, budget }, &Silent)?,
+        Method::Pssmlt => {
+            let settings = PssmltSettings {
+                seed,
+                budget,
+                mutation: mutation(),
+                ..Default::default()
+            };
+            render_pssmlt(oracle, &MaxChannel, &settings, &Silent)?
+        }
+        Method::Erpt => {
+            let settings = ErptSettings {
+                seed,
+                budget,
+                small_step: mutation().small_step,
+                ..Default::default()
+            };
+            render_erpt(oracle, &MaxChannel, &settings, &Silent)?
+        }
+        Method::Stratified => {
+            let settings = StratifiedSettings {
+                seed,
+                budget,
+                mutation: mutation(),
+                ..Default::default()
+            };
+            render_stratified(oracle, &MaxChannel, &settings, &Silent)?.render
+        }
+        Method::Replica => {
+            let mut ensemble = EnsembleSettings::geometric(4, 100.0)?;
+            ensemble.mutation = mutation();
+            let settings = ReplicaSettings {
+                seed,
+                budget,
+                ensemble,
+                ..Default::default()
+            };
+            let out = render_replica(oracle, &MaxChannel, &settings, &Silent)?;
+            return Ok((out.film, out.stats.samples));
+        }
+    };
+    Ok((out.film, out.stats.samples))
+}
+
+fn plot(rows: &[Row], args: &Args, out: &Path) -> Result<(), Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    let bytes: &'static [u8] = Box::leak(std::fs::read(&args.font)?.into_boxed_slice());
+    plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
+        .map_err(|_| "not a TrueType font")?;
+    let root = BitMapBackend::new(out, (1200, 500)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let panels = root.split_evenly((1, 2));
+    let metrics: [(&str, fn(&ImageErrors) -> f64); 2] =
+        [("relMSE", |e| e.rel_mse), ("MAPE", |e| e.mape)];
+    let colors = [BLACK, RED, GREEN, BLUE, MAGENTA];
+    let (t_lo, t_hi) = rows.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), r| {
+        (lo.min(r.seconds), hi.max(r.seconds))
+    });
+    for (panel, (name, metric)) in panels.iter().zip(metrics) {
+        let (lo, hi) = rows.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), r| {
+            let v = metric(&r.errors);
+            (lo.min(v), hi.max(v))
+        });
+        let mut chart = ChartBuilder::on(panel)
+            .caption(
+                format!("{}: {name} against time", args.scene),
+                ("sans-serif", 20),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(
+                (t_lo * 0.8..t_hi * 1.25).log_scale(),
+                (lo * 0.7..hi * 1.4).log_scale(),
+            )?;
+        chart
+            .configure_mesh()
+            .x_desc("seconds")
+            .y_desc(name)
+            .label_style(("sans-serif", 13))
+            .draw()?;
+        for (&method, color) in args.methods.iter().zip(colors) {
+            let points: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| r.method == method)
+                .map(|r| (r.seconds, metric(&r.errors)))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))?
+                .label(method.name())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
+            chart.draw_series(
+                points
+                    .iter()
+                    .map(|&p| Circle::new(p, 4, color.filled())),
+            )?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font(("sans-serif", 13))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
+    }
+    root.present()?;
+    Ok(())
+}

@@ -1,5 +1,6 @@
 //! Where each method puts its samples (seed 004 Fig. 4): PSSMLT, multi-stage
-//! MLT and noise-aware MLT on the same scene and budget. Writes each image
+//! MLT, noise-aware MLT and stratified MCMC (seed 001, whose density is flat
+//! by construction) on the same scene and budget. Writes each image
 //! and its sample-density map (mean 1; brighter = more samples) as PNG, and
 //! prints how even each density is and each image's error when the exact
 //! image is known.
@@ -16,12 +17,13 @@ use strata::engine::diagnose::{density_spread, sample_density};
 use strata::engine::metrics;
 use strata::engine::render::{Budget, PssmltSettings, RenderOutput, Silent, render_pssmlt};
 use strata::engine::stages::{MultiStageSettings, render_multistage};
+use strata::engine::stratify::{StratifiedSettings, render_stratified};
 use strata::engine::target::MaxChannel;
 use strata::engine::{Film, PathOracle, Resolution};
 use strata::native::{builtin, native_tracer};
 
 #[derive(Parser, Debug)]
-#[command(about = "Sample densities of PSSMLT, multi-stage and noise-aware MLT")]
+#[command(about = "Sample densities of PSSMLT, multi-stage, noise-aware MLT and stratified MCMC")]
 struct Args {
     /// `procedural` (exact image known) or a built-in scene (cornell, door, envplane, caustic).
     #[arg(long, default_value = "procedural")]
@@ -59,7 +61,12 @@ fn run<O: PathOracle>(
         bootstrap_candidates: 16_384,
         ..Default::default()
     };
-    let methods: [(&str, Render<'_>); 3] = [
+    let stratified = StratifiedSettings {
+        seed: args.seed,
+        budget: pssmlt.budget,
+        ..Default::default()
+    };
+    let methods: [(&str, Render<'_>); 4] = [
         (
             "pssmlt",
             Box::new(|| render_pssmlt(oracle, &MaxChannel, &pssmlt, &Silent)),
@@ -84,6 +91,12 @@ fn run<O: PathOracle>(
                     noise_aware: true,
                 };
                 render_multistage(oracle, &MaxChannel, &s, &Silent).map(|o| o.output)
+            }),
+        ),
+        (
+            "stratified",
+            Box::new(|| {
+                render_stratified(oracle, &MaxChannel, &stratified, &Silent).map(|o| o.render)
             }),
         ),
     ];

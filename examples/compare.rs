@@ -74,7 +74,12 @@ struct Args {
     #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1")]
     checkpoints: Vec<f64>,
     /// Methods to compare.
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "mc,pssmlt,erpt,stratified,replica")]
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "mc,pssmlt,erpt,stratified,replica"
+    )]
     methods: Vec<Method>,
     /// Paths per pixel of the MC reference.
     #[arg(long, default_value_t = 8192)]
@@ -281,6 +286,9 @@ fn render<O: PathOracle>(
     Ok((out.film, out.stats.samples))
 }
 
+/// One of the error metrics.
+type Metric = fn(&ImageErrors) -> f64;
+
 fn plot(rows: &[Row], args: &Args, out: &Path) -> Result<(), Box<dyn std::error::Error>> {
     use plotters::prelude::*;
     let bytes: &'static [u8] = Box::leak(std::fs::read(&args.font)?.into_boxed_slice());
@@ -289,8 +297,7 @@ fn plot(rows: &[Row], args: &Args, out: &Path) -> Result<(), Box<dyn std::error:
     let root = BitMapBackend::new(out, (1200, 500)).into_drawing_area();
     root.fill(&WHITE)?;
     let panels = root.split_evenly((1, 2));
-    let metrics: [(&str, fn(&ImageErrors) -> f64); 2] =
-        [("relMSE", |e| e.rel_mse), ("MAPE", |e| e.mape)];
+    let metrics: [(&str, Metric); 2] = [("relMSE", |e| e.rel_mse), ("MAPE", |e| e.mape)];
     let colors = [BLACK, RED, GREEN, BLUE, MAGENTA];
     let (t_lo, t_hi) = rows.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), r| {
         (lo.min(r.seconds), hi.max(r.seconds))
@@ -330,11 +337,7 @@ fn plot(rows: &[Row], args: &Args, out: &Path) -> Result<(), Box<dyn std::error:
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
                 });
-            chart.draw_series(
-                points
-                    .iter()
-                    .map(|&p| Circle::new(p, 4, color.filled())),
-            )?;
+            chart.draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
         }
         chart
             .configure_series_labels()

@@ -324,6 +324,20 @@ fn the_log_domain_solver_reconstructs_too() {
 }
 
 #[test]
+fn every_builtin_scene_renders() {
+    for name in builtin::NAMES {
+        let tracer = native_tracer(builtin::by_name(name, Resolution::new(16, 12)).unwrap());
+        let out = stratified(&tracer, 1, 24);
+        let film = &out.render.film;
+        assert!(
+            film.data().iter().all(|v| v.is_finite() && *v >= 0.0),
+            "{name}"
+        );
+        assert!(film.channel_mean(1) > 0.0, "{name} is black");
+    }
+}
+
+#[test]
 fn bad_settings_are_typed_errors() {
     let image = ProceduralImage::showcase(Resolution::new(8, 8));
     let settings = StratifiedSettings {

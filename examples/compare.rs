@@ -6,7 +6,8 @@
 //! compared with a reference: a long MC render cached on disk
 //! (`reference_WxH_SPP.exr` in the output directory, reused when present).
 //! Writes every final image (EXR + PNG), `metrics.csv` (MAPE with ε = 0.01,
-//! relMSE, L1, L2 on luminance, seed 001's metrics) and `error_vs_time.png`.
+//! relMSE, L1, L2 on luminance, seed 001's metrics, and the energy ratio on
+//! the brightest pixels) and `error_vs_time.png`.
 //!
 //! ```text
 //! cargo run --release --example compare -- --scene veach-ajar --width 160 --height 90 --time 60
@@ -107,6 +108,21 @@ struct Row {
     seconds: f64,
     samples: u64,
     errors: ImageErrors,
+    bright: f64,
+}
+
+/// Σ luminance of `film` over Σ luminance of `reference` on the reference's
+/// brightest pixels (luminance above 20x the image mean: emitters and their
+/// direct reflections), where a reconstruction could lose or add energy.
+fn bright_ratio(film: &Film, reference: &Film) -> f64 {
+    let n = reference.resolution().pixel_count();
+    let mean = (0..n).map(|i| reference.luminance(i)).sum::<f64>() / n as f64;
+    let (mut a, mut b) = (0.0, 0.0);
+    for i in (0..n).filter(|&i| reference.luminance(i) > 20.0 * mean) {
+        a += film.luminance(i);
+        b += reference.luminance(i);
+    }
+    if b > 0.0 { a / b } else { f64::NAN }
 }
 
 fn main() -> AnyResult<()> {
@@ -149,8 +165,9 @@ fn main() -> AnyResult<()> {
             let (film, samples) = render(&tracer, method, budget, args.seed)?;
             let seconds = start.elapsed().as_secs_f64();
             let errors = metrics::compare(&film, &reference)?;
+            let bright = bright_ratio(&film, &reference);
             println!(
-                "{:>10} {budget:>7.1} s (took {seconds:.1}): MAPE {:.3e} relMSE {:.3e} L1 {:.3e} L2 {:.3e} ({samples} paths)",
+                "{:>10} {budget:>7.1} s (took {seconds:.1}): MAPE {:.3e} relMSE {:.3e} L1 {:.3e} L2 {:.3e} bright {bright:.3} ({samples} paths)",
                 method.name(),
                 errors.mape,
                 errors.rel_mse,
@@ -168,15 +185,19 @@ fn main() -> AnyResult<()> {
                 seconds,
                 samples,
                 errors,
+                bright,
             });
         }
     }
     let mut csv = std::fs::File::create(dir.join("metrics.csv"))?;
-    writeln!(csv, "method,budget_s,seconds,paths,mape,rel_mse,l1,l2")?;
+    writeln!(
+        csv,
+        "method,budget_s,seconds,paths,mape,rel_mse,l1,l2,bright_ratio"
+    )?;
     for r in &rows {
         writeln!(
             csv,
-            "{},{:.3},{:.3},{},{:.6},{:.6},{:.6},{:.6}",
+            "{},{:.3},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.4}",
             r.method.name(),
             r.budget,
             r.seconds,
@@ -184,7 +205,8 @@ fn main() -> AnyResult<()> {
             r.errors.mape,
             r.errors.rel_mse,
             r.errors.l1,
-            r.errors.l2
+            r.errors.l2,
+            r.bright
         )?;
     }
     if let Err(e) = plot(&rows, &args, &dir.join("error_vs_time.png")) {

@@ -78,17 +78,23 @@ fn map_indices(n: usize, f: impl Fn(usize) -> f64 + Sync + Send) -> Vec<f64> {
     (0..n).map(f).collect()
 }
 
-/// The image of eq. 12: every pixel the mean of its tiles' `b_s G_s(j)`.
-pub fn image(tiles: &Tiles, g: &[f64], b: &[f64]) -> Vec<f64> {
+/// The image of eq. 12: every pixel the mean of its tiles' `b_s G_s(j)`,
+/// channel by channel. `g` holds `channels` values per tile and offset
+/// (`(s · offsets + o) · channels + c`); the result `channels` per pixel.
+pub fn image(tiles: &Tiles, g: &[f64], b: &[f64], channels: usize) -> Vec<f64> {
     let o = tiles.offsets().len();
-    map_indices(tiles.count(), |j| {
-        let (mut sum, mut count) = (0.0, 0);
+    let mut out = vec![0.0; tiles.count() * channels];
+    for (j, pixel) in out.chunks_mut(channels).enumerate() {
+        let mut count = 0;
         for (s, off) in tiles.tiles_of(j) {
-            sum += g[s * o + off] * b[s];
             count += 1;
+            for (c, v) in pixel.iter_mut().enumerate() {
+                *v += b[s] * g[(s * o + off) * channels + c];
+            }
         }
-        sum / count.max(1) as f64
-    })
+        pixel.iter_mut().for_each(|v| *v /= count.max(1) as f64);
+    }
+    out
 }
 
 /// Per tile, the mean over its pixels of `values` (per pixel).

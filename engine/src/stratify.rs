@@ -987,22 +987,10 @@ fn channel_means(values: &[f64], channels: usize) -> Vec<f64> {
         .collect()
 }
 
-/// Eq. 12 channel by channel: each pixel the mean over its tiles of
-/// `b_s G_s(j)`.
+/// Eq. 12 channel by channel ([`reconstruct::image`]) as a film.
 fn image(tiles: &Tiles, unscaled: &[f64], b: &[f64], channels: usize) -> Film {
-    let offsets = tiles.offsets().len();
-    let mut film = Film::new(tiles.resolution(), channels);
-    for (j, pixel) in film.data_mut().chunks_mut(channels).enumerate() {
-        let mut count = 0;
-        for (s, o) in tiles.tiles_of(j) {
-            count += 1;
-            for (c, v) in pixel.iter_mut().enumerate() {
-                *v += b[s] * unscaled[(s * offsets + o) * channels + c];
-            }
-        }
-        pixel.iter_mut().for_each(|v| *v /= count as f64);
-    }
-    film
+    let data = reconstruct::image(tiles, unscaled, b, channels);
+    Film::from_data(tiles.resolution(), channels, data).expect("one value per pixel and channel")
 }
 
 /// The log-domain solver's scalar image, split into channels in the

@@ -161,6 +161,10 @@ struct Args {
     /// Stratified MCMC: the reconstruction.
     #[arg(long, value_enum, default_value = "weighted")]
     solver: SolverArg,
+    /// Stratified MCMC: pixels this many standard errors below their MC
+    /// estimate take it (0: never).
+    #[arg(long, default_value_t = 3.0)]
+    fallback_sigmas: f64,
     /// ERPT: steps per chain.
     #[arg(long, default_value_t = 100)]
     chain_length: u32,
@@ -318,6 +322,7 @@ fn render<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<RenderOutput> {
                     SolverArg::Weighted => Solver::Weighted(WeightedSettings::default()),
                     SolverArg::Log => Solver::LogDomain(LogSettings::default()),
                 },
+                fallback_sigmas: (args.fallback_sigmas > 0.0).then_some(args.fallback_sigmas),
                 ..Default::default()
             };
             let out = render_stratified(oracle, &MaxChannel, &settings, &observer)?;
@@ -325,7 +330,7 @@ fn render<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<RenderOutput> {
             println!(
                 "{} sweeps; paths: tiles {}, exchanges {}, initialization {}; tiles started by \
                  global chains {}, borrowing {}, uniform draws {}, never {}; exchanges \
-                 accepted {}/{}",
+                 accepted {}/{}; pixels that took their MC estimate {}",
                 s.sweeps,
                 s.tile_samples,
                 s.exchange_samples,
@@ -335,7 +340,8 @@ fn render<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<RenderOutput> {
                 s.initialized_by_uniform_draws,
                 s.never_initialized,
                 s.exchange_accepted,
-                s.exchange_attempts
+                s.exchange_attempts,
+                s.fallback_pixels
             );
             out.render
         }

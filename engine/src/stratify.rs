@@ -30,6 +30,11 @@
 //!   of the image by [`reconstruct::log_domain`] (eq. 17-20); the image is
 //!   eq. 12, channel by channel. The solvers see one scalar per estimate: the
 //!   mean of the channels.
+//! * **Fallback to the regularizer** (ours, not in seed 001): a pixel whose
+//!   reconstruction lies more than [`StratifiedSettings::fallback_sigmas`]
+//!   standard errors below its Monte Carlo estimate takes that estimate, so
+//!   rare bright paths that the tile chains found too late (start-up bias,
+//!   seed 001 sec. 5 and Fig. 9) are not dimmed.
 //!
 //! A tile's chain does not know its normalization, so steps spent before it
 //! is initialized scale all its `G_s(k)` by the same factor, which the
@@ -119,6 +124,18 @@ pub struct StratifiedSettings {
     pub initialization: Initialization,
     /// The reconstruction.
     pub solver: Solver,
+    /// Pixels whose reconstructed value (channel mean) lies more than this
+    /// many standard errors *below* their Monte Carlo regularizer `Î(j)` take
+    /// the regularizer instead (`None`: never). Our addition, not in seed
+    /// 001: tile chains that start far from a rare bright path (a caustic,
+    /// a glint) carry start-up bias in their within-tile ratios, and the
+    /// reconstruction, which treats such tiles as outliers, then dims the
+    /// brightest pixels (seed 001 sec. 5 and Fig. 9 report the same loss).
+    /// The test is one-sided: a regularizer that missed a rare path is low
+    /// and never replaces anything, and one that caught a firefly has a
+    /// standard error as large as its excess. Pixels with fewer than 32
+    /// large steps (their sample variance is unreliable) are left alone.
+    pub fallback_sigmas: Option<f64>,
 }
 
 impl Default for StratifiedSettings {
@@ -131,6 +148,7 @@ impl Default for StratifiedSettings {
             exchange_every: 1,
             initialization: Initialization::default(),
             solver: Solver::default(),
+            fallback_sigmas: Some(3.0),
         }
     }
 }
@@ -142,6 +160,11 @@ impl StratifiedSettings {
         let init = &self.initialization;
         check_probability("coverage", init.coverage)?;
         check_probability("max_budget_fraction", init.max_budget_fraction)?;
+        if let Some(k) = self.fallback_sigmas
+            && !(k.is_finite() && k > 0.0)
+        {
+            return Err(Error::invalid("fallback_sigmas", k, "a finite value > 0"));
+        }
         if !(init.max_samples_per_pixel.is_finite() && init.max_samples_per_pixel >= 0.0) {
             return Err(Error::invalid(
                 "max_samples_per_pixel",
@@ -177,6 +200,9 @@ pub struct StratifiedStats {
     pub exchange_attempts: u64,
     /// Local exchanges accepted.
     pub exchange_accepted: u64,
+    /// Pixels that took their regularizer's value
+    /// ([`StratifiedSettings::fallback_sigmas`]).
+    pub fallback_pixels: u64,
 }
 
 /// A finished stratified render.
@@ -228,6 +254,9 @@ struct TileChain<R> {
     unscaled: Vec<f64>,
     /// Sum of the large steps' radiance per offset and channel.
     uniform: Vec<f64>,
+    /// Sum of the squared channel mean of the large steps' radiance per
+    /// offset (the regularizer's variance).
+    uniform_squares: Vec<f64>,
     large_steps: u64,
     stats: ChainStats,
     start: Start,
@@ -313,6 +342,7 @@ impl<R: Radiance> TileChain<R> {
             target: 0.0,
             unscaled: vec![0.0; per_offset],
             uniform: vec![0.0; per_offset],
+            uniform_squares: vec![0.0; offsets],
             large_steps: 0,
             stats: ChainStats::default(),
             start: Start::None,
@@ -343,6 +373,13 @@ impl<R: Radiance> TileChain<R> {
         };
         if large {
             add(scratch, 1.0, &mut self.uniform);
+            for (sq, v) in self.uniform_squares.iter_mut().zip(scratch.iter()) {
+                let mean = (0..channels)
+                    .map(|c| v.radiance.channel(c) as f64)
+                    .sum::<f64>()
+                    / channels as f64;
+                *sq += mean * mean;
+            }
             self.large_steps += 1;
         }
         if proposed > 0.0 && a > 0.0 {
@@ -872,7 +909,7 @@ where
     let (unscaled, regularizer) = estimates(&tiles, &chains, stats.sweeps.max(1));
     let g = channel_means(&unscaled, channels);
     let mc = channel_means(regularizer.data(), channels);
-    let (film, normalizations) = match settings.solver {
+    let (mut film, normalizations) = match settings.solver {
         Solver::Weighted(w) => {
             let b = reconstruct::weighted(&tiles, &g, &mc, &w, None)?;
             (image(&tiles, &unscaled, &b, channels), b)
@@ -882,6 +919,10 @@ where
             (log_image(&tiles, &unscaled, &solved, channels), Vec::new())
         }
     };
+    if let Some(sigmas) = settings.fallback_sigmas {
+        let errors = regularizer_errors(&tiles, &chains, &regularizer);
+        stats.fallback_pixels = fall_back(&mut film, &regularizer, &errors, sigmas);
+    }
 
     let mut chain_stats = ChainStats::default();
     let mut visits = vec![0u64; n];
@@ -977,6 +1018,53 @@ fn estimates<R: Radiance>(tiles: &Tiles, chains: &[TileChain<R>], sweeps: u64) -
         }
     }
     (unscaled, regularizer)
+}
+
+/// Large steps a pixel's regularizer needs before its sample variance is
+/// trusted by the fallback.
+const FALLBACK_MIN_LARGE_STEPS: u64 = 32;
+
+/// Per pixel, the standard error of the regularizer's channel mean, from the
+/// large steps' sums of squares pooled like the regularizer itself
+/// (infinite with fewer than [`FALLBACK_MIN_LARGE_STEPS`]).
+fn regularizer_errors<R: Radiance>(
+    tiles: &Tiles,
+    chains: &[TileChain<R>],
+    regularizer: &Film,
+) -> Vec<f64> {
+    let means = channel_means(regularizer.data(), R::CHANNELS);
+    (0..tiles.count())
+        .map(|j| {
+            let (mut count, mut squares) = (0u64, 0.0);
+            for (s, o) in tiles.tiles_of(j) {
+                count += chains[s].large_steps;
+                squares += chains[s].uniform_squares[o];
+            }
+            if count < FALLBACK_MIN_LARGE_STEPS {
+                return f64::INFINITY;
+            }
+            let n = count as f64;
+            let variance = (squares / n - means[j] * means[j]).max(0.0) * n / (n - 1.0);
+            libm::sqrt(variance / n)
+        })
+        .collect()
+}
+
+/// [`StratifiedSettings::fallback_sigmas`]: replaces every pixel of `film`
+/// more than `sigmas` standard errors below the regularizer by the
+/// regularizer. Returns the number replaced.
+fn fall_back(film: &mut Film, regularizer: &Film, errors: &[f64], sigmas: f64) -> u64 {
+    let channels = film.channels();
+    let mut replaced = 0;
+    let pixels = film.data_mut().chunks_mut(channels);
+    for ((pixel, mc), error) in pixels.zip(regularizer.data().chunks(channels)).zip(errors) {
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / channels as f64;
+        if mean(pixel) < mean(mc) - sigmas * error {
+            pixel.copy_from_slice(mc);
+            replaced += 1;
+        }
+    }
+    replaced
 }
 
 /// The mean over the `channels` channels of each value.

@@ -308,7 +308,9 @@ fn lesser(a: f64, b: f64) -> f64 {
     if a < b { a } else { b }
 }
 
-/// The weighted iterative solver (eq. 13-16).
+/// The weighted iterative solver (eq. 13-16): one `b_s` per tile, from
+/// `initial` or [`initial_normalizations`]. The iterations run on f32 planes
+/// (relative rounding ~1e-7, far below any estimate's noise).
 pub fn weighted(
     tiles: &Tiles,
     g: &[f64],

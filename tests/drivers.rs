@@ -15,6 +15,9 @@ use strata::engine::{
     Error, Film, FilmPoint, PathOracle, PathSample, Resolution, Rgb, Sampler, Temperature,
 };
 
+mod threads;
+use threads::{bits, in_pool};
+
 fn settings(seed: u64) -> PssmltSettings {
     PssmltSettings {
         seed,
@@ -23,18 +26,6 @@ fn settings(seed: u64) -> PssmltSettings {
         bootstrap_candidates: 5_000,
         mutation: MutationParams::default(),
     }
-}
-
-fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(f)
-}
-
-fn bits(film: &Film) -> Vec<u64> {
-    film.data().iter().map(|v| v.to_bits()).collect()
 }
 
 #[test]

@@ -11,6 +11,8 @@
 //! * The driver's images match closed-form pixel values.
 
 mod common;
+mod threads;
+use threads::{bits, in_pool};
 
 use strata::engine::analytic::{Component, GaussianMixture, ProceduralImage};
 use strata::engine::exchange::{
@@ -609,18 +611,14 @@ fn replica_renders_do_not_depend_on_the_thread_count() {
     let image = ProceduralImage::showcase(Resolution::new(20, 12));
     let res = image.resolution;
     let render = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        in_pool(threads, || {
             let mut s = replica_settings(3, 16, res, ExchangeKind::IsSwap);
             s.ladder_tuning_sweeps = 40;
             render_replica(&image, &MaxChannel, &s, &Silent).unwrap()
         })
     };
     let (one, two) = (render(1), render(2));
-    assert_eq!(one.film.data(), two.film.data());
+    assert_eq!(bits(&one.film), bits(&two.film));
     assert_eq!(one.ladder, two.ladder);
     assert_eq!(one.visits, two.visits);
     // Every chain's state is counted once per sweep; under power tempering a

@@ -26,6 +26,8 @@ use strata::native::{builtin, native_tracer};
 
 mod common;
 use common::{RUNS, check};
+mod threads;
+use threads::{bits, in_pool};
 
 fn stratified<O: PathOracle>(oracle: &O, seed: u64, spp: u64) -> StratifiedOutput {
     let settings = StratifiedSettings {
@@ -208,18 +210,6 @@ fn the_environment_plane_is_close_to_mc_and_far_below_pssmlt() {
     // Observed: stratified 2-4x MC's relMSE, PSSMLT ~200x MC's.
     assert!(strat < 8.0 * mc, "stratified {strat} vs MC {mc}");
     assert!(strat < 0.05 * pss, "stratified {strat} vs PSSMLT {pss}");
-}
-
-fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(f)
-}
-
-fn bits(film: &Film) -> Vec<u64> {
-    film.data().iter().map(|v| v.to_bits()).collect()
 }
 
 #[test]

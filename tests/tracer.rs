@@ -18,6 +18,9 @@ use strata::native::material::{Material, Texture};
 use strata::native::tracer::Regularization;
 use strata::native::{Camera, Scene, native_tracer};
 
+mod threads;
+use threads::{bits, in_pool};
+
 /// Mean and standard error over runs of a statistic of each film.
 fn mean_se(films: &[Film], stat: impl Fn(&Film) -> f64) -> (f64, f64) {
     let v: Vec<f64> = films.iter().map(stat).collect();
@@ -180,22 +183,19 @@ fn same_seed_same_image_on_one_and_two_threads() {
         bootstrap_candidates: 2048,
         ..Default::default()
     };
-    let bits = |f: &Film| f.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-    let pool = |n| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build()
-            .unwrap()
-    };
-    let one = pool(1).install(|| render_pssmlt(&tracer, &MaxChannel, &settings, &Silent).unwrap());
-    let two = pool(2).install(|| render_pssmlt(&tracer, &MaxChannel, &settings, &Silent).unwrap());
+    let one = in_pool(1, || {
+        render_pssmlt(&tracer, &MaxChannel, &settings, &Silent).unwrap()
+    });
+    let two = in_pool(2, || {
+        render_pssmlt(&tracer, &MaxChannel, &settings, &Silent).unwrap()
+    });
     assert_eq!(bits(&one.film), bits(&two.film));
     let mc = McSettings {
         seed: 9,
         budget: Budget::samples_per_pixel(4, Resolution::new(24, 24)),
     };
-    let one = pool(1).install(|| render_mc(&tracer, &mc, &Silent).unwrap());
-    let two = pool(2).install(|| render_mc(&tracer, &mc, &Silent).unwrap());
+    let one = in_pool(1, || render_mc(&tracer, &mc, &Silent).unwrap());
+    let two = in_pool(2, || render_mc(&tracer, &mc, &Silent).unwrap());
     assert_eq!(bits(&one.film), bits(&two.film));
 }
 

@@ -248,9 +248,9 @@ impl Planes {
 struct Stencil {
     /// Index distances `δ = d_o - d_o'` between tiles sharing a pixel (0 first).
     shifts: Vec<isize>,
-    /// Per shift, the offsets `o'` at which tile `s + δ` holds the pixels it
-    /// shares with tile `s` (none for `δ = 0`).
-    others: Vec<Vec<usize>>,
+    /// Per shift, the offset pairs `(o, o')` with `d_o - d_o' = δ`: tile `s`'s
+    /// pixel at offset `o` is tile `(s + δ)`'s pixel at offset `o'`.
+    sharing: Vec<Vec<(usize, usize)>>,
     /// Per shift, the plane `K_δ(s)`: the weight of `b(s + δ)` in tile `s`'s
     /// mean of the eq. 12 image, `e_s = Σ_δ K_δ(s) b(s + δ)`.
     k: Vec<Vec<f64>>,
@@ -260,23 +260,16 @@ impl Stencil {
     fn new(planes: &Planes, gp: &[Vec<f64>], per_pixel: &[f64], per_tile: &[f64]) -> Self {
         let o = planes.offsets.len();
         let mut shifts = vec![0isize];
-        let mut others = vec![Vec::new()];
-        // Per shift, the (o, o') with d_o - d_o' = δ: tile s's pixel at
-        // offset o is tile (s + δ)'s pixel at offset o'.
         let mut sharing: Vec<Vec<(usize, usize)>> = vec![Vec::new()];
         for a in 0..o {
             for c in 0..o {
                 let shift = planes.offsets[a] - planes.offsets[c];
                 let i = shifts.iter().position(|&d| d == shift).unwrap_or_else(|| {
                     shifts.push(shift);
-                    others.push(Vec::new());
                     sharing.push(Vec::new());
                     shifts.len() - 1
                 });
                 sharing[i].push((a, c));
-                if a != c {
-                    others[i].push(c);
-                }
             }
         }
         let k = sharing
@@ -297,7 +290,20 @@ impl Stencil {
                 })
             })
             .collect();
-        Self { shifts, others, k }
+        Self { shifts, sharing, k }
+    }
+
+    /// Every `(o, o', δ)` with `o ≠ o'`: the pixels tile `s` shares with
+    /// another tile, `s + δ`.
+    fn pairs(&self) -> impl Iterator<Item = (usize, usize, isize)> + '_ {
+        self.shifts
+            .iter()
+            .zip(&self.sharing)
+            .flat_map(|(&shift, list)| {
+                list.iter()
+                    .filter(|(a, c)| a != c)
+                    .map(move |&(a, c)| (a, c, shift))
+            })
     }
 }
 
@@ -362,18 +368,13 @@ pub fn weighted(
             *v *= inv;
         }
     });
-    // Every (offset, other tile's offset) pair sharing a pixel: the other tile
-    // is at index distance d_o - d_o'.
-    let pairs: Vec<(usize, usize, isize)> = (0..o)
-        .flat_map(|a| (0..o).filter(move |&c| c != a).map(move |c| (a, c)))
-        .map(|(a, c)| (a, c, planes.offsets[a] - planes.offsets[c]))
-        .collect();
     // Between weight refreshes the update of eq. 13 is linear in b: a
     // stencil over the shifts at which tiles share pixels (13 for crosses),
     // `b' = max(0, r + Σ_δ C_δ b(s + δ))`. Its coefficients are rebuilt at
     // every refresh, stored as f32 planes (half the memory traffic of the
     // iterations, which stream them), and each iteration is one fused pass.
     let stencil = Stencil::new(&planes, &gp, &per_pixel, &per_tile);
+    let pairs: Vec<(usize, usize, isize)> = stencil.pairs().collect();
     let alpha = settings.alpha;
     let mut b: Vec<f32> = planes.pad(&b0, 1, 0).iter().map(|&v| v as f32).collect();
     let mut next = vec![0.0f32; planes.len()];
@@ -461,8 +462,8 @@ pub fn weighted(
                 .shifts
                 .iter()
                 .zip(&stencil.k)
-                .zip(&stencil.others)
-                .map(|((&shift, k), others)| {
+                .zip(&stencil.sharing)
+                .map(|((&shift, k), sharing)| {
                     // The diagonal keeps b(s) and subtracts ½ own(s) b(s); a
                     // tile with D = 0 keeps its b (C_0 = 1, the rest 0).
                     let (keep, own_part) = if shift == 0 { (1.0, 0.5) } else { (0.0, 0.0) };
@@ -472,7 +473,7 @@ pub fn weighted(
                         let k = planes.at(k, base, 0);
                         let mut c: Vec<f64> =
                             ws.iter().zip(k).map(|(w, k)| -alpha * w * k).collect();
-                        for &o in others {
+                        for &(_, o) in sharing.iter().filter(|(a, c)| a != c) {
                             let g = planes.at(&gp[o], base, shift);
                             for (((c, ws), wt), g) in c.iter_mut().zip(ws).zip(wt).zip(g) {
                                 *c += 0.5 * lesser(*ws, *wt) * g;

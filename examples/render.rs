@@ -162,7 +162,7 @@ struct Args {
     #[arg(long, value_enum, default_value = "weighted")]
     solver: SolverArg,
     /// Stratified MCMC: pixels this many standard errors below their MC
-    /// estimate take it (0: never).
+    /// estimate take it (0: never; negative values are an error).
     #[arg(long, default_value_t = 3.0)]
     fallback_sigmas: f64,
     /// ERPT: steps per chain.
@@ -322,7 +322,7 @@ fn render<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<RenderOutput> {
                     SolverArg::Weighted => Solver::Weighted(WeightedSettings::default()),
                     SolverArg::Log => Solver::LogDomain(LogSettings::default()),
                 },
-                fallback_sigmas: (args.fallback_sigmas > 0.0).then_some(args.fallback_sigmas),
+                fallback_sigmas: (args.fallback_sigmas != 0.0).then_some(args.fallback_sigmas),
                 ..Default::default()
             };
             let out = render_stratified(oracle, &MaxChannel, &settings, &observer)?;

@@ -1055,10 +1055,10 @@ fn regularizer_errors<R: Radiance>(
 /// regularizer. Returns the number replaced.
 fn fall_back(film: &mut Film, regularizer: &Film, errors: &[f64], sigmas: f64) -> u64 {
     let channels = film.channels();
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / channels as f64;
     let mut replaced = 0;
     let pixels = film.data_mut().chunks_mut(channels);
     for ((pixel, mc), error) in pixels.zip(regularizer.data().chunks(channels)).zip(errors) {
-        let mean = |v: &[f64]| v.iter().sum::<f64>() / channels as f64;
         if mean(pixel) < mean(mc) - sigmas * error {
             pixel.copy_from_slice(mc);
             replaced += 1;

@@ -381,26 +381,25 @@ impl Linear {
         ((row * (1 + self.moves.len()) + p) * self.stride) + column
     }
 
-    /// Rows per strip for `strips` strips, and the strips' ring buffers
-    /// (`BLOCK - 1` rings of `2 · reach + 1` padded rows, zero padding).
-    fn rings(&self, planes: &Planes, strips: usize) -> (usize, Vec<Vec<Vec<f32>>>) {
+    /// [`Strips`] for `count` strips (fewer if the film has fewer rows).
+    fn strips(&self, planes: &Planes, count: usize) -> Strips {
         let rows = planes
             .height
-            .div_ceil(strips.clamp(1, planes.height.max(1)));
+            .div_ceil(count.clamp(1, planes.height.max(1)))
+            .max(1);
         let ring = (2 * self.reach + 1) * planes.stride;
-        let strips = planes.height.div_ceil(rows.max(1));
-        let rings = (0..strips)
+        let rings = (0..planes.height.div_ceil(rows))
             .map(|_| vec![vec![0.0; ring]; BLOCK - 1])
             .collect();
-        (rows.max(1), rings)
+        Strips { rows, rings }
     }
 
     /// `count` iterations from `b` (the result ends in `b`; `next` is
-    /// scratch of the same size), strips and rings from [`rings`](Self::rings).
+    /// scratch of the same size).
     fn iterate(
         &self,
         planes: &Planes,
-        (rows, rings): &mut (usize, Vec<Vec<Vec<f32>>>),
+        Strips { rows, rings }: &mut Strips,
         b: &mut Vec<f32>,
         next: &mut Vec<f32>,
         count: u32,
@@ -492,6 +491,15 @@ impl Linear {
             }
         }
     }
+}
+
+/// The strips of rows that [`Linear::iterate`] computes in parallel, and
+/// each strip's ring buffers: `BLOCK - 1` rings of `2 · reach + 1` padded
+/// rows, whose padding columns stay zero.
+struct Strips {
+    /// Film rows per strip (the last may have fewer).
+    rows: usize,
+    rings: Vec<Vec<Vec<f32>>>,
 }
 
 /// One output row of the stencil, `out[i] = max(0, r + Σ_δ C_δ b(· + δ))`:
@@ -646,7 +654,7 @@ pub fn weighted(
     let mut b: Vec<f32> = planes.pad(&b0, 1, 0).iter().map(|&v| v as f32).collect();
     let mut next = vec![0.0f32; planes.len()];
     let mut linear = Linear::new(&planes, &stencil.shifts);
-    let mut rings = linear.rings(&planes, threads());
+    let mut strips = linear.strips(&planes, threads());
     let every = settings.reweight_every.max(1);
     let mut iteration = 0;
     while iteration < settings.iterations {
@@ -655,7 +663,7 @@ pub fn weighted(
         let weights = problem.weights(&b, floor);
         problem.linearize(&weights, &mut linear);
         let count = every.min(settings.iterations - iteration);
-        linear.iterate(&planes, &mut rings, &mut b, &mut next, count);
+        linear.iterate(&planes, &mut strips, &mut b, &mut next, count);
         iteration += count;
     }
     Ok(planes.unpad(&b))
@@ -1085,11 +1093,14 @@ mod tests {
             }
             for count in [1, BLOCK as u32, 2 * BLOCK as u32 + 3, 50] {
                 let want: Vec<u32> = plain(count).iter().map(|v| v.to_bits()).collect();
-                assert!(want.iter().any(|&v| v != 0), "a trivial check");
+                assert!(
+                    want.iter().any(|&v| v != 0),
+                    "the check must not be trivial"
+                );
                 for strips in [1, 2, 3, 7] {
-                    let mut rings = linear.rings(&planes, strips);
+                    let mut split = linear.strips(&planes, strips);
                     let (mut b, mut next) = (start.clone(), vec![0.0f32; planes.len()]);
-                    linear.iterate(&planes, &mut rings, &mut b, &mut next, count);
+                    linear.iterate(&planes, &mut split, &mut b, &mut next, count);
                     let got: Vec<u32> = b.iter().map(|v| v.to_bits()).collect();
                     assert!(got == want, "{res:?}: {count} iterations, {strips} strips");
                 }

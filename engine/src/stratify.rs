@@ -482,11 +482,13 @@ impl core::ops::Add for ExchangeCount {
 }
 
 /// Replica exchange between neighbouring tiles `s` and `t` (eq. 21), or state
-/// borrowing when exactly one of them is initialized.
+/// borrowing when exactly one of them is initialized. `scratch` holds two
+/// buffers of one value per tile offset, reused across pairs.
 fn exchange<O, I>(
     ctx: &Context<'_, O, I>,
     (s, a): (usize, &mut TileChain<O::Radiance>),
     (t, b): (usize, &mut TileChain<O::Radiance>),
+    scratch: &mut Scratch<O::Radiance>,
 ) -> ExchangeCount
 where
     O: PathOracle,
@@ -496,10 +498,9 @@ where
     match (a.target > 0.0, b.target > 0.0) {
         (false, false) => {}
         (true, true) => {
-            let mut a_in_t = vec![Value::default(); a.current.len()];
-            let mut b_in_s = vec![Value::default(); b.current.len()];
-            let (ta, n1, i1) = a.evaluate_in(ctx, s, t, &mut a_in_t);
-            let (tb, n2, i2) = b.evaluate_in(ctx, t, s, &mut b_in_s);
+            let [a_in_t, b_in_s] = scratch;
+            let (ta, n1, i1) = a.evaluate_in(ctx, s, t, a_in_t);
+            let (tb, n2, i2) = b.evaluate_in(ctx, t, s, b_in_s);
             count.traces = n1 + n2;
             count.invalid = i1 + i2;
             count.attempts = 1;
@@ -507,37 +508,40 @@ where
             if uniform_f64(&mut a.decisions) < ratio {
                 core::mem::swap(&mut a.sampler, &mut b.sampler);
                 a.sampler.swap_rng(&mut b.sampler);
-                a.current = b_in_s;
+                a.current.copy_from_slice(b_in_s);
                 a.target = tb;
-                b.current = a_in_t;
+                b.current.copy_from_slice(a_in_t);
                 b.target = ta;
                 count.accepted = 1;
             }
         }
-        (true, false) => count = borrow(ctx, (s, a), (t, b)),
-        (false, true) => count = borrow(ctx, (t, b), (s, a)),
+        (true, false) => count = borrow(ctx, (s, a), (t, b), &mut scratch[0]),
+        (false, true) => count = borrow(ctx, (t, b), (s, a), &mut scratch[0]),
     }
     count
 }
 
+/// Two buffers of one value per tile offset (see [`exchange`]).
+type Scratch<R> = [Vec<Value<R>>; 2];
+
 /// Tile `t` (not initialized) copies the state of its neighbour `s` if it has
-/// `T_t > 0` there.
+/// `T_t > 0` there (`values` is scratch of one value per tile offset).
 fn borrow<O, I>(
     ctx: &Context<'_, O, I>,
     (s, a): (usize, &mut TileChain<O::Radiance>),
     (t, b): (usize, &mut TileChain<O::Radiance>),
+    values: &mut [Value<O::Radiance>],
 ) -> ExchangeCount
 where
     O: PathOracle,
     I: Importance<O::Radiance>,
 {
-    let mut values = vec![Value::default(); b.current.len()];
-    let (target, traces, invalid) = a.evaluate_in(ctx, s, t, &mut values);
+    let (target, traces, invalid) = a.evaluate_in(ctx, s, t, values);
     if target > 0.0 {
         let mut copy = a.sampler.clone();
         copy.swap_rng(&mut b.sampler);
         b.sampler = copy;
-        b.current = values;
+        b.current.copy_from_slice(values);
         b.target = target;
         if b.start == Start::None {
             b.start = Start::Borrowed;
@@ -568,14 +572,23 @@ where
     I: Importance<O::Radiance>,
 {
     let (horizontal, parity) = pairing(round);
+    let scratch = |chains: &[TileChain<O::Radiance>]| -> Scratch<O::Radiance> {
+        let offsets = chains.first().map_or(0, |c| c.current.len());
+        [
+            vec![Value::default(); offsets],
+            vec![Value::default(); offsets],
+        ]
+    };
     if horizontal {
         let row = |(y, row): (usize, &mut [TileChain<O::Radiance>])| {
             let mut count = ExchangeCount::default();
+            let mut scratch = scratch(row);
             let mut x = parity;
             while x + 1 < width {
                 let (left, right) = row.split_at_mut(x + 1);
                 let s = y * width + x;
-                count = count + exchange(ctx, (s, &mut left[x]), (s + 1, &mut right[0]));
+                let (a, b) = ((s, &mut left[x]), (s + 1, &mut right[0]));
+                count = count + exchange(ctx, a, b, &mut scratch);
                 x += 2;
             }
             count
@@ -588,11 +601,12 @@ where
             if pair.len() < 2 * width {
                 return count;
             }
+            let mut scratch = scratch(pair);
             let (top, bottom) = pair.split_at_mut(width);
             let y = parity + 2 * k;
             for (x, (a, b)) in top.iter_mut().zip(bottom.iter_mut()).enumerate() {
                 let s = y * width + x;
-                count = count + exchange(ctx, (s, a), (s + width, b));
+                count = count + exchange(ctx, (s, a), (s + width, b), &mut scratch);
             }
             count
         };

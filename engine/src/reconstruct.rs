@@ -188,14 +188,12 @@ impl Planes {
     /// Per-tile `values` (row-major, `stride_in` values per tile, taking
     /// component `at`) as a padded plane.
     fn pad(&self, values: &[f64], stride_in: usize, at: usize) -> Vec<f64> {
-        let mut plane = vec![0.0; self.len()];
-        for y in 0..self.height {
-            let base = self.row(y);
-            for x in 0..self.width {
-                plane[base + x] = values[(y * self.width + x) * stride_in + at];
+        self.map_rows(|base, row| {
+            let first = (base / self.stride - self.pad) * self.width;
+            for (x, v) in row.iter_mut().enumerate() {
+                *v = values[(first + x) * stride_in + at];
             }
-        }
-        plane
+        })
     }
 
     fn unpad(&self, plane: &[f32]) -> Vec<f64> {
@@ -617,9 +615,8 @@ pub fn weighted(
     };
     let planes = Planes::new(tiles);
     let gp: Vec<Vec<f64>> = (0..o).map(|off| planes.pad(g, o, off)).collect();
-    let counts = |count: &dyn Fn(usize) -> usize| -> Vec<f64> {
-        let inverse: Vec<f64> = (0..n).map(|i| 1.0 / count(i).max(1) as f64).collect();
-        planes.pad(&inverse, 1, 0)
+    let counts = |count: &(dyn Fn(usize) -> usize + Sync)| -> Vec<f64> {
+        planes.pad(&map_indices(n, |i| 1.0 / count(i).max(1) as f64), 1, 0)
     };
     // 1 / tiles containing each pixel (eq. 12), 1 / pixels of each tile.
     let per_pixel = counts(&|j| tiles.tiles_of(j).count());

@@ -376,7 +376,12 @@ impl Linear {
     /// coefficient) at padded index `at`.
     fn term(&self, at: usize, p: usize) -> usize {
         let (row, column) = (at / self.stride, at % self.stride);
-        ((row * (1 + self.moves.len()) + p) * self.stride) + column
+        row * self.row_block() + p * self.stride + column
+    }
+
+    /// Values of `terms` per padded row (all its terms).
+    fn row_block(&self) -> usize {
+        (1 + self.moves.len()) * self.stride
     }
 
     /// [`Strips`] for `count` strips (fewer if the film has fewer rows).
@@ -743,7 +748,7 @@ impl Problem<'_> {
     fn linearize(&self, weights: &[f64], linear: &mut Linear) {
         let (planes, alpha, stencil) = (self.planes, self.alpha, self.stencil);
         let (pad, width, stride) = (planes.pad, planes.width, planes.stride);
-        let block = stride * (1 + stencil.shifts.len());
+        let block = linear.row_block();
         let row = |(r, terms): (usize, &mut [f32])| {
             if r < pad || r >= pad + planes.height {
                 return;

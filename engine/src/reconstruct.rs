@@ -196,11 +196,12 @@ impl Planes {
         })
     }
 
-    fn unpad(&self, plane: &[f32]) -> Vec<f64> {
+    /// The film's values of a padded plane, row-major.
+    fn unpad<T: Copy + Into<f64>>(&self, plane: &[T]) -> Vec<f64> {
         let mut values = Vec::with_capacity(self.width * self.height);
         for y in 0..self.height {
             let base = self.row(y);
-            values.extend(plane[base..base + self.width].iter().map(|&v| v as f64));
+            values.extend(plane[base..base + self.width].iter().map(|&v| v.into()));
         }
         values
     }
@@ -256,21 +257,18 @@ impl Planes {
     }
 }
 
-/// The shifts at which tiles share pixels, and per shift the part of the
-/// weighted solver's stencil that does not depend on the weights.
+/// The shifts at which tiles share pixels: the neighbours in the weighted
+/// solver's stencil.
 struct Stencil {
     /// Index distances `δ = d_o - d_o'` between tiles sharing a pixel (0 first).
     shifts: Vec<isize>,
     /// Per shift, the offset pairs `(o, o')` with `d_o - d_o' = δ`: tile `s`'s
     /// pixel at offset `o` is tile `(s + δ)`'s pixel at offset `o'`.
     sharing: Vec<Vec<(usize, usize)>>,
-    /// Per shift, the plane `K_δ(s)`: the weight of `b(s + δ)` in tile `s`'s
-    /// mean of the eq. 12 image, `e_s = Σ_δ K_δ(s) b(s + δ)`.
-    k: Vec<Vec<f64>>,
 }
 
 impl Stencil {
-    fn new(planes: &Planes, gp: &[Vec<f64>], per_pixel: &[f64], per_tile: &[f64]) -> Self {
+    fn new(planes: &Planes) -> Self {
         let o = planes.offsets.len();
         let mut shifts = vec![0isize];
         let mut sharing: Vec<Vec<(usize, usize)>> = vec![Vec::new()];
@@ -285,25 +283,7 @@ impl Stencil {
                 sharing[i].push((a, c));
             }
         }
-        let k = sharing
-            .iter()
-            .zip(&shifts)
-            .map(|(pairs, &shift)| {
-                planes.map_rows(|base, row| {
-                    for &(a, c) in pairs {
-                        let pixel = planes.at(per_pixel, base, planes.offsets[a]);
-                        let g = planes.at(&gp[c], base, shift);
-                        for ((v, p), g) in row.iter_mut().zip(pixel).zip(g) {
-                            *v += p * g;
-                        }
-                    }
-                    for (v, t) in row.iter_mut().zip(planes.at(per_tile, base, 0)) {
-                        *v *= t;
-                    }
-                })
-            })
-            .collect();
-        Self { shifts, sharing, k }
+        Self { shifts, sharing }
     }
 
     /// Every `(o, o', δ)` with `o ≠ o'`: the pixels tile `s` shares with
@@ -319,6 +299,10 @@ impl Stencil {
             })
     }
 }
+
+/// Tiles per step of the weight refresh's row pass (its values stay in
+/// registers).
+const REFRESH_LANES: usize = 8;
 
 /// Iterations of eq. 13 per block of [`Linear::iterate`].
 const BLOCK: usize = 8;
@@ -606,7 +590,6 @@ pub fn weighted(
         }
     }
     let n = tiles.count();
-    let o = tiles.offsets().len();
     let b0 = match initial {
         Some(b0) if b0.len() == n => b0.to_vec(),
         Some(b0) => {
@@ -618,93 +601,120 @@ pub fn weighted(
         }
         None => initial_normalizations(tiles, g, mc),
     };
-    let planes = Planes::new(tiles);
-    let gp: Vec<Vec<f64>> = (0..o).map(|off| planes.pad(g, o, off)).collect();
-    let counts = |count: &(dyn Fn(usize) -> usize + Sync)| -> Vec<f64> {
-        planes.pad(&map_indices(n, |i| 1.0 / count(i).max(1) as f64), 1, 0)
-    };
-    // 1 / tiles containing each pixel (eq. 12), 1 / pixels of each tile.
-    let per_pixel = counts(&|j| tiles.tiles_of(j).count());
-    let per_tile = counts(&|s| tiles.pixels(s).count());
-    let inside = planes.pad(&vec![1.0; n], 1, 0);
-    let mc_mean = planes.pad(&tile_means(tiles, mc), 1, 0);
-    let g_mean = planes.map_rows(|base, row| {
-        for gp_o in &gp {
-            for (v, gv) in row.iter_mut().zip(planes.at(gp_o, base, 0)) {
-                *v += gv;
-            }
-        }
-        for (v, inv) in row.iter_mut().zip(planes.at(&per_tile, base, 0)) {
-            *v *= inv;
-        }
-    });
     // Between weight refreshes the update of eq. 13 is linear in b: a
     // stencil over the shifts at which tiles share pixels (13 for crosses),
     // `b' = max(0, r + Σ_δ C_δ b(s + δ))` (see `Linear`), whose
     // coefficients are rebuilt at every refresh.
-    let stencil = Stencil::new(&planes, &gp, &per_pixel, &per_tile);
-    let problem = Problem {
-        planes: &planes,
-        pairs: stencil.pairs().collect(),
-        stencil: &stencil,
-        gp: &gp,
-        inside: &inside,
-        mc_mean: &mc_mean,
-        g_mean: &g_mean,
-        alpha: settings.alpha,
-    };
+    let problem = Problem::new(tiles, g, mc, settings.alpha);
+    let planes = &problem.planes;
     let mut b: Vec<f32> = planes.pad(&b0, 1, 0).iter().map(|&v| v as f32).collect();
     let mut next = vec![0.0f32; planes.len()];
-    let mut linear = Linear::new(&planes, &stencil.shifts);
-    let mut strips = linear.strips(&planes, threads());
+    let mut linear = Linear::new(planes, &problem.stencil.shifts);
+    let mut strips = linear.strips(planes, threads());
+    let (mut image, mut weights) = (vec![0.0; planes.len()], vec![0.0; planes.len()]);
     let every = settings.reweight_every.max(1);
     let mut iteration = 0;
     while iteration < settings.iterations {
         // Eq. 15-16: w(s) = 1 / (e(s) + β1 β2^n).
         let floor = (settings.beta1 * libm::pow(settings.beta2, iteration as f64)).max(1e-300);
-        let weights = problem.weights(&b, floor);
+        problem.weights(&b, floor, &mut image, &mut weights);
         problem.linearize(&weights, &mut linear);
         let count = every.min(settings.iterations - iteration);
-        linear.iterate(&planes, &mut strips, &mut b, &mut next, count);
+        linear.iterate(planes, &mut strips, &mut b, &mut next, count);
         iteration += count;
     }
     Ok(planes.unpad(&b))
 }
 
 /// The fixed inputs of [`weighted`], as padded planes.
-struct Problem<'a> {
-    planes: &'a Planes,
-    stencil: &'a Stencil,
+struct Problem {
+    planes: Planes,
+    stencil: Stencil,
     /// [`Stencil::pairs`].
     pairs: Vec<(usize, usize, isize)>,
     /// `G_s(o)`, one plane per tile offset `o`.
-    gp: &'a [Vec<f64>],
+    gp: Vec<Vec<f64>>,
+    /// 1 / the number of tiles containing each pixel (eq. 12).
+    per_pixel: Vec<f64>,
+    /// 1 / the number of pixels of each tile.
+    per_tile: Vec<f64>,
     /// 1 on tiles, 0 on the padding.
-    inside: &'a [f64],
+    inside: Vec<f64>,
     /// `Î_s`, each tile's mean MC estimate.
-    mc_mean: &'a [f64],
+    mc_mean: Vec<f64>,
     /// `Ḡ_s`, each tile's mean unscaled estimate.
-    g_mean: &'a [f64],
+    g_mean: Vec<f64>,
     alpha: f64,
 }
 
-impl Problem<'_> {
-    /// The IRLS weights of eq. 15-16 at `b`, `w(s) = 1 / (E(s) + floor)` with
-    /// `E(s)` the tile's regularization and overlap residuals, scaled so the
-    /// largest is 1 (the update is invariant to a common factor); 0 on the
-    /// padding.
-    fn weights(&self, b: &[f32], floor: f64) -> Vec<f64> {
-        let (planes, alpha) = (self.planes, self.alpha);
-        let raw = planes.map_rows(|base, row: &mut [f64]| {
-            // α |e_s - Î_s|, with e_s the tile's mean of the eq. 12 image.
-            for (k, &shift) in self.stencil.k.iter().zip(&self.stencil.shifts) {
-                let (k, bt) = (planes.at(k, base, 0), planes.at(b, base, shift));
-                for ((v, k), b) in row.iter_mut().zip(k).zip(bt) {
-                    *v += k * *b as f64;
+impl Problem {
+    /// The planes of `g` and `mc` (shapes checked by the caller).
+    fn new(tiles: &Tiles, g: &[f64], mc: &[f64], alpha: f64) -> Self {
+        let (n, o) = (tiles.count(), tiles.offsets().len());
+        let planes = Planes::new(tiles);
+        let gp: Vec<Vec<f64>> = (0..o).map(|off| planes.pad(g, o, off)).collect();
+        let counts = |count: &(dyn Fn(usize) -> usize + Sync)| -> Vec<f64> {
+            planes.pad(&map_indices(n, |i| 1.0 / count(i).max(1) as f64), 1, 0)
+        };
+        let per_pixel = counts(&|j| tiles.tiles_of(j).count());
+        let per_tile = counts(&|s| tiles.pixels(s).count());
+        let g_mean = planes.map_rows(|base, row| {
+            for gp_o in &gp {
+                for (v, gv) in row.iter_mut().zip(planes.at(gp_o, base, 0)) {
+                    *v += gv;
                 }
             }
-            for (v, m) in row.iter_mut().zip(planes.at(self.mc_mean, base, 0)) {
-                *v = alpha * (*v - m).abs();
+            for (v, inv) in row.iter_mut().zip(planes.at(&per_tile, base, 0)) {
+                *v *= inv;
+            }
+        });
+        let stencil = Stencil::new(&planes);
+        Self {
+            pairs: stencil.pairs().collect(),
+            stencil,
+            gp,
+            per_pixel,
+            per_tile,
+            inside: planes.pad(&vec![1.0; n], 1, 0),
+            mc_mean: planes.pad(&tile_means(tiles, mc), 1, 0),
+            g_mean,
+            planes,
+            alpha,
+        }
+    }
+
+    /// The IRLS weights of eq. 15-16 at `b`, `w(s) = 1 / (E(s) + floor)` with
+    /// `E(s)` the tile's regularization and overlap residuals, scaled so the
+    /// largest is 1 (the update is invariant to a common factor), into
+    /// `weights` (0 on the padding); `image` is scratch.
+    fn weights(&self, b: &[f32], floor: f64, image: &mut [f64], weights: &mut [f64]) {
+        let (planes, alpha) = (&self.planes, self.alpha);
+        // The eq. 12 image at b: 𝓘(j) = 1/|tiles ∋ j| Σ_o b(j - d_o) G_{j - d_o}(o).
+        planes.fill_rows(image, |base, row: &mut [f64]| {
+            for (gp, &d) in self.gp.iter().zip(&planes.offsets) {
+                let (g, bt) = (planes.at(gp, base, -d), planes.at(b, base, -d));
+                for ((v, g), b) in row.iter_mut().zip(g).zip(bt) {
+                    *v += g * *b as f64;
+                }
+            }
+            for (v, p) in row.iter_mut().zip(planes.at(&self.per_pixel, base, 0)) {
+                *v *= p;
+            }
+        });
+        let image = &*image;
+        planes.fill_rows(weights, |base, row: &mut [f64]| {
+            // α |e_s - Î_s|, with e_s the tile's mean of the eq. 12 image.
+            for &d in &planes.offsets {
+                for (v, i) in row.iter_mut().zip(planes.at(image, base, d)) {
+                    *v += i;
+                }
+            }
+            let (pt, m) = (
+                planes.at(&self.per_tile, base, 0),
+                planes.at(&self.mc_mean, base, 0),
+            );
+            for ((v, pt), m) in row.iter_mut().zip(pt).zip(m) {
+                *v = alpha * (*v * pt - m).abs();
             }
             // ½ |b_t G_t(k) - b_s G_s(k)| over the pixels shared with other tiles.
             let bs = planes.at(b, base, 0);
@@ -714,7 +724,7 @@ impl Problem<'_> {
                     planes.at(&self.gp[c], base, shift),
                     planes.at(b, base, shift),
                 );
-                let it = planes.at(self.inside, base, shift);
+                let it = planes.at(&self.inside, base, shift);
                 let terms = gs.iter().zip(bs).zip(gt.iter().zip(bt)).zip(it);
                 for (v, (((gs, bs), (gt, bt)), it)) in row.iter_mut().zip(terms) {
                     *v += it * (0.5 * (gt * *bt as f64 - gs * *bs as f64)).abs();
@@ -724,11 +734,10 @@ impl Problem<'_> {
                 *v = 1.0 / (*v + floor);
             }
         });
-        let max = raw.iter().copied().fold(0.0, f64::max);
-        raw.iter()
-            .zip(self.inside)
-            .map(|(w, i)| i * w / max)
-            .collect()
+        let max = weights.iter().copied().fold(0.0, f64::max);
+        for (w, i) in weights.iter_mut().zip(&self.inside) {
+            *w *= i / max;
+        }
     }
 
     /// Eq. 13 at fixed `weights` as the linear stencil of `linear`.
@@ -741,60 +750,28 @@ impl Problem<'_> {
     /// neighbours are right) and stays stable when neighbouring
     /// normalizations differ by large factors, where the printed form
     /// oscillates and diverges (seen in the synthetic test below). So, with
-    /// `own(s) = Σ_k G_s(k) Σ_t w(s,t)` and `D = α w(s) Ḡ_s + own(s)`,
+    /// `own(s) = Σ_k G_s(k) Σ_t w(s,t)`, `D = α w(s) Ḡ_s + own(s)` and
+    /// `e_s(b) = Σ_δ K_δ(s) b(s + δ)` the tile's mean of the eq. 12 image,
     /// `b'(s) = b(s) + [α w(s) (Î_s - e_s(b)) - ½ own(s) b(s)
     ///                  + ½ Σ_t w(s,t) b(t) Σ_{k shared} G_t(k)] / D`.
     /// A tile with `D = 0` keeps its `b` (`C_0 = 1`, the rest 0).
     fn linearize(&self, weights: &[f64], linear: &mut Linear) {
-        let (planes, alpha, stencil) = (self.planes, self.alpha, self.stencil);
-        let (pad, width, stride) = (planes.pad, planes.width, planes.stride);
+        let (pad, height) = (self.planes.pad, self.planes.height);
         let block = linear.row_block();
         let row = |(r, terms): (usize, &mut [f32])| {
-            if r < pad || r >= pad + planes.height {
+            if r < pad || r >= pad + height {
                 return;
             }
-            let base = planes.row(r - pad);
-            let ws = planes.at(weights, base, 0);
-            let mut own = vec![0.0; width];
-            for &(a, _, shift) in &self.pairs {
-                let gs = planes.at(&self.gp[a], base, 0);
-                let wt = planes.at(weights, base, shift);
-                for (v, ((ws, wt), g)) in own.iter_mut().zip(ws.iter().zip(wt).zip(gs)) {
-                    *v += lesser(*ws, *wt) * g;
+            let base = self.planes.row(r - pad);
+            #[cfg(all(feature = "std", target_arch = "x86_64"))]
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2, the only requirement of `terms_row_avx2`.
+                #[allow(unsafe_code)]
+                unsafe {
+                    return self.terms_row_avx2(weights, base, &mut terms[pad..]);
                 }
             }
-            let gm = planes.at(self.g_mean, base, 0);
-            let inverse: Vec<f64> = (0..width)
-                .map(|x| alpha * ws[x] * gm[x] + own[x])
-                .map(|d| if d > 0.0 { 1.0 / d } else { 0.0 })
-                .collect();
-            let m = planes.at(self.mc_mean, base, 0);
-            for (x, v) in terms[pad..pad + width].iter_mut().enumerate() {
-                *v = (alpha * ws[x] * m[x] * inverse[x]) as f32;
-            }
-            let mut c = vec![0.0; width];
-            for (p, ((&shift, k), sharing)) in (stencil.shifts.iter())
-                .zip(&stencil.k)
-                .zip(&stencil.sharing)
-                .enumerate()
-            {
-                let wt = planes.at(weights, base, shift);
-                for ((c, w), k) in c.iter_mut().zip(ws).zip(planes.at(k, base, 0)) {
-                    *c = -alpha * w * k;
-                }
-                for &(_, o) in sharing.iter().filter(|(a, c)| a != c) {
-                    let g = planes.at(&self.gp[o], base, shift);
-                    for (((c, ws), wt), g) in c.iter_mut().zip(ws).zip(wt).zip(g) {
-                        *c += 0.5 * lesser(*ws, *wt) * g;
-                    }
-                }
-                // The diagonal keeps b(s) and subtracts ½ own(s) b(s).
-                let (keep, own_part) = if shift == 0 { (1.0, 0.5) } else { (0.0, 0.0) };
-                let out = &mut terms[(1 + p) * stride + pad..][..width];
-                for (x, v) in out.iter_mut().enumerate() {
-                    *v = (keep + (c[x] - own_part * own[x]) * inverse[x]) as f32;
-                }
-            }
+            self.terms_row(weights, base, &mut terms[pad..]);
         };
         #[cfg(feature = "parallel")]
         {
@@ -803,6 +780,87 @@ impl Problem<'_> {
         }
         #[cfg(not(feature = "parallel"))]
         linear.terms.chunks_mut(block).enumerate().for_each(row);
+    }
+
+    /// [`terms_row`](Self::terms_row) compiled for AVX2.
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    #[target_feature(enable = "avx2")]
+    fn terms_row_avx2(&self, weights: &[f64], base: usize, terms: &mut [f32]) {
+        self.terms_row(weights, base, terms);
+    }
+
+    /// The terms of the `width` tiles of the film row starting at padded
+    /// index `base`, into `terms` (term `p` of tile `i` at `p · stride + i`).
+    #[inline(always)]
+    fn terms_row(&self, weights: &[f64], base: usize, terms: &mut [f32]) {
+        let (width, stride) = (self.planes.width, self.planes.stride);
+        let whole = width - width % REFRESH_LANES;
+        for x in (0..whole).step_by(REFRESH_LANES) {
+            self.terms::<REFRESH_LANES>(weights, base + x, &mut terms[x..], stride);
+        }
+        for x in whole..width {
+            self.terms::<1>(weights, base + x, &mut terms[x..], stride);
+        }
+    }
+
+    /// [`linearize`](Self::linearize) at the `N` tiles from padded index
+    /// `at`: term `p` of tile `at + i` goes to `terms[p · stride + i]`.
+    #[inline(always)]
+    fn terms<const N: usize>(&self, weights: &[f64], at: usize, terms: &mut [f32], stride: usize) {
+        let (planes, alpha, stencil) = (&self.planes, self.alpha, &self.stencil);
+        let load = |plane: &[f64], shift: isize| -> [f64; N] {
+            let start = at.wrapping_add_signed(shift);
+            <[f64; N]>::try_from(&plane[start..start + N]).unwrap_or([0.0; N])
+        };
+        let ws = load(weights, 0);
+        // own(s) = Σ_δ w(s, s + δ) Σ_{(o, o'), o ≠ o'} G_s(o).
+        let mut own = [0.0; N];
+        for (&shift, sharing) in stencil.shifts.iter().zip(&stencil.sharing) {
+            let mut gs = [0.0; N];
+            for &(a, _) in sharing.iter().filter(|(a, o)| a != o) {
+                let g = load(&self.gp[a], 0);
+                for i in 0..N {
+                    gs[i] += g[i];
+                }
+            }
+            let wt = load(weights, shift);
+            for i in 0..N {
+                own[i] += lesser(ws[i], wt[i]) * gs[i];
+            }
+        }
+        let (gm, m) = (load(&self.g_mean, 0), load(&self.mc_mean, 0));
+        let mut inverse = [0.0; N];
+        for i in 0..N {
+            let d = alpha * ws[i] * gm[i] + own[i];
+            inverse[i] = if d > 0.0 { 1.0 / d } else { 0.0 };
+            terms[i] = (alpha * ws[i] * m[i] * inverse[i]) as f32;
+        }
+        let pt = load(&self.per_tile, 0);
+        for (p, (&shift, sharing)) in stencil.shifts.iter().zip(&stencil.sharing).enumerate() {
+            // K_δ(s) |s| = Σ_{(o, o')} G_{s+δ}(o') / |tiles ∋ s + d_o|, and
+            // Σ_{(o, o'), o ≠ o'} G_{s+δ}(o').
+            let (mut k, mut gt) = ([0.0; N], [0.0; N]);
+            for &(a, o) in sharing {
+                let g = load(&self.gp[o], shift);
+                let pixel = load(&self.per_pixel, planes.offsets[a]);
+                for i in 0..N {
+                    k[i] += pixel[i] * g[i];
+                }
+                if a != o {
+                    for i in 0..N {
+                        gt[i] += g[i];
+                    }
+                }
+            }
+            let wt = load(weights, shift);
+            // The diagonal keeps b(s) and subtracts ½ own(s) b(s).
+            let (keep, own_part) = if shift == 0 { (1.0, 0.5) } else { (0.0, 0.0) };
+            let out = &mut terms[(1 + p) * stride..][..N];
+            for i in 0..N {
+                let c = -alpha * ws[i] * k[i] * pt[i] + 0.5 * lesser(ws[i], wt[i]) * gt[i];
+                out[i] = (keep + (c - own_part * own[i]) * inverse[i]) as f32;
+            }
+        }
     }
 }
 
@@ -1034,6 +1092,95 @@ mod tests {
         }
     }
 
+    /// One weight refresh and one stencil step give eq. 13-16 evaluated
+    /// directly from the tiles (in the form of `Problem::linearize`), up to
+    /// the f32 rounding of the stencil (~1e-7 per term).
+    #[test]
+    fn a_refreshed_stencil_step_is_eq_13_evaluated_directly() {
+        for (res, shape) in [
+            (Resolution::new(19, 7), TileShape::Cross),
+            (Resolution::new(10, 9), TileShape::Square { radius: 1 }),
+        ] {
+            let tiles = Tiles::new(res, shape).unwrap();
+            let (n, o) = (tiles.count(), tiles.offsets().len());
+            let mut rng = stream(6, Domain::User, 6);
+            let mut draw = |lo: f64| lo + uniform_f64(&mut rng);
+            let g: Vec<f64> = (0..n * o)
+                .map(|i| match tiles.pixel(i / o, i % o) {
+                    Some(_) => draw(0.1),
+                    None => 0.0,
+                })
+                .collect();
+            let mc: Vec<f64> = (0..n).map(|_| draw(0.1)).collect();
+            // Exactly representable in f32, as the stencil stores b.
+            let b: Vec<f64> = (0..n).map(|_| draw(0.5) as f32 as f64).collect();
+            let (alpha, floor) = (0.05, 0.01);
+
+            let problem = Problem::new(&tiles, &g, &mc, alpha);
+            let planes = &problem.planes;
+            let padded: Vec<f32> = planes.pad(&b, 1, 0).iter().map(|&v| v as f32).collect();
+            let (mut image, mut weights) = (vec![0.0; planes.len()], vec![0.0; planes.len()]);
+            problem.weights(&padded, floor, &mut image, &mut weights);
+            let mut linear = Linear::new(planes, &problem.stencil.shifts);
+            problem.linearize(&weights, &mut linear);
+            let mut strips = linear.strips(planes, 1);
+            let (mut stepped, mut next) = (padded.clone(), vec![0.0; planes.len()]);
+            linear.iterate(planes, &mut strips, &mut stepped, &mut next, 1);
+            let (weights, stepped) = (planes.unpad(&weights), planes.unpad(&stepped));
+
+            // Eq. 12-16 from the tiles' own description.
+            let gs = |s: usize, j: usize| tiles.offset_of(s, j).map_or(0.0, |off| g[s * o + off]);
+            let pixel_value = |j: usize| {
+                let t: Vec<usize> = tiles.tiles_of(j).map(|(t, _)| t).collect();
+                t.iter().map(|&t| b[t] * gs(t, j)).sum::<f64>() / t.len() as f64
+            };
+            let mean = |s: usize, f: &dyn Fn(usize) -> f64| {
+                let pixels: Vec<usize> = tiles.pixels(s).map(|(_, j)| j).collect();
+                pixels.iter().map(|&j| f(j)).sum::<f64>() / pixels.len() as f64
+            };
+            // (t, k): tile t ≠ s shares pixel k with s.
+            let shared = |s: usize| -> Vec<(usize, usize)> {
+                let pixels = tiles.pixels(s).map(|(_, k)| k);
+                pixels
+                    .flat_map(|k| tiles.tiles_of(k).map(move |(t, _)| (t, k)))
+                    .filter(|&(t, _)| t != s)
+                    .collect()
+            };
+            let residual: Vec<f64> = (0..n)
+                .map(|s| {
+                    let e = mean(s, &pixel_value) - mean(s, &|j| mc[j]);
+                    let overlaps: f64 = shared(s)
+                        .iter()
+                        .map(|&(t, k)| 0.5 * (b[t] * gs(t, k) - b[s] * gs(s, k)).abs())
+                        .sum();
+                    1.0 / (alpha * e.abs() + overlaps + floor)
+                })
+                .collect();
+            let max = residual.iter().copied().fold(0.0, f64::max);
+            for s in 0..n {
+                let w = residual[s] / max;
+                assert!(
+                    (weights[s] - w).abs() <= 1e-12 * w,
+                    "{res:?} tile {s}: weight"
+                );
+                let (mut own, mut others) = (0.0, 0.0);
+                for (t, k) in shared(s) {
+                    let wst = w.min(residual[t] / max);
+                    own += wst * gs(s, k);
+                    others += wst * b[t] * gs(t, k);
+                }
+                let regularizer = alpha * w * (mean(s, &|j| mc[j]) - mean(s, &pixel_value));
+                let d = alpha * w * mean(s, &|j| gs(s, j)) + own;
+                let want = (b[s] + (regularizer - 0.5 * own * b[s] + 0.5 * others) / d).max(0.0);
+                assert!(
+                    (stepped[s] - want).abs() <= 1e-5 * b[s],
+                    "{res:?} tile {s}: {} instead of {want}",
+                    stepped[s]
+                );
+            }
+        }
+    }
+
     /// Blocked, strip-parallel iterations give exactly the bits of plain
     /// Jacobi iterations of the same stencil, for any strip count and any
     /// number of iterations (blocks of every length, films narrower and
@@ -1046,9 +1193,7 @@ mod tests {
         ] {
             let tiles = Tiles::new(res, shape).unwrap();
             let planes = Planes::new(&tiles);
-            let zero = vec![0.0; planes.len()];
-            let gp = vec![zero.clone(); tiles.offsets().len()];
-            let stencil = Stencil::new(&planes, &gp, &zero, &zero);
+            let stencil = Stencil::new(&planes);
             let mut linear = Linear::new(&planes, &stencil.shifts);
             let mut rng = stream(5, Domain::User, 5);
             let scale = 1.0 / stencil.shifts.len() as f64;

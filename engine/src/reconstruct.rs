@@ -225,21 +225,41 @@ impl Planes {
         plane: &mut [T],
         f: impl Fn(usize, &mut [T]) + Sync + Send,
     ) {
+        self.fill_rows_with(plane, || (), |_, base, row| f(base, row));
+    }
+
+    /// [`fill_rows`](Self::fill_rows) where `f` also gets scratch made by
+    /// `init`, one per worker (rows reach it in no particular order).
+    fn fill_rows_with<T: Copy + Default + Send + Sync, S>(
+        &self,
+        plane: &mut [T],
+        init: impl Fn() -> S + Sync + Send,
+        f: impl Fn(&mut S, usize, &mut [T]) + Sync + Send,
+    ) {
         let (pad, height, width) = (self.pad, self.height, self.width);
-        let row = |(r, row): (usize, &mut [T])| {
+        let row = |scratch: &mut S, (r, row): (usize, &mut [T])| {
             if r >= pad && r < pad + height {
                 let inside = &mut row[pad..pad + width];
                 inside.fill(T::default());
-                f(self.row(r - pad), inside);
+                f(scratch, self.row(r - pad), inside);
             }
         };
         #[cfg(feature = "parallel")]
         {
             use rayon::prelude::*;
-            plane.par_chunks_mut(self.stride).enumerate().for_each(row);
+            plane
+                .par_chunks_mut(self.stride)
+                .enumerate()
+                .for_each_init(init, row);
         }
         #[cfg(not(feature = "parallel"))]
-        plane.chunks_mut(self.stride).enumerate().for_each(row);
+        {
+            let mut scratch = init();
+            plane
+                .chunks_mut(self.stride)
+                .enumerate()
+                .for_each(|r| row(&mut scratch, r));
+        }
     }
 
     /// An index distance as `(dx, dy)` (columns never shift by half a row).
@@ -611,19 +631,69 @@ pub fn weighted(
     let mut next = vec![0.0f32; planes.len()];
     let mut linear = Linear::new(planes, &problem.stencil.shifts);
     let mut strips = linear.strips(planes, threads());
-    let (mut image, mut weights) = (vec![0.0; planes.len()], vec![0.0; planes.len()]);
+    let mut weights = vec![0.0; planes.len()];
     let every = settings.reweight_every.max(1);
     let mut iteration = 0;
     while iteration < settings.iterations {
         // Eq. 15-16: w(s) = 1 / (e(s) + β1 β2^n).
         let floor = (settings.beta1 * libm::pow(settings.beta2, iteration as f64)).max(1e-300);
-        problem.weights(&b, floor, &mut image, &mut weights);
-        problem.linearize(&weights, &mut linear);
+        let scale = problem.weights(&b, floor, &mut weights);
+        problem.linearize(&weights, scale, &mut linear);
         let count = every.min(settings.iterations - iteration);
         linear.iterate(planes, &mut strips, &mut b, &mut next, count);
         iteration += count;
     }
     Ok(planes.unpad(&b))
+}
+
+/// A worker's last rows of the eq. 12 image, by film row: consecutive rows
+/// reuse the rows they share instead of computing them again.
+struct ImageRows {
+    /// The film row each slot holds.
+    held: Vec<Option<isize>>,
+    rows: Vec<Vec<f64>>,
+}
+
+impl ImageRows {
+    fn new(slots: usize, stride: usize) -> Self {
+        Self {
+            held: vec![None; slots],
+            rows: vec![vec![0.0; stride]; slots],
+        }
+    }
+
+    fn slot(&self, y: isize) -> usize {
+        y.rem_euclid(self.rows.len() as isize) as usize
+    }
+
+    /// Makes row `y` present, computing it with `compute` if it is not.
+    fn ensure(&mut self, y: isize, compute: impl FnOnce(&mut [f64])) {
+        let slot = self.slot(y);
+        if self.held[slot] != Some(y) {
+            compute(&mut self.rows[slot]);
+            self.held[slot] = Some(y);
+        }
+    }
+
+    /// Row `y` (present by [`ensure`](Self::ensure)).
+    fn row(&self, y: isize) -> &[f64] {
+        &self.rows[self.slot(y)]
+    }
+}
+
+/// The largest value of `values` (0 if there is none), in parallel under the
+/// `parallel` feature (exact: the maximum does not depend on the order).
+fn largest(values: &[f64]) -> f64 {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        values
+            .par_chunks(1 << 14)
+            .map(|c| c.iter().copied().fold(0.0, f64::max))
+            .reduce(|| 0.0, f64::max)
+    }
+    #[cfg(not(feature = "parallel"))]
+    values.iter().copied().fold(0.0, f64::max)
 }
 
 /// The fixed inputs of [`weighted`], as padded planes.
@@ -683,29 +753,53 @@ impl Problem {
         }
     }
 
+    /// Padded row `y` (film rows `0..height`; any other `y` gives zeros) of
+    /// the eq. 12 image at `b`, `𝓘(j) = 1/|tiles ∋ j| Σ_o b(j - d_o)
+    /// G_{j - d_o}(o)`, into `row` (`stride` values; the padding columns
+    /// zero).
+    fn image_row(&self, b: &[f32], y: isize, row: &mut [f64]) {
+        let planes = &self.planes;
+        row.fill(0.0);
+        if y < 0 || y >= planes.height as isize {
+            return;
+        }
+        let base = planes.row(y as usize);
+        let inside = &mut row[planes.pad..planes.pad + planes.width];
+        for (gp, &d) in self.gp.iter().zip(&planes.offsets) {
+            let (g, bt) = (planes.at(gp, base, -d), planes.at(b, base, -d));
+            for ((v, g), b) in inside.iter_mut().zip(g).zip(bt) {
+                *v += g * *b as f64;
+            }
+        }
+        for (v, p) in inside.iter_mut().zip(planes.at(&self.per_pixel, base, 0)) {
+            *v *= p;
+        }
+    }
+
     /// The IRLS weights of eq. 15-16 at `b`, `w(s) = 1 / (E(s) + floor)` with
-    /// `E(s)` the tile's regularization and overlap residuals, scaled so the
-    /// largest is 1 (the update is invariant to a common factor), into
-    /// `weights` (0 on the padding); `image` is scratch.
-    fn weights(&self, b: &[f32], floor: f64, image: &mut [f64], weights: &mut [f64]) {
+    /// `E(s)` the tile's regularization and overlap residuals, into `weights`
+    /// (0 on the padding). Returns the scale that makes the largest weight 1
+    /// (eq. 13 is invariant to a common factor; [`linearize`](Self::linearize)
+    /// applies it as it reads the weights).
+    ///
+    /// One pass over the rows: each row recomputes the image rows its tiles
+    /// cover (cheap arithmetic on rows already in cache) instead of reading
+    /// an image plane back from memory.
+    fn weights(&self, b: &[f32], floor: f64, weights: &mut [f64]) -> f64 {
         let (planes, alpha) = (&self.planes, self.alpha);
-        // The eq. 12 image at b: 𝓘(j) = 1/|tiles ∋ j| Σ_o b(j - d_o) G_{j - d_o}(o).
-        planes.fill_rows(image, |base, row: &mut [f64]| {
-            for (gp, &d) in self.gp.iter().zip(&planes.offsets) {
-                let (g, bt) = (planes.at(gp, base, -d), planes.at(b, base, -d));
-                for ((v, g), b) in row.iter_mut().zip(g).zip(bt) {
-                    *v += g * *b as f64;
-                }
+        let reach = (planes.pad / 2) as isize;
+        let image = || ImageRows::new(2 * reach as usize + 1, planes.stride);
+        planes.fill_rows_with(weights, image, |image, base, row: &mut [f64]| {
+            let y = (base / planes.stride - planes.pad) as isize;
+            for near in y - reach..=y + reach {
+                image.ensure(near, |into| self.image_row(b, near, into));
             }
-            for (v, p) in row.iter_mut().zip(planes.at(&self.per_pixel, base, 0)) {
-                *v *= p;
-            }
-        });
-        let image = &*image;
-        planes.fill_rows(weights, |base, row: &mut [f64]| {
             // α |e_s - Î_s|, with e_s the tile's mean of the eq. 12 image.
             for &d in &planes.offsets {
-                for (v, i) in row.iter_mut().zip(planes.at(image, base, d)) {
+                let (dx, dy) = planes.split(d);
+                let start = (planes.pad as isize + dx) as usize;
+                let image_row = &image.row(y + dy)[start..start + planes.width];
+                for (v, i) in row.iter_mut().zip(image_row) {
                     *v += i;
                 }
             }
@@ -734,13 +828,11 @@ impl Problem {
                 *v = 1.0 / (*v + floor);
             }
         });
-        let max = weights.iter().copied().fold(0.0, f64::max);
-        for (w, i) in weights.iter_mut().zip(&self.inside) {
-            *w *= i / max;
-        }
+        1.0 / largest(weights)
     }
 
-    /// Eq. 13 at fixed `weights` as the linear stencil of `linear`.
+    /// Eq. 13 at fixed weights (`weights` times `scale`) as the linear
+    /// stencil of `linear`.
     ///
     /// Eq. 13 sums over the pixels k that tile s shares with other tiles t
     /// `w(s,t) F_{s,t}(k)` and `w(s,t) G_s(k)`, with `w(s,t) = min(w(s),
@@ -755,7 +847,7 @@ impl Problem {
     /// `b'(s) = b(s) + [α w(s) (Î_s - e_s(b)) - ½ own(s) b(s)
     ///                  + ½ Σ_t w(s,t) b(t) Σ_{k shared} G_t(k)] / D`.
     /// A tile with `D = 0` keeps its `b` (`C_0 = 1`, the rest 0).
-    fn linearize(&self, weights: &[f64], linear: &mut Linear) {
+    fn linearize(&self, weights: &[f64], scale: f64, linear: &mut Linear) {
         let (pad, height) = (self.planes.pad, self.planes.height);
         let block = linear.row_block();
         let row = |(r, terms): (usize, &mut [f32])| {
@@ -768,10 +860,10 @@ impl Problem {
                 // SAFETY: the CPU has AVX2, the only requirement of `terms_row_avx2`.
                 #[allow(unsafe_code)]
                 unsafe {
-                    return self.terms_row_avx2(weights, base, &mut terms[pad..]);
+                    return self.terms_row_avx2(weights, scale, base, &mut terms[pad..]);
                 }
             }
-            self.terms_row(weights, base, &mut terms[pad..]);
+            self.terms_row(weights, scale, base, &mut terms[pad..]);
         };
         #[cfg(feature = "parallel")]
         {
@@ -785,34 +877,42 @@ impl Problem {
     /// [`terms_row`](Self::terms_row) compiled for AVX2.
     #[cfg(all(feature = "std", target_arch = "x86_64"))]
     #[target_feature(enable = "avx2")]
-    fn terms_row_avx2(&self, weights: &[f64], base: usize, terms: &mut [f32]) {
-        self.terms_row(weights, base, terms);
+    fn terms_row_avx2(&self, weights: &[f64], scale: f64, base: usize, terms: &mut [f32]) {
+        self.terms_row(weights, scale, base, terms);
     }
 
     /// The terms of the `width` tiles of the film row starting at padded
     /// index `base`, into `terms` (term `p` of tile `i` at `p · stride + i`).
     #[inline(always)]
-    fn terms_row(&self, weights: &[f64], base: usize, terms: &mut [f32]) {
+    fn terms_row(&self, weights: &[f64], scale: f64, base: usize, terms: &mut [f32]) {
         let (width, stride) = (self.planes.width, self.planes.stride);
         let whole = width - width % REFRESH_LANES;
         for x in (0..whole).step_by(REFRESH_LANES) {
-            self.terms::<REFRESH_LANES>(weights, base + x, &mut terms[x..], stride);
+            self.terms::<REFRESH_LANES>(weights, scale, base + x, &mut terms[x..], stride);
         }
         for x in whole..width {
-            self.terms::<1>(weights, base + x, &mut terms[x..], stride);
+            self.terms::<1>(weights, scale, base + x, &mut terms[x..], stride);
         }
     }
 
     /// [`linearize`](Self::linearize) at the `N` tiles from padded index
     /// `at`: term `p` of tile `at + i` goes to `terms[p · stride + i]`.
     #[inline(always)]
-    fn terms<const N: usize>(&self, weights: &[f64], at: usize, terms: &mut [f32], stride: usize) {
+    fn terms<const N: usize>(
+        &self,
+        weights: &[f64],
+        scale: f64,
+        at: usize,
+        terms: &mut [f32],
+        stride: usize,
+    ) {
         let (planes, alpha, stencil) = (&self.planes, self.alpha, &self.stencil);
         let load = |plane: &[f64], shift: isize| -> [f64; N] {
             let start = at.wrapping_add_signed(shift);
             <[f64; N]>::try_from(&plane[start..start + N]).unwrap_or([0.0; N])
         };
-        let ws = load(weights, 0);
+        let weight = |shift: isize| load(weights, shift).map(|w| w * scale);
+        let ws = weight(0);
         // own(s) = Σ_δ w(s, s + δ) Σ_{(o, o'), o ≠ o'} G_s(o).
         let mut own = [0.0; N];
         for (&shift, sharing) in stencil.shifts.iter().zip(&stencil.sharing) {
@@ -823,7 +923,7 @@ impl Problem {
                     gs[i] += g[i];
                 }
             }
-            let wt = load(weights, shift);
+            let wt = weight(shift);
             for i in 0..N {
                 own[i] += lesser(ws[i], wt[i]) * gs[i];
             }
@@ -852,7 +952,7 @@ impl Problem {
                     }
                 }
             }
-            let wt = load(weights, shift);
+            let wt = weight(shift);
             // The diagonal keeps b(s) and subtracts ½ own(s) b(s).
             let (keep, own_part) = if shift == 0 { (1.0, 0.5) } else { (0.0, 0.0) };
             let out = &mut terms[(1 + p) * stride..][..N];
@@ -1119,10 +1219,10 @@ mod tests {
             let problem = Problem::new(&tiles, &g, &mc, alpha);
             let planes = &problem.planes;
             let padded: Vec<f32> = planes.pad(&b, 1, 0).iter().map(|&v| v as f32).collect();
-            let (mut image, mut weights) = (vec![0.0; planes.len()], vec![0.0; planes.len()]);
-            problem.weights(&padded, floor, &mut image, &mut weights);
+            let mut weights = vec![0.0; planes.len()];
+            let scale = problem.weights(&padded, floor, &mut weights);
             let mut linear = Linear::new(planes, &problem.stencil.shifts);
-            problem.linearize(&weights, &mut linear);
+            problem.linearize(&weights, scale, &mut linear);
             let mut strips = linear.strips(planes, 1);
             let (mut stepped, mut next) = (padded.clone(), vec![0.0; planes.len()]);
             linear.iterate(planes, &mut strips, &mut stepped, &mut next, 1);
@@ -1160,7 +1260,7 @@ mod tests {
             for s in 0..n {
                 let w = residual[s] / max;
                 assert!(
-                    (weights[s] - w).abs() <= 1e-12 * w,
+                    (weights[s] * scale - w).abs() <= 1e-12 * w,
                     "{res:?} tile {s}: weight"
                 );
                 let (mut own, mut others) = (0.0, 0.0);

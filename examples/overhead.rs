@@ -5,6 +5,14 @@
 //! (exact catch-up replays every missed step) and the Gaussian one (catch-up
 //! in one draw), and writes them to a JSON file.
 //!
+//! It also bounds from below what a primary-sample-space Metropolis step
+//! with this engine's Kelemen offsets could cost on the procedural oracle:
+//! MC's own cost per path plus, for the small steps, one offset per
+//! coordinate the path reads in place of MC's uniform draw. Nothing else (the
+//! second splat of expected values, the acceptance draw, backups, catch-up,
+//! the bootstrap) is counted, so any implementation with these offsets costs
+//! more.
+//!
 //! ```text
 //! cargo run --release --example overhead -- --out out/bench/overhead.json
 //! ```
@@ -13,13 +21,17 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Parser;
+use std::hint::black_box;
+
 use strata::engine::analytic::ProceduralImage;
-use strata::engine::mutate::{Gaussian, Kelemen, MutationParams, SmallStep};
+use strata::engine::mutate::{Gaussian, Kelemen, MutationParams, OffsetBatch, SmallStep};
 use strata::engine::render::{
     Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
 };
+use strata::engine::rng::{self, Domain, uniform_f32};
+use strata::engine::sample::IndependentSampler;
 use strata::engine::target::MaxChannel;
-use strata::engine::{PathOracle, Resolution};
+use strata::engine::{PathOracle, Resolution, Sampler, Temperature};
 use strata::native::{builtin, native_tracer};
 
 /// Measure PSSMLT's cost per path relative to MC.
@@ -78,6 +90,64 @@ fn measure<O: PathOracle>(
     Ok((median(mc), median(pss)))
 }
 
+/// Counts the numbers an oracle draws.
+struct Counting {
+    inner: IndependentSampler,
+    draws: u64,
+}
+
+impl Sampler for Counting {
+    fn next_1d(&mut self) -> f32 {
+        self.draws += 1;
+        self.inner.next_1d()
+    }
+}
+
+/// Mean numbers drawn per path (film position included) by `oracle` at
+/// random film points.
+fn coordinates_per_path<O: PathOracle>(oracle: &O, paths: u64) -> f64 {
+    let r = oracle.resolution();
+    let mut film_rng = rng::stream(3, Domain::User, 0);
+    let mut sampler = Counting {
+        inner: IndependentSampler::new(rng::stream(3, Domain::User, 1)),
+        draws: 0,
+    };
+    for _ in 0..paths {
+        let u = [uniform_f32(&mut film_rng), uniform_f32(&mut film_rng)];
+        black_box(oracle.trace(r.film_point(u), &mut sampler, Temperature::ONE));
+    }
+    2.0 + sampler.draws as f64 / paths as f64
+}
+
+/// Median ns of one Kelemen offset beyond one uniform draw, both drawn into
+/// batches of [`OffsetBatch::LEN`] as the sampler draws its offsets (the
+/// cheapest way this engine knows).
+fn offset_cost(repeats: usize) -> f64 {
+    const BATCHES: usize = 1 << 17;
+    let kelemen = Kelemen::DEFAULT;
+    let mut extra = Vec::new();
+    for _ in 0..repeats {
+        let mut pcg = rng::stream(5, Domain::User, 0);
+        let mut batch = [0.0f64; OffsetBatch::LEN];
+        let t = Instant::now();
+        for _ in 0..BATCHES {
+            batch
+                .iter_mut()
+                .for_each(|v| *v = uniform_f32(&mut pcg) as f64);
+            black_box(&mut batch);
+        }
+        let uniform = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        for _ in 0..BATCHES {
+            batch.iter_mut().for_each(|v| *v = kelemen.offset(&mut pcg));
+            black_box(&mut batch);
+        }
+        let offsets = t.elapsed().as_secs_f64();
+        extra.push((offsets - uniform) * 1e9 / (BATCHES * OffsetBatch::LEN) as f64);
+    }
+    median(extra)
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = Args::parse();
     let pool = rayon::ThreadPoolBuilder::new()
@@ -110,13 +180,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ])
     })?;
     let mut json = Vec::new();
-    for (name, (mc, pss)) in rows {
+    for &(name, (mc, pss)) in &rows {
         let ratio = pss / mc;
         println!("{name}: MC {mc:.1} ns/path, PSSMLT {pss:.1} ns/path, ratio {ratio:.3}");
         json.push(format!(
             "{{\"oracle\": \"{name}\", \"mc_ns_per_path\": {mc:.2}, \"pssmlt_ns_per_path\": {pss:.2}, \"ratio\": {ratio:.4}}}"
         ));
     }
+    // The floor of a Metropolis step on the procedural oracle (Kelemen,
+    // large steps 0.3): MC's path, plus, per small step, one offset per
+    // coordinate beyond MC's uniform draw. Nothing else (the second splat,
+    // the acceptance draw, backups, catch-up, the bootstrap) is counted.
+    let coordinates = coordinates_per_path(&procedural, 1 << 20);
+    let offset = pool.install(|| offset_cost(args.repeats));
+    let mc = rows[0].1.0;
+    let p_small = 1.0 - MutationParams::default().large_step_probability;
+    let floor = mc + p_small * coordinates * offset;
+    println!(
+        "floor of a PSSMLT step with these Kelemen offsets, procedural oracle: {coordinates:.2} numbers per path x {offset:.2} ns per offset beyond a uniform draw: {floor:.1} ns/path, ratio {:.3}",
+        floor / mc
+    );
+    json.push(format!(
+        "{{\"oracle\": \"floor of a PSSMLT step with these Kelemen offsets, procedural 256x192\", \"coordinates_per_path\": {coordinates:.3}, \"offset_ns\": {offset:.3}, \"mc_ns_per_path\": {mc:.2}, \"floor_ns_per_path\": {floor:.2}, \"ratio\": {:.4}}}",
+        floor / mc
+    ));
     if let Some(dir) = args.out.parent() {
         std::fs::create_dir_all(dir)?;
     }

@@ -5,6 +5,9 @@
 //! checkpoints (fractions of the budget, each a separate render), and is
 //! compared with a reference: a long MC render cached on disk
 //! (`reference_WxH_SPP.exr` in the output directory, reused when present).
+//! An independent MC render with a quarter of the reference's paths (also
+//! cached) estimates the reference's own error, which every method's error
+//! against it includes.
 //! Writes every final image (EXR + PNG), `metrics.csv` (MAPE with ε = 0.01,
 //! relMSE, L1, L2 on luminance, seed 001's metrics, and the energy ratio on
 //! the brightest pixels) and `error_vs_time.png`.
@@ -153,6 +156,18 @@ fn main() -> AnyResult<()> {
         .unwrap_or_else(|| PathBuf::from("out/compare").join(&args.scene));
     std::fs::create_dir_all(&dir)?;
     let reference = reference(&tracer, &args, &dir)?;
+    let check = cached_mc(
+        &tracer,
+        "check",
+        (args.reference_spp / 4).max(1),
+        args.seed + 2000,
+        &dir,
+    )?;
+    let own = reference_error(&reference, &check);
+    println!(
+        "the reference's own error (from an independent render with 1/4 of its paths): MAPE ~{:.3e}, relMSE ~{:.3e}",
+        own.mape, own.rel_mse
+    );
     println!(
         "{}: {}x{}, {} s per method",
         args.scene, resolution.width, resolution.height, args.time
@@ -192,18 +207,28 @@ fn main() -> AnyResult<()> {
     let mut csv = std::fs::File::create(dir.join("metrics.csv"))?;
     writeln!(
         csv,
-        "method,budget_s,seconds,paths,mape,rel_mse,l1,l2,bright_ratio"
+        "method,budget_s,seconds,paths,mape,rel_mse,rel_mse_net,l1,l2,bright_ratio"
+    )?;
+    // The reference's own error first (its paths, no time); rel_mse_net is
+    // a method's relMSE less the reference's.
+    writeln!(
+        csv,
+        "reference-own-error,,,{},{:.6},{:.6},,,,",
+        args.reference_spp * resolution.pixel_count() as u64,
+        own.mape,
+        own.rel_mse
     )?;
     for r in &rows {
         writeln!(
             csv,
-            "{},{:.3},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.4}",
+            "{},{:.3},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4}",
             r.method.name(),
             r.budget,
             r.seconds,
             r.samples,
             r.errors.mape,
             r.errors.rel_mse,
+            r.errors.rel_mse - own.rel_mse,
             r.errors.l1,
             r.errors.l2,
             r.bright
@@ -222,30 +247,67 @@ fn reference<O: PathOracle<Radiance = strata::engine::Rgb>>(
     args: &Args,
     dir: &Path,
 ) -> AnyResult<Film> {
+    cached_mc(
+        oracle,
+        "reference",
+        args.reference_spp,
+        args.seed + 1000,
+        dir,
+    )
+}
+
+/// An MC render of `spp` paths per pixel with `seed`, cached on disk as
+/// `NAME_WxH_SPP.exr` in `dir`.
+fn cached_mc<O: PathOracle<Radiance = strata::engine::Rgb>>(
+    oracle: &O,
+    name: &str,
+    spp: u64,
+    seed: u64,
+    dir: &Path,
+) -> AnyResult<Film> {
     let r = oracle.resolution();
-    let path = dir.join(format!(
-        "reference_{}x{}_{}.exr",
-        r.width, r.height, args.reference_spp
-    ));
+    let path = dir.join(format!("{name}_{}x{}_{spp}.exr", r.width, r.height));
     if path.exists() {
-        println!("reference: {}", path.display());
+        println!("{name}: {}", path.display());
         return Ok(strata::io::read_film(&path)?);
     }
     let start = Instant::now();
     let settings = McSettings {
-        seed: args.seed + 1000,
-        budget: Budget::samples_per_pixel(args.reference_spp, r),
+        seed,
+        budget: Budget::samples_per_pixel(spp, r),
     };
     let film = render_mc(oracle, &settings, &Silent)?.film;
     strata::io::write_exr(&film, &path)?;
     strata::io::write_png(&film, 0.0, path.with_extension("png"))?;
     println!(
-        "reference: {} spp MC in {:.0} s -> {}",
-        args.reference_spp,
+        "{name}: {spp} spp MC in {:.0} s -> {}",
         start.elapsed().as_secs_f64(),
         path.display()
     );
     Ok(film)
+}
+
+/// The reference's own error, estimated from an independent MC render with
+/// a quarter of its paths (`check`): per pixel, `E[(R - C)²] = 5 σ²/N` where
+/// `σ²/N` is the reference's variance, so the reference's own relMSE is
+/// `mean (R - C)² / (R² + ε) / 5` and, for roughly Gaussian noise, its own
+/// MAPE `mean |R - C| / (R + ε) / √5`. A method's relMSE against the
+/// reference is its true relMSE plus the reference's (their errors are
+/// independent); MAPE has no such sum, the reference's own MAPE is a floor.
+fn reference_error(reference: &Film, check: &Film) -> ImageErrors {
+    let n = reference.resolution().pixel_count();
+    let (mut mape, mut rel_mse) = (0.0, 0.0);
+    for i in 0..n {
+        let (r, c) = (reference.luminance(i), check.luminance(i));
+        let d = r - c;
+        mape += d.abs() / (r.abs() + metrics::EPSILON);
+        rel_mse += d * d / (r * r + metrics::EPSILON);
+    }
+    ImageErrors {
+        mape: mape / n as f64 / 5f64.sqrt(),
+        rel_mse: rel_mse / n as f64 / 5.0,
+        ..Default::default()
+    }
 }
 
 /// Seed 001 sec. 4: Kelemen small steps from 1/1024 to 1/32, large steps 0.3.

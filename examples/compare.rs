@@ -10,7 +10,8 @@
 //! against it includes.
 //! Writes every final image (EXR + PNG), `metrics.csv` (MAPE with ε = 0.01,
 //! relMSE, L1, L2 on luminance, seed 001's metrics, and the energy ratio on
-//! the brightest pixels) and `error_vs_time.png`.
+//! the brightest pixels) and `error_vs_time.png`; `--replot` redraws the
+//! plot from an existing `metrics.csv` without rendering.
 //!
 //! ```text
 //! cargo run --release --example compare -- --scene veach-ajar --width 160 --height 90 --time 60
@@ -94,6 +95,10 @@ struct Args {
     /// Output directory (default out/compare/SCENE).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Only redraw the plot from the output directory's `metrics.csv` (no
+    /// rendering).
+    #[arg(long)]
+    replot: bool,
     /// TrueType font for the plot.
     #[arg(
         long,
@@ -130,6 +135,25 @@ fn bright_ratio(film: &Film, reference: &Film) -> f64 {
 
 fn main() -> AnyResult<()> {
     let args = Args::parse();
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out/compare").join(&args.scene));
+    if args.replot {
+        let rows = read_metrics(&dir.join("metrics.csv"))?;
+        let mut methods: Vec<Method> = rows.iter().map(|r| r.method).collect();
+        methods.dedup();
+        plot(
+            &rows,
+            &args.scene,
+            &methods,
+            &args.font,
+            &dir.join("error_vs_time.png"),
+        )
+        .map_err(|e| e.to_string())?;
+        println!("wrote {}", dir.join("error_vs_time.png").display());
+        return Ok(());
+    }
     let scene = match builtin::by_name(
         &args.scene,
         Resolution::new(args.width.unwrap_or(128), args.height.unwrap_or(128)),
@@ -150,10 +174,6 @@ fn main() -> AnyResult<()> {
     };
     let tracer = native_tracer(scene);
     let resolution = tracer.resolution();
-    let dir = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("out/compare").join(&args.scene));
     std::fs::create_dir_all(&dir)?;
     let reference = reference(&tracer, &args, &dir)?;
     let check = cached_mc(
@@ -213,7 +233,7 @@ fn main() -> AnyResult<()> {
     // a method's relMSE less the reference's.
     writeln!(
         csv,
-        "reference-own-error,,,{},{:.6},{:.6},,,,",
+        "reference-own-error,,,{},{:.6e},{:.6e},,,,",
         args.reference_spp * resolution.pixel_count() as u64,
         own.mape,
         own.rel_mse
@@ -221,7 +241,7 @@ fn main() -> AnyResult<()> {
     for r in &rows {
         writeln!(
             csv,
-            "{},{:.3},{:.3},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4}",
+            "{},{:.3},{:.3},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.4}",
             r.method.name(),
             r.budget,
             r.seconds,
@@ -234,7 +254,8 @@ fn main() -> AnyResult<()> {
             r.bright
         )?;
     }
-    if let Err(e) = plot(&rows, &args, &dir.join("error_vs_time.png")) {
+    let png = dir.join("error_vs_time.png");
+    if let Err(e) = plot(&rows, &args.scene, &args.methods, &args.font, &png) {
         eprintln!("note: no plot ({e})");
     }
     println!("wrote {}", dir.display());
@@ -373,9 +394,80 @@ fn render<O: PathOracle>(
 /// One of the error metrics.
 type Metric = fn(&ImageErrors) -> f64;
 
-fn plot(rows: &[Row], args: &Args, out: &Path) -> Result<(), Box<dyn std::error::Error>> {
+/// Labelled values of a log axis over `lo..hi`: 1, 2 and 5 times the powers
+/// of ten inside it; every digit times them where that gives fewer than 3,
+/// the powers of ten alone where it gives more than 8 (plotters labels only
+/// powers of ten, so a range within one decade would have no labels).
+fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let decades = lo.log10().floor() as i32..=hi.log10().ceil() as i32;
+    let within = |mantissas: &[f64]| -> Vec<f64> {
+        decades
+            .clone()
+            .flat_map(|e| mantissas.iter().map(move |m| m * 10f64.powi(e)))
+            .filter(|v| (lo..=hi).contains(v))
+            .collect()
+    };
+    match within(&[1.0, 2.0, 5.0]) {
+        few if few.len() < 3 => within(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]),
+        many if many.len() > 8 => within(&[1.0]),
+        ticks => ticks,
+    }
+}
+
+/// The method rows of a `metrics.csv` this program wrote.
+fn read_metrics(path: &Path) -> AnyResult<Vec<Row>> {
+    let text = std::fs::read_to_string(path)?;
+    let mut rows = Vec::new();
+    for line in text.lines().skip(1) {
+        let fields: Vec<&str> = line.split(',').collect();
+        let Some(method) = Method::value_variants()
+            .iter()
+            .find(|m| m.name() == fields[0])
+        else {
+            continue; // the reference's own error
+        };
+        let number = |i: usize| -> AnyResult<f64> {
+            let field = fields.get(i).ok_or("a short line in metrics.csv")?;
+            Ok(field.parse::<f64>()?)
+        };
+        let l2 = number(8)?;
+        rows.push(Row {
+            method: *method,
+            budget: number(1)?,
+            seconds: number(2)?,
+            samples: number(3)? as u64,
+            errors: ImageErrors {
+                mape: number(4)?,
+                rel_mse: number(5)?,
+                l1: number(7)?,
+                l2,
+                mse: l2 * l2,
+            },
+            bright: number(9)?,
+        });
+    }
+    Ok(rows)
+}
+
+/// A [`log_ticks`] value (one significant digit) as text: `0.05`, `20`,
+/// `2e-7`.
+fn tick_label(v: f64) -> String {
+    if v != 0.0 && v.abs() < 1e-3 {
+        return format!("{v:.0e}");
+    }
+    let decimals = (-v.abs().log10().floor()).max(0.0) as usize;
+    format!("{v:.decimals$}")
+}
+
+fn plot(
+    rows: &[Row],
+    scene: &str,
+    methods: &[Method],
+    font: &Path,
+    out: &Path,
+) -> Result<(), Box<dyn std::error::Error>> {
     use plotters::prelude::*;
-    let bytes: &'static [u8] = Box::leak(std::fs::read(&args.font)?.into_boxed_slice());
+    let bytes: &'static [u8] = Box::leak(std::fs::read(font)?.into_boxed_slice());
     plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
         .map_err(|_| "not a TrueType font")?;
     let root = BitMapBackend::new(out, (1200, 500)).into_drawing_area();
@@ -387,29 +479,39 @@ fn plot(rows: &[Row], args: &Args, out: &Path) -> Result<(), Box<dyn std::error:
         (lo.min(r.seconds), hi.max(r.seconds))
     });
     for (panel, (name, metric)) in panels.iter().zip(metrics) {
-        let (lo, hi) = rows.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), r| {
-            let v = metric(&r.errors);
-            (lo.min(v), hi.max(v))
-        });
+        // A log axis shows positive values only.
+        let (lo, hi) = rows
+            .iter()
+            .map(|r| metric(&r.errors))
+            .filter(|v| *v > 0.0 && v.is_finite())
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            });
+        if lo > hi {
+            return Err(format!("no positive {name} to plot").into());
+        }
         let mut chart = ChartBuilder::on(panel)
-            .caption(
-                format!("{}: {name} against time", args.scene),
-                ("sans-serif", 20),
-            )
+            .caption(format!("{scene}: {name} against time"), ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(70)
             .build_cartesian_2d(
-                (t_lo * 0.8..t_hi * 1.25).log_scale(),
-                (lo * 0.7..hi * 1.4).log_scale(),
+                (t_lo * 0.8..t_hi * 1.25)
+                    .log_scale()
+                    .with_key_points(log_ticks(t_lo * 0.8, t_hi * 1.25)),
+                (lo * 0.7..hi * 1.4)
+                    .log_scale()
+                    .with_key_points(log_ticks(lo * 0.7, hi * 1.4)),
             )?;
         chart
             .configure_mesh()
             .x_desc("seconds")
             .y_desc(name)
+            .x_label_formatter(&|v| tick_label(*v))
+            .y_label_formatter(&|v| tick_label(*v))
             .label_style(("sans-serif", 13))
             .draw()?;
-        for (&method, color) in args.methods.iter().zip(colors) {
+        for (&method, color) in methods.iter().zip(colors) {
             let points: Vec<(f64, f64)> = rows
                 .iter()
                 .filter(|r| r.method == method)

@@ -305,19 +305,6 @@ impl Stencil {
         }
         Self { shifts, sharing }
     }
-
-    /// Every `(o, o', δ)` with `o ≠ o'`: the pixels tile `s` shares with
-    /// another tile, `s + δ`.
-    fn pairs(&self) -> impl Iterator<Item = (usize, usize, isize)> + '_ {
-        self.shifts
-            .iter()
-            .zip(&self.sharing)
-            .flat_map(|(&shift, list)| {
-                list.iter()
-                    .filter(|(a, c)| a != c)
-                    .map(move |&(a, c)| (a, c, shift))
-            })
-    }
 }
 
 /// Tiles per step of the weight refresh's row pass (its values stay in
@@ -704,38 +691,47 @@ pub fn weighted(
     Ok(planes.unpad(&b))
 }
 
-/// A worker's last rows of the eq. 12 image, by film row: consecutive rows
-/// reuse the rows they share instead of computing them again.
-struct ImageRows {
+/// A worker's last rows of the per-pixel values of the weight refresh
+/// ([`Problem::pixel_rows`]), by film row: consecutive rows reuse the rows
+/// they share instead of computing them again.
+struct PixelRows {
     /// The film row each slot holds.
     held: Vec<Option<isize>>,
-    rows: Vec<Vec<f64>>,
+    /// Per slot, `1 + offsets` padded rows.
+    slots: Vec<Vec<f64>>,
+    /// Scratch: one film row per offset.
+    products: Vec<f64>,
+    stride: usize,
 }
 
-impl ImageRows {
-    fn new(slots: usize, stride: usize) -> Self {
+impl PixelRows {
+    fn new(slots: usize, offsets: usize, stride: usize) -> Self {
         Self {
             held: vec![None; slots],
-            rows: vec![vec![0.0; stride]; slots],
+            slots: vec![vec![0.0; (1 + offsets) * stride]; slots],
+            products: vec![0.0; offsets * stride],
+            stride,
         }
     }
 
     fn slot(&self, y: isize) -> usize {
-        y.rem_euclid(self.rows.len() as isize) as usize
+        y.rem_euclid(self.slots.len() as isize) as usize
     }
 
-    /// Makes row `y` present, computing it with `compute` if it is not.
-    fn ensure(&mut self, y: isize, compute: impl FnOnce(&mut [f64])) {
+    /// Makes row `y` present, computing it with `compute` (slot, scratch) if
+    /// it is not.
+    fn ensure(&mut self, y: isize, compute: impl FnOnce(&mut [f64], &mut [f64])) {
         let slot = self.slot(y);
         if self.held[slot] != Some(y) {
-            compute(&mut self.rows[slot]);
+            compute(&mut self.slots[slot], &mut self.products);
             self.held[slot] = Some(y);
         }
     }
 
-    /// Row `y` (present by [`ensure`](Self::ensure)).
-    fn row(&self, y: isize) -> &[f64] {
-        &self.rows[self.slot(y)]
+    /// Part `part` (0 = the image, `1 + a` = offset `a`'s disagreement) of
+    /// row `y` (present by [`ensure`](Self::ensure)).
+    fn row(&self, y: isize, part: usize) -> &[f64] {
+        &self.slots[self.slot(y)][part * self.stride..][..self.stride]
     }
 }
 
@@ -758,8 +754,6 @@ fn largest(values: &[f64]) -> f64 {
 struct Problem {
     planes: Planes,
     stencil: Stencil,
-    /// [`Stencil::pairs`].
-    pairs: Vec<(usize, usize, isize)>,
     /// `G_s(o)`, one plane per tile offset `o`.
     gp: Vec<Vec<f64>>,
     /// 1 / the number of tiles containing each pixel (eq. 12).
@@ -798,7 +792,6 @@ impl Problem {
         });
         let stencil = Stencil::new(&planes);
         Self {
-            pairs: stencil.pairs().collect(),
             stencil,
             gp,
             per_pixel,
@@ -846,17 +839,20 @@ impl Problem {
     fn weights(&self, b: &[f32], floor: f64, weights: &mut [f64]) -> f64 {
         let (planes, alpha) = (&self.planes, self.alpha);
         let reach = (planes.pad / 2) as isize;
-        let image = || ImageRows::new(2 * reach as usize + 1, planes.stride);
-        planes.fill_rows_with(weights, image, |image, base, row: &mut [f64]| {
+        let o = planes.offsets.len();
+        let scratch = || PixelRows::new(2 * reach as usize + 1, o, planes.stride);
+        planes.fill_rows_with(weights, scratch, |rows, base, row: &mut [f64]| {
             let y = (base / planes.stride - planes.pad) as isize;
             for near in y - reach..=y + reach {
-                image.ensure(near, |into| self.image_row(b, near, into));
+                rows.ensure(near, |slot, products| {
+                    self.pixel_rows(b, near, slot, products)
+                });
             }
             // α |e_s - Î_s|, with e_s the tile's mean of the eq. 12 image.
             for &d in &planes.offsets {
                 let (dx, dy) = planes.split(d);
                 let start = (planes.pad as isize + dx) as usize;
-                let image_row = &image.row(y + dy)[start..start + planes.width];
+                let image_row = &rows.row(y + dy, 0)[start..start + planes.width];
                 for (v, i) in row.iter_mut().zip(image_row) {
                     *v += i;
                 }
@@ -868,18 +864,14 @@ impl Problem {
             for ((v, pt), m) in row.iter_mut().zip(pt).zip(m) {
                 *v = alpha * (*v * pt - m).abs();
             }
-            // ½ |b_t G_t(k) - b_s G_s(k)| over the pixels shared with other tiles.
-            let bs = planes.at(b, base, 0);
-            for &(a, c, shift) in &self.pairs {
-                let gs = planes.at(&self.gp[a], base, 0);
-                let (gt, bt) = (
-                    planes.at(&self.gp[c], base, shift),
-                    planes.at(b, base, shift),
-                );
-                let it = planes.at(&self.inside, base, shift);
-                let terms = gs.iter().zip(bs).zip(gt.iter().zip(bt)).zip(it);
-                for (v, (((gs, bs), (gt, bt)), it)) in row.iter_mut().zip(terms) {
-                    *v += it * (0.5 * (gt * *bt as f64 - gs * *bs as f64)).abs();
+            // ½ |b_t G_t(k) - b_s G_s(k)| over the pixels k shared with other
+            // tiles t: the disagreement of each of the tile's pixels.
+            for (a, &d) in planes.offsets.iter().enumerate() {
+                let (dx, dy) = planes.split(d);
+                let start = (planes.pad as isize + dx) as usize;
+                let disagreement = &rows.row(y + dy, 1 + a)[start..start + planes.width];
+                for (v, e) in row.iter_mut().zip(disagreement) {
+                    *v += e;
                 }
             }
             for v in row.iter_mut() {
@@ -887,6 +879,59 @@ impl Problem {
             }
         });
         1.0 / largest(weights)
+    }
+
+    /// Film row `y` (any other `y` gives zeros) of the per-pixel values
+    /// [`weights`](Self::weights) reads, into `slot` (`1 + offsets` padded
+    /// rows): the eq. 12 image, then per offset `a` the disagreement
+    /// `Σ_{o ≠ a} ½ |P_o - P_a|` of the pixel's estimate by the tile that
+    /// holds it at offset `a`, `P_a = b G` of that tile, with the other
+    /// tiles holding it (tiles outside the film excluded). `products` is
+    /// scratch for the `P_o` (one film row each).
+    fn pixel_rows(&self, b: &[f32], y: isize, slot: &mut [f64], products: &mut [f64]) {
+        let planes = &self.planes;
+        let (stride, width, pad) = (planes.stride, planes.width, planes.pad);
+        let (image, disagreements) = slot.split_at_mut(stride);
+        self.image_row(b, y, image);
+        disagreements.fill(0.0);
+        if y < 0 || y >= planes.height as isize {
+            return;
+        }
+        let base = planes.row(y as usize);
+        for ((gp, &d), p) in self
+            .gp
+            .iter()
+            .zip(&planes.offsets)
+            .zip(products.chunks_mut(width))
+        {
+            let (g, bt) = (planes.at(gp, base, -d), planes.at(b, base, -d));
+            for ((p, g), b) in p.iter_mut().zip(g).zip(bt) {
+                *p = g * *b as f64;
+            }
+        }
+        let offsets = planes.offsets.len();
+        for a in 0..offsets {
+            for c in a + 1..offsets {
+                let (pa, pc) = (
+                    &products[a * width..][..width],
+                    &products[c * width..][..width],
+                );
+                let (inside_a, inside_c) = (
+                    planes.at(&self.inside, base, -planes.offsets[a]),
+                    planes.at(&self.inside, base, -planes.offsets[c]),
+                );
+                let (da, dc) = disagreements.split_at_mut(c * stride);
+                let da = &mut da[a * stride + pad..][..width];
+                let dc = &mut dc[pad..pad + width];
+                let values = pa.iter().zip(pc).zip(inside_a.iter().zip(inside_c));
+                for ((ea, ec), ((pa, pc), (ia, ic))) in da.iter_mut().zip(dc.iter_mut()).zip(values)
+                {
+                    let e = (0.5 * (pc - pa)).abs();
+                    *ea += ic * e;
+                    *ec += ia * e;
+                }
+            }
+        }
     }
 
     /// Eq. 13 at fixed weights (`weights` times `scale`) as the linear

@@ -804,29 +804,6 @@ impl Problem {
         }
     }
 
-    /// Padded row `y` (film rows `0..height`; any other `y` gives zeros) of
-    /// the eq. 12 image at `b`, `𝓘(j) = 1/|tiles ∋ j| Σ_o b(j - d_o)
-    /// G_{j - d_o}(o)`, into `row` (`stride` values; the padding columns
-    /// zero).
-    fn image_row(&self, b: &[f32], y: isize, row: &mut [f64]) {
-        let planes = &self.planes;
-        row.fill(0.0);
-        if y < 0 || y >= planes.height as isize {
-            return;
-        }
-        let base = planes.row(y as usize);
-        let inside = &mut row[planes.pad..planes.pad + planes.width];
-        for (gp, &d) in self.gp.iter().zip(&planes.offsets) {
-            let (g, bt) = (planes.at(gp, base, -d), planes.at(b, base, -d));
-            for ((v, g), b) in inside.iter_mut().zip(g).zip(bt) {
-                *v += g * *b as f64;
-            }
-        }
-        for (v, p) in inside.iter_mut().zip(planes.at(&self.per_pixel, base, 0)) {
-            *v *= p;
-        }
-    }
-
     /// The IRLS weights of eq. 15-16 at `b`, `w(s) = 1 / (E(s) + floor)` with
     /// `E(s)` the tile's regularization and overlap residuals, into `weights`
     /// (0 on the padding). Returns the scale that makes the largest weight 1
@@ -883,17 +860,18 @@ impl Problem {
 
     /// Film row `y` (any other `y` gives zeros) of the per-pixel values
     /// [`weights`](Self::weights) reads, into `slot` (`1 + offsets` padded
-    /// rows): the eq. 12 image, then per offset `a` the disagreement
-    /// `Σ_{o ≠ a} ½ |P_o - P_a|` of the pixel's estimate by the tile that
-    /// holds it at offset `a`, `P_a = b G` of that tile, with the other
-    /// tiles holding it (tiles outside the film excluded). `products` is
-    /// scratch for the `P_o` (one film row each).
+    /// rows, the padding columns zero): the eq. 12 image at `b`, `𝓘(j) =
+    /// 1/|tiles ∋ j| Σ_o P_o(j)` with `P_o(j) = b(j - d_o) G_{j - d_o}(o)`
+    /// the estimate of the tile holding `j` at offset `o`, then per offset
+    /// `a` the disagreement
+    /// `Σ_{o ≠ a} ½ |P_o - P_a|` of that tile's estimate with the other
+    /// tiles holding the pixel (tiles outside the film excluded). `products`
+    /// is scratch for the `P_o` (one film row each).
     fn pixel_rows(&self, b: &[f32], y: isize, slot: &mut [f64], products: &mut [f64]) {
         let planes = &self.planes;
         let (stride, width, pad) = (planes.stride, planes.width, planes.pad);
+        slot.fill(0.0);
         let (image, disagreements) = slot.split_at_mut(stride);
-        self.image_row(b, y, image);
-        disagreements.fill(0.0);
         if y < 0 || y >= planes.height as isize {
             return;
         }
@@ -908,6 +886,15 @@ impl Problem {
             for ((p, g), b) in p.iter_mut().zip(g).zip(bt) {
                 *p = g * *b as f64;
             }
+        }
+        let image = &mut image[pad..pad + width];
+        for p in products.chunks(width).take(planes.offsets.len()) {
+            for (v, p) in image.iter_mut().zip(p) {
+                *v += p;
+            }
+        }
+        for (v, p) in image.iter_mut().zip(planes.at(&self.per_pixel, base, 0)) {
+            *v *= p;
         }
         let offsets = planes.offsets.len();
         for a in 0..offsets {

@@ -186,12 +186,12 @@ impl Planes {
     }
 
     /// Per-tile `values` (row-major, `stride_in` values per tile, taking
-    /// component `at`) as a padded plane.
-    fn pad(&self, values: &[f64], stride_in: usize, at: usize) -> Vec<f64> {
+    /// component `at`) times `scale`, as a padded f32 plane.
+    fn pad(&self, values: &[f64], stride_in: usize, at: usize, scale: f64) -> Vec<f32> {
         self.map_rows(|base, row| {
             let first = (base / self.stride - self.pad) * self.width;
             for (x, v) in row.iter_mut().enumerate() {
-                *v = values[(first + x) * stride_in + at];
+                *v = (values[(first + x) * stride_in + at] * scale) as f32;
             }
         })
     }
@@ -309,7 +309,7 @@ impl Stencil {
 
 /// Tiles per step of the weight refresh's row pass (its values stay in
 /// registers).
-const REFRESH_LANES: usize = 8;
+const REFRESH_LANES: usize = 16;
 
 /// Iterations of eq. 13 per block of [`Linear::iterate`].
 const BLOCK: usize = 16;
@@ -635,8 +635,10 @@ fn lesser(a: f64, b: f64) -> f64 {
 }
 
 /// The weighted iterative solver (eq. 13-16): one `b_s` per tile, from
-/// `initial` or [`initial_normalizations`]. The iterations run on f32 planes
-/// (relative rounding ~1e-7, far below any estimate's noise).
+/// `initial` or [`initial_normalizations`]. It runs on f32 planes, with `g`
+/// and `mc` scaled by powers of two to a largest value in [0.5, 1) (exact;
+/// relative rounding ~1e-7, far below any estimate's noise); the weights
+/// of eq. 15-16 stay f64, whose range their floor `β1 β2^n` needs.
 pub fn weighted(
     tiles: &Tiles,
     g: &[f64],
@@ -672,7 +674,7 @@ pub fn weighted(
     // coefficients are rebuilt at every refresh.
     let problem = Problem::new(tiles, g, mc, settings.alpha);
     let planes = &problem.planes;
-    let mut b: Vec<f32> = planes.pad(&b0, 1, 0).iter().map(|&v| v as f32).collect();
+    let mut b = planes.pad(&b0, 1, 0, problem.b_scale());
     let mut next = vec![0.0f32; planes.len()];
     let mut linear = Linear::new(planes, &problem.stencil.shifts);
     let mut strips = linear.strips(planes, threads());
@@ -682,13 +684,25 @@ pub fn weighted(
     while iteration < settings.iterations {
         // Eq. 15-16: w(s) = 1 / (e(s) + β1 β2^n).
         let floor = (settings.beta1 * libm::pow(settings.beta2, iteration as f64)).max(1e-300);
-        let scale = problem.weights(&b, floor, &mut weights);
-        problem.linearize(&weights, scale, &mut linear);
+        problem.weights(&b, floor, &mut weights);
+        problem.linearize(&weights, &mut linear);
         let count = every.min(settings.iterations - iteration);
         linear.iterate(planes, &mut strips, &mut b, &mut next, count);
         iteration += count;
     }
-    Ok(planes.unpad(&b))
+    let b_scale = problem.b_scale();
+    Ok(planes.unpad(&b).into_iter().map(|v| v / b_scale).collect())
+}
+
+/// The power of two that brings the largest of `values` into [0.5, 1) (1 if
+/// they are all 0; at most 2^1000, below which values are 0 to f32).
+fn unit_scale(values: &[f64]) -> f64 {
+    let largest = values.iter().copied().fold(0.0, f64::max);
+    if largest > 0.0 {
+        libm::ldexp(1.0, -libm::frexp(largest).1.max(-1000))
+    } else {
+        1.0
+    }
 }
 
 /// A worker's last rows of the per-pixel values of the weight refresh
@@ -698,9 +712,11 @@ struct PixelRows {
     /// The film row each slot holds.
     held: Vec<Option<isize>>,
     /// Per slot, `1 + offsets` padded rows.
-    slots: Vec<Vec<f64>>,
+    slots: Vec<Vec<f32>>,
     /// Scratch: one film row per offset.
-    products: Vec<f64>,
+    products: Vec<f32>,
+    /// Scratch: one film row of residuals.
+    residuals: Vec<f32>,
     stride: usize,
 }
 
@@ -710,6 +726,7 @@ impl PixelRows {
             held: vec![None; slots],
             slots: vec![vec![0.0; (1 + offsets) * planes.stride]; slots],
             products: vec![0.0; offsets * planes.width],
+            residuals: vec![0.0; planes.width],
             stride: planes.stride,
         }
     }
@@ -720,7 +737,7 @@ impl PixelRows {
 
     /// Makes row `y` present, computing it with `compute` (slot, scratch) if
     /// it is not.
-    fn ensure(&mut self, y: isize, compute: impl FnOnce(&mut [f64], &mut [f64])) {
+    fn ensure(&mut self, y: isize, compute: impl FnOnce(&mut [f32], &mut [f32])) {
         let slot = self.slot(y);
         if self.held[slot] != Some(y) {
             compute(&mut self.slots[slot], &mut self.products);
@@ -730,43 +747,31 @@ impl PixelRows {
 
     /// Part `part` (0 = the image, `1 + a` = offset `a`'s disagreement) of
     /// row `y` (present by [`ensure`](Self::ensure)).
-    fn row(&self, y: isize, part: usize) -> &[f64] {
+    fn row(&self, y: isize, part: usize) -> &[f32] {
         &self.slots[self.slot(y)][part * self.stride..][..self.stride]
     }
-}
-
-/// The largest value of `values` (0 if there is none), in parallel under the
-/// `parallel` feature (exact: the maximum does not depend on the order).
-fn largest(values: &[f64]) -> f64 {
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        values
-            .par_chunks(1 << 14)
-            .map(|c| c.iter().copied().fold(0.0, f64::max))
-            .reduce(|| 0.0, f64::max)
-    }
-    #[cfg(not(feature = "parallel"))]
-    values.iter().copied().fold(0.0, f64::max)
 }
 
 /// The fixed inputs of [`weighted`], as padded planes.
 struct Problem {
     planes: Planes,
     stencil: Stencil,
-    /// `G_s(o)`, one plane per tile offset `o`.
-    gp: Vec<Vec<f64>>,
+    /// `G_s(o) · g_scale`, one plane per tile offset `o`.
+    gp: Vec<Vec<f32>>,
     /// 1 / the number of tiles containing each pixel (eq. 12).
-    per_pixel: Vec<f64>,
+    per_pixel: Vec<f32>,
     /// 1 / the number of pixels of each tile.
-    per_tile: Vec<f64>,
+    per_tile: Vec<f32>,
     /// 1 on tiles, 0 on the padding.
-    inside: Vec<f64>,
-    /// `Î_s`, each tile's mean MC estimate.
-    mc_mean: Vec<f64>,
-    /// `Ḡ_s`, each tile's mean unscaled estimate.
-    g_mean: Vec<f64>,
-    alpha: f64,
+    inside: Vec<f32>,
+    /// `Î_s · mc_scale`, each tile's mean MC estimate.
+    mc_mean: Vec<f32>,
+    /// `Ḡ_s · g_scale`, each tile's mean unscaled estimate.
+    g_mean: Vec<f32>,
+    /// The [`unit_scale`] of the estimates `g` and of the MC estimates.
+    g_scale: f64,
+    mc_scale: f64,
+    alpha: f32,
 }
 
 impl Problem {
@@ -774,9 +779,10 @@ impl Problem {
     fn new(tiles: &Tiles, g: &[f64], mc: &[f64], alpha: f64) -> Self {
         let (n, o) = (tiles.count(), tiles.offsets().len());
         let planes = Planes::new(tiles);
-        let gp: Vec<Vec<f64>> = (0..o).map(|off| planes.pad(g, o, off)).collect();
-        let counts = |count: &(dyn Fn(usize) -> usize + Sync)| -> Vec<f64> {
-            planes.pad(&map_indices(n, |i| 1.0 / count(i).max(1) as f64), 1, 0)
+        let (g_scale, mc_scale) = (unit_scale(g), unit_scale(mc));
+        let gp: Vec<Vec<f32>> = (0..o).map(|off| planes.pad(g, o, off, g_scale)).collect();
+        let counts = |count: &(dyn Fn(usize) -> usize + Sync)| -> Vec<f32> {
+            planes.pad(&map_indices(n, |i| 1.0 / count(i).max(1) as f64), 1, 0, 1.0)
         };
         let per_pixel = counts(&|j| tiles.tiles_of(j).count());
         let per_tile = counts(&|s| tiles.pixels(s).count());
@@ -796,66 +802,92 @@ impl Problem {
             gp,
             per_pixel,
             per_tile,
-            inside: planes.pad(&vec![1.0; n], 1, 0),
-            mc_mean: planes.pad(&tile_means(tiles, mc), 1, 0),
+            inside: planes.pad(&vec![1.0; n], 1, 0, 1.0),
+            mc_mean: planes.pad(&tile_means(tiles, mc), 1, 0, mc_scale),
             g_mean,
+            g_scale,
+            mc_scale,
             planes,
-            alpha,
+            alpha: alpha as f32,
         }
     }
 
+    /// The factor from `b` to the planes' normalizations: they hold `g ·
+    /// g_scale` and `mc · mc_scale`, so `b · mc_scale / g_scale`.
+    fn b_scale(&self) -> f64 {
+        self.mc_scale / self.g_scale
+    }
+
     /// The IRLS weights of eq. 15-16 at `b`, `w(s) = 1 / (E(s) + floor)` with
-    /// `E(s)` the tile's regularization and overlap residuals, into `weights`
-    /// (0 on the padding). Returns the scale that makes the largest weight 1
-    /// (eq. 13 is invariant to a common factor; [`linearize`](Self::linearize)
-    /// applies it as it reads the weights).
+    /// `E(s)` the tile's regularization and overlap residuals (f32), into
+    /// `weights` (0 on the padding). Eq. 13 is invariant to a common factor
+    /// of the weights, so they are not normalized.
     ///
     /// One pass over the rows: each row recomputes the image rows its tiles
     /// cover (cheap arithmetic on rows already in cache) instead of reading
     /// an image plane back from memory.
-    fn weights(&self, b: &[f32], floor: f64, weights: &mut [f64]) -> f64 {
+    fn weights(&self, b: &[f32], floor: f64, weights: &mut [f64]) {
+        let planes = &self.planes;
+        let reach = planes.pad / 2;
+        let scratch = || PixelRows::new(2 * reach + 1, planes.offsets.len(), planes);
+        planes.fill_rows_with(weights, scratch, |rows, base, row: &mut [f64]| {
+            self.weights_row(rows, b, floor, base, row);
+        });
+    }
+
+    /// The weights of the tiles of the film row starting at padded index
+    /// `base`, into `row`.
+    fn weights_row(
+        &self,
+        rows: &mut PixelRows,
+        b: &[f32],
+        floor: f64,
+        base: usize,
+        row: &mut [f64],
+    ) {
         let (planes, alpha) = (&self.planes, self.alpha);
         let reach = (planes.pad / 2) as isize;
-        let o = planes.offsets.len();
-        let scratch = || PixelRows::new(2 * reach as usize + 1, o, planes);
-        planes.fill_rows_with(weights, scratch, |rows, base, row: &mut [f64]| {
-            let y = (base / planes.stride - planes.pad) as isize;
-            for near in y - reach..=y + reach {
-                rows.ensure(near, |slot, products| {
-                    self.pixel_rows(b, near, slot, products)
-                });
+        let y = (base / planes.stride - planes.pad) as isize;
+        for near in y - reach..=y + reach {
+            rows.ensure(near, |slot, products| {
+                self.pixel_rows(b, near, slot, products)
+            });
+        }
+        let mut residuals = core::mem::take(&mut rows.residuals);
+        residuals.fill(0.0);
+        // α |e_s - Î_s|, with e_s the tile's mean of the eq. 12 image.
+        for &d in &planes.offsets {
+            let (dx, dy) = planes.split(d);
+            let start = (planes.pad as isize + dx) as usize;
+            let image_row = &rows.row(y + dy, 0)[start..start + planes.width];
+            for (v, i) in residuals.iter_mut().zip(image_row) {
+                *v += i;
             }
-            // α |e_s - Î_s|, with e_s the tile's mean of the eq. 12 image.
-            for &d in &planes.offsets {
-                let (dx, dy) = planes.split(d);
-                let start = (planes.pad as isize + dx) as usize;
-                let image_row = &rows.row(y + dy, 0)[start..start + planes.width];
-                for (v, i) in row.iter_mut().zip(image_row) {
-                    *v += i;
-                }
+        }
+        let (pt, m) = (
+            planes.at(&self.per_tile, base, 0),
+            planes.at(&self.mc_mean, base, 0),
+        );
+        for ((v, pt), m) in residuals.iter_mut().zip(pt).zip(m) {
+            *v = alpha * (*v * pt - m).abs();
+        }
+        // ½ |b_t G_t(k) - b_s G_s(k)| over the pixels k shared with other
+        // tiles t: the disagreement of each of the tile's pixels.
+        for (a, &d) in planes.offsets.iter().enumerate() {
+            let (dx, dy) = planes.split(d);
+            let start = (planes.pad as isize + dx) as usize;
+            let disagreement = &rows.row(y + dy, 1 + a)[start..start + planes.width];
+            for (v, e) in residuals.iter_mut().zip(disagreement) {
+                *v += e;
             }
-            let (pt, m) = (
-                planes.at(&self.per_tile, base, 0),
-                planes.at(&self.mc_mean, base, 0),
-            );
-            for ((v, pt), m) in row.iter_mut().zip(pt).zip(m) {
-                *v = alpha * (*v * pt - m).abs();
-            }
-            // ½ |b_t G_t(k) - b_s G_s(k)| over the pixels k shared with other
-            // tiles t: the disagreement of each of the tile's pixels.
-            for (a, &d) in planes.offsets.iter().enumerate() {
-                let (dx, dy) = planes.split(d);
-                let start = (planes.pad as isize + dx) as usize;
-                let disagreement = &rows.row(y + dy, 1 + a)[start..start + planes.width];
-                for (v, e) in row.iter_mut().zip(disagreement) {
-                    *v += e;
-                }
-            }
-            for v in row.iter_mut() {
-                *v = 1.0 / (*v + floor);
-            }
-        });
-        1.0 / largest(weights)
+        }
+        // The residuals are in the planes' units, `mc_scale` times the
+        // estimates'.
+        let floor = floor * self.mc_scale;
+        for (w, e) in row.iter_mut().zip(&residuals) {
+            *w = 1.0 / (*e as f64 + floor);
+        }
+        rows.residuals = residuals;
     }
 
     /// Film row `y` (any other `y` gives zeros) of the per-pixel values
@@ -867,7 +899,7 @@ impl Problem {
     /// estimate with the other tiles holding the pixel (tiles outside the
     /// film excluded). `products` is scratch for the `P_o` (one film row
     /// each).
-    fn pixel_rows(&self, b: &[f32], y: isize, slot: &mut [f64], products: &mut [f64]) {
+    fn pixel_rows(&self, b: &[f32], y: isize, slot: &mut [f32], products: &mut [f32]) {
         let planes = &self.planes;
         let (stride, width, pad) = (planes.stride, planes.width, planes.pad);
         slot.fill(0.0);
@@ -884,7 +916,7 @@ impl Problem {
         {
             let (g, bt) = (planes.at(gp, base, -d), planes.at(b, base, -d));
             for ((p, g), b) in p.iter_mut().zip(g).zip(bt) {
-                *p = g * *b as f64;
+                *p = g * b;
             }
         }
         let image = &mut image[pad..pad + width];
@@ -921,8 +953,7 @@ impl Problem {
         }
     }
 
-    /// Eq. 13 at fixed weights (`weights` times `scale`) as the linear
-    /// stencil of `linear`.
+    /// Eq. 13 at fixed weights as the linear stencil of `linear`.
     ///
     /// Eq. 13 sums over the pixels k that tile s shares with other tiles t
     /// `w(s,t) F_{s,t}(k)` and `w(s,t) G_s(k)`, with `w(s,t) = min(w(s),
@@ -936,8 +967,10 @@ impl Problem {
     /// `e_s(b) = Σ_δ K_δ(s) b(s + δ)` the tile's mean of the eq. 12 image,
     /// `b'(s) = b(s) + [α w(s) (Î_s - e_s(b)) - ½ own(s) b(s)
     ///                  + ½ Σ_t w(s,t) b(t) Σ_{k shared} G_t(k)] / D`.
-    /// A tile with `D = 0` keeps its `b` (`C_0 = 1`, the rest 0).
-    fn linearize(&self, weights: &[f64], scale: f64, linear: &mut Linear) {
+    /// A tile with `D = 0` keeps its `b` (`C_0 = 1`, the rest 0). Every term
+    /// is a ratio to `D`, so the weights enter as `w(s,t) / w(s) ∈ [0, 1]`
+    /// (f32; the weights themselves span up to ~600 orders of magnitude).
+    fn linearize(&self, weights: &[f64], linear: &mut Linear) {
         let (pad, height) = (self.planes.pad, self.planes.height);
         let block = linear.row_block();
         let chunks = linear.chunks;
@@ -951,10 +984,10 @@ impl Problem {
                 // SAFETY: the CPU has AVX2, the only requirement of `terms_row_avx2`.
                 #[allow(unsafe_code)]
                 unsafe {
-                    return self.terms_row_avx2(weights, scale, base, chunks, terms);
+                    return self.terms_row_avx2(weights, base, chunks, terms);
                 }
             }
-            self.terms_row(weights, scale, base, chunks, terms);
+            self.terms_row(weights, base, chunks, terms);
         };
         #[cfg(feature = "parallel")]
         {
@@ -968,38 +1001,24 @@ impl Problem {
     /// [`terms_row`](Self::terms_row) compiled for AVX2.
     #[cfg(all(feature = "std", target_arch = "x86_64"))]
     #[target_feature(enable = "avx2")]
-    fn terms_row_avx2(
-        &self,
-        weights: &[f64],
-        scale: f64,
-        base: usize,
-        chunks: Chunks,
-        terms: &mut [f32],
-    ) {
-        self.terms_row(weights, scale, base, chunks, terms);
+    fn terms_row_avx2(&self, weights: &[f64], base: usize, chunks: Chunks, terms: &mut [f32]) {
+        self.terms_row(weights, base, chunks, terms);
     }
 
     /// The terms of the tiles of the film row starting at padded index
     /// `base`, into the row's block of [`Linear::terms`], chunk by chunk.
     #[inline(always)]
-    fn terms_row(
-        &self,
-        weights: &[f64],
-        scale: f64,
-        base: usize,
-        chunks: Chunks,
-        terms: &mut [f32],
-    ) {
+    fn terms_row(&self, weights: &[f64], base: usize, chunks: Chunks, terms: &mut [f32]) {
         let (lanes, block) = (chunks.lanes, (self.stencil.shifts.len() + 1) * chunks.lanes);
         for c in 0..chunks.count {
             let start = chunks.start(c);
             let out = &mut terms[c * block..(c + 1) * block];
             let whole = lanes - lanes % REFRESH_LANES;
             for x in (0..whole).step_by(REFRESH_LANES) {
-                self.terms::<REFRESH_LANES>(weights, scale, base + start + x, &mut out[x..], lanes);
+                self.terms::<REFRESH_LANES>(weights, base + start + x, &mut out[x..], lanes);
             }
             for x in whole..lanes {
-                self.terms::<1>(weights, scale, base + start + x, &mut out[x..], lanes);
+                self.terms::<1>(weights, base + start + x, &mut out[x..], lanes);
             }
         }
     }
@@ -1007,48 +1026,33 @@ impl Problem {
     /// [`linearize`](Self::linearize) at the `N` tiles from padded index
     /// `at`: term `p` of tile `at + i` goes to `terms[p · stride + i]`.
     #[inline(always)]
-    fn terms<const N: usize>(
-        &self,
-        weights: &[f64],
-        scale: f64,
-        at: usize,
-        terms: &mut [f32],
-        stride: usize,
-    ) {
+    fn terms<const N: usize>(&self, weights: &[f64], at: usize, terms: &mut [f32], stride: usize) {
         let (planes, alpha, stencil) = (&self.planes, self.alpha, &self.stencil);
-        let load = |plane: &[f64], shift: isize| -> [f64; N] {
+        let load = |plane: &[f32], shift: isize| -> [f32; N] {
             let start = at.wrapping_add_signed(shift);
-            <[f64; N]>::try_from(&plane[start..start + N]).unwrap_or([0.0; N])
+            <[f32; N]>::try_from(&plane[start..start + N]).unwrap_or([0.0; N])
         };
-        let weight = |shift: isize| load(weights, shift).map(|w| w * scale);
-        let ws = weight(0);
-        // own(s) = Σ_δ w(s, s + δ) Σ_{(o, o'), o ≠ o'} G_s(o).
-        let mut own = [0.0; N];
-        for (&shift, sharing) in stencil.shifts.iter().zip(&stencil.sharing) {
-            let mut gs = [0.0; N];
-            for &(a, _) in sharing.iter().filter(|(a, o)| a != o) {
-                let g = load(&self.gp[a], 0);
-                for i in 0..N {
-                    gs[i] += g[i];
-                }
-            }
-            let wt = weight(shift);
-            for i in 0..N {
-                own[i] += lesser(ws[i], wt[i]) * gs[i];
-            }
-        }
-        let (gm, m) = (load(&self.g_mean, 0), load(&self.mc_mean, 0));
-        let mut inverse = [0.0; N];
-        for i in 0..N {
-            let d = alpha * ws[i] * gm[i] + own[i];
-            inverse[i] = if d > 0.0 { 1.0 / d } else { 0.0 };
-            terms[i] = (alpha * ws[i] * m[i] * inverse[i]) as f32;
-        }
+        let load_weights = |shift: isize| -> [f64; N] {
+            let start = at.wrapping_add_signed(shift);
+            <[f64; N]>::try_from(&weights[start..start + N]).unwrap_or([0.0; N])
+        };
+        let ws = load_weights(0);
+        let inverse_ws = ws.map(|w| if w > 0.0 { 1.0 / w } else { 0.0 });
+        // w(s, s + δ) / w(s) (0 for both if w(s) = 0).
+        let ratio = |shift: isize| -> [f32; N] {
+            let wt = load_weights(shift);
+            core::array::from_fn(|i| (lesser(ws[i], wt[i]) * inverse_ws[i]) as f32)
+        };
+        let own_ratio = ratio(0);
         let pt = load(&self.per_tile, 0);
+        // Per shift δ, into the term's slot: the numerator c_δ(s) / w(s) of
+        // C_δ(s) = c_δ(s) / D (the diagonal's also gets its own(s) part
+        // below), with K_δ(s) |s| = Σ_{(o, o')} G_{s+δ}(o') / |tiles ∋ s +
+        // d_o| and the sums over the pairs with o ≠ o' of G_{s+δ}(o') and,
+        // for own(s) / w(s) = Σ_δ w(s, s + δ) / w(s) Σ G_s(o), of G_s(o).
+        let mut own = [0.0; N];
         for (p, (&shift, sharing)) in stencil.shifts.iter().zip(&stencil.sharing).enumerate() {
-            // K_δ(s) |s| = Σ_{(o, o')} G_{s+δ}(o') / |tiles ∋ s + d_o|, and
-            // Σ_{(o, o'), o ≠ o'} G_{s+δ}(o').
-            let (mut k, mut gt) = ([0.0; N], [0.0; N]);
+            let (mut k, mut gt, mut gs) = ([0.0; N], [0.0; N], [0.0; N]);
             for &(a, o) in sharing {
                 let g = load(&self.gp[o], shift);
                 let pixel = load(&self.per_pixel, planes.offsets[a]);
@@ -1056,18 +1060,33 @@ impl Problem {
                     k[i] += pixel[i] * g[i];
                 }
                 if a != o {
+                    let g_own = load(&self.gp[a], 0);
                     for i in 0..N {
                         gt[i] += g[i];
+                        gs[i] += g_own[i];
                     }
                 }
             }
-            let wt = weight(shift);
+            let rt = ratio(shift);
+            let out = &mut terms[(1 + p) * stride..][..N];
+            for i in 0..N {
+                own[i] += rt[i] * gs[i];
+                out[i] = -alpha * own_ratio[i] * k[i] * pt[i] + 0.5 * rt[i] * gt[i];
+            }
+        }
+        let (gm, m) = (load(&self.g_mean, 0), load(&self.mc_mean, 0));
+        let mut inverse = [0.0; N];
+        for i in 0..N {
+            let d = alpha * own_ratio[i] * gm[i] + own[i];
+            inverse[i] = if d > 0.0 { 1.0 / d } else { 0.0 };
+            terms[i] = alpha * own_ratio[i] * m[i] * inverse[i];
+        }
+        for (p, &shift) in stencil.shifts.iter().enumerate() {
             // The diagonal keeps b(s) and subtracts ½ own(s) b(s).
             let (keep, own_part) = if shift == 0 { (1.0, 0.5) } else { (0.0, 0.0) };
             let out = &mut terms[(1 + p) * stride..][..N];
             for i in 0..N {
-                let c = -alpha * ws[i] * k[i] * pt[i] + 0.5 * lesser(ws[i], wt[i]) * gt[i];
-                out[i] = (keep + (c - own_part * own[i]) * inverse[i]) as f32;
+                out[i] = keep + (out[i] - own_part * own[i]) * inverse[i];
             }
         }
     }
@@ -1301,6 +1320,33 @@ mod tests {
         }
     }
 
+    #[test]
+    fn unit_scales_are_powers_of_two_bringing_the_largest_value_below_1() {
+        assert_eq!(unit_scale(&[0.0, 3.0, 1.0]), 0.25);
+        assert_eq!(unit_scale(&[0.5]), 1.0);
+        assert_eq!(unit_scale(&[0.0, 0.0]), 1.0);
+        let largest = unit_scale(&[f64::MAX]) * f64::MAX;
+        assert!((0.5..1.0).contains(&largest), "{largest}");
+        assert_eq!(unit_scale(&[5e-324]), 2f64.powi(1000));
+    }
+
+    /// Estimates far outside f32's range (the solver's planes are f32) give
+    /// the same normalizations, scaled.
+    #[test]
+    fn estimates_beyond_the_range_of_f32_are_solved_alike() {
+        let (tiles, g, intensity, _) = synthetic(Resolution::new(17, 11), TileShape::Cross);
+        let settings = WeightedSettings::default();
+        let plain = weighted(&tiles, &g, &intensity, &settings, None).unwrap();
+        let (up, down) = (1e60, 1e-60);
+        let g_up: Vec<f64> = g.iter().map(|v| v * up).collect();
+        let mc_down: Vec<f64> = intensity.iter().map(|v| v * down).collect();
+        let scaled = weighted(&tiles, &g_up, &mc_down, &settings, None).unwrap();
+        for (s, (got, want)) in scaled.iter().zip(&plain).enumerate() {
+            let ratio = got / (want * down / up);
+            assert!((ratio - 1.0).abs() < 1e-5, "tile {s}: ratio {ratio}");
+        }
+    }
+
     /// One weight refresh and one stencil step give eq. 13-16 evaluated
     /// directly from the tiles (in the form of `Problem::linearize`), up to
     /// the f32 rounding of the stencil (~1e-7 per term).
@@ -1316,28 +1362,34 @@ mod tests {
             let (n, o) = (tiles.count(), tiles.offsets().len());
             let mut rng = stream(6, Domain::User, 6);
             let mut draw = |lo: f64| lo + uniform_f64(&mut rng);
+            // Scaled away from [0.5, 1), so that the solver's planes are
+            // scaled (g by 2^-4, mc by 2^10).
             let g: Vec<f64> = (0..n * o)
                 .map(|i| match tiles.pixel(i / o, i % o) {
-                    Some(_) => draw(0.1),
+                    Some(_) => 9.0 * draw(0.1),
                     None => 0.0,
                 })
                 .collect();
-            let mc: Vec<f64> = (0..n).map(|_| draw(0.1)).collect();
+            let mc: Vec<f64> = (0..n).map(|_| 7e-4 * draw(0.1)).collect();
             // Exactly representable in f32, as the stencil stores b.
             let b: Vec<f64> = (0..n).map(|_| draw(0.5) as f32 as f64).collect();
             let (alpha, floor) = (0.05, 0.01);
 
             let problem = Problem::new(&tiles, &g, &mc, alpha);
             let planes = &problem.planes;
-            let padded: Vec<f32> = planes.pad(&b, 1, 0).iter().map(|&v| v as f32).collect();
+            // The planes' units (see `weighted`).
+            let b_scale = problem.b_scale();
+            let padded = planes.pad(&b, 1, 0, b_scale);
             let mut weights = vec![0.0; planes.len()];
-            let scale = problem.weights(&padded, floor, &mut weights);
+            problem.weights(&padded, floor, &mut weights);
             let mut linear = Linear::new(planes, &problem.stencil.shifts);
-            problem.linearize(&weights, scale, &mut linear);
+            problem.linearize(&weights, &mut linear);
             let mut strips = linear.strips(planes, 1);
             let (mut stepped, mut next) = (padded.clone(), vec![0.0; planes.len()]);
             linear.iterate(planes, &mut strips, &mut stepped, &mut next, 1);
-            let (weights, stepped) = (planes.unpad(&weights), planes.unpad(&stepped));
+            let weights = planes.unpad(&weights);
+            let largest_weight = weights.iter().copied().fold(0.0, f64::max);
+            let stepped: Vec<f64> = planes.unpad(&stepped).iter().map(|v| v / b_scale).collect();
 
             // Eq. 12-16 from the tiles' own description.
             let gs = |s: usize, j: usize| tiles.offset_of(s, j).map_or(0.0, |off| g[s * o + off]);
@@ -1370,8 +1422,9 @@ mod tests {
             let max = residual.iter().copied().fold(0.0, f64::max);
             for s in 0..n {
                 let w = residual[s] / max;
+                // The residuals are summed in f32.
                 assert!(
-                    (weights[s] * scale - w).abs() <= 1e-12 * w,
+                    (weights[s] / largest_weight - w).abs() <= 2e-6 * w,
                     "{res:?} tile {s}: weight"
                 );
                 let (mut own, mut others) = (0.0, 0.0);
@@ -1417,7 +1470,7 @@ mod tests {
                 }
             }
             let films: Vec<f64> = (0..tiles.count()).map(|_| uniform_f64(&mut rng)).collect();
-            let start: Vec<f32> = planes.pad(&films, 1, 0).iter().map(|&v| v as f32).collect();
+            let start = planes.pad(&films, 1, 0, 1.0);
             let plain = |count: u32| {
                 let mut b = start.clone();
                 for _ in 0..count {

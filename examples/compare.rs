@@ -459,6 +459,56 @@ fn tick_label(v: f64) -> String {
     format!("{v:.decimals$}")
 }
 
+/// Where the legend hides the least of `lines` (points on log-log axes over
+/// `x` and `y`): the upper right unless another corner or edge of the plot
+/// has fewer line samples under a legend-sized box (a quarter of the width
+/// and of the height).
+fn legend_position(
+    lines: &[Vec<(f64, f64)>],
+    x: (f64, f64),
+    y: (f64, f64),
+) -> plotters::prelude::SeriesLabelPosition {
+    use plotters::prelude::SeriesLabelPosition::*;
+    let unit = |v: f64, (lo, hi): (f64, f64)| (v / lo).ln() / (hi / lo).ln();
+    let samples: Vec<(f64, f64)> = lines
+        .iter()
+        .flat_map(|line| line.windows(2))
+        .flat_map(|pair| {
+            let (a, b) = (
+                (unit(pair[0].0, x), unit(pair[0].1, y)),
+                (unit(pair[1].0, x), unit(pair[1].1, y)),
+            );
+            (0..=32).map(move |i| {
+                let f = i as f64 / 32.0;
+                (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1))
+            })
+        })
+        .collect();
+    let (w, h) = (0.25, 0.25);
+    let span = |at: f64, size: f64| (at * (1.0 - size), at * (1.0 - size) + size);
+    [
+        (UpperRight, 1.0, 1.0),
+        (UpperLeft, 0.0, 1.0),
+        (LowerLeft, 0.0, 0.0),
+        (LowerRight, 1.0, 0.0),
+        (MiddleRight, 1.0, 0.5),
+        (MiddleLeft, 0.0, 0.5),
+        (UpperMiddle, 0.5, 1.0),
+        (LowerMiddle, 0.5, 0.0),
+    ]
+    .into_iter()
+    .map(|(position, cx, cy)| {
+        let ((x0, x1), (y0, y1)) = (span(cx, w), span(cy, h));
+        let covered = samples
+            .iter()
+            .filter(|(sx, sy)| (x0..=x1).contains(sx) && (y0..=y1).contains(sy))
+            .count();
+        (covered, position)
+    })
+    .min_by_key(|(covered, _)| *covered)
+    .map_or(UpperRight, |(_, position)| position)
+}
+
 fn plot(
     rows: &[Row],
     scene: &str,
@@ -511,12 +561,14 @@ fn plot(
             .y_label_formatter(&|v| tick_label(*v))
             .label_style(("sans-serif", 13))
             .draw()?;
+        let mut lines = Vec::new();
         for (&method, color) in methods.iter().zip(colors) {
             let points: Vec<(f64, f64)> = rows
                 .iter()
                 .filter(|r| r.method == method)
                 .map(|r| (r.seconds, metric(&r.errors)))
                 .collect();
+            lines.push(points.clone());
             chart
                 .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))?
                 .label(method.name())
@@ -525,9 +577,10 @@ fn plot(
                 });
             chart.draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
         }
+        let legend = legend_position(&lines, (t_lo * 0.8, t_hi * 1.25), (lo * 0.7, hi * 1.4));
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(legend)
             .label_font(("sans-serif", 13))
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)

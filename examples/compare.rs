@@ -540,18 +540,19 @@ fn plot(
         if lo > hi {
             return Err(format!("no positive {name} to plot").into());
         }
+        let (x_range, y_range) = ((t_lo * 0.8, t_hi * 1.25), (lo * 0.7, hi * 1.4));
         let mut chart = ChartBuilder::on(panel)
             .caption(format!("{scene}: {name} against time"), ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(70)
             .build_cartesian_2d(
-                (t_lo * 0.8..t_hi * 1.25)
+                (x_range.0..x_range.1)
                     .log_scale()
-                    .with_key_points(log_ticks(t_lo * 0.8, t_hi * 1.25)),
-                (lo * 0.7..hi * 1.4)
+                    .with_key_points(log_ticks(x_range.0, x_range.1)),
+                (y_range.0..y_range.1)
                     .log_scale()
-                    .with_key_points(log_ticks(lo * 0.7, hi * 1.4)),
+                    .with_key_points(log_ticks(y_range.0, y_range.1)),
             )?;
         chart
             .configure_mesh()
@@ -568,7 +569,6 @@ fn plot(
                 .filter(|r| r.method == method)
                 .map(|r| (r.seconds, metric(&r.errors)))
                 .collect();
-            lines.push(points.clone());
             chart
                 .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))?
                 .label(method.name())
@@ -576,8 +576,9 @@ fn plot(
                     PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
                 });
             chart.draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
+            lines.push(points);
         }
-        let legend = legend_position(&lines, (t_lo * 0.8, t_hi * 1.25), (lo * 0.7, hi * 1.4));
+        let legend = legend_position(&lines, x_range, y_range);
         chart
             .configure_series_labels()
             .position(legend)

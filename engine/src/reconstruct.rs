@@ -882,8 +882,8 @@ impl Problem {
             }
         }
         // The residuals are in the planes' units, `mc_scale` times the
-        // estimates'.
-        let floor = floor * self.mc_scale;
+        // estimates' (kept normal, so that no weight is infinite).
+        let floor = (floor * self.mc_scale).max(f64::MIN_POSITIVE);
         for (w, e) in row.iter_mut().zip(&residuals) {
             *w = 1.0 / (*e as f64 + floor);
         }
@@ -1344,6 +1344,34 @@ mod tests {
         for (s, (got, want)) in scaled.iter().zip(&plain).enumerate() {
             let ratio = got / (want * down / up);
             assert!((ratio - 1.0).abs() < 1e-5, "tile {s}: ratio {ratio}");
+        }
+    }
+
+    /// A black tile's residual is 0, so its weight is 1 / the floor; with
+    /// estimates so large that the floor in the planes' units underflows,
+    /// the weight still stays finite.
+    #[test]
+    fn black_tiles_get_finite_weights_whatever_the_scale() {
+        let tiles = Tiles::new(Resolution::new(9, 7), TileShape::Cross).unwrap();
+        let o = tiles.offsets().len();
+        // Bright (1e300) on the left half, black on the right.
+        let bright = |p: usize| p % 9 < 4;
+        let g: Vec<f64> = (0..tiles.count() * o)
+            .map(|i| match tiles.pixel(i / o, i % o) {
+                Some(p) if bright(p) => 0.5,
+                _ => 0.0,
+            })
+            .collect();
+        let mc: Vec<f64> = (0..tiles.count())
+            .map(|p| if bright(p) { 1e300 } else { 0.0 })
+            .collect();
+        let problem = Problem::new(&tiles, &g, &mc, 0.05);
+        let planes = &problem.planes;
+        let b = planes.pad(&vec![1.0; tiles.count()], 1, 0, problem.b_scale());
+        let mut weights = vec![0.0; planes.len()];
+        problem.weights(&b, 1e-290, &mut weights);
+        for (s, w) in planes.unpad(&weights).iter().enumerate() {
+            assert!(w.is_finite() && *w > 0.0, "tile {s}: weight {w}");
         }
     }
 

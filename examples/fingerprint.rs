@@ -1,0 +1,211 @@
+//! Renders every method on a few scenes at a fixed seed and sample budget and
+//! writes, per render, the film's f64 values (`.f64`, little-endian), its EXR
+//! (`.exr`) and its statistics (`.stats`). `scripts/image-hashes.sh` runs it at
+//! 1 and 2 threads and compares the files' SHA-256 with the recorded ones, so
+//! a refactoring can show that no method computes anything different.
+//!
+//! ```text
+//! cargo run --release --example fingerprint -- --threads 2 --out out/fingerprints/2
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use clap::Parser;
+use strata::engine::analytic::ProceduralImage;
+use strata::engine::erpt::{ErptSettings, render_erpt};
+use strata::engine::exchange::{
+    EnsembleSettings, ExchangeKind, ReplicaSettings, Tempering, render_replica,
+};
+use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
+use strata::engine::reconstruct::LogSettings;
+use strata::engine::render::{
+    Budget, McSettings, PssmltSettings, RenderOutput, RenderStats, Silent, render_mc, render_pssmlt,
+};
+use strata::engine::stages::{MultiStageSettings, render_multistage};
+use strata::engine::stratify::{Solver, StratifiedSettings, render_stratified};
+use strata::engine::target::MaxChannel;
+use strata::engine::{Error, PathOracle, Resolution};
+use strata::native::{builtin, native_tracer};
+
+/// Render every method at a fixed seed and budget; write films, EXRs, statistics.
+#[derive(Parser, Debug)]
+struct Args {
+    /// Worker threads.
+    #[arg(long, default_value_t = 1)]
+    threads: usize,
+    /// Output directory.
+    #[arg(long, default_value = "out/fingerprints")]
+    out: PathBuf,
+}
+
+const SEED: u64 = 11;
+const SPP: u64 = 64;
+const RESOLUTION: Resolution = Resolution::new(40, 24);
+
+fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    let args = Args::parse();
+    std::fs::create_dir_all(&args.out)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads)
+        .build()?;
+    pool.install(|| -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        let procedural = ProceduralImage::showcase(RESOLUTION);
+        render_all("procedural", &procedural, &args.out)?;
+        for name in ["cornell", "caustic"] {
+            let scene = builtin::by_name(name, RESOLUTION).expect("a built-in scene");
+            render_all(name, &native_tracer(scene), &args.out)?;
+        }
+        Ok(())
+    })
+}
+
+/// Every method (and the variants that take other code paths) on `oracle`.
+fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), Error> {
+    let budget = Budget::samples_per_pixel(SPP, oracle.resolution());
+    let mc = render_mc(oracle, &McSettings { seed: SEED, budget }, &Silent)?;
+    write(out, scene, "mc", &mc);
+    for (name, small_step) in [
+        ("pssmlt", SmallStep::Kelemen(Kelemen::DEFAULT)),
+        ("pssmlt-gaussian", SmallStep::Gaussian(Gaussian::DEFAULT)),
+        ("pssmlt-adaptive", SmallStep::Adaptive(Adaptive::DEFAULT)),
+    ] {
+        let settings = PssmltSettings {
+            seed: SEED,
+            budget,
+            mutation: MutationParams {
+                small_step,
+                large_step_probability: 0.3,
+            },
+            ..Default::default()
+        };
+        write(
+            out,
+            scene,
+            name,
+            &render_pssmlt(oracle, &MaxChannel, &settings, &Silent)?,
+        );
+    }
+    for (name, exchange, tempering, tuning) in [
+        (
+            "replica-is-permutation",
+            ExchangeKind::IsPermutation,
+            Tempering::Oracle,
+            0,
+        ),
+        (
+            "replica-ees",
+            ExchangeKind::thesis_equi_energy_sampler(20),
+            Tempering::Oracle,
+            0,
+        ),
+        (
+            "replica-neighbor-tuned",
+            ExchangeKind::NeighborSwap,
+            Tempering::Power,
+            64,
+        ),
+    ] {
+        let mut ensemble = EnsembleSettings::geometric(4, 100.0)?;
+        ensemble.tempering = tempering;
+        ensemble.bootstrap_candidates = 20_000;
+        let settings = ReplicaSettings {
+            seed: SEED,
+            budget,
+            ensembles: 8,
+            ensemble,
+            exchange,
+            ladder_tuning_sweeps: tuning,
+        };
+        let r = render_replica(oracle, &MaxChannel, &settings, &Silent)?;
+        let output = RenderOutput {
+            film: r.film,
+            stats: r.stats,
+            cancelled: r.cancelled,
+            visits: r.visits,
+        };
+        write(out, scene, name, &output);
+    }
+    for (name, solver) in [
+        ("stratified", Solver::default()),
+        ("stratified-log", Solver::LogDomain(LogSettings::default())),
+    ] {
+        let settings = StratifiedSettings {
+            seed: SEED,
+            budget,
+            mutation: MutationParams {
+                small_step: SmallStep::Kelemen(Kelemen::SEED_001),
+                large_step_probability: 0.3,
+            },
+            solver,
+            ..Default::default()
+        };
+        let s = render_stratified(oracle, &MaxChannel, &settings, &Silent)?;
+        write(out, scene, name, &s.render);
+    }
+    let erpt = ErptSettings {
+        seed: SEED,
+        budget,
+        small_step: SmallStep::Kelemen(Kelemen::SEED_001),
+        chain_length: 20,
+        ..Default::default()
+    };
+    write(
+        out,
+        scene,
+        "erpt",
+        &render_erpt(oracle, &MaxChannel, &erpt, &Silent)?,
+    );
+    for (name, noise_aware) in [("multistage", false), ("noise-aware", true)] {
+        let mut settings = MultiStageSettings {
+            noise_aware,
+            ..Default::default()
+        };
+        settings.pssmlt.seed = SEED;
+        settings.pssmlt.budget = budget;
+        settings.pssmlt.chains = 64;
+        let m = render_multistage(oracle, &MaxChannel, &settings, &Silent)?;
+        write(out, scene, name, &m.output);
+    }
+    Ok(())
+}
+
+fn write(out: &Path, scene: &str, method: &str, output: &RenderOutput) {
+    let base = out.join(format!("{scene}-{method}"));
+    let values: Vec<u8> = output
+        .film
+        .data()
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    std::fs::write(base.with_extension("f64"), values).expect("writable output directory");
+    strata::io::write_exr(&output.film, base.with_extension("exr")).expect("EXR written");
+    std::fs::write(
+        base.with_extension("stats"),
+        stats(&output.stats, &output.visits),
+    )
+    .expect("writable output directory");
+    println!("{scene} {method}");
+}
+
+/// The counters that must not change either (floats as bits).
+fn stats(s: &RenderStats, visits: &[u64]) -> String {
+    let c = &s.chains;
+    format!(
+        "samples {}\nbootstrap {}\ninvalid {}\nnormalization {:?}\nproposals {}\naccepted {}\n\
+         large {}\nacceptance {:016x}\nchain invalid {}\nvisits {}\n",
+        s.samples,
+        s.bootstrap_samples,
+        s.invalid_samples,
+        s.normalization.map(f64::to_bits),
+        c.proposals,
+        c.accepted,
+        c.large_steps,
+        c.acceptance_sum.to_bits(),
+        c.invalid,
+        visits
+            .iter()
+            .map(|v| v.to_string())
+            .collect::<Vec<_>>()
+            .join(","),
+    )
+}

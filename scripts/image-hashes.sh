@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# The image-hash check: renders every method on a few scenes at a fixed seed and
+# sample budget (examples/fingerprint.rs) at 1 and 2 threads, and compares the
+# SHA-256 of every film, EXR and statistics file with the recorded ones in
+# scripts/image-hashes.sha256. Run it before and after any change that must not
+# change what a method computes.
+#
+#   scripts/image-hashes.sh            check (exit 1 on any difference)
+#   scripts/image-hashes.sh --record   record the current hashes
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+record=0
+[ "${1:-}" = "--record" ] && record=1
+recorded=scripts/image-hashes.sha256
+out=out/fingerprints
+
+cargo build --release --example fingerprint
+rm -rf "$out"
+for threads in 1 2; do
+  target/release/examples/fingerprint --threads "$threads" --out "$out/$threads" >/dev/null
+done
+hashes() { (cd "$out/$1" && sha256sum -- * | sort -k 2); }
+
+status=0
+if ! diff <(hashes 1) <(hashes 2) >/dev/null; then
+  echo "1 and 2 threads differ:"
+  diff <(hashes 1) <(hashes 2) || true
+  status=1
+fi
+if [ "$record" = 1 ]; then
+  hashes 1 >"$recorded"
+  echo "recorded $(wc -l <"$recorded") hashes in $recorded"
+elif ! diff "$recorded" <(hashes 1); then
+  echo "the hashes differ from $recorded (< recorded, > now)"
+  status=1
+else
+  echo "all $(wc -l <"$recorded") hashes match $recorded, at 1 and 2 threads"
+fi
+exit "$status"

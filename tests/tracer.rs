@@ -7,7 +7,7 @@ use glam::Vec3;
 use strata::engine::exchange::{
     EnsembleSettings, ExchangeKind, ReplicaSettings, Tempering, render_replica,
 };
-use strata::engine::oracle::check_purity;
+use strata::engine::purity::check_purity;
 use strata::engine::render::{
     Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
 };

@@ -7,9 +7,9 @@
 use alloc::vec::Vec;
 
 use crate::film::Film;
+use crate::oracle::Sampler;
 use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Resolution, Rgb, Temperature};
 use crate::rng::{self, Domain, uniform_f64};
-use crate::sample::Sampler;
 
 /// Standard normal CDF.
 fn phi(z: f64) -> f64 {
@@ -470,7 +470,7 @@ mod tests {
         let exact = m.squared_integral(2.0);
         assert!((sum - exact).abs() < 1e-4 * exact, "{sum} vs {exact}");
     }
-    use crate::oracle::check_purity;
+    use crate::purity::check_purity;
 
     /// Midpoint-rule check of every closed form on a fine grid.
     #[test]

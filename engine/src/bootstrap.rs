@@ -159,8 +159,8 @@ impl Bootstrap {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::oracle::Sampler;
     use crate::oracle::{FilmPoint, PathSample, Resolution, Temperature};
-    use crate::sample::Sampler;
     use crate::target::MaxChannel;
 
     /// Bright only where the film x is in the left tenth.

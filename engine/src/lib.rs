@@ -8,8 +8,9 @@
 //!
 //! | module | owns |
 //! |---|---|
-//! | [`oracle`] | the oracle contract, [`Radiance`](oracle::Radiance), [`PathSample`](oracle::PathSample), purity checking |
-//! | [`sample`] | the [`Sampler`](sample::Sampler) trait, the lazily mutated primary-sample-space sampler, the independent sampler |
+//! | [`oracle`] | the oracle contract: [`PathOracle`](oracle::PathOracle), [`Sampler`](oracle::Sampler), [`Radiance`](oracle::Radiance), [`PathSample`](oracle::PathSample) |
+//! | [`purity`] | checking that an oracle is a pure function of its inputs |
+//! | [`sample`] | the lazily mutated primary-sample-space sampler, the independent sampler |
 //! | [`mutate`] | small-step kernels (Kelemen, Gaussian, adaptive) and their parameters |
 //! | [`target`] | importance functions (max channel, luminance, closures) |
 //! | [`chain`] | one Metropolis-Hastings chain with expected-values splatting |
@@ -47,6 +48,7 @@ pub mod film;
 pub mod metrics;
 pub mod mutate;
 pub mod oracle;
+pub mod purity;
 pub mod reconstruct;
 pub mod render;
 pub mod rng;
@@ -60,6 +62,5 @@ pub mod tiles;
 pub use error::Error;
 pub use film::Film;
 pub use oracle::{
-    FilmPoint, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb, Temperature,
+    FilmPoint, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb, Sampler, Temperature,
 };
-pub use sample::Sampler;

@@ -8,6 +8,8 @@
 //! compose by addition on the circle, which is what the lazy sampler uses to
 //! catch up coordinates that were not read for a while.
 
+use alloc::vec::Vec;
+
 use rand_core::Rng;
 
 use crate::error::{Error, check_positive, check_probability};
@@ -381,6 +383,157 @@ impl MutationParams {
             SmallStep::Gaussian(g) => Gaussian::new(g.sigma).map(drop),
             SmallStep::Adaptive(a) => Adaptive::new(a.initial_theta, a.target_acceptance).map(drop),
         }
+    }
+}
+
+/// A small-step kernel with its running state, applied lazily (seed 002 sec.
+/// 4.2.1; pbrt-v4's `MLTSampler`): [`advance`](Self::advance) moves a
+/// coordinate by every small step it missed since it was last up to date.
+/// The Gaussian kernel catches up exactly in one draw of standard deviation
+/// `σ√n`; Kelemen's replays the `n` offsets; the adaptive kernel replays them
+/// with the `θ` recorded for each of those iterations. That record starts
+/// over at every accepted large step (older coordinates are redrawn
+/// uniformly anyway), and when it reaches [`THETA_RECORD_LIMIT`] entries the
+/// sampler brings every coordinate up to date and clears it, which is exact
+/// and bounds memory when large steps are rare.
+#[derive(Clone, Debug)]
+pub(crate) enum Mutator {
+    /// Offsets drawn in batches.
+    Kelemen(Kelemen, OffsetBatch),
+    /// Unit normals drawn in batches, scaled by `sigma·sqrt(steps)`.
+    Gaussian(Gaussian, OffsetBatch),
+    /// Eq. 6.8 with `θ` adapted by eq. 4.10.
+    Adaptive {
+        kernel: Adaptive,
+        state: AdaptiveState,
+        /// `θ` of each accepted small-step iteration from `record_start` on.
+        record: Vec<f32>,
+        record_start: u64,
+    },
+}
+
+/// Past this many recorded `θ`s, every coordinate is brought up to date and
+/// the record is cleared (see [`Mutator`]).
+pub(crate) const THETA_RECORD_LIMIT: usize = 4096;
+
+impl Mutator {
+    pub(crate) fn new(step: SmallStep) -> Self {
+        match step {
+            SmallStep::Kelemen(k) => Mutator::Kelemen(k, OffsetBatch::default()),
+            SmallStep::Gaussian(g) => Mutator::Gaussian(g, OffsetBatch::default()),
+            SmallStep::Adaptive(a) => Mutator::Adaptive {
+                kernel: a,
+                state: AdaptiveState::new(&a),
+                record: Vec::new(),
+                record_start: 1,
+            },
+        }
+    }
+
+    /// The adaptive kernel's current `θ`.
+    pub(crate) fn adaptive_theta(&self) -> Option<f64> {
+        match self {
+            Mutator::Adaptive { state, .. } => Some(state.theta()),
+            _ => None,
+        }
+    }
+
+    /// Whether the `θ` record is full: every coordinate must be brought up to
+    /// date (then [`clear_record`](Self::clear_record)) before the next proposal.
+    pub(crate) fn record_full(&self) -> bool {
+        matches!(self, Mutator::Adaptive { record, .. } if record.len() >= THETA_RECORD_LIMIT)
+    }
+
+    /// Whether the record grew past its limit (never, if the sampler obeys
+    /// [`record_full`](Self::record_full)).
+    #[cfg(test)]
+    pub(crate) fn record_overflowed(&self) -> bool {
+        matches!(self, Mutator::Adaptive { record, .. } if record.len() > THETA_RECORD_LIMIT)
+    }
+
+    /// Starts the record over after iteration `iteration`: no coordinate
+    /// needs an older `θ`.
+    pub(crate) fn clear_record(&mut self, iteration: u64) {
+        if let Mutator::Adaptive {
+            record,
+            record_start,
+            ..
+        } = self
+        {
+            record.clear();
+            *record_start = iteration + 1;
+        }
+    }
+
+    /// A small-step proposal opens: its `θ` is recorded.
+    pub(crate) fn open_small_step(&mut self) {
+        if let Mutator::Adaptive { state, record, .. } = self {
+            record.push(state.theta() as f32);
+        }
+    }
+
+    /// The open proposal was accepted or rejected with probability
+    /// `acceptance`; `iteration` is the sampler's accepted iterations after it.
+    pub(crate) fn close(&mut self, large: bool, accepted: bool, acceptance: f64, iteration: u64) {
+        if large {
+            if accepted {
+                self.clear_record(iteration);
+            }
+        } else if let Mutator::Adaptive {
+            kernel,
+            state,
+            record,
+            ..
+        } = self
+        {
+            if !accepted {
+                record.pop();
+            }
+            state.update(kernel, acceptance);
+        }
+    }
+
+    /// `value` moved by the small steps of iterations `from + 1 ..= to`.
+    pub(crate) fn advance<R: Rng + ?Sized>(
+        &mut self,
+        value: f32,
+        from: u64,
+        to: u64,
+        rng: &mut R,
+    ) -> f32 {
+        let steps = to - from;
+        let offset = match self {
+            Mutator::Gaussian(g, batch) => {
+                let normal = batch.next(|values| {
+                    for pair in values.chunks_exact_mut(2) {
+                        pair.copy_from_slice(&unit_normals(rng));
+                    }
+                });
+                normal * g.scale_of_steps(steps)
+            }
+            Mutator::Kelemen(k, batch) => (0..steps)
+                .map(|_| batch.next(|values| values.iter_mut().for_each(|v| *v = k.offset(rng))))
+                .sum(),
+            Mutator::Adaptive {
+                state,
+                record,
+                record_start,
+                ..
+            } => (from + 1..=to)
+                .map(|iteration| {
+                    let recorded = iteration
+                        .checked_sub(*record_start)
+                        .and_then(|i| record.get(i as usize));
+                    debug_assert!(
+                        recorded.is_some(),
+                        "theta of iteration {iteration} was not recorded"
+                    );
+                    let theta = recorded.map_or(state.theta(), |&t| t as f64);
+                    Adaptive::offset(theta, rng)
+                })
+                .sum(),
+        };
+        wrap_unit(value as f64 + offset)
     }
 }
 

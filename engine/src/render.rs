@@ -16,9 +16,10 @@ use crate::chain::{Chain, ChainStats};
 use crate::error::{Error, check_probability};
 use crate::film::Film;
 use crate::mutate::MutationParams;
+use crate::oracle::Sampler;
 use crate::oracle::{FilmPoint, PathOracle, Radiance, Resolution, Temperature};
 use crate::rng::{self, Domain};
-use crate::sample::{IndependentSampler, Sampler};
+use crate::sample::IndependentSampler;
 use crate::splat::{RoundBuffers, SplatBands, Worker};
 use crate::target::Importance;
 

@@ -1,4 +1,4 @@
-//! Primary sample space: the [`Sampler`] trait oracles draw numbers from, the
+//! Primary sample space: the samplers behind the oracle's [`Sampler`]: the
 //! independent sampler of plain Monte Carlo, and the lazily mutated
 //! [`MltSampler`] of primary sample space MLT (seed 002 sec. 4.2.1; the design
 //! follows pbrt-v4's `MLTSampler`).
@@ -15,47 +15,10 @@ use alloc::vec::Vec;
 
 use rand_pcg::Pcg32;
 
-use crate::mutate::{
-    Adaptive, AdaptiveState, Gaussian, Kelemen, OffsetBatch, SmallStep, unit_normals, wrap_unit,
-};
-use crate::oracle::{FilmPoint, Resolution};
+use crate::mutate::{Mutator, SmallStep};
+use crate::oracle::{FilmPoint, ORACLE_STREAMS, Resolution, Sampler};
 use crate::rng::uniform_f32;
 
-/// Where an oracle draws its numbers. Every number is in `[0, 1)`.
-pub trait Sampler {
-    /// The next number of the current stream.
-    fn next_1d(&mut self) -> f32;
-
-    /// Two numbers.
-    fn next_2d(&mut self) -> [f32; 2] {
-        [self.next_1d(), self.next_1d()]
-    }
-
-    /// Switches to the oracle's stream `stream` and restarts it at its first
-    /// number. Streams keep unrelated decisions (say, camera and light
-    /// subpaths) in separate coordinates, so a change in one does not shift
-    /// the other. Oracles start on stream 0; a sampler supports at least
-    /// [`ORACLE_STREAMS`] streams and ignores requests beyond (the current
-    /// stream then simply continues). Independent samplers ignore streams.
-    fn start_stream(&mut self, stream: u8) {
-        let _ = stream;
-    }
-}
-
-impl<S: Sampler + ?Sized> Sampler for &mut S {
-    fn next_1d(&mut self) -> f32 {
-        (**self).next_1d()
-    }
-    fn next_2d(&mut self) -> [f32; 2] {
-        (**self).next_2d()
-    }
-    fn start_stream(&mut self, stream: u8) {
-        (**self).start_stream(stream)
-    }
-}
-
-/// Number of streams available to oracles.
-pub const ORACLE_STREAMS: usize = 7;
 /// The engine's own stream, which holds the film position.
 pub const FILM_STREAM: usize = 0;
 const STREAMS: usize = ORACLE_STREAMS + 1;
@@ -90,78 +53,6 @@ struct Coordinate {
     backup_modified: u64,
 }
 
-/// The small-step kernel with whatever running state it needs.
-#[derive(Clone, Debug)]
-enum Kernel {
-    /// Offsets drawn in batches.
-    Kelemen(Kelemen, OffsetBatch),
-    /// Unit normals drawn in batches, scaled by `sigma·sqrt(steps)`.
-    Gaussian(Gaussian, OffsetBatch),
-    Adaptive {
-        kernel: Adaptive,
-        state: AdaptiveState,
-        /// `θ` of each accepted small-step iteration from `history_start` on.
-        history: Vec<f32>,
-        history_start: u64,
-    },
-}
-
-/// Past this many recorded `θ`s, every coordinate is brought up to date and
-/// the record is cleared, which bounds memory when large steps are rare.
-const THETA_HISTORY_LIMIT: usize = 4096;
-
-impl Kernel {
-    fn new(step: SmallStep) -> Self {
-        match step {
-            SmallStep::Kelemen(k) => Kernel::Kelemen(k, OffsetBatch::default()),
-            SmallStep::Gaussian(g) => Kernel::Gaussian(g, OffsetBatch::default()),
-            SmallStep::Adaptive(a) => Kernel::Adaptive {
-                kernel: a,
-                state: AdaptiveState::new(&a),
-                history: Vec::new(),
-                history_start: 1,
-            },
-        }
-    }
-
-    /// `value` moved by the small steps of iterations `from + 1 ..= to`.
-    fn advance(&mut self, value: f32, from: u64, to: u64, rng: &mut Pcg32) -> f32 {
-        let steps = to - from;
-        let offset = match self {
-            Kernel::Gaussian(g, batch) => {
-                let normal = batch.next(|values| {
-                    for pair in values.chunks_exact_mut(2) {
-                        pair.copy_from_slice(&unit_normals(rng));
-                    }
-                });
-                normal * g.scale_of_steps(steps)
-            }
-            Kernel::Kelemen(k, batch) => (0..steps)
-                .map(|_| batch.next(|values| values.iter_mut().for_each(|v| *v = k.offset(rng))))
-                .sum(),
-            Kernel::Adaptive {
-                state,
-                history,
-                history_start,
-                ..
-            } => (from + 1..=to)
-                .map(|iteration| {
-                    let recorded = iteration
-                        .checked_sub(*history_start)
-                        .and_then(|i| history.get(i as usize));
-                    debug_assert!(
-                        recorded.is_some(),
-                        "theta of iteration {iteration} was not recorded"
-                    );
-                    let theta = recorded.map_or(state.theta(), |&t| t as f64);
-                    Adaptive::offset(theta, rng)
-                })
-                .sum(),
-        };
-        wrap_unit(value as f64 + offset)
-    }
-}
-
 /// Counters of one sampler.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SamplerStats {
@@ -180,7 +71,7 @@ pub struct SamplerStats {
 /// coherent sampling or re-evaluation at another temperature).
 #[derive(Clone, Debug)]
 pub struct MltSampler {
-    kernel: Kernel,
+    kernel: Mutator,
     rng: Pcg32,
     /// Accepted iterations so far, plus one while a proposal is open.
     iteration: u64,
@@ -196,7 +87,7 @@ impl MltSampler {
     /// The first proposal should be a large step (the uniform start state).
     pub fn new(small_step: SmallStep, rng: Pcg32) -> Self {
         Self {
-            kernel: Kernel::new(small_step),
+            kernel: Mutator::new(small_step),
             rng,
             iteration: 0,
             last_large_step: 0,
@@ -221,10 +112,7 @@ impl MltSampler {
 
     /// The current `θ` of the adaptive kernel.
     pub fn adaptive_theta(&self) -> Option<f64> {
-        match &self.kernel {
-            Kernel::Adaptive { state, .. } => Some(state.theta()),
-            _ => None,
-        }
+        self.kernel.adaptive_theta()
     }
 
     /// Counters.
@@ -263,18 +151,14 @@ impl MltSampler {
     /// Opens a proposal: a large step (fresh uniform sample) if `large`, a
     /// small step otherwise.
     pub fn propose(&mut self, large: bool) -> Proposal<'_> {
-        if let Kernel::Adaptive { history, .. } = &self.kernel
-            && history.len() >= THETA_HISTORY_LIMIT
-        {
+        if self.kernel.record_full() {
             self.bring_all_up_to_date();
         }
         self.iteration += 1;
         self.large_step = large;
         self.touched.clear();
-        if let Kernel::Adaptive { state, history, .. } = &mut self.kernel
-            && !large
-        {
-            history.push(state.theta() as f32);
+        if !large {
+            self.kernel.open_small_step();
         }
         Proposal {
             cursor: Cursor::new(),
@@ -296,15 +180,6 @@ impl MltSampler {
         if accept {
             if large {
                 self.last_large_step = self.iteration;
-                if let Kernel::Adaptive {
-                    history,
-                    history_start,
-                    ..
-                } = &mut self.kernel
-                {
-                    history.clear();
-                    *history_start = self.iteration + 1;
-                }
             }
         } else {
             for &(s, i) in &self.touched {
@@ -313,17 +188,8 @@ impl MltSampler {
                 c.modified = c.backup_modified;
             }
             self.iteration -= 1;
-            if let Kernel::Adaptive { history, .. } = &mut self.kernel
-                && !large
-            {
-                history.pop();
-            }
         }
-        if let Kernel::Adaptive { kernel, state, .. } = &mut self.kernel
-            && !large
-        {
-            state.update(kernel, acceptance);
-        }
+        self.kernel.close(large, accept, acceptance, self.iteration);
         self.large_step = false;
     }
 
@@ -386,15 +252,7 @@ impl MltSampler {
                 self.read(s, i, false);
             }
         }
-        if let Kernel::Adaptive {
-            history,
-            history_start,
-            ..
-        } = &mut self.kernel
-        {
-            history.clear();
-            *history_start = self.iteration + 1;
-        }
+        self.kernel.clear_record(self.iteration);
     }
 }
 
@@ -563,7 +421,7 @@ impl Sampler for Replay<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mutate::{Gaussian, Kelemen};
+    use crate::mutate::{Adaptive, Gaussian, Kelemen};
     use crate::rng::{Domain, stream};
 
     fn read_n(p: &mut impl Sampler, n: usize) -> Vec<f32> {
@@ -689,13 +547,11 @@ mod tests {
         let mut p = s.propose(false);
         let _ = read_n(&mut p, 4);
         p.accept(0.5);
-        for _ in 0..3 * THETA_HISTORY_LIMIT {
+        for _ in 0..3 * crate::mutate::THETA_RECORD_LIMIT {
             let mut p = s.propose(false);
             let _ = p.next_1d();
             p.accept(0.5);
-        }
-        if let Kernel::Adaptive { history, .. } = &s.kernel {
-            assert!(history.len() <= THETA_HISTORY_LIMIT);
+            assert!(!s.kernel.record_overflowed());
         }
         // Coordinates 1..4 were caught up through the compactions.
         let mut r = s.replay();

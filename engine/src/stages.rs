@@ -28,9 +28,9 @@ use alloc::vec::Vec;
 
 use crate::error::Error;
 use crate::film::Film;
+use crate::oracle::Sampler;
 use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Resolution, Temperature};
 use crate::render::{Budget, Observer, PssmltSettings, RenderOutput, RenderStats, render_pssmlt};
-use crate::sample::Sampler;
 use crate::target::{FnImportance, Importance};
 
 /// Settings of [`render_multistage`].

@@ -53,11 +53,12 @@ use crate::chain::{ChainStats, acceptance};
 use crate::error::{Error, check_probability};
 use crate::film::Film;
 use crate::mutate::MutationParams;
+use crate::oracle::Sampler;
 use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Resolution, Temperature};
 use crate::reconstruct::{self, LogSettings, WeightedSettings};
 use crate::render::{Budget, Clock, Observer, RenderOutput, RenderStats, checked_resolution};
 use crate::rng::{self, Domain, uniform_f64};
-use crate::sample::{MltSampler, Sampler};
+use crate::sample::MltSampler;
 use crate::target::{Importance, MaxChannel, evaluate};
 use crate::tiles::{TileShape, Tiles};
 

@@ -7,7 +7,7 @@ use std::hint::black_box;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::bootstrap::Bootstrap;
-use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
+use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, SmallStep};
 use strata::engine::render::{
     Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
 };
@@ -45,18 +45,13 @@ fn mh_step(c: &mut Criterion) {
     for dims in [8usize, 32] {
         let oracle = Trivial { dims };
         for (name, small_step) in kernels {
-            let params = MutationParams {
-                small_step,
-                large_step_probability: 0.3,
-            };
-            let bootstrap = Bootstrap::run(&oracle, &MaxChannel, &params, 1, 256).unwrap();
-            let mut chain = bootstrap.start_chain(&oracle, &MaxChannel, params, 0);
-            let b = bootstrap.normalization();
+            let bootstrap = Bootstrap::run(&oracle, &MaxChannel, small_step, 1, 256).unwrap();
+            let mut chain = bootstrap.start_path_chain(&oracle, &MaxChannel, 0, 0.3);
             group.throughput(Throughput::Elements(1));
             group.bench_function(BenchmarkId::new(name, dims), |bench| {
                 bench.iter(|| {
-                    chain.step(&oracle, &MaxChannel, b, |p, r, w| {
-                        black_box((p, r, w));
+                    chain.step(&oracle, &MaxChannel, |path, w| {
+                        black_box((path, w));
                     })
                 })
             });

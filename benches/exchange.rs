@@ -9,7 +9,7 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use strata::engine::Resolution;
 use strata::engine::analytic::GaussianMixture;
 use strata::engine::exchange::{
-    Candidates, Ensemble, EnsembleSettings, ExchangeKind, PermutationSampler, Tempering,
+    Ensemble, EnsembleSettings, ExchangeKind, PermutationSampler, Tempering,
     log_normalization_by_enumeration,
 };
 use strata::engine::rng::{Domain, stream, uniform_f64};
@@ -55,10 +55,10 @@ fn sweeps(c: &mut Criterion) {
         let mut settings = EnsembleSettings::geometric(8, 2500.0).unwrap();
         settings.tempering = tempering;
         settings.bootstrap_candidates = 2000;
-        let candidates = Candidates::run(&mixture, &Luminance, &settings, 1).unwrap();
+        let bootstrap = settings.bootstrap(&mixture, &Luminance, 1).unwrap();
         for kind in ExchangeKind::all(0) {
-            let mut ensemble = Ensemble::start(&mixture, &Luminance, &settings, &candidates, 0);
-            let mut exchange = kind.build(&candidates).unwrap();
+            let mut ensemble = Ensemble::start(&mixture, &Luminance, &settings, &bootstrap, 0);
+            let mut exchange = kind.build(&bootstrap).unwrap();
             let id = BenchmarkId::new(format!("{tempering:?}"), kind.name());
             group.bench_function(id, |b| {
                 b.iter(|| {

@@ -32,7 +32,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use strata::engine::Resolution;
 use strata::engine::analytic::GaussianMixture;
-use strata::engine::exchange::{Candidates, Ensemble, EnsembleSettings, ExchangeKind, Tempering};
+use strata::engine::exchange::{Ensemble, EnsembleSettings, ExchangeKind, Tempering};
 use strata::engine::mutate::{MutationParams, unit_normals};
 use strata::engine::rng::{Domain, stream, uniform_f64};
 use strata::engine::target::Luminance;
@@ -145,10 +145,11 @@ fn run_move(
         bootstrap_candidates: 1000,
     };
     let seed = run * 1000 + scenario.id as u64;
-    let candidates =
-        Candidates::run(m, &Luminance, &settings, seed).expect("the mixture is not black");
-    let mut ensemble = Ensemble::start(m, &Luminance, &settings, &candidates, 0);
-    let mut exchange = kind.build(&candidates).expect("valid move");
+    let bootstrap = settings
+        .bootstrap(m, &Luminance, seed)
+        .expect("the mixture is not black");
+    let mut ensemble = Ensemble::start(m, &Luminance, &settings, &bootstrap, 0);
+    let mut exchange = kind.build(&bootstrap).expect("valid move");
     let mut visits = vec![0u64; m.components.len()];
     let mut value_sum = 0.0;
     let mut x = vec![0.0; dims];
@@ -164,7 +165,7 @@ fn run_move(
             continue;
         }
         let replica = ensemble.replica_mut(0);
-        value_sum += replica.values()[0];
+        value_sum += replica.state().values[0];
         let mut replay = replica.replay();
         let p = replay.film_point(m.resolution);
         x[0] = p.x as f64 / m.resolution.width as f64;

@@ -31,12 +31,12 @@ fn run_chain<O: PathOracle>(
     steps: usize,
     bin: impl Fn(f32, f32) -> usize,
 ) -> Vec<usize> {
-    let bootstrap = Bootstrap::run(oracle, &MaxChannel, &params, seed, 1000).unwrap();
-    let mut chain = bootstrap.start_chain(oracle, &MaxChannel, params, 0);
-    let b = bootstrap.normalization();
+    let bootstrap = Bootstrap::run(oracle, &MaxChannel, params.small_step, seed, 1000).unwrap();
+    let mut chain =
+        bootstrap.start_path_chain(oracle, &MaxChannel, 0, params.large_step_probability);
     (0..steps)
         .map(|_| {
-            chain.step(oracle, &MaxChannel, b, |_, _, _| {});
+            chain.step(oracle, &MaxChannel, |_, _| {});
             let f = chain.current().film;
             bin(f.x, f.y)
         })

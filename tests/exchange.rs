@@ -16,10 +16,9 @@ use threads::{bits, in_pool};
 
 use strata::engine::analytic::{Component, GaussianMixture, ProceduralImage};
 use strata::engine::exchange::{
-    Candidates, Decisions, EnergyLevels, Ensemble, EnsembleSettings, EquiEnergy, EquiEnergySampler,
-    Exchange, ExchangeKind, ExchangeStats, IsPermutation, IsSwap, Ladder, Move, NeighborSwap,
-    NonReversible, PermutationSampler, ReplicaSettings, Tempered, Tempering, for_each_permutation,
-    render_replica,
+    Decisions, EnergyLevels, Ensemble, EnsembleSettings, EquiEnergy, EquiEnergySampler, Exchange,
+    ExchangeKind, ExchangeStats, IsPermutation, IsSwap, Ladder, Move, NeighborSwap, NonReversible,
+    PermutationSampler, ReplicaSettings, Tempered, Tempering, for_each_permutation, render_replica,
 };
 use strata::engine::mutate::{Gaussian, MutationParams, SmallStep};
 use strata::engine::render::{Budget, Silent};
@@ -507,13 +506,13 @@ fn first_mode_share(kind: ExchangeKind, sweeps: u64, seed: u64) -> f64 {
         },
         bootstrap_candidates: 4096,
     };
-    let candidates = Candidates::run(&target, &Luminance, &settings, seed).unwrap();
-    let mut ensemble = Ensemble::start(&target, &Luminance, &settings, &candidates, 0);
-    let mut exchange = kind.build(&candidates).unwrap();
+    let bootstrap = settings.bootstrap(&target, &Luminance, seed).unwrap();
+    let mut ensemble = Ensemble::start(&target, &Luminance, &settings, &bootstrap, 0);
+    let mut exchange = kind.build(&bootstrap).unwrap();
     let mut first = 0;
     for _ in 0..sweeps {
         ensemble.sweep(&target, &Luminance, exchange.as_mut(), |_, _, _| {});
-        let x = ensemble.replicas()[0].film().x / 64.0;
+        let x = ensemble.replicas()[0].state().film.x / 64.0;
         first += (x < 0.5) as u64;
     }
     first as f64 / sweeps as f64

@@ -6,37 +6,60 @@
 //! every chain starts from a candidate chosen with probability proportional
 //! to its importance, so all chains share the same `b*`.
 //!
+//! A candidate may carry several values, one per *level*: replica exchange
+//! evaluates each candidate under every chain's tempered target `π_j` and
+//! gets one `b_j` per temperature, each chain starting from a candidate
+//! chosen in proportion to its own `π_j` (seed 002 sec. 5.4).
+//!
 //! Candidates are not stored: candidate `i` is the large step drawn by the
 //! stream `(seed, Candidate, i)`, and a chain started from it replays that
 //! stream (checked in debug builds: this is where an impure oracle shows).
 
+use alloc::vec;
 use alloc::vec::Vec;
 
-use crate::chain::{Chain, initial_state};
+use crate::chain::{Chain, KelemenWeights, PathChain, PathTarget, Traced};
 use crate::error::Error;
-use crate::mutate::MutationParams;
+use crate::mutate::SmallStep;
 use crate::oracle::PathOracle;
 use crate::rng::{self, Domain, uniform_f64};
-use crate::target::Importance;
+use crate::sample::MltSampler;
+use crate::target::{Evaluated, Importance};
 
-/// The bootstrap of a PSSMLT render: `b*` and the distribution of start states.
+/// The bootstrap of an MCMC render: `b*` per level and the distribution of
+/// chain starts.
 #[derive(Clone, Debug)]
 pub struct Bootstrap {
     seed: u64,
-    importances: Vec<f64>,
-    /// Running sums of `importances`, for selection.
-    cumulative: Vec<f64>,
-    normalization: f64,
-    invalid: u64,
+    small_step: SmallStep,
+    levels: usize,
+    /// `values[k * levels + j]`: candidate `k`'s value at level `j`.
+    values: Vec<f64>,
+    /// Per level, running sums of its values over the candidates, for selection.
+    cumulative: Vec<Vec<f64>>,
+    normalizations: Vec<f64>,
+    /// Per level, the smallest positive and the largest value.
+    ranges: Vec<(f64, f64)>,
+    traced: Traced,
+}
+
+/// A chain started by [`Bootstrap::start`], with its decision stream.
+#[derive(Clone, Debug)]
+pub struct Started<S> {
+    /// The chain, in the candidate's state, mutating on its own stream.
+    pub chain: Chain<S>,
+    /// Its accept/reject decisions.
+    pub decisions: rand_pcg::Pcg32,
 }
 
 impl Bootstrap {
-    /// Traces `candidates` uniform primary samples. Fails with
-    /// [`Error::AllCandidatesBlack`] when every one has zero importance.
+    /// Traces `candidates` uniform primary samples and values each by its
+    /// importance (one level). Fails with [`Error::AllCandidatesBlack`] when
+    /// every one has zero importance.
     pub fn run<O, I>(
         oracle: &O,
         importance: &I,
-        params: &MutationParams,
+        small_step: SmallStep,
         seed: u64,
         candidates: u64,
     ) -> Result<Self, Error>
@@ -44,116 +67,214 @@ impl Bootstrap {
         O: PathOracle,
         I: Importance<O::Radiance> + ?Sized,
     {
+        Self::run_levels(
+            oracle,
+            importance,
+            small_step,
+            seed,
+            candidates,
+            1,
+            |_, path, row| {
+                row[0] = path.importance;
+                Traced::default()
+            },
+        )
+    }
+
+    /// Traces `candidates` uniform primary samples; `row(sampler, path, row)`
+    /// gives each its `levels` values from its path (traced at `T = 1`),
+    /// and may replay the sampler to trace more. Fails with
+    /// [`Error::AllCandidatesBlack`] when level 0 is zero on every candidate
+    /// (other levels may be: the caller decides), and with a typed error when
+    /// a level's sum overflows.
+    pub fn run_levels<O, I, F>(
+        oracle: &O,
+        importance: &I,
+        small_step: SmallStep,
+        seed: u64,
+        candidates: u64,
+        levels: usize,
+        row: F,
+    ) -> Result<Self, Error>
+    where
+        O: PathOracle,
+        I: Importance<O::Radiance> + ?Sized,
+        F: Fn(&mut MltSampler, &Evaluated<O::Radiance>, &mut [f64]) -> Traced + Sync,
+    {
         if candidates == 0 {
             return Err(Error::invalid("bootstrap_candidates", 0.0, "at least 1"));
         }
-        let evaluate = |i: u64| {
-            let (_, state) = initial_state(
-                oracle,
-                importance,
-                params,
-                rng::stream(seed, Domain::Candidate, i),
-            );
-            (state.importance, state.invalid)
+        let target = PathTarget { oracle, importance };
+        let mut values = vec![0.0; candidates as usize * levels];
+        let evaluate = |(k, values): (usize, &mut [f64])| {
+            let stream = rng::stream(seed, Domain::Candidate, k as u64);
+            let (mut chain, mut traced) = Chain::start(&target, small_step, stream);
+            let path = *chain.state();
+            traced += row(chain.sampler_mut(), &path, values);
+            traced
         };
         #[cfg(feature = "parallel")]
-        let evaluated: Vec<(f64, bool)> = {
+        let traced = {
             use rayon::prelude::*;
-            (0..candidates).into_par_iter().map(evaluate).collect()
+            values
+                .par_chunks_mut(levels)
+                .enumerate()
+                .map(evaluate)
+                .reduce(Traced::default, sum)
         };
         #[cfg(not(feature = "parallel"))]
-        let evaluated: Vec<(f64, bool)> = (0..candidates).map(evaluate).collect();
+        let traced = values
+            .chunks_mut(levels)
+            .enumerate()
+            .map(evaluate)
+            .fold(Traced::default(), sum);
 
-        let invalid = evaluated.iter().filter(|e| e.1).count() as u64;
-        let importances: Vec<f64> = evaluated.into_iter().map(|e| e.0).collect();
-        let mut total = 0.0;
-        let cumulative: Vec<f64> = importances
-            .iter()
-            .map(|i| {
-                total += i;
-                total
-            })
-            .collect();
-        if total <= 0.0 {
-            return Err(Error::AllCandidatesBlack { candidates });
+        let mut cumulative = vec![Vec::with_capacity(candidates as usize); levels];
+        let mut ranges = vec![(f64::INFINITY, 0.0f64); levels];
+        for row in values.chunks(levels) {
+            for (j, &v) in row.iter().enumerate() {
+                let total = cumulative[j].last().copied().unwrap_or(0.0) + v;
+                cumulative[j].push(total);
+                if v > 0.0 {
+                    ranges[j] = (ranges[j].0.min(v), ranges[j].1.max(v));
+                }
+            }
         }
-        if !total.is_finite() {
+        let totals: Vec<f64> = cumulative.iter().map(|c| c[c.len() - 1]).collect();
+        if let Some(&total) = totals.iter().find(|t| !t.is_finite()) {
             return Err(Error::invalid(
                 "importance",
                 total,
                 "candidate importances whose sum fits in an f64",
             ));
         }
+        if totals[0] <= 0.0 {
+            return Err(Error::AllCandidatesBlack { candidates });
+        }
         Ok(Self {
             seed,
-            importances,
+            small_step,
+            levels,
+            values,
             cumulative,
-            normalization: total / candidates as f64,
-            invalid,
+            normalizations: totals.iter().map(|t| t / candidates as f64).collect(),
+            ranges,
+            traced,
         })
     }
 
-    /// `b*`, the estimated integral of the importance over primary sample space.
+    /// `b*`, the estimated integral of level 0's values (the importance) over
+    /// primary sample space.
     pub fn normalization(&self) -> f64 {
-        self.normalization
+        self.normalizations[0]
+    }
+
+    /// `b*` of every level.
+    pub fn normalizations(&self) -> &[f64] {
+        &self.normalizations
+    }
+
+    /// The seed of the candidates' streams.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// Values per candidate.
+    pub fn levels(&self) -> usize {
+        self.levels
     }
 
     /// Number of candidates drawn.
     pub fn candidates(&self) -> u64 {
-        self.importances.len() as u64
+        (self.values.len() / self.levels) as u64
     }
 
-    /// Candidates whose radiance or importance was invalid (counted as zero).
-    pub fn invalid(&self) -> u64 {
-        self.invalid
+    /// Oracle traces spent, and how many were invalid (counted as zero).
+    pub fn traced(&self) -> Traced {
+        self.traced
     }
 
-    /// The candidate selected by `u` in `[0, 1)`, with probability proportional
-    /// to its importance (never a zero-importance candidate).
-    pub fn select(&self, u: f64) -> usize {
-        let total = *self.cumulative.last().unwrap_or(&0.0);
-        let target = u * total;
-        let k = self.cumulative.partition_point(|&c| c <= target);
-        // u * total < total, so k < len; step back over zero-importance ties.
-        let mut k = k.min(self.cumulative.len() - 1);
-        while self.importances[k] == 0.0 && k > 0 {
+    /// The smallest positive and the largest value of `level` over the
+    /// candidates.
+    pub fn value_range(&self, level: usize) -> (f64, f64) {
+        self.ranges[level]
+    }
+
+    /// The candidate selected by `u` in `[0, 1)`, with probability
+    /// proportional to its value at `level` (never a zero-valued candidate).
+    pub fn select(&self, level: usize, u: f64) -> usize {
+        let cumulative = &self.cumulative[level];
+        let total = cumulative[cumulative.len() - 1];
+        let k = cumulative.partition_point(|&c| c <= u * total);
+        // u * total < total, so k < len; step back over zero-valued ties.
+        let mut k = k.min(cumulative.len() - 1);
+        while self.values[k * self.levels + level] == 0.0 && k > 0 {
             k -= 1;
         }
         k
     }
 
-    /// Starts chain `index` from a candidate chosen by its own stream.
-    pub fn start_chain<O, I>(
+    /// Starts chain `index` from a candidate chosen by its own stream in
+    /// proportion to the values of `level`. `complete(sampler, path)` makes
+    /// the chain's state from the candidate's path; it may replay the
+    /// sampler, which is still on the candidate's stream (so the state is
+    /// exactly the candidate's), before the chain moves to its own streams.
+    pub fn start<O, I, S: Default>(
         &self,
         oracle: &O,
         importance: &I,
-        params: MutationParams,
+        level: usize,
         index: u64,
-    ) -> Chain<O::Radiance>
+        complete: impl FnOnce(&mut MltSampler, Evaluated<O::Radiance>) -> S,
+    ) -> Started<S>
     where
         O: PathOracle,
         I: Importance<O::Radiance> + ?Sized,
     {
         let u = uniform_f64(&mut rng::stream(self.seed, Domain::ChainStart, index));
-        let k = self.select(u);
-        let chain_rng = rng::stream(self.seed, Domain::Chain, index);
-        let decisions = rng::stream(self.seed ^ 0x5bd1_e995, Domain::Chain, index);
-        let chain = Chain::start(
-            oracle,
-            importance,
-            params,
-            rng::stream(self.seed, Domain::Candidate, k as u64),
-            chain_rng,
-            decisions,
-        );
+        let k = self.select(level, u);
+        let target = PathTarget { oracle, importance };
+        let candidate = rng::stream(self.seed, Domain::Candidate, k as u64);
+        let (chain, _) = Chain::start(&target, self.small_step, candidate);
         debug_assert_eq!(
-            chain.current().importance.to_bits(),
-            self.importances[k].to_bits(),
+            chain.state().importance.to_bits(),
+            self.values[k * self.levels].to_bits(),
             "replaying bootstrap candidate {k} changed its importance: the oracle is not a pure function \
              of (film point, numbers drawn, temperature)"
         );
-        chain
+        let mut chain = chain.map(complete);
+        let (mutations, decisions) = rng::chain_streams(self.seed, index);
+        chain.sampler_mut().reseed(mutations);
+        Started { chain, decisions }
     }
+}
+
+impl Bootstrap {
+    /// PSSMLT's chain `index`: started at level 0, weighting by Kelemen's
+    /// weights with this bootstrap's `b*` and `large_step_probability`.
+    pub fn start_path_chain<O, I>(
+        &self,
+        oracle: &O,
+        importance: &I,
+        index: u64,
+        large_step_probability: f64,
+    ) -> PathChain<O::Radiance>
+    where
+        O: PathOracle,
+        I: Importance<O::Radiance> + ?Sized,
+    {
+        let started = self.start(oracle, importance, 0, index, |_, path| path);
+        let weights = KelemenWeights {
+            normalization: self.normalization(),
+            large_step_probability,
+        };
+        PathChain::new(started.chain, weights, started.decisions)
+    }
+}
+
+fn sum(mut a: Traced, b: Traced) -> Traced {
+    a += b;
+    a
 }
 
 #[cfg(test)]
@@ -201,7 +322,7 @@ mod tests {
         // Integral of I over PSS: 0.1 * E[1 + u] = 0.15. Var of one candidate's
         // I: 0.1 * E[(1+u)^2] - 0.15^2 = 0.1 * 7/3 - 0.0225; 5 sigma tolerance.
         let n = 40_000u64;
-        let b = Bootstrap::run(&Strip, &MaxChannel, &MutationParams::default(), 9, n).unwrap();
+        let b = Bootstrap::run(&Strip, &MaxChannel, SmallStep::default(), 9, n).unwrap();
         let sd = libm::sqrt((0.1 * 7.0 / 3.0 - 0.0225) / n as f64);
         assert!(
             (b.normalization() - 0.15).abs() < 5.0 * sd,
@@ -212,22 +333,21 @@ mod tests {
 
     #[test]
     fn chains_start_only_from_bright_candidates() {
-        let b = Bootstrap::run(&Strip, &MaxChannel, &MutationParams::default(), 10, 1000).unwrap();
+        let b = Bootstrap::run(&Strip, &MaxChannel, SmallStep::default(), 10, 1000).unwrap();
         for i in 0..200 {
-            let chain = b.start_chain(&Strip, &MaxChannel, MutationParams::default(), i);
-            assert!(chain.current().importance > 0.0);
-            assert!(chain.current().film.x < 1.0);
+            let started = b.start(&Strip, &MaxChannel, 0, i, |_, path| path);
+            assert!(started.chain.state().importance > 0.0);
+            assert!(started.chain.state().film.x < 1.0);
         }
         for u in [0.0, 0.5, 0.999_999_9] {
-            assert!(b.importances[b.select(u)] > 0.0);
+            assert!(b.values[b.select(0, u)] > 0.0);
         }
     }
 
     #[test]
     fn black_scene_is_a_typed_error_not_a_loop() {
-        let e =
-            Bootstrap::run(&Black, &MaxChannel, &MutationParams::default(), 1, 500).unwrap_err();
+        let e = Bootstrap::run(&Black, &MaxChannel, SmallStep::default(), 1, 500).unwrap_err();
         assert_eq!(e, Error::AllCandidatesBlack { candidates: 500 });
-        assert!(Bootstrap::run(&Black, &MaxChannel, &MutationParams::default(), 1, 0).is_err());
+        assert!(Bootstrap::run(&Black, &MaxChannel, SmallStep::default(), 1, 0).is_err());
     }
 }

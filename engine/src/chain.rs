@@ -1,35 +1,48 @@
-//! One Metropolis-Hastings chain in primary sample space (seed 002 fig. 3.1,
-//! eq. 3.2) with expected-values splatting (sec. 3.7; seed 004 Alg. 1) and
-//! Kelemen's large-step weights.
+//! One Metropolis-Hastings step in primary sample space (seed 002 fig. 3.1,
+//! eq. 3.2) with expected-values splatting (sec. 3.7; seed 004 Alg. 1), for
+//! every method of the engine.
 //!
-//! # The estimator
+//! A [`Chain`] is a primary sample ([`MltSampler`]) and the state it encodes.
+//! [`Chain::step`] proposes (a large or a small step), has a [`Target`] trace
+//! and value the proposal, accepts with probability
+//! `a = min(1, π(y)/π(x))`, and splats both the proposal `y` and the current
+//! state `x` with the weights a [`Weights`] gives them. What differs between
+//! methods is only what a state is and how its samples are weighted:
+//!
+//! | method | state and value `π` | weights |
+//! |---|---|---|
+//! | PSSMLT, ERPT, global chains | one path, `I(x)` ([`PathTarget`]) | [`KelemenWeights`], `EnergyWeights` |
+//! | stratified MCMC | a jitter replayed in every tile pixel, `max_k I(x^k)` | `a/T(y)`, `(1-a)/T(x)` |
+//! | replica exchange | a path traced at every temperature, `π_c(x)` | MIS over the ensemble |
+//!
+//! # Kelemen's weights
 //! With normalization `b` (the bootstrap's `b*`, seed 002 eq. 3.12) and large
-//! step probability `p`, every step splats both the proposal `y` and the
-//! current state `x` (Kelemen et al. 2002, sec. 4):
+//! step probability `p`, every step splats the proposal `y` and the current
+//! state `x` (Kelemen et al. 2002, sec. 4):
 //!
 //! ```text
 //! w(y) = (a + [large]) / (I(y)/b + p)      w(x) = (1 - a) / (I(x)/b + p)
 //! ```
 //!
-//! where `a = min(1, I(y)/I(x))`. The expected value of the `(a, 1 - a)` pair
-//! is that of splatting the next state (Rao-Blackwellization), and the large
-//! steps are independent uniform samples; `1/(I/b + p)` is then the balance
-//! heuristic of the two sampling densities `I/b` and `p`, so each pixel's
-//! estimate `(W·H/N) Σ w f` is unbiased even where `I = 0`. With `p = 0` the
-//! weights reduce to seed 004's Alg. 1 (`a·b/I(y)` and `(1 - a)·b/I(x)`).
+//! The expected value of the `(a, 1 - a)` pair is that of splatting the next
+//! state (Rao-Blackwellization), and the large steps are independent uniform
+//! samples; `1/(I/b + p)` is then the balance heuristic of the two sampling
+//! densities `I/b` and `p`, so each pixel's estimate `(W·H/N) Σ w f` is
+//! unbiased even where `I = 0`. With `p = 0` the weights reduce to seed 004's
+//! Alg. 1 (`a·b/I(y)` and `(1 - a)·b/I(x)`).
 
 use rand_pcg::Pcg32;
 
-use crate::mutate::MutationParams;
-use crate::oracle::{FilmPoint, PathOracle, Radiance, Temperature};
+use crate::mutate::SmallStep;
+use crate::oracle::{PathOracle, Radiance, Temperature};
 use crate::rng::uniform_f64;
-use crate::sample::MltSampler;
+use crate::sample::{MltSampler, Proposal, Replay};
 use crate::target::{Evaluated, Importance, evaluate};
 
-/// Counters of one chain.
+/// Counters of one chain (or of many, merged).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ChainStats {
-    /// Proposals made (oracle traces).
+    /// Proposals made.
     pub proposals: u64,
     /// Proposals accepted.
     pub accepted: u64,
@@ -37,8 +50,8 @@ pub struct ChainStats {
     pub large_steps: u64,
     /// Sum of the acceptance probabilities (the expected number of acceptances).
     pub acceptance_sum: f64,
-    /// Proposals whose radiance or importance was NaN, infinite or negative;
-    /// they were rejected and not splatted.
+    /// Traces whose radiance or importance was NaN, infinite or negative;
+    /// they were valued zero and not splatted.
     pub invalid: u64,
 }
 
@@ -62,6 +75,22 @@ impl ChainStats {
     }
 }
 
+/// Paths an evaluation traced, and how many of them were invalid.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Traced {
+    /// Oracle traces.
+    pub paths: u64,
+    /// Traces with invalid radiance or importance (valued zero).
+    pub invalid: u64,
+}
+
+impl core::ops::AddAssign for Traced {
+    fn add_assign(&mut self, other: Traced) {
+        self.paths += other.paths;
+        self.invalid += other.invalid;
+    }
+}
+
 /// What one step did.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepOutcome {
@@ -71,53 +100,97 @@ pub struct StepOutcome {
     pub accepted: bool,
     /// Whether the proposal was a large step.
     pub large_step: bool,
+    /// What evaluating the proposal traced.
+    pub traced: Traced,
 }
 
-/// One Markov chain over primary samples.
+/// What a chain samples: how an open proposal becomes a state, and the
+/// target's value `π` there.
+pub trait Target {
+    /// What a chain keeps of a traced primary sample.
+    type State;
+
+    /// Traces the open `proposal` (nothing read yet) into `state`, whose
+    /// buffers it may reuse.
+    fn evaluate(&self, proposal: &mut Proposal<'_>, state: &mut Self::State) -> Traced;
+
+    /// `π(state)`: finite and `>= 0`.
+    fn value(&self, state: &Self::State) -> f64;
+}
+
+/// How a step weights the two samples it splats.
+pub trait Weights<S> {
+    /// `[w(y), w(x)]` for the proposal `proposed` and the current state
+    /// `current`, given the acceptance probability; a zero weight is not
+    /// splatted.
+    fn weights(&self, acceptance: f64, large_step: bool, current: &S, proposed: &S) -> [f64; 2];
+}
+
+/// A Markov chain over primary samples: the lazily mutated sample and the
+/// state it encodes. Its accept/reject decisions and counters are kept by
+/// the caller, so that states can be exchanged between chains (replica
+/// exchange) while each chain keeps its own.
 #[derive(Clone, Debug)]
-pub struct Chain<R> {
+pub struct Chain<S> {
     sampler: MltSampler,
-    rng: Pcg32,
-    params: MutationParams,
-    current: Evaluated<R>,
-    stats: ChainStats,
+    current: S,
+    /// The last proposal, or the state before it if it was accepted.
+    other: S,
+    last_accepted: bool,
 }
 
-impl<R: Radiance> Chain<R> {
-    /// A chain whose initial state is the uniform primary sample drawn by
-    /// `start_rng` (a bootstrap candidate's stream), and whose mutations then
-    /// draw from `sampler_rng` and decisions from `decision_rng`.
-    pub fn start<O, I>(
-        oracle: &O,
-        importance: &I,
-        params: MutationParams,
-        start_rng: Pcg32,
-        sampler_rng: Pcg32,
-        decision_rng: Pcg32,
-    ) -> Self
-    where
-        O: PathOracle<Radiance = R>,
-        I: Importance<R> + ?Sized,
-    {
-        let (mut sampler, current) = initial_state(oracle, importance, &params, start_rng);
-        sampler.reseed(sampler_rng);
+impl<S: Default> Chain<S> {
+    /// A chain in `state`, encoded by `sampler` (outside a proposal).
+    pub fn new(sampler: MltSampler, state: S) -> Self {
         Self {
             sampler,
-            rng: decision_rng,
-            params,
-            current,
-            stats: ChainStats::default(),
+            current: state,
+            other: S::default(),
+            last_accepted: false,
         }
     }
 
+    /// A chain whose first state is the uniform primary sample drawn by `rng`
+    /// (a large step), mutated by `small_step` from then on.
+    pub fn start<T: Target<State = S> + ?Sized>(
+        target: &T,
+        small_step: SmallStep,
+        rng: Pcg32,
+    ) -> (Self, Traced) {
+        let mut sampler = MltSampler::new(small_step, rng);
+        let mut state = S::default();
+        let mut proposal = sampler.propose(true);
+        let traced = target.evaluate(&mut proposal, &mut state);
+        proposal.accept(1.0);
+        (Self::new(sampler, state), traced)
+    }
+
+    /// The same primary sample with its state mapped by `f`, which may replay
+    /// the sample (e.g. to trace the state at other temperatures).
+    pub fn map<T: Default>(mut self, f: impl FnOnce(&mut MltSampler, S) -> T) -> Chain<T> {
+        let state = f(&mut self.sampler, self.current);
+        Chain::new(self.sampler, state)
+    }
+}
+
+impl<S> Chain<S> {
     /// The current state.
-    pub fn current(&self) -> &Evaluated<R> {
+    pub fn state(&self) -> &S {
         &self.current
     }
 
-    /// Counters so far.
-    pub fn stats(&self) -> &ChainStats {
-        &self.stats
+    /// The current state, to update it after re-evaluating it (exchanges).
+    pub fn state_mut(&mut self) -> &mut S {
+        &mut self.current
+    }
+
+    /// The state the last step proposed, whether or not it was accepted.
+    pub fn last_proposal(&self) -> &S {
+        if self.last_accepted {
+            &self.current
+        } else {
+            &self.other
+        }
     }
 
     /// The primary sample.
@@ -125,81 +198,140 @@ impl<R: Radiance> Chain<R> {
         &self.sampler
     }
 
-    /// Mutable access to the primary sample (to replay the current state).
+    /// The primary sample, mutably (to replay it, or to swap random streams).
     pub fn sampler_mut(&mut self) -> &mut MltSampler {
         &mut self.sampler
     }
 
-    /// One Metropolis-Hastings step at temperature 1. `normalization` is `b`;
-    /// `splat(film, radiance, weight)` receives the (at most two) non-zero
-    /// weighted contributions; the driver scales them by `W·H / N`.
-    pub fn step<O, I>(
+    /// The primary sample and the current state, both mutably (to replay the
+    /// sample and update the state from what it traces).
+    pub fn parts_mut(&mut self) -> (&mut MltSampler, &mut S) {
+        (&mut self.sampler, &mut self.current)
+    }
+
+    /// Reads the current primary sample again.
+    pub fn replay(&mut self) -> Replay<'_> {
+        self.sampler.replay()
+    }
+
+    /// One Metropolis-Hastings step: a large step if `large_step`, else a
+    /// small one; `decisions` draws the accept/reject decision, `stats`
+    /// counts. `splat(state, weight)` receives the (at most two) weighted
+    /// states, the proposal first; the method scales them into its image.
+    pub fn step<T, W>(
         &mut self,
-        oracle: &O,
-        importance: &I,
-        normalization: f64,
-        mut splat: impl FnMut(FilmPoint, R, f64),
+        target: &T,
+        weights: &W,
+        large_step: bool,
+        decisions: &mut Pcg32,
+        stats: &mut ChainStats,
+        mut splat: impl FnMut(&S, f64),
     ) -> StepOutcome
     where
-        O: PathOracle<Radiance = R>,
-        I: Importance<R> + ?Sized,
+        T: Target<State = S> + ?Sized,
+        W: Weights<S> + ?Sized,
     {
-        let p_large = self.params.large_step_probability;
-        let large = uniform_f64(&mut self.rng) < p_large;
-        let mut proposal = self.sampler.propose(large);
-        let film = proposal.film_point(oracle.resolution());
-        let traced = oracle.trace(film, &mut proposal, Temperature::ONE);
-        let proposed = evaluate(importance, traced, film);
-
-        let current = self.current.importance;
-        let acceptance = acceptance(current, proposed.importance);
-        let [proposed_weight, current_weight] = splat_weights(
-            acceptance,
-            large,
-            current,
-            proposed.importance,
-            normalization,
-            p_large,
-        );
+        let mut proposal = self.sampler.propose(large_step);
+        let traced = target.evaluate(&mut proposal, &mut self.other);
+        let acceptance = acceptance(target.value(&self.current), target.value(&self.other));
+        let [proposed_weight, current_weight] =
+            weights.weights(acceptance, large_step, &self.current, &self.other);
         if proposed_weight > 0.0 {
-            splat(film, proposed.sample.radiance, proposed_weight);
+            splat(&self.other, proposed_weight);
         }
         if current_weight > 0.0 {
-            splat(
-                self.current.film,
-                self.current.sample.radiance,
-                current_weight,
-            );
+            splat(&self.current, current_weight);
         }
-
-        let accepted = uniform_f64(&mut self.rng) < acceptance;
+        let accepted = uniform_f64(decisions) < acceptance;
         if accepted {
             proposal.accept(acceptance);
-            self.current = proposed;
+            core::mem::swap(&mut self.current, &mut self.other);
         } else {
             proposal.reject(acceptance);
         }
-        self.stats.proposals += 1;
-        self.stats.accepted += accepted as u64;
-        self.stats.large_steps += large as u64;
-        self.stats.acceptance_sum += acceptance;
-        self.stats.invalid += proposed.invalid as u64;
+        self.last_accepted = accepted;
+        stats.proposals += 1;
+        stats.accepted += accepted as u64;
+        stats.large_steps += large_step as u64;
+        stats.acceptance_sum += acceptance;
+        stats.invalid += traced.invalid;
         StepOutcome {
             acceptance,
             accepted,
-            large_step: large,
+            large_step,
+            traced,
         }
     }
 }
 
 /// The Metropolis-Hastings acceptance probability of a symmetric proposal
-/// (seed 002 eq. 3.2): `min(1, I(y)/I(x))`, and 1 when `I(x) = 0`.
+/// (seed 002 eq. 3.2): `min(1, π(y)/π(x))`, and 1 when `π(x) = 0`.
 #[inline]
 pub fn acceptance(current: f64, proposed: f64) -> f64 {
     if current > 0.0 {
         (proposed / current).min(1.0)
     } else {
         1.0
+    }
+}
+
+/// One path per state, valued by an importance function: the film position
+/// comes from the primary sample's film stream, the path is traced at `T = 1`.
+pub struct PathTarget<'a, O, I: ?Sized> {
+    /// The renderer.
+    pub oracle: &'a O,
+    /// `I`.
+    pub importance: &'a I,
+}
+
+impl<O, I> Target for PathTarget<'_, O, I>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    type State = Evaluated<O::Radiance>;
+
+    fn evaluate(&self, proposal: &mut Proposal<'_>, state: &mut Self::State) -> Traced {
+        let film = proposal.film_point(self.oracle.resolution());
+        let traced = self.oracle.trace(film, proposal, Temperature::ONE);
+        *state = evaluate(self.importance, traced, film);
+        Traced {
+            paths: 1,
+            invalid: state.invalid as u64,
+        }
+    }
+
+    fn value(&self, state: &Self::State) -> f64 {
+        state.importance
+    }
+}
+
+/// Kelemen's weights (see the module docs) with normalization `b` and large
+/// step probability `p`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KelemenWeights {
+    /// `b`, the integral of the importance.
+    pub normalization: f64,
+    /// `p`.
+    pub large_step_probability: f64,
+}
+
+impl<R: Radiance> Weights<Evaluated<R>> for KelemenWeights {
+    fn weights(
+        &self,
+        acceptance: f64,
+        large_step: bool,
+        current: &Evaluated<R>,
+        proposed: &Evaluated<R>,
+    ) -> [f64; 2] {
+        splat_weights(
+            acceptance,
+            large_step,
+            current.importance,
+            proposed.importance,
+            self.normalization,
+            self.large_step_probability,
+        )
     }
 }
 
@@ -228,23 +360,65 @@ pub fn splat_weights(
     ]
 }
 
-/// Draws a uniform primary sample from `rng` (a large step) and evaluates it.
-/// Bootstrap candidates and chain starts share this, so a chain started from
-/// candidate `k` is exactly candidate `k`.
-pub(crate) fn initial_state<O, I>(
-    oracle: &O,
-    importance: &I,
-    params: &MutationParams,
-    rng: Pcg32,
-) -> (MltSampler, Evaluated<O::Radiance>)
-where
-    O: PathOracle,
-    I: Importance<O::Radiance> + ?Sized,
-{
-    let mut sampler = MltSampler::new(params.small_step, rng);
-    let mut proposal = sampler.propose(true);
-    let film = proposal.film_point(oracle.resolution());
-    let traced = oracle.trace(film, &mut proposal, Temperature::ONE);
-    proposal.accept(1.0);
-    (sampler, evaluate(importance, traced, film))
+/// A chain over paths that draws its own large steps and weights its
+/// samples by Kelemen's weights, with its own decisions and counters: the
+/// chain of PSSMLT, of stratified MCMC's global chains and of seed 003's
+/// predictions.
+#[derive(Clone, Debug)]
+pub struct PathChain<R> {
+    chain: Chain<Evaluated<R>>,
+    weights: KelemenWeights,
+    decisions: Pcg32,
+    stats: ChainStats,
+}
+
+impl<R: Radiance> PathChain<R> {
+    /// `chain`, weighting by `weights` and deciding with `decisions`.
+    pub fn new(chain: Chain<Evaluated<R>>, weights: KelemenWeights, decisions: Pcg32) -> Self {
+        Self {
+            chain,
+            weights,
+            decisions,
+            stats: ChainStats::default(),
+        }
+    }
+
+    /// The current path.
+    pub fn current(&self) -> &Evaluated<R> {
+        self.chain.state()
+    }
+
+    /// The chain.
+    pub fn chain(&self) -> &Chain<Evaluated<R>> {
+        &self.chain
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> &ChainStats {
+        &self.stats
+    }
+
+    /// One step over `oracle` valued by `importance`: a large step with the
+    /// weights' large-step probability. `splat(path, weight)` receives the
+    /// weighted paths.
+    pub fn step<O, I>(
+        &mut self,
+        oracle: &O,
+        importance: &I,
+        splat: impl FnMut(&Evaluated<R>, f64),
+    ) -> StepOutcome
+    where
+        O: PathOracle<Radiance = R>,
+        I: Importance<R> + ?Sized,
+    {
+        let large = uniform_f64(&mut self.decisions) < self.weights.large_step_probability;
+        self.chain.step(
+            &PathTarget { oracle, importance },
+            &self.weights,
+            large,
+            &mut self.decisions,
+            &mut self.stats,
+            splat,
+        )
+    }
 }

@@ -32,7 +32,7 @@ use alloc::vec::Vec;
 use rand_pcg::Pcg32;
 
 use crate::bootstrap::Bootstrap;
-use crate::chain::Chain;
+use crate::chain::{Chain, KelemenWeights, PathChain, PathTarget};
 use crate::error::Error;
 use crate::mutate::MutationParams;
 use crate::oracle::{PathOracle, Radiance};
@@ -193,7 +193,12 @@ where
         });
     }
     let pixel_weight = resolution.pixel_count() as f64;
-    let observe = |chain: &Chain<O::Radiance>| {
+    let target = PathTarget { oracle, importance };
+    let weights = KelemenWeights {
+        normalization,
+        large_step_probability: mutation.large_step_probability,
+    };
+    let observe = |chain: &PathChain<O::Radiance>| {
         let s = chain.current();
         Observation {
             pixel: resolution.pixel_index(s.film),
@@ -206,18 +211,15 @@ where
         reference,
         settings,
         |i| {
-            let chain = Chain::start(
-                oracle,
-                importance,
-                mutation,
-                stream(Domain::Candidate, i),
-                stream(Domain::Chain, i),
-                rng::stream(settings.seed ^ 0x5bd1_e995, Domain::Chain, i),
-            );
+            let (mut chain, _) =
+                Chain::start(&target, mutation.small_step, stream(Domain::Candidate, i));
+            let (mutations, decisions) = rng::chain_streams(settings.seed, i);
+            chain.sampler_mut().reseed(mutations);
+            let chain = PathChain::new(chain, weights, decisions);
             (observe(&chain), 1.0, chain)
         },
         |chain| {
-            chain.step(oracle, importance, normalization, |_, _, _| {});
+            chain.step(oracle, importance, |_, _| {});
             observe(chain)
         },
     )
@@ -243,11 +245,16 @@ where
 {
     let resolution = oracle.resolution();
     let pixels = resolution.pixel_count();
-    let bootstrap = Bootstrap::run(oracle, importance, &mutation, seed, candidates)?;
-    let mut chain = bootstrap.start_chain(oracle, importance, mutation, 0);
+    let bootstrap = Bootstrap::run(oracle, importance, mutation.small_step, seed, candidates)?;
+    let started = bootstrap.start(oracle, importance, 0, 0, |_, path| path);
+    let weights = KelemenWeights {
+        normalization,
+        large_step_probability: mutation.large_step_probability,
+    };
+    let mut chain = PathChain::new(started.chain, weights, started.decisions);
     let mut sums = vec![0.0; pixels];
     for _ in 0..steps {
-        chain.step(oracle, importance, normalization, |_, _, _| {});
+        chain.step(oracle, importance, |_, _| {});
         let s = chain.current();
         if s.importance > 0.0 {
             sums[resolution.pixel_index(s.film)] += pixels as f64

@@ -108,7 +108,7 @@ where
     let bootstrap = Bootstrap::run(
         oracle,
         importance,
-        &mutation,
+        mutation.small_step,
         settings.seed,
         settings.bootstrap_candidates,
     )?;
@@ -129,7 +129,7 @@ where
     let mut film = Film::new(resolution, O::Radiance::CHANNELS);
     let mut visits = alloc::vec![0u64; pixels as usize];
     let mut stats = RenderStats {
-        bootstrap_samples: bootstrap.candidates(),
+        bootstrap_samples: bootstrap.traced().paths,
         normalization: Some(bootstrap.normalization()),
         ..Default::default()
     };
@@ -178,7 +178,7 @@ where
         stats.chains.merge(&w.stats);
         stats.invalid_samples += w.invalid;
     }
-    stats.invalid_samples += bootstrap.invalid();
+    stats.invalid_samples += bootstrap.traced().invalid;
     Ok(RenderOutput {
         film,
         stats,

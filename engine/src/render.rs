@@ -12,7 +12,7 @@
 use alloc::vec::Vec;
 
 use crate::bootstrap::Bootstrap;
-use crate::chain::{Chain, ChainStats};
+use crate::chain::{ChainStats, PathChain};
 use crate::error::{Error, check_probability};
 use crate::film::Film;
 use crate::mutate::MutationParams;
@@ -265,15 +265,16 @@ where
     let bootstrap = Bootstrap::run(
         oracle,
         importance,
-        &settings.mutation,
+        settings.mutation.small_step,
         settings.seed,
         settings.bootstrap_candidates,
     )?;
     let b = bootstrap.normalization();
     let chain_count = settings.chains as usize;
     let bands = SplatBands::new(resolution);
+    let p_large = settings.mutation.large_step_probability;
     let start = |i: usize| ChainWork {
-        chain: bootstrap.start_chain(oracle, importance, settings.mutation, i as u64),
+        chain: bootstrap.start_path_chain(oracle, importance, i as u64, p_large),
         buffers: RoundBuffers::new(&bands),
     };
     #[cfg(feature = "parallel")]
@@ -293,8 +294,8 @@ where
         |w, steps| {
             for _ in 0..steps {
                 let buffers = &mut w.buffers;
-                w.chain.step(oracle, importance, b, |p, radiance, weight| {
-                    buffers.splat(&bands, p, radiance, weight);
+                w.chain.step(oracle, importance, |path, weight| {
+                    buffers.splat(&bands, path.film, path.sample.radiance, weight);
                 });
                 w.buffers.visit(&bands, w.chain.current().film);
             }
@@ -303,14 +304,14 @@ where
     let done = rounds.units;
     let mut stats = RenderStats {
         samples: done * chain_count as u64,
-        bootstrap_samples: bootstrap.candidates(),
+        bootstrap_samples: bootstrap.traced().paths,
         normalization: Some(b),
         ..Default::default()
     };
     for w in &work {
         stats.chains.merge(w.chain.stats());
     }
-    stats.invalid_samples = stats.chains.invalid + bootstrap.invalid();
+    stats.invalid_samples = stats.chains.invalid + bootstrap.traced().invalid;
     Ok(RenderOutput {
         film: rounds.film,
         stats,
@@ -430,7 +431,7 @@ pub(crate) fn report(
 
 /// A chain and what it produced in the current round.
 struct ChainWork<R> {
-    chain: Chain<R>,
+    chain: PathChain<R>,
     buffers: RoundBuffers<R>,
 }
 

@@ -41,6 +41,14 @@ pub fn stream(seed: u64, domain: Domain, index: u64) -> Pcg32 {
     Pcg32::new(state, increment)
 }
 
+/// Chain `index`'s own streams: its mutations and its accept/reject decisions.
+pub fn chain_streams(seed: u64, index: u64) -> (Pcg32, Pcg32) {
+    (
+        stream(seed, Domain::Chain, index),
+        stream(seed ^ 0x5bd1_e995, Domain::Chain, index),
+    )
+}
+
 /// A uniform `f32` in `[0, 1)` (24 random bits).
 #[inline]
 pub fn uniform_f32<R: Rng + ?Sized>(rng: &mut R) -> f32 {

@@ -49,7 +49,7 @@ use core::sync::atomic::{AtomicU64, Ordering};
 use rand_pcg::Pcg32;
 
 use crate::bootstrap::Bootstrap;
-use crate::chain::{ChainStats, acceptance};
+use crate::chain::{ChainStats, PathChain, acceptance};
 use crate::error::{Error, check_probability};
 use crate::film::Film;
 use crate::mutate::MutationParams;
@@ -718,8 +718,8 @@ where
         .min(max_traces / (2 * offsets))
         .max(1);
     let seed = settings.seed ^ 0x6a09_e667_f3bc_c908;
-    let bootstrap = match Bootstrap::run(&target, &MaxChannel, &settings.mutation, seed, candidates)
-    {
+    let small_step = settings.mutation.small_step;
+    let bootstrap = match Bootstrap::run(&target, &MaxChannel, small_step, seed, candidates) {
         Ok(b) => b,
         // A black scene (for these candidates): tiles fall back on uniform draws.
         Err(Error::AllCandidatesBlack { .. }) => {
@@ -729,9 +729,9 @@ where
         Err(e) => return Err(e),
     };
     let bootstrap_traces = target.traces.load(Ordering::Relaxed);
-    let b = bootstrap.normalization();
+    let p_large = settings.mutation.large_step_probability;
     let mut global: Vec<_> = (0..init.global_chains as u64)
-        .map(|i| bootstrap.start_chain(&target, &MaxChannel, settings.mutation, i))
+        .map(|i| bootstrap.start_path_chain(&target, &MaxChannel, i, p_large))
         .collect();
     let mut initialized = vec![false; n];
     let mut count = 0usize;
@@ -740,10 +740,10 @@ where
         && target.traces.load(Ordering::Relaxed) < max_traces
         && !clock.is_some_and(Clock::expired)
     {
-        let run = |chain: &mut crate::chain::Chain<f32>| -> Vec<Visit> {
+        let run = |chain: &mut PathChain<f32>| -> Vec<Visit> {
             let mut visits: Vec<Visit> = Vec::new();
             for _ in 0..STEPS_PER_ROUND {
-                chain.step(&target, &MaxChannel, b, |_, _, _| {});
+                chain.step(&target, &MaxChannel, |_, _| {});
                 let state = chain.current();
                 let tile = ctx.tiles.resolution().pixel_index(state.film);
                 if state.importance > 0.0
@@ -753,7 +753,7 @@ where
                     visits.push(Visit {
                         tile,
                         jitter: jitter_of(state.film),
-                        sampler: chain.sampler().clone(),
+                        sampler: chain.chain().sampler().clone(),
                     });
                 }
             }

@@ -1,107 +1,27 @@
-//! An ensemble of tempered chains over an oracle, and the replica-exchange
-//! MLT driver (seed 002 sec. 5.4).
-//!
-//! # Tempering
-//! * [`Tempering::Power`]: `π_i(u) = I(u)^(1/T_i)`, computed by the engine from
-//!   one trace at `T = 1`. Works with any oracle.
-//! * [`Tempering::Oracle`]: the oracle is asked for the tempered target
-//!   (`π_i(u) = I(trace(u, T_i))`, e.g. roughened BSDFs, seed 002 sec. 5.2).
-//!   Every proposal is traced at every temperature once and the row of values
-//!   is kept with the state, so exchange moves, which need `π_i(u_j)` for all
-//!   pairs, never trace: `M` traces per proposal, none per exchange.
-//!
-//! # The estimator (eq. 5.13 with Kelemen's large steps)
-//! Chain `j` samples `π_j / b_j` (its normalization `b_j` from the bootstrap)
-//! and proposes uniform large steps with probability `p`. Every sample `u` of
-//! every chain is weighted by the balance heuristic over all of them,
-//!
-//! ```text
-//! w(y) = (a + [large]) / D(y),   w(x) = (1 - a) / D(x),   D(u) = Σ_j π_j(u)/b_j + M p,
-//! ```
-//!
-//! which is eq. 5.13's MCMC MIS weight `(π_i/b_i) / Σ_j π_j/b_j` extended by
-//! the large steps exactly as [`chain`](crate::chain) does for one chain. One
-//! sweep (every chain steps once) then estimates the image once, whatever the
-//! exchanges did in between; the untempered contribution `f(u)` is splatted.
+//! An ensemble of tempered chains over an oracle (seed 002 sec. 5.4): the
+//! chains at the ladder's temperatures, swept from the hottest down with an
+//! exchange move's hooks around every mutation.
 
-use alloc::boxed::Box;
 use alloc::vec;
 use alloc::vec::Vec;
 
 use rand_core::Rng;
 use rand_pcg::Pcg32;
 
-use super::{
-    EnergyLevels, EquiEnergy, EquiEnergySampler, Exchange, ExchangeStats, IsPermutation, IsSwap,
-    Ladder, Move, NeighborSwap, NoExchange, NonReversible, SweepRecorder, Tempered,
-};
-use crate::chain::{ChainStats, acceptance, initial_state};
+use super::ExchangeKind;
+use super::tempered::{EnsembleWeights, Levels, Replica, TemperedPath, TemperedTarget, Tempering};
+use super::{Exchange, ExchangeStats, Ladder, Move, SweepRecorder};
+use crate::bootstrap::Bootstrap;
+use crate::chain::ChainStats;
 use crate::error::{Error, check_probability};
 use crate::film::Film;
 use crate::mutate::MutationParams;
-use crate::oracle::{FilmPoint, PathOracle, Radiance, Temperature};
+use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance};
 use crate::render::{Budget, Observer, RenderStats, checked_resolution, run_round, run_rounds};
 use crate::rng::{self, Domain, uniform_f64};
-use crate::sample::{MltSampler, Replay};
 use crate::splat::{RoundBuffers, SplatBands, Worker};
-use crate::target::{Evaluated, Importance, evaluate};
-
-/// How the chains' targets are tempered.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Tempering {
-    /// `π_i = I^(1/T_i)`, computed by the engine (any oracle).
-    #[default]
-    Power,
-    /// The oracle traces at temperature `T_i` and `π_i` is the importance of
-    /// that trace (the native path tracer roughens BSDFs, seed 002 sec. 5.2).
-    Oracle,
-}
-
-/// One state of an ensemble: a primary sample with its untempered
-/// contribution and the value of every chain's target at it.
-#[derive(Clone, Debug)]
-pub struct Replica<R> {
-    sampler: MltSampler,
-    film: FilmPoint,
-    radiance: R,
-    values: Vec<f64>,
-    density: f64,
-}
-
-impl<R> Tempered for Replica<R> {
-    #[inline]
-    fn value(&self, chain: usize) -> f64 {
-        self.values[chain]
-    }
-}
-
-impl<R: Radiance> Replica<R> {
-    /// Where on the film.
-    pub fn film(&self) -> FilmPoint {
-        self.film
-    }
-
-    /// The untempered contribution `f(u)`.
-    pub fn radiance(&self) -> R {
-        self.radiance
-    }
-
-    /// `π_j(u)` for every chain `j`.
-    pub fn values(&self) -> &[f64] {
-        &self.values
-    }
-
-    /// `Σ_j π_j(u) / b_j`, the MCMC part of the MIS denominator.
-    pub fn density(&self) -> f64 {
-        self.density
-    }
-
-    /// Reads the primary sample again (to inspect it, e.g. the coordinates of
-    /// an analytic target).
-    pub fn replay(&mut self) -> Replay<'_> {
-        self.sampler.replay()
-    }
-}
+use crate::target::{Evaluated, Importance};
+use alloc::boxed::Box;
 
 /// What defines an ensemble.
 #[derive(Clone, Debug, PartialEq)]
@@ -145,204 +65,34 @@ impl EnsembleSettings {
 
     /// Oracle traces per proposal.
     pub fn traces_per_proposal(&self) -> u64 {
-        match self.tempering {
-            Tempering::Power => 1,
-            Tempering::Oracle => self.ladder.len() as u64,
+        self.tempering.traces_per_proposal(self.ladder.len())
+    }
+
+    /// The ladder's temperatures and how they temper.
+    fn levels(&self) -> Levels<'_> {
+        Levels {
+            tempering: self.tempering,
+            temperatures: self.ladder.temperatures(),
         }
     }
-}
 
-/// Fills `row[j] = π_j(u)` from the first trace (at `T = 1`) and, under oracle
-/// tempering, traces at the other temperatures; returns the invalid traces.
-fn fill_row<R: Radiance>(
-    tempering: Tempering,
-    temperatures: &[f64],
-    first: &Evaluated<R>,
-    row: &mut [f64],
-    mut retrace: impl FnMut(f64) -> Evaluated<R>,
-) -> u64 {
-    row[0] = first.importance;
-    let mut invalid = 0;
-    for (j, &t) in temperatures.iter().enumerate().skip(1) {
-        row[j] = match tempering {
-            Tempering::Power if first.importance > 0.0 => {
-                libm::exp(libm::log(first.importance) / t)
-            }
-            Tempering::Power => 0.0,
-            Tempering::Oracle => {
-                let e = retrace(t);
-                invalid += e.invalid as u64;
-                e.importance
-            }
-        };
-    }
-    invalid
-}
-
-/// `Σ_j row[j] / b_j`.
-fn mis_density(row: &[f64], normalizations: &[f64]) -> f64 {
-    row.iter().zip(normalizations).map(|(v, b)| v / b).sum()
-}
-
-/// `numerator / denominator`, zero when either is not positive.
-fn weight(numerator: f64, denominator: f64) -> f64 {
-    if numerator > 0.0 && denominator > 0.0 {
-        numerator / denominator
-    } else {
-        0.0
-    }
-}
-
-/// The bootstrap of an ensemble (seed 002 sec. 3.6, per temperature as in
-/// sec. 5.4): `N` uniform candidates, each evaluated under every chain's
-/// target; `b_j` is the mean of `π_j`, chain `j` starts from a candidate
-/// drawn in proportion to `π_j`, and the range of the positive values gives
-/// each chain's energy levels.
-#[derive(Clone, Debug)]
-pub struct Candidates {
-    seed: u64,
-    chains: usize,
-    /// `cumulative[j][k] = Σ_{k' <= k} π_j(candidate k')`.
-    cumulative: Vec<Vec<f64>>,
-    normalizations: Vec<f64>,
-    ranges: Vec<(f64, f64)>,
-    invalid: u64,
-    traces: u64,
-}
-
-impl Candidates {
-    /// Traces the candidates. Fails with [`Error::AllCandidatesBlack`] if the
-    /// exact target is zero on all of them, and with a typed error if a
-    /// tempered target is.
-    pub fn run<O, I>(
-        oracle: &O,
-        importance: &I,
-        settings: &EnsembleSettings,
-        seed: u64,
-    ) -> Result<Self, Error>
+    /// The bootstrap of an ensemble with these settings (see
+    /// [`tempered`](super::tempered)): `b_j` per chain, the chains' starts and
+    /// the value ranges of their energy levels.
+    pub fn bootstrap<O, I>(&self, oracle: &O, importance: &I, seed: u64) -> Result<Bootstrap, Error>
     where
         O: PathOracle,
         I: Importance<O::Radiance> + ?Sized,
     {
-        settings.validate()?;
-        let temperatures = settings.ladder.temperatures();
-        let m = temperatures.len();
-        let n = settings.bootstrap_candidates;
-        let resolution = oracle.resolution();
-        let evaluate_candidate = |k: u64| {
-            let (mut sampler, first) = initial_state(
-                oracle,
-                importance,
-                &settings.mutation,
-                rng::stream(seed, Domain::Candidate, k),
-            );
-            let mut row = vec![0.0; m];
-            let mut invalid = first.invalid as u64;
-            invalid += fill_row(settings.tempering, temperatures, &first, &mut row, |t| {
-                let mut replay = sampler.replay();
-                let film = replay.film_point(resolution);
-                let traced = oracle.trace(film, &mut replay, Temperature(t as f32));
-                evaluate(importance, traced, film)
-            });
-            (row, invalid)
-        };
-        #[cfg(feature = "parallel")]
-        let rows: Vec<(Vec<f64>, u64)> = {
-            use rayon::prelude::*;
-            (0..n).into_par_iter().map(evaluate_candidate).collect()
-        };
-        #[cfg(not(feature = "parallel"))]
-        let rows: Vec<(Vec<f64>, u64)> = (0..n).map(evaluate_candidate).collect();
-
-        let mut cumulative = vec![Vec::with_capacity(n as usize); m];
-        let mut ranges = vec![(f64::INFINITY, 0.0f64); m];
-        let mut invalid = 0;
-        for (row, bad) in &rows {
-            invalid += bad;
-            for j in 0..m {
-                let total = cumulative[j].last().copied().unwrap_or(0.0) + row[j];
-                cumulative[j].push(total);
-                if row[j] > 0.0 {
-                    ranges[j] = (ranges[j].0.min(row[j]), ranges[j].1.max(row[j]));
-                }
-            }
-        }
-        let mut normalizations = Vec::with_capacity(m);
-        for (j, c) in cumulative.iter().enumerate() {
-            let total = c.last().copied().unwrap_or(0.0);
-            if !total.is_finite() {
-                return Err(Error::invalid(
-                    "importance",
-                    total,
-                    "candidate importances whose sum fits in an f64",
-                ));
-            }
-            if total <= 0.0 {
-                return Err(if j == 0 {
-                    Error::AllCandidatesBlack { candidates: n }
-                } else {
-                    Error::invalid(
-                        "temperatures",
-                        temperatures[j],
-                        "temperatures at which some bootstrap candidate has a non-zero tempered target",
-                    )
-                });
-            }
-            normalizations.push(total / n as f64);
-        }
-        Ok(Self {
+        self.validate()?;
+        super::tempered::bootstrap(
+            oracle,
+            importance,
+            self.levels(),
+            self.mutation.small_step,
             seed,
-            chains: m,
-            cumulative,
-            normalizations,
-            ranges,
-            invalid,
-            traces: n * settings.traces_per_proposal(),
-        })
-    }
-
-    /// `b_j` for every chain.
-    pub fn normalizations(&self) -> &[f64] {
-        &self.normalizations
-    }
-
-    /// Smallest positive and largest value of `π_j` over the candidates.
-    pub fn value_range(&self, chain: usize) -> (f64, f64) {
-        self.ranges[chain]
-    }
-
-    /// Oracle traces spent.
-    pub fn traces(&self) -> u64 {
-        self.traces
-    }
-
-    /// Candidates with an invalid trace.
-    pub fn invalid(&self) -> u64 {
-        self.invalid
-    }
-
-    /// Log-spaced energy levels for every chain, from its value range.
-    pub fn energy_levels(&self, rings: usize) -> Result<Vec<EnergyLevels>, Error> {
-        (0..self.chains)
-            .map(|j| {
-                let (low, high) = self.ranges[j];
-                EnergyLevels::log_spaced(rings, low, high)
-            })
-            .collect()
-    }
-
-    /// The candidate drawn for chain `chain` by `u` in `[0, 1)`, in
-    /// proportion to `π_chain`.
-    fn select(&self, chain: usize, u: f64) -> u64 {
-        let c = &self.cumulative[chain];
-        let total = *c.last().unwrap_or(&0.0);
-        let k = c.partition_point(|&x| x <= u * total).min(c.len() - 1);
-        // Step back over zero-valued ties (never start on a zero state).
-        let mut k = k;
-        while k > 0 && c[k] == c[k - 1] {
-            k -= 1;
-        }
-        k as u64
+            self.bootstrap_candidates,
+        )
     }
 }
 
@@ -361,83 +111,66 @@ pub struct Ensemble<R> {
     recorder: SweepRecorder,
     chain_stats: Vec<ChainStats>,
     sweep: u64,
-    row: Vec<f64>,
     neighbor: Vec<f64>,
 }
 
 impl<R: Radiance> Ensemble<R> {
-    /// Ensemble `index` of a render seeded with `seed`: chain `j` starts from
-    /// a candidate drawn in proportion to `π_j`, and every chain, and the
-    /// exchanges, own their random streams.
+    /// Ensemble `index` of a render whose bootstrap is `bootstrap`
+    /// ([`EnsembleSettings::bootstrap`]): chain `j` starts from a candidate
+    /// drawn in proportion to `π_j`, and every chain, and the exchanges, own
+    /// their random streams.
     pub fn start<O, I>(
         oracle: &O,
         importance: &I,
         settings: &EnsembleSettings,
-        candidates: &Candidates,
+        bootstrap: &Bootstrap,
         index: u64,
     ) -> Self
     where
         O: PathOracle<Radiance = R>,
         I: Importance<R> + ?Sized,
     {
-        let seed = candidates.seed;
-        let temperatures = settings.ladder.temperatures().to_vec();
-        let m = temperatures.len();
-        let resolution = oracle.resolution();
+        let levels = settings.levels();
+        let m = levels.temperatures.len();
         let mut replicas = Vec::with_capacity(m);
         let mut decisions = Vec::with_capacity(m);
         for j in 0..m {
-            let stream = index * m as u64 + j as u64;
-            let u = uniform_f64(&mut rng::stream(seed, Domain::ChainStart, stream));
-            let k = candidates.select(j, u);
-            let (mut sampler, first) = initial_state(
+            let started = bootstrap.start(
                 oracle,
                 importance,
-                &settings.mutation,
-                rng::stream(seed, Domain::Candidate, k),
-            );
-            let mut values = vec![0.0; m];
-            fill_row(
-                settings.tempering,
-                &temperatures,
-                &first,
-                &mut values,
-                |t| {
-                    let mut replay = sampler.replay();
-                    let film = replay.film_point(resolution);
-                    let traced = oracle.trace(film, &mut replay, Temperature(t as f32));
-                    evaluate(importance, traced, film)
+                j,
+                index * m as u64 + j as u64,
+                |sampler, first| {
+                    let mut values = vec![0.0; m];
+                    levels.replay_row(oracle, importance, sampler, &first, &mut values);
+                    debug_assert!(
+                        values[j] > 0.0,
+                        "replaying a bootstrap candidate changed its value: the oracle is not a \
+                         pure function of (film point, numbers drawn, temperature)"
+                    );
+                    TemperedPath {
+                        film: first.film,
+                        radiance: first.sample.radiance,
+                        values,
+                    }
                 },
             );
-            debug_assert!(
-                values[j] > 0.0,
-                "replaying bootstrap candidate {k} changed its value: the oracle is not a pure function \
-                 of (film point, numbers drawn, temperature)"
-            );
-            sampler.reseed(rng::stream(seed, Domain::Chain, stream));
-            decisions.push(rng::stream(seed ^ 0x5bd1_e995, Domain::Chain, stream));
-            replicas.push(Replica {
-                sampler,
-                film: first.film,
-                radiance: first.sample.radiance,
-                density: mis_density(&values, candidates.normalizations()),
-                values,
-            });
+            replicas.push(started.chain);
+            decisions.push(started.decisions);
         }
         Self {
             replicas,
             labels: (0..m).collect(),
             decisions,
-            exchange_rng: rng::stream(seed, Domain::Exchange, index),
-            temperatures,
-            normalizations: candidates.normalizations().to_vec(),
+            exchange_rng: rng::stream(bootstrap.seed(), Domain::Exchange, index),
+            temperatures: levels.temperatures.to_vec(),
+            normalizations: bootstrap.normalizations().to_vec(),
             tempering: settings.tempering,
             large_step_probability: settings.mutation.large_step_probability,
             stats: ExchangeStats::new(m),
             recorder: SweepRecorder::new(m),
             chain_stats: vec![ChainStats::default(); m],
             sweep: 0,
-            row: vec![0.0; m],
             neighbor: vec![0.0; m.saturating_sub(1)],
         }
     }
@@ -477,44 +210,43 @@ impl<R: Radiance> Ensemble<R> {
         self.sweep
     }
 
-    /// Moves the chains to a new ladder (same number of chains) with its
-    /// normalizations: every state's row of values is recomputed (traced again
-    /// under oracle tempering) and the exchange counters restart.
+    fn weights(&self) -> EnsembleWeights<'_> {
+        EnsembleWeights {
+            normalizations: &self.normalizations,
+            large_rate: self.temperatures.len() as f64 * self.large_step_probability,
+        }
+    }
+
+    /// Moves the chains to a new ladder (same number of chains) with the
+    /// normalizations of its bootstrap: every state's row of values is
+    /// recomputed (traced again under oracle tempering) and the exchange
+    /// counters restart.
     pub fn set_ladder<O, I>(
         &mut self,
         oracle: &O,
         importance: &I,
         ladder: &Ladder,
-        candidates: &Candidates,
+        bootstrap: &Bootstrap,
     ) where
         O: PathOracle<Radiance = R>,
         I: Importance<R> + ?Sized,
     {
         debug_assert_eq!(ladder.len(), self.temperatures.len());
         self.temperatures = ladder.temperatures().to_vec();
-        self.normalizations = candidates.normalizations().to_vec();
-        let resolution = oracle.resolution();
+        self.normalizations = bootstrap.normalizations().to_vec();
+        let levels = Levels {
+            tempering: self.tempering,
+            temperatures: &self.temperatures,
+        };
         for replica in &mut self.replicas {
+            let (sampler, path) = replica.parts_mut();
             let first = Evaluated {
-                film: replica.film,
-                sample: crate::oracle::PathSample::new(replica.radiance),
-                importance: replica.values[0],
+                film: path.film,
+                sample: PathSample::new(path.radiance),
+                importance: path.values[0],
                 invalid: false,
             };
-            let sampler = &mut replica.sampler;
-            fill_row(
-                self.tempering,
-                &self.temperatures,
-                &first,
-                &mut replica.values,
-                |t| {
-                    let mut replay = sampler.replay();
-                    let film = replay.film_point(resolution);
-                    let traced = oracle.trace(film, &mut replay, Temperature(t as f32));
-                    evaluate(importance, traced, film)
-                },
-            );
-            replica.density = mis_density(&replica.values, &self.normalizations);
+            levels.replay_row(oracle, importance, sampler, &first, &mut path.values);
         }
         let m = self.temperatures.len();
         self.stats = ExchangeStats::new(m);
@@ -523,8 +255,8 @@ impl<R: Radiance> Ensemble<R> {
 
     /// One sweep: chains mutate from the hottest down, with `exchange`'s hooks
     /// around each mutation and after the sweep. `splat(film, f, weight)`
-    /// receives the weighted contributions (see the module docs); the driver
-    /// scales them by `W·H / sweeps`.
+    /// receives the weighted contributions (see
+    /// [`tempered`](super::tempered)); the method scales them by `W·H / sweeps`.
     pub fn sweep<O, I>(
         &mut self,
         oracle: &O,
@@ -548,29 +280,29 @@ impl<R: Radiance> Ensemble<R> {
             };
         }
         let m = self.temperatures.len();
-        let large_rate = m as f64 * self.large_step_probability;
         self.recorder.begin(&self.labels);
         for c in (0..m).rev() {
             exchange.before_mutation(&mut ex!(), c);
             let large = uniform_f64(&mut self.decisions[c]) < self.large_step_probability;
             if !large {
-                let before = &self.replicas[c];
-                let (film, radiance, density) = (before.film, before.radiance, before.density);
+                let before = self.replicas[c].state().clone();
                 if let Some(jump) = exchange.replace_small_step(&mut ex!(), c) {
+                    let weights = self.weights();
                     let a = jump.acceptance;
-                    let w = weight(a, jump.proposal.density + large_rate);
+                    let proposed = jump.proposal.state();
+                    let w = weights.weight(a, proposed);
                     if w > 0.0 {
-                        splat(jump.proposal.film, jump.proposal.radiance, w);
+                        splat(proposed.film, proposed.radiance, w);
                     }
-                    let w = weight(1.0 - a, density + large_rate);
+                    let w = weights.weight(1.0 - a, &before);
                     if w > 0.0 {
-                        splat(film, radiance, w);
+                        splat(before.film, before.radiance, w);
                     }
                     if jump.accepted {
                         // The past state's random stream belongs to its chain:
                         // continue on a fresh one.
                         let fresh = self.decisions[c].next_u64();
-                        self.replicas[c].sampler.reseed(rng::stream(
+                        self.replicas[c].sampler_mut().reseed(rng::stream(
                             fresh,
                             Domain::Exchange,
                             c as u64,
@@ -580,7 +312,27 @@ impl<R: Radiance> Ensemble<R> {
                     continue;
                 }
             }
-            self.mutate(oracle, importance, c, large, &mut splat);
+            let target = TemperedTarget {
+                oracle,
+                importance,
+                levels: Levels {
+                    tempering: self.tempering,
+                    temperatures: &self.temperatures,
+                },
+                chain: c,
+            };
+            let weights = EnsembleWeights {
+                normalizations: &self.normalizations,
+                large_rate: m as f64 * self.large_step_probability,
+            };
+            self.replicas[c].step(
+                &target,
+                &weights,
+                large,
+                &mut self.decisions[c],
+                &mut self.chain_stats[c],
+                |path, weight| splat(path.film, path.radiance, weight),
+            );
             exchange.after_mutation(&mut ex!(), c);
         }
         exchange.after_sweep(&mut ex!());
@@ -593,172 +345,6 @@ impl<R: Radiance> Ensemble<R> {
         self.recorder
             .end(&self.labels, &self.neighbor, &mut self.stats);
         self.sweep += 1;
-    }
-
-    /// One Metropolis-Hastings step of chain `c` on its target `π_c`.
-    fn mutate<O, I>(
-        &mut self,
-        oracle: &O,
-        importance: &I,
-        c: usize,
-        large: bool,
-        splat: &mut impl FnMut(FilmPoint, R, f64),
-    ) where
-        O: PathOracle<Radiance = R>,
-        I: Importance<R> + ?Sized,
-    {
-        let m = self.temperatures.len();
-        let large_rate = m as f64 * self.large_step_probability;
-        let resolution = oracle.resolution();
-        let replica = &mut self.replicas[c];
-        let mut proposal = replica.sampler.propose(large);
-        let film = proposal.film_point(resolution);
-        let traced = oracle.trace(film, &mut proposal, Temperature::ONE);
-        let first = evaluate(importance, traced, film);
-        let mut invalid = first.invalid as u64;
-        invalid += fill_row(
-            self.tempering,
-            &self.temperatures,
-            &first,
-            &mut self.row,
-            |t| {
-                proposal.restart();
-                let traced = oracle.trace(film, &mut proposal, Temperature(t as f32));
-                evaluate(importance, traced, film)
-            },
-        );
-        let density = mis_density(&self.row, &self.normalizations);
-        let a = acceptance(replica.values[c], self.row[c]);
-        let w = weight(a + large as u8 as f64, density + large_rate);
-        if w > 0.0 {
-            splat(film, first.sample.radiance, w);
-        }
-        let w = weight(1.0 - a, replica.density + large_rate);
-        if w > 0.0 {
-            splat(replica.film, replica.radiance, w);
-        }
-        let accepted = uniform_f64(&mut self.decisions[c]) < a;
-        if accepted {
-            proposal.accept(a);
-            replica.film = film;
-            replica.radiance = first.sample.radiance;
-            replica.density = density;
-            core::mem::swap(&mut replica.values, &mut self.row);
-        } else {
-            proposal.reject(a);
-        }
-        let s = &mut self.chain_stats[c];
-        s.proposals += 1;
-        s.accepted += accepted as u64;
-        s.large_steps += large as u64;
-        s.acceptance_sum += a;
-        s.invalid += invalid;
-    }
-}
-
-/// Which exchange move an ensemble runs (a [`Move`] built per ensemble).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum ExchangeKind {
-    /// Independent tempered chains (chain 0 is plain MH).
-    None,
-    /// [`NeighborSwap`].
-    NeighborSwap,
-    /// [`IsPermutation`].
-    IsPermutation,
-    /// [`IsSwap`].
-    IsSwap,
-    /// [`EquiEnergy::original`] with `rings` log-spaced rings.
-    OriginalEquiEnergy {
-        /// Number of rings (the thesis uses 8).
-        rings: usize,
-    },
-    /// [`EquiEnergy::frequent`] with `rings` log-spaced rings per chain.
-    FrequentEquiEnergy {
-        /// Number of rings (the thesis uses 8).
-        rings: usize,
-    },
-    /// [`EquiEnergySampler`].
-    EquiEnergySampler {
-        /// Probability of a jump in place of a small step (0.1).
-        p_jump: f64,
-        /// Adaptive rings (the thesis uses 16).
-        rings: usize,
-        /// Recorded states kept per chain.
-        capacity: usize,
-        /// Sweeps before chains start recording.
-        burn_in: u64,
-    },
-    /// [`NonReversible`].
-    NonReversible,
-}
-
-impl ExchangeKind {
-    /// Every move of seed 002 sec. 5.3 with the thesis' settings, plus
-    /// non-reversible PT, after the no-exchange baseline.
-    pub fn all(burn_in: u64) -> [ExchangeKind; 8] {
-        [
-            ExchangeKind::None,
-            ExchangeKind::NeighborSwap,
-            ExchangeKind::IsPermutation,
-            ExchangeKind::IsSwap,
-            ExchangeKind::OriginalEquiEnergy { rings: 8 },
-            ExchangeKind::FrequentEquiEnergy { rings: 8 },
-            ExchangeKind::thesis_equi_energy_sampler(burn_in),
-            ExchangeKind::NonReversible,
-        ]
-    }
-
-    /// The adaptive equi-energy sampler with seed 002 sec. 5.3.7's settings
-    /// (`p_EEJ = 0.1`, 16 rings), 4096 recorded states per chain, recording
-    /// after `burn_in` sweeps.
-    pub fn thesis_equi_energy_sampler(burn_in: u64) -> ExchangeKind {
-        ExchangeKind::EquiEnergySampler {
-            p_jump: 0.1,
-            rings: 16,
-            capacity: 4096,
-            burn_in,
-        }
-    }
-
-    /// A short name for tables and command lines.
-    pub fn name(&self) -> &'static str {
-        match self {
-            ExchangeKind::None => "none",
-            ExchangeKind::NeighborSwap => "neighbor",
-            ExchangeKind::IsPermutation => "is-permutation",
-            ExchangeKind::IsSwap => "is-swap",
-            ExchangeKind::OriginalEquiEnergy { .. } => "original-eem",
-            ExchangeKind::FrequentEquiEnergy { .. } => "frequent-eem",
-            ExchangeKind::EquiEnergySampler { .. } => "ees",
-            ExchangeKind::NonReversible => "non-reversible",
-        }
-    }
-
-    /// Builds the move for an ensemble whose bootstrap is `candidates`.
-    pub fn build<R: Radiance + Send + Sync + 'static>(
-        &self,
-        candidates: &Candidates,
-    ) -> Result<Box<dyn Move<Replica<R>> + Send + Sync>, Error> {
-        let m = candidates.chains;
-        Ok(match *self {
-            ExchangeKind::None => Box::new(NoExchange),
-            ExchangeKind::NeighborSwap => Box::new(NeighborSwap),
-            ExchangeKind::IsPermutation => Box::new(IsPermutation::new(m)?),
-            ExchangeKind::IsSwap => Box::new(IsSwap::default()),
-            ExchangeKind::OriginalEquiEnergy { rings } => Box::new(EquiEnergy::original(
-                candidates.energy_levels(rings)?.remove(0),
-            )),
-            ExchangeKind::FrequentEquiEnergy { rings } => {
-                Box::new(EquiEnergy::frequent(candidates.energy_levels(rings)?))
-            }
-            ExchangeKind::EquiEnergySampler {
-                p_jump,
-                rings,
-                capacity,
-                burn_in,
-            } => Box::new(EquiEnergySampler::new(m, p_jump, rings, capacity, burn_in)?),
-            ExchangeKind::NonReversible => Box::new(NonReversible),
-        })
     }
 }
 
@@ -852,19 +438,19 @@ where
     settings.ensemble.validate()?;
     let resolution = checked_resolution(oracle)?;
     let mut ensemble_settings = settings.ensemble.clone();
-    let mut candidates = Candidates::run(oracle, importance, &ensemble_settings, settings.seed)?;
-    let mut bootstrap_traces = candidates.traces();
+    let mut bootstrap = ensemble_settings.bootstrap(oracle, importance, settings.seed)?;
+    let mut bootstrap_traces = bootstrap.traced().paths;
     let count = settings.ensembles as usize;
     let bands = SplatBands::new(resolution);
-    let start = |i: usize, candidates: &Candidates| -> Result<EnsembleWork<O::Radiance>, Error> {
+    let start = |i: usize, bootstrap: &Bootstrap| -> Result<EnsembleWork<O::Radiance>, Error> {
         Ok(EnsembleWork {
-            ensemble: Ensemble::start(oracle, importance, &ensemble_settings, candidates, i as u64),
-            exchange: settings.exchange.build(candidates)?,
+            ensemble: Ensemble::start(oracle, importance, &ensemble_settings, bootstrap, i as u64),
+            exchange: settings.exchange.build(bootstrap)?,
             buffers: RoundBuffers::new(&bands),
         })
     };
     let mut work = (0..count)
-        .map(|i| start(i, &candidates))
+        .map(|i| start(i, &bootstrap))
         .collect::<Result<Vec<_>, Error>>()?;
 
     // Ladder tuning: rounds of 16, 32, ... sweeps, not splatted.
@@ -891,12 +477,12 @@ where
             .ladder
             .equalized(&merged.neighbor_rejection())?;
         ensemble_settings.ladder = ladder;
-        candidates = Candidates::run(oracle, importance, &ensemble_settings, settings.seed)?;
-        bootstrap_traces += candidates.traces();
+        bootstrap = ensemble_settings.bootstrap(oracle, importance, settings.seed)?;
+        bootstrap_traces += bootstrap.traced().paths;
         for w in work.iter_mut() {
             w.ensemble
-                .set_ladder(oracle, importance, &ensemble_settings.ladder, &candidates);
-            w.exchange = settings.exchange.build(&candidates)?;
+                .set_ladder(oracle, importance, &ensemble_settings.ladder, &bootstrap);
+            w.exchange = settings.exchange.build(&bootstrap)?;
         }
     }
 
@@ -916,7 +502,7 @@ where
                     |p, radiance, weight| buffers.splat(&bands, p, radiance, weight),
                 );
                 for r in w.ensemble.replicas() {
-                    w.buffers.visit(&bands, r.film());
+                    w.buffers.visit(&bands, r.state().film);
                 }
             }
         },
@@ -928,7 +514,7 @@ where
     let mut stats = RenderStats {
         samples: done * count as u64 * traces_per_sweep,
         bootstrap_samples: bootstrap_traces,
-        normalization: Some(candidates.normalizations()[0]),
+        normalization: Some(bootstrap.normalization()),
         ..Default::default()
     };
     for w in &work {
@@ -938,7 +524,7 @@ where
             stats.chains.merge(s);
         }
     }
-    stats.invalid_samples = stats.chains.invalid + candidates.invalid();
+    stats.invalid_samples = stats.chains.invalid + bootstrap.traced().invalid;
     Ok(ReplicaOutput {
         film: rounds.film,
         stats,

@@ -23,17 +23,17 @@
 mod decide;
 mod ensemble;
 mod equi_energy;
+mod kind;
 mod ladder;
 mod moves;
 mod permutation;
 mod stats;
+mod tempered;
 
 pub use decide::Decisions;
-pub use ensemble::{
-    Candidates, Ensemble, EnsembleSettings, ExchangeKind, Replica, ReplicaOutput, ReplicaSettings,
-    Tempering, render_replica,
-};
+pub use ensemble::{Ensemble, EnsembleSettings, ReplicaOutput, ReplicaSettings, render_replica};
 pub use equi_energy::{EnergyLevels, EquiEnergy, EquiEnergySampler};
+pub use kind::ExchangeKind;
 pub use ladder::Ladder;
 pub use moves::{IsPermutation, IsSwap, NeighborSwap, NonReversible};
 pub use permutation::{
@@ -41,6 +41,7 @@ pub use permutation::{
     log_normalization_by_enumeration,
 };
 pub use stats::{ExchangeStats, SweepRecorder};
+pub use tempered::{Replica, TemperedPath, Tempering};
 
 /// A state of the ensemble that knows the value of every chain's target at
 /// itself: `value(i) = π_i(u)`, finite and `>= 0`.

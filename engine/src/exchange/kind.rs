@@ -1,0 +1,128 @@
+//! The catalogue of exchange moves an ensemble can run, built per ensemble
+//! from its bootstrap.
+
+use alloc::boxed::Box;
+use alloc::vec::Vec;
+
+use super::tempered::Replica;
+use super::{
+    EnergyLevels, EquiEnergy, EquiEnergySampler, IsPermutation, IsSwap, Move, NeighborSwap,
+    NoExchange, NonReversible,
+};
+use crate::bootstrap::Bootstrap;
+use crate::error::Error;
+use crate::oracle::Radiance;
+
+/// Which exchange move an ensemble runs (a [`Move`] built per ensemble).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ExchangeKind {
+    /// Independent tempered chains (chain 0 is plain MH).
+    None,
+    /// [`NeighborSwap`].
+    NeighborSwap,
+    /// [`IsPermutation`].
+    IsPermutation,
+    /// [`IsSwap`].
+    IsSwap,
+    /// [`EquiEnergy::original`] with `rings` log-spaced rings.
+    OriginalEquiEnergy {
+        /// Number of rings (the thesis uses 8).
+        rings: usize,
+    },
+    /// [`EquiEnergy::frequent`] with `rings` log-spaced rings per chain.
+    FrequentEquiEnergy {
+        /// Number of rings (the thesis uses 8).
+        rings: usize,
+    },
+    /// [`EquiEnergySampler`].
+    EquiEnergySampler {
+        /// Probability of a jump in place of a small step (0.1).
+        p_jump: f64,
+        /// Adaptive rings (the thesis uses 16).
+        rings: usize,
+        /// Recorded states kept per chain.
+        capacity: usize,
+        /// Sweeps before chains start recording.
+        burn_in: u64,
+    },
+    /// [`NonReversible`].
+    NonReversible,
+}
+
+impl ExchangeKind {
+    /// Every move of seed 002 sec. 5.3 with the thesis' settings, plus
+    /// non-reversible PT, after the no-exchange baseline.
+    pub fn all(burn_in: u64) -> [ExchangeKind; 8] {
+        [
+            ExchangeKind::None,
+            ExchangeKind::NeighborSwap,
+            ExchangeKind::IsPermutation,
+            ExchangeKind::IsSwap,
+            ExchangeKind::OriginalEquiEnergy { rings: 8 },
+            ExchangeKind::FrequentEquiEnergy { rings: 8 },
+            ExchangeKind::thesis_equi_energy_sampler(burn_in),
+            ExchangeKind::NonReversible,
+        ]
+    }
+
+    /// The adaptive equi-energy sampler with seed 002 sec. 5.3.7's settings
+    /// (`p_EEJ = 0.1`, 16 rings), 4096 recorded states per chain, recording
+    /// after `burn_in` sweeps.
+    pub fn thesis_equi_energy_sampler(burn_in: u64) -> ExchangeKind {
+        ExchangeKind::EquiEnergySampler {
+            p_jump: 0.1,
+            rings: 16,
+            capacity: 4096,
+            burn_in,
+        }
+    }
+
+    /// A short name for tables and command lines.
+    pub fn name(&self) -> &'static str {
+        match self {
+            ExchangeKind::None => "none",
+            ExchangeKind::NeighborSwap => "neighbor",
+            ExchangeKind::IsPermutation => "is-permutation",
+            ExchangeKind::IsSwap => "is-swap",
+            ExchangeKind::OriginalEquiEnergy { .. } => "original-eem",
+            ExchangeKind::FrequentEquiEnergy { .. } => "frequent-eem",
+            ExchangeKind::EquiEnergySampler { .. } => "ees",
+            ExchangeKind::NonReversible => "non-reversible",
+        }
+    }
+
+    /// Builds the move for an ensemble whose bootstrap is `bootstrap`.
+    pub fn build<R: Radiance + Send + Sync + 'static>(
+        &self,
+        bootstrap: &Bootstrap,
+    ) -> Result<Box<dyn Move<Replica<R>> + Send + Sync>, Error> {
+        let m = bootstrap.levels();
+        let energy_levels = |rings| -> Result<Vec<EnergyLevels>, Error> {
+            (0..m)
+                .map(|j| {
+                    let (low, high) = bootstrap.value_range(j);
+                    EnergyLevels::log_spaced(rings, low, high)
+                })
+                .collect()
+        };
+        Ok(match *self {
+            ExchangeKind::None => Box::new(NoExchange),
+            ExchangeKind::NeighborSwap => Box::new(NeighborSwap),
+            ExchangeKind::IsPermutation => Box::new(IsPermutation::new(m)?),
+            ExchangeKind::IsSwap => Box::new(IsSwap::default()),
+            ExchangeKind::OriginalEquiEnergy { rings } => {
+                Box::new(EquiEnergy::original(energy_levels(rings)?.remove(0)))
+            }
+            ExchangeKind::FrequentEquiEnergy { rings } => {
+                Box::new(EquiEnergy::frequent(energy_levels(rings)?))
+            }
+            ExchangeKind::EquiEnergySampler {
+                p_jump,
+                rings,
+                capacity,
+                burn_in,
+            } => Box::new(EquiEnergySampler::new(m, p_jump, rings, capacity, burn_in)?),
+            ExchangeKind::NonReversible => Box::new(NonReversible),
+        })
+    }
+}

@@ -16,7 +16,7 @@
 use alloc::vec::Vec;
 
 use crate::bootstrap::Bootstrap;
-use crate::chain::{ChainStats, acceptance};
+use crate::chain::{Chain, ChainStats, PathTarget, Weights};
 use crate::error::Error;
 use crate::film::Film;
 use crate::mutate::{MutationParams, SmallStep};
@@ -27,7 +27,7 @@ use crate::render::{
 use crate::rng::{self, Domain, uniform_f64};
 use crate::sample::MltSampler;
 use crate::splat::{RoundBuffers, SplatBands, Worker};
-use crate::target::{Importance, evaluate};
+use crate::target::{Evaluated, Importance, evaluate};
 
 /// Settings of [`render_erpt`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -57,6 +57,36 @@ impl Default for ErptSettings {
             small_step: SmallStep::default(),
             bootstrap_candidates: 100_000,
         }
+    }
+}
+
+/// ERPT's weights (Cline et al. 2005): a chain deposits the energy `e_d` per
+/// step, coloured `f/I`, by expected values: `a e_d / I(y)` at the proposal,
+/// `(1 - a) e_d / I(x)` at the current state.
+struct EnergyWeights {
+    energy: f64,
+}
+
+impl<R> Weights<Evaluated<R>> for EnergyWeights {
+    fn weights(
+        &self,
+        acceptance: f64,
+        _large_step: bool,
+        current: &Evaluated<R>,
+        proposed: &Evaluated<R>,
+    ) -> [f64; 2] {
+        [
+            if acceptance > 0.0 && proposed.importance > 0.0 {
+                acceptance * self.energy / proposed.importance
+            } else {
+                0.0
+            },
+            if acceptance < 1.0 {
+                (1.0 - acceptance) * self.energy / current.importance
+            } else {
+                0.0
+            },
+        ]
     }
 }
 
@@ -223,6 +253,8 @@ fn redistribute<O, I>(
     if chains < 1.0 {
         return;
     }
+    let target = PathTarget { oracle, importance };
+    let weights = EnergyWeights { energy };
     for c in 0..chains as u64 {
         let mut sampler = start.clone();
         sampler.reseed(rng::stream(
@@ -230,37 +262,20 @@ fn redistribute<O, I>(
             Domain::Energy,
             index,
         ));
-        let mut current = first;
+        let mut chain = Chain::new(sampler, first);
         for _ in 0..length {
-            let mut proposal = sampler.propose(false);
-            let film = proposal.film_point(resolution);
-            let traced = oracle.trace(film, &mut proposal, Temperature::ONE);
-            let proposed = evaluate(importance, traced, film);
-            let a = acceptance(current.importance, proposed.importance);
-            if a > 0.0 && proposed.importance > 0.0 {
-                let weight = a * energy / proposed.importance;
-                w.buffers
-                    .splat(bands, film, proposed.sample.radiance, weight);
-            }
-            if a < 1.0 {
-                let weight = (1.0 - a) * energy / current.importance;
-                w.buffers
-                    .splat(bands, current.film, current.sample.radiance, weight);
-            }
-            let accepted = uniform_f64(&mut decisions) < a;
-            if accepted {
-                proposal.accept(a);
-                current = proposed;
-            } else {
-                proposal.reject(a);
-            }
-            w.buffers.visit(bands, current.film);
+            let buffers = &mut w.buffers;
+            let outcome = chain.step(
+                &target,
+                &weights,
+                false,
+                &mut decisions,
+                &mut w.stats,
+                |path, weight| buffers.splat(bands, path.film, path.sample.radiance, weight),
+            );
+            w.buffers.visit(bands, chain.state().film);
             w.traces += 1;
-            w.invalid += proposed.invalid as u64;
-            w.stats.proposals += 1;
-            w.stats.accepted += accepted as u64;
-            w.stats.acceptance_sum += a;
-            w.stats.invalid += proposed.invalid as u64;
+            w.invalid += outcome.traced.invalid;
         }
     }
 }

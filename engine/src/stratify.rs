@@ -49,7 +49,7 @@ use core::sync::atomic::{AtomicU64, Ordering};
 use rand_pcg::Pcg32;
 
 use crate::bootstrap::Bootstrap;
-use crate::chain::{ChainStats, PathChain, acceptance};
+use crate::chain::{Chain, ChainStats, PathChain, Target, Traced, Weights};
 use crate::error::{Error, check_probability};
 use crate::film::Film;
 use crate::mutate::MutationParams;
@@ -58,7 +58,7 @@ use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Resolution, Tem
 use crate::reconstruct::{self, LogSettings, WeightedSettings};
 use crate::render::{Budget, Clock, Observer, RenderOutput, RenderStats, checked_resolution};
 use crate::rng::{self, Domain, uniform_f64};
-use crate::sample::MltSampler;
+use crate::sample::{MltSampler, Proposal};
 use crate::target::{Importance, MaxChannel, evaluate};
 use crate::tiles::{TileShape, Tiles};
 
@@ -233,6 +233,16 @@ struct Value<R> {
     importance: f64,
 }
 
+/// A tile chain's state: its jitter replayed in every tile pixel.
+#[derive(Clone, Debug, Default)]
+struct TileState<R> {
+    /// The evaluation in every tile pixel (offset order; zero where the tile
+    /// is clipped).
+    values: Vec<Value<R>>,
+    /// `T_s`, the largest importance of the values (eq. 9).
+    target: f64,
+}
+
 /// How a tile got its first state with `T_s > 0`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Start {
@@ -244,13 +254,8 @@ enum Start {
 
 /// A tile's chain and its accumulators.
 struct TileChain<R> {
-    sampler: MltSampler,
+    chain: Chain<TileState<R>>,
     decisions: Pcg32,
-    /// The current state evaluated in every tile pixel (offset order; zero
-    /// where the tile is clipped).
-    current: Vec<Value<R>>,
-    /// `T_s` of the current state.
-    target: f64,
     /// `N G_s(k)` per offset and channel.
     unscaled: Vec<f64>,
     /// Sum of the large steps' radiance per offset and channel.
@@ -302,25 +307,90 @@ where
         )
     }
 
-    /// Evaluates a state in every pixel of `tile` into `out`; returns `T_s`,
-    /// paths traced and invalid samples.
+    /// Evaluates a state in every pixel of `tile` into `out` (coherent
+    /// sampling, eq. 10): `T_s` and what was traced.
     fn trace_tile<S: Sampler>(
         &self,
         sampler: &mut S,
         tile: usize,
         jitter: FilmPoint,
-        out: &mut [Value<O::Radiance>],
-    ) -> (f64, u64, u64) {
-        out.fill(Value::default());
-        let (mut target, mut traces, mut invalid) = (0.0f64, 0, 0);
+        out: &mut TileState<O::Radiance>,
+    ) -> Traced {
+        out.values.clear();
+        out.values
+            .resize(self.tiles.offsets().len(), Value::default());
+        out.target = 0.0;
+        let mut traced = Traced::default();
         for (o, q) in self.tiles.pixels(tile) {
             let (v, bad) = self.trace_in(sampler, q, jitter);
-            target = target.max(v.importance);
-            out[o] = v;
-            traces += 1;
-            invalid += bad as u64;
+            out.target = out.target.max(v.importance);
+            out.values[o] = v;
+            traced.paths += 1;
+            traced.invalid += bad as u64;
         }
-        (target, traces, invalid)
+        traced
+    }
+}
+
+/// Tile `tile`'s target `T_s` (eq. 9), a state traced by coherent sampling.
+struct TileTarget<'a, 'b, O, I> {
+    ctx: &'a Context<'b, O, I>,
+    tile: usize,
+}
+
+impl<O, I> Target for TileTarget<'_, '_, O, I>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance>,
+{
+    type State = TileState<O::Radiance>;
+
+    fn evaluate(&self, proposal: &mut Proposal<'_>, state: &mut Self::State) -> Traced {
+        let jitter = proposal.film_point(UNIT);
+        self.ctx.trace_tile(proposal, self.tile, jitter, state)
+    }
+
+    fn value(&self, state: &Self::State) -> f64 {
+        state.target
+    }
+}
+
+/// The expected-values weights of a tile chain (eq. 10): `a / T_s(y)` and
+/// `(1 - a) / T_s(x)`; large steps are independence proposals of the same
+/// chain, weighted alike.
+struct TileWeights;
+
+impl<R> Weights<TileState<R>> for TileWeights {
+    fn weights(
+        &self,
+        acceptance: f64,
+        _large_step: bool,
+        current: &TileState<R>,
+        proposed: &TileState<R>,
+    ) -> [f64; 2] {
+        [
+            if proposed.target > 0.0 && acceptance > 0.0 {
+                acceptance / proposed.target
+            } else {
+                0.0
+            },
+            if current.target > 0.0 && acceptance < 1.0 {
+                (1.0 - acceptance) / current.target
+            } else {
+                0.0
+            },
+        ]
+    }
+}
+
+/// Adds `weight ·` the radiance of every tile pixel of `values` into `into`
+/// (offset by offset, channel by channel).
+fn add<R: Radiance>(values: &[Value<R>], weight: f64, into: &mut [f64]) {
+    let channels = R::CHANNELS;
+    for (o, v) in values.iter().enumerate() {
+        for c in 0..channels {
+            into[o * channels + c] += weight * v.radiance.channel(c) as f64;
+        }
     }
 }
 
@@ -333,14 +403,17 @@ impl<R: Radiance> TileChain<R> {
         mutation: &MutationParams,
     ) -> Self {
         let per_offset = offsets * R::CHANNELS;
-        Self {
-            sampler: MltSampler::new(
-                mutation.small_step,
-                rng::stream(seed, Domain::Tile, tile as u64),
-            ),
-            decisions: rng::stream(seed, Domain::Tile, (tile + tiles) as u64),
-            current: vec![Value::default(); offsets],
+        let sampler = MltSampler::new(
+            mutation.small_step,
+            rng::stream(seed, Domain::Tile, tile as u64),
+        );
+        let state = TileState {
+            values: vec![Value::default(); offsets],
             target: 0.0,
+        };
+        Self {
+            chain: Chain::new(sampler, state),
+            decisions: rng::stream(seed, Domain::Tile, (tile + tiles) as u64),
             unscaled: vec![0.0; per_offset],
             uniform: vec![0.0; per_offset],
             uniform_squares: vec![0.0; offsets],
@@ -351,30 +424,35 @@ impl<R: Radiance> TileChain<R> {
         }
     }
 
+    /// `T_s` of the current state.
+    fn target(&self) -> f64 {
+        self.chain.state().target
+    }
+
     /// One Metropolis-Hastings step on `T_s` with coherent sampling (eq. 10).
     /// Until the tile has a state with `T_s > 0` every step is a uniform draw.
     /// Returns paths traced.
-    fn step<O, I>(&mut self, ctx: &Context<'_, O, I>, tile: usize, scratch: &mut [Value<R>]) -> u64
+    fn step<O, I>(&mut self, ctx: &Context<'_, O, I>, tile: usize) -> u64
     where
         O: PathOracle<Radiance = R>,
         I: Importance<R>,
     {
-        let large = self.target <= 0.0 || uniform_f64(&mut self.decisions) < ctx.p_large;
-        let mut proposal = self.sampler.propose(large);
-        let jitter = proposal.film_point(UNIT);
-        let (proposed, traces, invalid) = ctx.trace_tile(&mut proposal, tile, jitter, scratch);
-        let a = acceptance(self.target, proposed);
-        let channels = R::CHANNELS;
-        let add = |values: &[Value<R>], weight: f64, into: &mut [f64]| {
-            for (o, v) in values.iter().enumerate() {
-                for c in 0..channels {
-                    into[o * channels + c] += weight * v.radiance.channel(c) as f64;
-                }
-            }
-        };
+        let dark = self.target() <= 0.0;
+        let large = dark || uniform_f64(&mut self.decisions) < ctx.p_large;
+        let unscaled = &mut self.unscaled;
+        let outcome = self.chain.step(
+            &TileTarget { ctx, tile },
+            &TileWeights,
+            large,
+            &mut self.decisions,
+            &mut self.stats,
+            |state, weight| add(&state.values, weight, unscaled),
+        );
         if large {
-            add(scratch, 1.0, &mut self.uniform);
-            for (sq, v) in self.uniform_squares.iter_mut().zip(scratch.iter()) {
+            let proposed = self.chain.last_proposal();
+            add(&proposed.values, 1.0, &mut self.uniform);
+            let channels = R::CHANNELS;
+            for (sq, v) in self.uniform_squares.iter_mut().zip(&proposed.values) {
                 let mean = (0..channels)
                     .map(|c| v.radiance.channel(c) as f64)
                     .sum::<f64>()
@@ -383,29 +461,10 @@ impl<R: Radiance> TileChain<R> {
             }
             self.large_steps += 1;
         }
-        if proposed > 0.0 && a > 0.0 {
-            add(scratch, a / proposed, &mut self.unscaled);
+        if outcome.accepted && dark && self.target() > 0.0 && self.start == Start::None {
+            self.start = Start::Uniform;
         }
-        if self.target > 0.0 && a < 1.0 {
-            add(&self.current, (1.0 - a) / self.target, &mut self.unscaled);
-        }
-        let accepted = uniform_f64(&mut self.decisions) < a;
-        if accepted {
-            proposal.accept(a);
-            self.current.copy_from_slice(scratch);
-            if self.target <= 0.0 && proposed > 0.0 && self.start == Start::None {
-                self.start = Start::Uniform;
-            }
-            self.target = proposed;
-        } else {
-            proposal.reject(a);
-        }
-        self.stats.proposals += 1;
-        self.stats.accepted += accepted as u64;
-        self.stats.large_steps += large as u64;
-        self.stats.acceptance_sum += a;
-        self.stats.invalid += invalid;
-        traces
+        outcome.traced.paths
     }
 
     /// Evaluates the current state again in every tile pixel (after a
@@ -415,49 +474,63 @@ impl<R: Radiance> TileChain<R> {
         O: PathOracle<Radiance = R>,
         I: Importance<R>,
     {
-        let mut values = core::mem::take(&mut self.current);
-        let mut replay = self.sampler.replay();
+        let (sampler, state) = self.chain.parts_mut();
+        let mut replay = sampler.replay();
         let jitter = replay.film_point(UNIT);
-        let (target, traces, invalid) = ctx.trace_tile(&mut replay, tile, jitter, &mut values);
-        self.current = values;
-        self.target = target;
-        self.stats.invalid += invalid;
+        let traced = ctx.trace_tile(&mut replay, tile, jitter, state);
+        self.stats.invalid += traced.invalid;
         self.pending = false;
-        traces
+        traced.paths
     }
 
     /// The current state (of tile `from`) evaluated in every pixel of tile
-    /// `to` into `out`, reusing the pixels the two tiles share. Returns `T_to`,
-    /// paths traced and invalid samples.
+    /// `to` into `out`, reusing the pixels the two tiles share. Returns `T_to`
+    /// and what was traced.
     fn evaluate_in<O, I>(
         &mut self,
         ctx: &Context<'_, O, I>,
         from: usize,
         to: usize,
         out: &mut [Value<R>],
-    ) -> (f64, u64, u64)
+    ) -> (f64, Traced)
     where
         O: PathOracle<Radiance = R>,
         I: Importance<R>,
     {
         out.fill(Value::default());
-        let mut replay = self.sampler.replay();
+        let (sampler, state) = self.chain.parts_mut();
+        let mut replay = sampler.replay();
         let jitter = replay.film_point(UNIT);
-        let (mut target, mut traces, mut invalid) = (0.0f64, 0, 0);
+        let mut target = 0.0f64;
+        let mut traced = Traced::default();
         for (o, q) in ctx.tiles.pixels(to) {
             let v = match ctx.tiles.offset_of(from, q) {
-                Some(known) => self.current[known],
+                Some(known) => state.values[known],
                 None => {
                     let (v, bad) = ctx.trace_in(&mut replay, q, jitter);
-                    traces += 1;
-                    invalid += bad as u64;
+                    traced.paths += 1;
+                    traced.invalid += bad as u64;
                     v
                 }
             };
             target = target.max(v.importance);
             out[o] = v;
         }
-        (target, traces, invalid)
+        (target, traced)
+    }
+
+    /// Takes the primary sample `sampler`, keeping this tile's own random
+    /// stream; its state must then be set or evaluated.
+    fn take_sampler(&mut self, mut sampler: MltSampler) {
+        sampler.swap_rng(self.chain.sampler_mut());
+        *self.chain.sampler_mut() = sampler;
+    }
+
+    /// Sets the current state's tile values and target (evaluated elsewhere).
+    fn set_state(&mut self, values: &[Value<R>], target: f64) {
+        let state = self.chain.state_mut();
+        state.values.copy_from_slice(values);
+        state.target = target;
     }
 }
 
@@ -496,23 +569,22 @@ where
     I: Importance<O::Radiance>,
 {
     let mut count = ExchangeCount::default();
-    match (a.target > 0.0, b.target > 0.0) {
+    match (a.target() > 0.0, b.target() > 0.0) {
         (false, false) => {}
         (true, true) => {
             let [a_in_t, b_in_s] = scratch;
-            let (ta, n1, i1) = a.evaluate_in(ctx, s, t, a_in_t);
-            let (tb, n2, i2) = b.evaluate_in(ctx, t, s, b_in_s);
-            count.traces = n1 + n2;
-            count.invalid = i1 + i2;
+            let (ta, traced_a) = a.evaluate_in(ctx, s, t, a_in_t);
+            let (tb, traced_b) = b.evaluate_in(ctx, t, s, b_in_s);
+            count.traces = traced_a.paths + traced_b.paths;
+            count.invalid = traced_a.invalid + traced_b.invalid;
             count.attempts = 1;
-            let ratio = (tb * ta) / (a.target * b.target);
+            let ratio = (tb * ta) / (a.target() * b.target());
             if uniform_f64(&mut a.decisions) < ratio {
-                core::mem::swap(&mut a.sampler, &mut b.sampler);
-                a.sampler.swap_rng(&mut b.sampler);
-                a.current.copy_from_slice(b_in_s);
-                a.target = tb;
-                b.current.copy_from_slice(a_in_t);
-                b.target = ta;
+                // The states change tiles; each tile keeps its random stream.
+                core::mem::swap(a.chain.sampler_mut(), b.chain.sampler_mut());
+                a.chain.sampler_mut().swap_rng(b.chain.sampler_mut());
+                a.set_state(b_in_s, tb);
+                b.set_state(a_in_t, ta);
                 count.accepted = 1;
             }
         }
@@ -537,20 +609,17 @@ where
     O: PathOracle,
     I: Importance<O::Radiance>,
 {
-    let (target, traces, invalid) = a.evaluate_in(ctx, s, t, values);
+    let (target, traced) = a.evaluate_in(ctx, s, t, values);
     if target > 0.0 {
-        let mut copy = a.sampler.clone();
-        copy.swap_rng(&mut b.sampler);
-        b.sampler = copy;
-        b.current.copy_from_slice(values);
-        b.target = target;
+        b.take_sampler(a.chain.sampler().clone());
+        b.set_state(values, target);
         if b.start == Start::None {
             b.start = Start::Borrowed;
         }
     }
     ExchangeCount {
-        traces,
-        invalid,
+        traces: traced.paths,
+        invalid: traced.invalid,
         ..Default::default()
     }
 }
@@ -574,7 +643,7 @@ where
 {
     let (horizontal, parity) = pairing(round);
     let scratch = |chains: &[TileChain<O::Radiance>]| -> Scratch<O::Radiance> {
-        let offsets = chains.first().map_or(0, |c| c.current.len());
+        let offsets = chains.first().map_or(0, |c| c.chain.state().values.len());
         [
             vec![Value::default(); offsets],
             vec![Value::default(); offsets],
@@ -775,8 +844,7 @@ where
             let chain = &mut chains[visit.tile];
             let mut sampler = visit.sampler;
             sampler.set_film([visit.jitter.x, visit.jitter.y]);
-            sampler.swap_rng(&mut chain.sampler);
-            chain.sampler = sampler;
+            chain.take_sampler(sampler);
             chain.pending = true;
             chain.start = Start::Global;
         }
@@ -880,10 +948,9 @@ where
         let round_clock = Clock::start(settings.budget);
         for _ in 0..sweeps {
             let traced = map_reduce(chains.chunks_mut(width).enumerate(), |(y, row)| {
-                let mut scratch = vec![Value::default(); offsets];
                 let mut traces = 0;
                 for (x, chain) in row.iter_mut().enumerate() {
-                    traces += chain.step(&ctx, y * width + x, &mut scratch);
+                    traces += chain.step(&ctx, y * width + x);
                 }
                 traces
             });

@@ -7,14 +7,17 @@ use std::hint::black_box;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::bootstrap::Bootstrap;
+use strata::engine::method::PssmltSettings;
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, SmallStep};
-use strata::engine::render::{
-    Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
-};
 use strata::engine::target::MaxChannel;
-use strata::engine::{FilmPoint, PathOracle, PathSample, Resolution, Sampler, Temperature};
+use strata::engine::{
+    Budget, FilmPoint, Method, PathOracle, PathSample, Resolution, Sampler, Settings, Silent,
+    Temperature, render,
+};
 
-/// Reads `dims` numbers and returns their mean: as cheap as an oracle gets.
+/// Reads `dims` numbers and returns their mean: as cheap as an oracle gets
+/// (a `PathOracle` of its own, not an `FnOracle`, whose virtual call per
+/// number would weigh in the step's cost).
 struct Trivial {
     dims: usize,
 }
@@ -66,18 +69,22 @@ fn per_path(c: &mut Criterion) {
     let mut group = c.benchmark_group("per_path_procedural");
     group.sample_size(10);
     group.throughput(Throughput::Elements(16 * 128 * 96));
-    group.bench_function("mc", |b| {
-        b.iter(|| render_mc(&image, &McSettings { seed: 1, budget }, &Silent).unwrap())
-    });
-    let settings = PssmltSettings {
+    let settings = |method| Settings {
         seed: 1,
         budget,
+        method,
+    };
+    let mc = settings(Method::Mc);
+    group.bench_function("mc", |b| {
+        b.iter(|| render(&image, &MaxChannel, &mc, &Silent).unwrap())
+    });
+    let pssmlt = settings(Method::Pssmlt(PssmltSettings {
         chains: 256,
         bootstrap_candidates: 4096,
         ..Default::default()
-    };
+    }));
     group.bench_function("pssmlt", |b| {
-        b.iter(|| render_pssmlt(&image, &MaxChannel, &settings, &Silent).unwrap())
+        b.iter(|| render(&image, &MaxChannel, &pssmlt, &Silent).unwrap())
     });
     group.finish();
 }

@@ -26,39 +26,14 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use clap::{Parser, ValueEnum};
-use strata::engine::erpt::{ErptSettings, render_erpt};
-use strata::engine::exchange::{EnsembleSettings, ReplicaSettings, render_replica};
+use clap::Parser;
+use clap::builder::PossibleValuesParser;
+use strata::engine::exchange::EnsembleSettings;
 use strata::engine::metrics::{self, ImageErrors};
 use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
-use strata::engine::render::{
-    Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
-};
-use strata::engine::stratify::{StratifiedSettings, render_stratified};
 use strata::engine::target::MaxChannel;
-use strata::engine::{Film, PathOracle, Resolution};
+use strata::engine::{Budget, Film, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::native::{builtin, native_tracer, pbrt};
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-enum Method {
-    Mc,
-    Pssmlt,
-    Erpt,
-    Stratified,
-    Replica,
-}
-
-impl Method {
-    fn name(self) -> &'static str {
-        match self {
-            Method::Mc => "MC",
-            Method::Pssmlt => "PSSMLT",
-            Method::Erpt => "ERPT",
-            Method::Stratified => "stratified",
-            Method::Replica => "replica",
-        }
-    }
-}
 
 /// Equal-time comparison against a cached MC reference.
 #[derive(Parser, Debug)]
@@ -78,14 +53,14 @@ struct Args {
     /// Checkpoints, as fractions of the budget (each a separate render).
     #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1")]
     checkpoints: Vec<f64>,
-    /// Methods to compare.
+    /// Methods to compare (any of mc, pssmlt, replica, stratified, erpt, multistage).
     #[arg(
         long,
-        value_enum,
         value_delimiter = ',',
-        default_value = "mc,pssmlt,erpt,stratified,replica"
+        default_value = "mc,pssmlt,erpt,stratified,replica",
+        value_parser = PossibleValuesParser::new(Method::NAMES)
     )]
-    methods: Vec<Method>,
+    methods: Vec<String>,
     /// Paths per pixel of the MC reference.
     #[arg(long, default_value_t = 8192)]
     reference_spp: u64,
@@ -111,7 +86,8 @@ type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
 /// One render of one method.
 struct Row {
-    method: Method,
+    /// The method's name.
+    method: &'static str,
     budget: f64,
     seconds: f64,
     samples: u64,
@@ -141,7 +117,7 @@ fn main() -> AnyResult<()> {
         .unwrap_or_else(|| PathBuf::from("out/compare").join(&args.scene));
     if args.replot {
         let rows = read_metrics(&dir.join("metrics.csv"))?;
-        let mut methods: Vec<Method> = rows.iter().map(|r| r.method).collect();
+        let mut methods: Vec<&str> = rows.iter().map(|r| r.method).collect();
         methods.dedup();
         plot(
             &rows,
@@ -193,11 +169,18 @@ fn main() -> AnyResult<()> {
         args.scene, resolution.width, resolution.height, args.time
     );
     let mut rows = Vec::new();
-    for &method in &args.methods {
+    for name in &args.methods {
+        let method = compared(name)?;
         for &fraction in &args.checkpoints {
             let budget = args.time * fraction;
+            let settings = Settings {
+                seed: args.seed,
+                budget: Budget::Time(Duration::from_secs_f64(budget)),
+                method: method.clone(),
+            };
             let start = Instant::now();
-            let (film, samples) = render(&tracer, method, budget, args.seed)?;
+            let out = render(&tracer, &MaxChannel, &settings, &Silent)?;
+            let (film, samples) = (out.film, out.stats.samples);
             let seconds = start.elapsed().as_secs_f64();
             let errors = metrics::compare(&film, &reference)?;
             let bright = bright_ratio(&film, &reference);
@@ -215,7 +198,7 @@ fn main() -> AnyResult<()> {
                 strata::io::write_png(&film, 0.0, stem.with_extension("png"))?;
             }
             rows.push(Row {
-                method,
+                method: method.name(),
                 budget,
                 seconds,
                 samples,
@@ -242,7 +225,7 @@ fn main() -> AnyResult<()> {
         writeln!(
             csv,
             "{},{:.3},{:.3},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.4}",
-            r.method.name(),
+            r.method,
             r.budget,
             r.seconds,
             r.samples,
@@ -255,7 +238,8 @@ fn main() -> AnyResult<()> {
         )?;
     }
     let png = dir.join("error_vs_time.png");
-    if let Err(e) = plot(&rows, &args.scene, &args.methods, &args.font, &png) {
+    let names: Vec<&str> = args.methods.iter().map(String::as_str).collect();
+    if let Err(e) = plot(&rows, &args.scene, &names, &args.font, &png) {
         eprintln!("note: no plot ({e})");
     }
     println!("wrote {}", dir.display());
@@ -293,11 +277,12 @@ fn cached_mc<O: PathOracle<Radiance = strata::engine::Rgb>>(
         return Ok(strata::io::read_film(&path)?);
     }
     let start = Instant::now();
-    let settings = McSettings {
+    let settings = Settings {
         seed,
         budget: Budget::samples_per_pixel(spp, r),
+        method: Method::Mc,
     };
-    let film = render_mc(oracle, &settings, &Silent)?.film;
+    let film = render(oracle, &MaxChannel, &settings, &Silent)?.film;
     strata::io::write_exr(&film, &path)?;
     strata::io::write_png(&film, 0.0, path.with_extension("png"))?;
     println!(
@@ -331,64 +316,27 @@ fn reference_error(reference: &Film, check: &Film) -> ImageErrors {
     }
 }
 
-/// Seed 001 sec. 4: Kelemen small steps from 1/1024 to 1/32, large steps 0.3.
-fn mutation() -> MutationParams {
-    MutationParams {
+/// The method called `name` as seed 001 sec. 4 compares it: Kelemen small
+/// steps from 1/1024 to 1/32, large steps 0.3; replica exchange with 4
+/// chains up to T = 100.
+fn compared(name: &str) -> AnyResult<Method> {
+    let mutation = MutationParams {
         small_step: SmallStep::Kelemen(Kelemen::SEED_001),
         large_step_probability: 0.3,
-    }
-}
-
-fn render<O: PathOracle>(
-    oracle: &O,
-    method: Method,
-    seconds: f64,
-    seed: u64,
-) -> AnyResult<(Film, u64)> {
-    let budget = Budget::Time(Duration::from_secs_f64(seconds));
-    let out = match method {
-        Method::Mc => render_mc(oracle, &McSettings { seed, budget }, &Silent)?,
-        Method::Pssmlt => {
-            let settings = PssmltSettings {
-                seed,
-                budget,
-                mutation: mutation(),
-                ..Default::default()
-            };
-            render_pssmlt(oracle, &MaxChannel, &settings, &Silent)?
-        }
-        Method::Erpt => {
-            let settings = ErptSettings {
-                seed,
-                budget,
-                small_step: mutation().small_step,
-                ..Default::default()
-            };
-            render_erpt(oracle, &MaxChannel, &settings, &Silent)?
-        }
-        Method::Stratified => {
-            let settings = StratifiedSettings {
-                seed,
-                budget,
-                mutation: mutation(),
-                ..Default::default()
-            };
-            render_stratified(oracle, &MaxChannel, &settings, &Silent)?.render
-        }
-        Method::Replica => {
-            let mut ensemble = EnsembleSettings::geometric(4, 100.0)?;
-            ensemble.mutation = mutation();
-            let settings = ReplicaSettings {
-                seed,
-                budget,
-                ensemble,
-                ..Default::default()
-            };
-            let out = render_replica(oracle, &MaxChannel, &settings, &Silent)?;
-            return Ok((out.film, out.stats.samples));
-        }
     };
-    Ok((out.film, out.stats.samples))
+    let mut method = Method::from_name(name).ok_or("unknown method")?;
+    match &mut method {
+        Method::Mc => {}
+        Method::Pssmlt(s) => s.mutation = mutation,
+        Method::Erpt(s) => s.small_step = mutation.small_step,
+        Method::Stratified(s) => s.mutation = mutation,
+        Method::MultiStage(s) => s.pssmlt.mutation = mutation,
+        Method::Replica(s) => {
+            s.ensemble = EnsembleSettings::geometric(4, 100.0)?;
+            s.ensemble.mutation = mutation;
+        }
+    }
+    Ok(method)
 }
 
 /// One of the error metrics.
@@ -420,10 +368,8 @@ fn read_metrics(path: &Path) -> AnyResult<Vec<Row>> {
     let mut rows = Vec::new();
     for line in text.lines().skip(1) {
         let fields: Vec<&str> = line.split(',').collect();
-        let Some(method) = Method::value_variants()
-            .iter()
-            .find(|m| m.name() == fields[0])
-        else {
+        // Names are matched in any case (older files wrote "MC", "PSSMLT").
+        let Some(method) = Method::from_name(&fields[0].to_lowercase()) else {
             continue; // the reference's own error
         };
         let number = |i: usize| -> AnyResult<f64> {
@@ -432,7 +378,7 @@ fn read_metrics(path: &Path) -> AnyResult<Vec<Row>> {
         };
         let l2 = number(8)?;
         rows.push(Row {
-            method: *method,
+            method: method.name(),
             budget: number(1)?,
             seconds: number(2)?,
             samples: number(3)? as u64,
@@ -512,7 +458,7 @@ fn legend_position(
 fn plot(
     rows: &[Row],
     scene: &str,
-    methods: &[Method],
+    methods: &[&str],
     font: &Path,
     out: &Path,
 ) -> Result<(), Box<dyn std::error::Error>> {
@@ -571,7 +517,7 @@ fn plot(
                 .collect();
             chart
                 .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))?
-                .label(method.name())
+                .label(method)
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
                 });

@@ -19,11 +19,10 @@ use strata::engine::analytic::{GaussianMixture, Parabola, ProceduralImage};
 use strata::engine::convergence::{ConvergenceSettings, predict_pssmlt, run_state_estimator};
 use strata::engine::metrics::{self, ImageErrors};
 use strata::engine::mutate::MutationParams;
-use strata::engine::render::{
-    Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
-};
 use strata::engine::target::{Importance, Luminance, MaxChannel};
-use strata::engine::{Film, FilmPoint, PathOracle, PathSample, Resolution};
+use strata::engine::{
+    Budget, Film, FilmPoint, Method, PathOracle, PathSample, Resolution, Settings, Silent, render,
+};
 
 /// Convergence of MC and PSSMLT on analytic scenes.
 #[derive(Parser, Debug)]
@@ -311,25 +310,18 @@ fn mean_errors<O: PathOracle>(
     reference: &Film,
     spp: u64,
     runs: u64,
-    pssmlt: bool,
+    method: &Method,
 ) -> ImageErrors {
     let mut sum = ImageErrors::default();
     for seed in 0..runs {
-        let budget = Budget::samples_per_pixel(spp, oracle.resolution());
-        let film = if pssmlt {
-            let settings = PssmltSettings {
-                seed,
-                budget,
-                ..Default::default()
-            };
-            render_pssmlt(oracle, &MaxChannel, &settings, &Silent)
-                .expect("render")
-                .film
-        } else {
-            render_mc(oracle, &McSettings { seed, budget }, &Silent)
-                .expect("render")
-                .film
+        let settings = Settings {
+            seed,
+            budget: Budget::samples_per_pixel(spp, oracle.resolution()),
+            method: method.clone(),
         };
+        let film = render(oracle, &MaxChannel, &settings, &Silent)
+            .expect("render")
+            .film;
         let e = metrics::compare(&film, reference).expect("same shape");
         sum.mape += e.mape / runs as f64;
         sum.rel_mse += e.rel_mse / runs as f64;
@@ -347,7 +339,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mixture = GaussianMixture::random(12, 4, (0.02, 0.1), resolution, 0);
     let mut csv = String::from("scene,method,spp,mape,rel_mse,l1,l2,mse\n");
     println!("| scene | method | spp | MAPE | relMSE | L1 | L2 |\n|---|---|---|---|---|---|---|");
-    type Measure<'a> = &'a dyn Fn(u64, bool) -> ImageErrors;
+    type Measure<'a> = &'a dyn Fn(u64, &Method) -> ImageErrors;
     let scenes: [(&str, Measure); 2] = [
         ("procedural", &|spp, p| {
             mean_errors(&procedural, &procedural.reference(), spp, args.runs, p)
@@ -358,8 +350,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     ];
     for (scene, measure) in scenes {
         for &spp in &args.spp {
-            for (method, pssmlt) in [("mc", false), ("pssmlt", true)] {
-                let e = measure(spp, pssmlt);
+            for method in [Method::Mc, Method::Pssmlt(Default::default())] {
+                let e = measure(spp, &method);
+                let method = method.name();
                 writeln!(
                     csv,
                     "{scene},{method},{spp},{},{},{},{},{}",

@@ -14,12 +14,10 @@ use std::path::PathBuf;
 use clap::Parser;
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::diagnose::{density_spread, sample_density};
+use strata::engine::method::{MultiStageSettings, PssmltSettings, StratifiedSettings};
 use strata::engine::metrics;
-use strata::engine::render::{Budget, PssmltSettings, RenderOutput, Silent, render_pssmlt};
-use strata::engine::stages::{MultiStageSettings, render_multistage};
-use strata::engine::stratify::{StratifiedSettings, render_stratified};
 use strata::engine::target::MaxChannel;
-use strata::engine::{Film, PathOracle, Resolution};
+use strata::engine::{Budget, Film, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::native::{builtin, native_tracer};
 
 #[derive(Parser, Debug)]
@@ -45,9 +43,6 @@ struct Args {
     out: PathBuf,
 }
 
-/// A deferred render.
-type Render<'a> = Box<dyn Fn() -> Result<RenderOutput, strata::engine::Error> + 'a>;
-
 fn run<O: PathOracle>(
     oracle: &O,
     reference: Option<&Film>,
@@ -55,56 +50,36 @@ fn run<O: PathOracle>(
 ) -> Result<(), Box<dyn std::error::Error>> {
     let res = oracle.resolution();
     let pssmlt = PssmltSettings {
-        seed: args.seed,
-        budget: Budget::samples_per_pixel(args.spp, res),
         chains: 256,
         bootstrap_candidates: 16_384,
         ..Default::default()
     };
-    let stratified = StratifiedSettings {
-        seed: args.seed,
-        budget: pssmlt.budget,
-        ..Default::default()
+    let multistage = |noise_aware| {
+        Method::MultiStage(MultiStageSettings {
+            pssmlt,
+            linear_stages: 10,
+            noise_aware,
+        })
     };
-    let methods: [(&str, Render<'_>); 4] = [
-        (
-            "pssmlt",
-            Box::new(|| render_pssmlt(oracle, &MaxChannel, &pssmlt, &Silent)),
-        ),
-        (
-            "multistage",
-            Box::new(|| {
-                let s = MultiStageSettings {
-                    pssmlt,
-                    linear_stages: 10,
-                    noise_aware: false,
-                };
-                render_multistage(oracle, &MaxChannel, &s, &Silent).map(|o| o.output)
-            }),
-        ),
-        (
-            "noise-aware",
-            Box::new(|| {
-                let s = MultiStageSettings {
-                    pssmlt,
-                    linear_stages: 10,
-                    noise_aware: true,
-                };
-                render_multistage(oracle, &MaxChannel, &s, &Silent).map(|o| o.output)
-            }),
-        ),
+    let methods = [
+        ("pssmlt", Method::Pssmlt(pssmlt)),
+        ("multistage", multistage(false)),
+        ("noise-aware", multistage(true)),
         (
             "stratified",
-            Box::new(|| {
-                render_stratified(oracle, &MaxChannel, &stratified, &Silent).map(|o| o.render)
-            }),
+            Method::Stratified(StratifiedSettings::default()),
         ),
     ];
     std::fs::create_dir_all(&args.out)?;
     println!("| method | density spread (CV) | MAPE | relMSE |");
     println!("|---|---|---|---|");
-    for (name, render) in methods {
-        let out = render()?;
+    for (name, method) in methods {
+        let settings = Settings {
+            seed: args.seed,
+            budget: Budget::samples_per_pixel(args.spp, res),
+            method,
+        };
+        let out = render(oracle, &MaxChannel, &settings, &Silent)?;
         let density = sample_density(&out.visits, res).ok_or("no samples")?;
         strata::io::write_png(
             &out.film,

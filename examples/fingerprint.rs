@@ -12,19 +12,16 @@ use std::path::{Path, PathBuf};
 
 use clap::Parser;
 use strata::engine::analytic::ProceduralImage;
-use strata::engine::erpt::{ErptSettings, render_erpt};
-use strata::engine::exchange::{
-    EnsembleSettings, ExchangeKind, ReplicaSettings, Tempering, render_replica,
+use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Tempering};
+use strata::engine::method::{
+    ErptSettings, MultiStageSettings, PssmltSettings, ReplicaSettings, Solver, StratifiedSettings,
 };
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
 use strata::engine::reconstruct::LogSettings;
-use strata::engine::render::{
-    Budget, McSettings, PssmltSettings, RenderOutput, RenderStats, Silent, render_mc, render_pssmlt,
-};
-use strata::engine::stages::{MultiStageSettings, render_multistage};
-use strata::engine::stratify::{Solver, StratifiedSettings, render_stratified};
 use strata::engine::target::MaxChannel;
-use strata::engine::{Error, PathOracle, Resolution};
+use strata::engine::{
+    Budget, Error, Method, Output, PathOracle, RenderStats, Resolution, Settings, Silent, render,
+};
 use strata::native::{builtin, native_tracer};
 
 /// Render every method at a fixed seed and budget; write films, EXRs, statistics.
@@ -62,28 +59,37 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
 /// Every method (and the variants that take other code paths) on `oracle`.
 fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), Error> {
     let budget = Budget::samples_per_pixel(SPP, oracle.resolution());
-    let mc = render_mc(oracle, &McSettings { seed: SEED, budget }, &Silent)?;
-    write(out, scene, "mc", &mc);
-    for (name, small_step) in [
-        ("pssmlt", SmallStep::Kelemen(Kelemen::DEFAULT)),
-        ("pssmlt-gaussian", SmallStep::Gaussian(Gaussian::DEFAULT)),
-        ("pssmlt-adaptive", SmallStep::Adaptive(Adaptive::DEFAULT)),
-    ] {
-        let settings = PssmltSettings {
+    let run = |name: &str, method: Method| -> Result<(), Error> {
+        let settings = Settings {
             seed: SEED,
             budget,
-            mutation: MutationParams {
-                small_step,
-                large_step_probability: 0.3,
-            },
-            ..Default::default()
+            method,
         };
         write(
             out,
             scene,
             name,
-            &render_pssmlt(oracle, &MaxChannel, &settings, &Silent)?,
+            &render(oracle, &MaxChannel, &settings, &Silent)?,
         );
+        Ok(())
+    };
+    run("mc", Method::Mc)?;
+    for (name, small_step) in [
+        ("pssmlt", SmallStep::Kelemen(Kelemen::DEFAULT)),
+        ("pssmlt-gaussian", SmallStep::Gaussian(Gaussian::DEFAULT)),
+        ("pssmlt-adaptive", SmallStep::Adaptive(Adaptive::DEFAULT)),
+    ] {
+        let mutation = MutationParams {
+            small_step,
+            large_step_probability: 0.3,
+        };
+        run(
+            name,
+            Method::Pssmlt(PssmltSettings {
+                mutation,
+                ..Default::default()
+            }),
+        )?;
     }
     for (name, exchange, tempering, tuning) in [
         (
@@ -108,68 +114,47 @@ fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), 
         let mut ensemble = EnsembleSettings::geometric(4, 100.0)?;
         ensemble.tempering = tempering;
         ensemble.bootstrap_candidates = 20_000;
-        let settings = ReplicaSettings {
-            seed: SEED,
-            budget,
+        let replica = ReplicaSettings {
             ensembles: 8,
             ensemble,
             exchange,
             ladder_tuning_sweeps: tuning,
         };
-        let r = render_replica(oracle, &MaxChannel, &settings, &Silent)?;
-        let output = RenderOutput {
-            film: r.film,
-            stats: r.stats,
-            cancelled: r.cancelled,
-            visits: r.visits,
-        };
-        write(out, scene, name, &output);
+        run(name, Method::Replica(replica))?;
     }
+    let seed_001 = MutationParams {
+        small_step: SmallStep::Kelemen(Kelemen::SEED_001),
+        large_step_probability: 0.3,
+    };
     for (name, solver) in [
         ("stratified", Solver::default()),
         ("stratified-log", Solver::LogDomain(LogSettings::default())),
     ] {
-        let settings = StratifiedSettings {
-            seed: SEED,
-            budget,
-            mutation: MutationParams {
-                small_step: SmallStep::Kelemen(Kelemen::SEED_001),
-                large_step_probability: 0.3,
-            },
+        let stratified = StratifiedSettings {
+            mutation: seed_001,
             solver,
             ..Default::default()
         };
-        let s = render_stratified(oracle, &MaxChannel, &settings, &Silent)?;
-        write(out, scene, name, &s.render);
+        run(name, Method::Stratified(stratified))?;
     }
     let erpt = ErptSettings {
-        seed: SEED,
-        budget,
         small_step: SmallStep::Kelemen(Kelemen::SEED_001),
         chain_length: 20,
         ..Default::default()
     };
-    write(
-        out,
-        scene,
-        "erpt",
-        &render_erpt(oracle, &MaxChannel, &erpt, &Silent)?,
-    );
+    run("erpt", Method::Erpt(erpt))?;
     for (name, noise_aware) in [("multistage", false), ("noise-aware", true)] {
-        let mut settings = MultiStageSettings {
+        let mut multistage = MultiStageSettings {
             noise_aware,
             ..Default::default()
         };
-        settings.pssmlt.seed = SEED;
-        settings.pssmlt.budget = budget;
-        settings.pssmlt.chains = 64;
-        let m = render_multistage(oracle, &MaxChannel, &settings, &Silent)?;
-        write(out, scene, name, &m.output);
+        multistage.pssmlt.chains = 64;
+        run(name, Method::MultiStage(multistage))?;
     }
     Ok(())
 }
 
-fn write(out: &Path, scene: &str, method: &str, output: &RenderOutput) {
+fn write(out: &Path, scene: &str, method: &str, output: &Output) {
     let base = out.join(format!("{scene}-{method}"));
     let values: Vec<u8> = output
         .film

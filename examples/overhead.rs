@@ -24,14 +24,14 @@ use clap::Parser;
 use std::hint::black_box;
 
 use strata::engine::analytic::ProceduralImage;
+use strata::engine::method::PssmltSettings;
 use strata::engine::mutate::{Gaussian, Kelemen, MutationParams, OffsetBatch, SmallStep};
-use strata::engine::render::{
-    Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
-};
 use strata::engine::rng::{self, Domain, uniform_f32};
 use strata::engine::sample::IndependentSampler;
 use strata::engine::target::MaxChannel;
-use strata::engine::{PathOracle, Resolution, Sampler, Temperature};
+use strata::engine::{
+    Budget, Method, PathOracle, Resolution, Sampler, Settings, Silent, Temperature, render,
+};
 use strata::native::{builtin, native_tracer};
 
 /// Measure PSSMLT's cost per path relative to MC.
@@ -68,20 +68,24 @@ fn measure<O: PathOracle>(
         small_step,
         ..Default::default()
     };
-    let settings = PssmltSettings {
+    let settings = |method| Settings {
         seed: 1,
         budget,
+        method,
+    };
+    let mc_settings = settings(Method::Mc);
+    let pssmlt = settings(Method::Pssmlt(PssmltSettings {
         chains: 256,
         bootstrap_candidates: 16_384,
         mutation,
-    };
+    }));
     let (mut mc, mut pss) = (Vec::new(), Vec::new());
     for _ in 0..repeats {
         let t = Instant::now();
-        let out = render_mc(oracle, &McSettings { seed: 1, budget }, &Silent)?;
+        let out = render(oracle, &MaxChannel, &mc_settings, &Silent)?;
         mc.push(t.elapsed().as_secs_f64() * 1e9 / out.stats.samples as f64);
         let t = Instant::now();
-        let out = render_pssmlt(oracle, &MaxChannel, &settings, &Silent)?;
+        let out = render(oracle, &MaxChannel, &pssmlt, &Silent)?;
         pss.push(
             t.elapsed().as_secs_f64() * 1e9
                 / (out.stats.samples + out.stats.bootstrap_samples) as f64,

@@ -27,13 +27,13 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::Parser;
+use strata::engine::method::StratifiedSettings;
 use strata::engine::metrics::{self, ImageErrors};
 use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
 use strata::engine::reconstruct::{self, WeightedSettings};
-use strata::engine::render::{Budget, Silent};
-use strata::engine::stratify::{StratifiedSettings, render_stratified};
 use strata::engine::target::MaxChannel;
 use strata::engine::tiles::{TileShape, Tiles};
+use strata::engine::{Budget, Method, Settings, Silent, render};
 use strata::engine::{Film, PathOracle, Resolution};
 use strata::native::{builtin, native_tracer, pbrt};
 
@@ -96,19 +96,23 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         return Err("the reference's resolution differs from the render's".into());
     }
     // Seed 001 sec. 4: Kelemen 1/1024..1/32, large steps 0.3, as `compare`.
-    let settings = StratifiedSettings {
-        seed: args.seed,
-        budget: Budget::Time(Duration::from_secs_f64(args.time)),
+    let stratified = StratifiedSettings {
         mutation: MutationParams {
             small_step: SmallStep::Kelemen(Kelemen::SEED_001),
             large_step_probability: 0.3,
         },
         ..Default::default()
     };
-    let out = render_stratified(&tracer, &MaxChannel, &settings, &Silent)?;
+    let settings = Settings {
+        seed: args.seed,
+        budget: Budget::Time(Duration::from_secs_f64(args.time)),
+        method: Method::Stratified(stratified),
+    };
+    let rendered = render(&tracer, &MaxChannel, &settings, &Silent)?;
+    let out = rendered.extras.stratified().ok_or("stratified extras")?;
     println!(
         "{}: {}x{}, {} s, {} sweeps",
-        args.scene, r.width, r.height, args.time, out.stratified.sweeps
+        args.scene, r.width, r.height, args.time, out.counters.sweeps
     );
 
     let tiles = Tiles::new(r, TileShape::Cross)?;
@@ -144,7 +148,7 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     let mut rows: Vec<(String, Film)> = vec![
         (
             "render (solver alpha 0.05, fallback)".into(),
-            out.render.film.clone(),
+            rendered.film.clone(),
         ),
         (
             "regularizer alone (MC of the large steps)".into(),

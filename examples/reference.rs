@@ -12,8 +12,8 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use strata::engine::render::{Budget, McSettings, Silent, render_mc};
-use strata::engine::{Film, Resolution, metrics};
+use strata::engine::target::MaxChannel;
+use strata::engine::{Budget, Film, Method, Resolution, Settings, Silent, metrics, render};
 use strata::native::{native_tracer, pbrt};
 
 /// Render cornell-box and compare with Tungsten's converged image.
@@ -99,15 +99,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let tracer = native_tracer(scene);
     let start = std::time::Instant::now();
     let budget = Budget::samples_per_pixel(args.spp, tracer.scene().camera.resolution);
-    let film = render_mc(
-        &tracer,
-        &McSettings {
-            seed: args.seed,
-            budget,
-        },
-        &Silent,
-    )?
-    .film;
+    let settings = Settings {
+        seed: args.seed,
+        budget,
+        method: Method::Mc,
+    };
+    let film = render(&tracer, &MaxChannel, &settings, &Silent)?.film;
     let seconds = start.elapsed().as_secs_f64();
     let ratio: Vec<f64> = (0..3)
         .map(|c| film.channel_mean(c) / reference.channel_mean(c))

@@ -17,39 +17,22 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
+use clap::builder::PossibleValuesParser;
 use clap::{Parser, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use strata::embree::EmbreeIntersector;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
-use strata::engine::erpt::{ErptSettings, render_erpt};
-use strata::engine::exchange::{
-    EnsembleSettings, ExchangeKind, Ladder, ReplicaSettings, Tempering, render_replica,
-};
+use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Ladder, Tempering};
 use strata::engine::metrics;
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
 use strata::engine::reconstruct::{LogSettings, WeightedSettings};
-use strata::engine::render::{
-    Budget, McSettings, Observer, Progress, PssmltSettings, RenderOutput, render_mc, render_pssmlt,
-};
-use strata::engine::stratify::{Solver, StratifiedSettings, render_stratified};
 use strata::engine::target::MaxChannel;
 use strata::engine::tiles::TileShape;
-use strata::engine::{Film, PathOracle, Resolution};
+use strata::engine::{
+    Budget, Extras, Film, Method, Observer, Output, PathOracle, Progress, Resolution, Settings,
+    render,
+};
 use strata::native::{PathTracer, builtin, native_tracer};
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum Method {
-    /// Independent path sampling.
-    Mc,
-    /// Primary sample space MLT.
-    Pssmlt,
-    /// Replica-exchange MLT (seed 002 ch. 5).
-    Replica,
-    /// Stratified MCMC (seed 001): one chain per pixel-centred tile.
-    Stratified,
-    /// Energy redistribution path tracing in primary sample space.
-    Erpt,
-}
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum SolverArg {
@@ -101,9 +84,9 @@ struct Args {
     /// Scene: cornell, door, envplane, caustic, procedural, mixture, or a .pbrt file.
     #[arg(long, default_value = "cornell")]
     scene: String,
-    /// Estimator.
-    #[arg(long, value_enum, default_value = "pssmlt")]
-    method: Method,
+    /// Estimator: mc, pssmlt, replica, stratified, erpt or multistage.
+    #[arg(long, default_value = "pssmlt", value_parser = PossibleValuesParser::new(Method::NAMES))]
+    method: String,
     /// Samples (paths) per pixel.
     #[arg(long, default_value_t = 64, conflicts_with = "time")]
     spp: u64,
@@ -168,6 +151,9 @@ struct Args {
     /// ERPT: steps per chain.
     #[arg(long, default_value_t = 100)]
     chain_length: u32,
+    /// Multi-stage MLT: noise-aware importance (seed 004 sec. 4.3).
+    #[arg(long)]
+    noise_aware: bool,
     /// Exposure (stops) of the PNG.
     #[arg(long, default_value_t = 0.0)]
     exposure: f32,
@@ -208,11 +194,11 @@ fn run(args: &Args) -> AnyResult<()> {
         Ok(match args.scene.as_str() {
             "procedural" => {
                 let image = ProceduralImage::showcase(resolution);
-                (render(&image, args)?, Some(image.reference()))
+                (render_with(&image, args)?, Some(image.reference()))
             }
             "mixture" => {
                 let mixture = GaussianMixture::random(12, 4, (0.02, 0.1), resolution, args.seed);
-                (render(&mixture, args)?, Some(mixture.reference(1.0)))
+                (render_with(&mixture, args)?, Some(mixture.reference(1.0)))
             }
             name => {
                 let scene = match builtin::by_name(name, resolution) {
@@ -235,10 +221,10 @@ fn run(args: &Args) -> AnyResult<()> {
                     scene.lights.len()
                 );
                 match args.backend {
-                    Backend::Native => (render(&native_tracer(scene), args)?, None),
+                    Backend::Native => (render_with(&native_tracer(scene), args)?, None),
                     Backend::Embree => {
                         let embree = EmbreeIntersector::new(&scene.triangles)?;
-                        (render(&PathTracer::new(scene, embree), args)?, None)
+                        (render_with(&PathTracer::new(scene, embree), args)?, None)
                     }
                 }
             }
@@ -266,67 +252,130 @@ fn run(args: &Args) -> AnyResult<()> {
     Ok(())
 }
 
-fn render<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<RenderOutput> {
+/// The method named by `--method`, with the options that concern it.
+fn method(args: &Args) -> AnyResult<Method> {
+    let mut method = Method::from_name(&args.method).ok_or("unknown method")?;
+    let seed_001 = SmallStep::Kelemen(Kelemen::SEED_001);
+    match &mut method {
+        Method::Mc => {}
+        Method::Pssmlt(s) => {
+            s.chains = args.chains;
+            s.mutation = MutationParams {
+                small_step: match args.kernel {
+                    Kernel::Kelemen => SmallStep::Kelemen(Kelemen::DEFAULT),
+                    Kernel::Gaussian => SmallStep::Gaussian(Gaussian::DEFAULT),
+                    Kernel::Adaptive => SmallStep::Adaptive(Adaptive::DEFAULT),
+                },
+                large_step_probability: args.large_step,
+            };
+        }
+        Method::Replica(s) => {
+            let mut ensemble = EnsembleSettings::geometric(args.replicas, args.t_max)?;
+            ensemble.tempering = match args.tempering {
+                TemperingArg::Power => Tempering::Power,
+                TemperingArg::Oracle => Tempering::Oracle,
+            };
+            ensemble.mutation.large_step_probability = args.large_step;
+            s.ensemble = ensemble;
+            s.ensembles = args.ensembles;
+            s.ladder_tuning_sweeps = args.tune_ladder;
+            s.exchange = match args.exchange {
+                Move::None => ExchangeKind::None,
+                Move::Neighbor => ExchangeKind::NeighborSwap,
+                Move::IsPermutation => ExchangeKind::IsPermutation,
+                Move::IsSwap => ExchangeKind::IsSwap,
+                Move::OriginalEem => ExchangeKind::OriginalEquiEnergy { rings: 8 },
+                Move::FrequentEem => ExchangeKind::FrequentEquiEnergy { rings: 8 },
+                Move::Ees => ExchangeKind::thesis_equi_energy_sampler(1000),
+                Move::NonReversible => ExchangeKind::NonReversible,
+            };
+        }
+        Method::Stratified(s) => {
+            s.shape = match args.tile_radius {
+                0 => TileShape::Cross,
+                radius => TileShape::Square { radius },
+            };
+            s.mutation = MutationParams {
+                small_step: seed_001,
+                large_step_probability: args.large_step,
+            };
+            s.exchange_every = args.exchange_every;
+            s.solver = match args.solver {
+                SolverArg::Weighted => {
+                    strata::engine::method::Solver::Weighted(WeightedSettings::default())
+                }
+                SolverArg::Log => strata::engine::method::Solver::LogDomain(LogSettings::default()),
+            };
+            s.fallback_sigmas = (args.fallback_sigmas != 0.0).then_some(args.fallback_sigmas);
+        }
+        Method::Erpt(s) => {
+            s.chain_length = args.chain_length;
+            s.small_step = seed_001;
+        }
+        Method::MultiStage(s) => {
+            s.pssmlt.chains = args.chains;
+            s.pssmlt.mutation.large_step_probability = args.large_step;
+            s.noise_aware = args.noise_aware;
+        }
+    }
+    Ok(method)
+}
+
+fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<Output> {
     let resolution = oracle.resolution();
     let budget = match args.time {
         Some(t) => Budget::Time(Duration::try_from_secs_f64(t)?),
         None => Budget::samples_per_pixel(args.spp, resolution),
+    };
+    let settings = Settings {
+        seed: args.seed,
+        budget,
+        method: method(args)?,
     };
     let bar = ProgressBar::new(1000).with_style(ProgressStyle::with_template(
         "{spinner} [{elapsed_precise}] {wide_bar} {percent:>3}% {msg}",
     )?);
     let observer = Bar(bar.clone());
     let start = Instant::now();
-    let output = match args.method {
-        Method::Mc => render_mc(
-            oracle,
-            &McSettings {
-                seed: args.seed,
-                budget,
-            },
-            &observer,
-        )?,
-        Method::Pssmlt => {
-            let small_step = match args.kernel {
-                Kernel::Kelemen => SmallStep::Kelemen(Kelemen::DEFAULT),
-                Kernel::Gaussian => SmallStep::Gaussian(Gaussian::DEFAULT),
-                Kernel::Adaptive => SmallStep::Adaptive(Adaptive::DEFAULT),
-            };
-            let settings = PssmltSettings {
-                seed: args.seed,
-                budget,
-                chains: args.chains,
-                mutation: MutationParams {
-                    small_step,
-                    large_step_probability: args.large_step,
-                },
-                ..Default::default()
-            };
-            render_pssmlt(oracle, &MaxChannel, &settings, &observer)?
+    let output = render(oracle, &MaxChannel, &settings, &observer)?;
+    bar.finish_and_clear();
+    println!(
+        "{} {}: {:.2} s",
+        args.scene,
+        settings.method.name(),
+        start.elapsed().as_secs_f64()
+    );
+    report_extras(&output.extras);
+    Ok(output)
+}
+
+/// What the method says beyond the image.
+fn report_extras(extras: &Extras) {
+    match extras {
+        Extras::None => {}
+        Extras::Replica(r) => {
+            let x = &r.exchange;
+            let t = r.ladder.temperatures();
+            println!(
+                "{} chains per ensemble, T = {:.3?}; round trips {}; mean change probability {:.3}",
+                t.len(),
+                t,
+                x.round_trips(),
+                x.mean_change_probability()
+            );
+            let rejection: Vec<String> = x
+                .neighbor_rejection()
+                .iter()
+                .map(|r| format!("{r:.2}"))
+                .collect();
+            println!(
+                "neighbour swap rejection per pair: [{}]; communication barrier {:.2}",
+                rejection.join(", "),
+                Ladder::barrier(&x.neighbor_rejection())
+            );
         }
-        Method::Replica => render_replica_exchange(oracle, args, budget, &observer)?,
-        Method::Stratified => {
-            let settings = StratifiedSettings {
-                seed: args.seed,
-                budget,
-                shape: match args.tile_radius {
-                    0 => TileShape::Cross,
-                    radius => TileShape::Square { radius },
-                },
-                mutation: MutationParams {
-                    small_step: SmallStep::Kelemen(Kelemen::SEED_001),
-                    large_step_probability: args.large_step,
-                },
-                exchange_every: args.exchange_every,
-                solver: match args.solver {
-                    SolverArg::Weighted => Solver::Weighted(WeightedSettings::default()),
-                    SolverArg::Log => Solver::LogDomain(LogSettings::default()),
-                },
-                fallback_sigmas: (args.fallback_sigmas != 0.0).then_some(args.fallback_sigmas),
-                ..Default::default()
-            };
-            let out = render_stratified(oracle, &MaxChannel, &settings, &observer)?;
-            let s = &out.stratified;
+        Extras::Stratified(s) => {
+            let s = &s.counters;
             println!(
                 "{} sweeps; paths: tiles {}, exchanges {}, initialization {}; tiles started by \
                  global chains {}, borrowing {}, uniform draws {}, never {}; exchanges \
@@ -343,89 +392,12 @@ fn render<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<RenderOutput> {
                 s.exchange_attempts,
                 s.fallback_pixels
             );
-            out.render
         }
-        Method::Erpt => {
-            let settings = ErptSettings {
-                seed: args.seed,
-                budget,
-                chain_length: args.chain_length,
-                small_step: SmallStep::Kelemen(Kelemen::SEED_001),
-                ..Default::default()
-            };
-            render_erpt(oracle, &MaxChannel, &settings, &observer)?
+        Extras::MultiStage(stages) => {
+            let grids: Vec<u32> = stages.iter().map(|s| s.grid).collect();
+            println!("{} stages, grids {grids:?}", stages.len());
         }
-    };
-    bar.finish_and_clear();
-    println!(
-        "{} {:?}: {:.2} s",
-        args.scene,
-        args.method,
-        start.elapsed().as_secs_f64()
-    );
-    Ok(output)
-}
-
-fn render_replica_exchange<O: PathOracle>(
-    oracle: &O,
-    args: &Args,
-    budget: Budget,
-    observer: &Bar,
-) -> AnyResult<RenderOutput>
-where
-    O::Radiance: Send + Sync + 'static,
-{
-    let mut ensemble = EnsembleSettings::geometric(args.replicas, args.t_max)?;
-    ensemble.tempering = match args.tempering {
-        TemperingArg::Power => Tempering::Power,
-        TemperingArg::Oracle => Tempering::Oracle,
-    };
-    ensemble.mutation.large_step_probability = args.large_step;
-    let exchange = match args.exchange {
-        Move::None => ExchangeKind::None,
-        Move::Neighbor => ExchangeKind::NeighborSwap,
-        Move::IsPermutation => ExchangeKind::IsPermutation,
-        Move::IsSwap => ExchangeKind::IsSwap,
-        Move::OriginalEem => ExchangeKind::OriginalEquiEnergy { rings: 8 },
-        Move::FrequentEem => ExchangeKind::FrequentEquiEnergy { rings: 8 },
-        Move::Ees => ExchangeKind::thesis_equi_energy_sampler(1000),
-        Move::NonReversible => ExchangeKind::NonReversible,
-    };
-    let settings = ReplicaSettings {
-        seed: args.seed,
-        budget,
-        ensembles: args.ensembles,
-        ensemble,
-        exchange,
-        ladder_tuning_sweeps: args.tune_ladder,
-    };
-    let out = render_replica(oracle, &MaxChannel, &settings, observer)?;
-    let x = &out.exchange;
-    let t = out.ladder.temperatures();
-    println!(
-        "{} ensembles x {} chains, T = {:.3?}; round trips {}; mean change probability {:.3}",
-        args.ensembles,
-        t.len(),
-        t,
-        x.round_trips(),
-        x.mean_change_probability()
-    );
-    let rejection: Vec<String> = x
-        .neighbor_rejection()
-        .iter()
-        .map(|r| format!("{r:.2}"))
-        .collect();
-    println!(
-        "neighbour swap rejection per pair: [{}]; communication barrier {:.2}",
-        rejection.join(", "),
-        Ladder::barrier(&x.neighbor_rejection())
-    );
-    Ok(RenderOutput {
-        film: out.film,
-        stats: out.stats,
-        cancelled: out.cancelled,
-        visits: out.visits,
-    })
+    }
 }
 
 fn write(film: &Film, args: &Args) -> AnyResult<()> {

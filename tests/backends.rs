@@ -6,9 +6,9 @@
 
 use glam::Vec3;
 use strata::embree::EmbreeIntersector;
-use strata::engine::render::{Budget, McSettings, Silent, render_mc};
 use strata::engine::rng::{Domain, stream, uniform_f32};
-use strata::engine::{Film, Resolution};
+use strata::engine::target::MaxChannel;
+use strata::engine::{Budget, Film, Method, Resolution, Settings, Silent, render};
 use strata::native::builtin;
 use strata::native::{BvhIntersector, Hit, Intersector, PathTracer, Ray, Scene};
 
@@ -149,12 +149,13 @@ fn renders_with_the_same_seed_agree_within_noise() {
         );
         let native = PathTracer::new(scene.clone(), BvhIntersector::new(&scene.triangles));
         let runs = |tracer: &dyn Fn(u64) -> Film| (0..8).map(tracer).collect::<Vec<_>>();
-        let mc = |seed| McSettings {
+        let mc = |seed| Settings {
             seed,
             budget: Budget::samples_per_pixel(32, res),
+            method: Method::Mc,
         };
-        let a = runs(&|s| render_mc(&native, &mc(s), &Silent).unwrap().film);
-        let b = runs(&|s| render_mc(&embree, &mc(s), &Silent).unwrap().film);
+        let a = runs(&|s| render(&native, &MaxChannel, &mc(s), &Silent).unwrap().film);
+        let b = runs(&|s| render(&embree, &MaxChannel, &mc(s), &Silent).unwrap().film);
         for c in 0..3 {
             let stat = |f: &[Film]| {
                 let v: Vec<f64> = f.iter().map(|f| f.channel_mean(c)).collect();

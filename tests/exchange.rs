@@ -18,13 +18,15 @@ use strata::engine::analytic::{Component, GaussianMixture, ProceduralImage};
 use strata::engine::exchange::{
     Decisions, EnergyLevels, Ensemble, EnsembleSettings, EquiEnergy, EquiEnergySampler, Exchange,
     ExchangeKind, ExchangeStats, IsPermutation, IsSwap, Ladder, Move, NeighborSwap, NonReversible,
-    PermutationSampler, ReplicaSettings, Tempered, Tempering, for_each_permutation, render_replica,
+    PermutationSampler, Tempered, Tempering, for_each_permutation,
 };
+use strata::engine::method::{ReplicaExtras, ReplicaSettings};
 use strata::engine::mutate::{Gaussian, MutationParams, SmallStep};
-use strata::engine::render::{Budget, Silent};
 use strata::engine::rng::{Domain, stream};
-use strata::engine::target::{Luminance, MaxChannel};
-use strata::engine::{Film, Resolution};
+use strata::engine::target::{Importance, Luminance, MaxChannel};
+use strata::engine::{
+    Budget, Error, Method, Output, PathOracle, Resolution, Settings, Silent, render,
+};
 
 /// Answers every choice every way, one run at a time (depth-first).
 struct Enumerator {
@@ -538,17 +540,10 @@ fn plain_mh_stays_in_its_mode_while_every_move_finds_the_other() {
     }
 }
 
-fn replica_settings(
-    seed: u64,
-    spp: u64,
-    res: Resolution,
-    exchange: ExchangeKind,
-) -> ReplicaSettings {
+fn replica_settings(exchange: ExchangeKind) -> ReplicaSettings {
     let mut ensemble = EnsembleSettings::geometric(4, 100.0).unwrap();
     ensemble.bootstrap_candidates = 20_000;
     ReplicaSettings {
-        seed,
-        budget: Budget::samples_per_pixel(spp, res),
         ensembles: 16,
         ensemble,
         exchange,
@@ -556,27 +551,36 @@ fn replica_settings(
     }
 }
 
+/// Replica exchange with `replica` on `oracle`, `spp` paths per pixel.
+fn run<O: PathOracle, I: Importance<O::Radiance>>(
+    oracle: &O,
+    importance: &I,
+    seed: u64,
+    spp: u64,
+    replica: &ReplicaSettings,
+) -> Result<Output, Error> {
+    let settings = Settings {
+        seed,
+        budget: Budget::samples_per_pixel(spp, oracle.resolution()),
+        method: Method::Replica(replica.clone()),
+    };
+    render(oracle, importance, &settings, &Silent)
+}
+
+fn extras(out: &Output) -> &ReplicaExtras {
+    out.extras.replica().unwrap()
+}
+
 #[test]
 fn replica_exchange_images_match_closed_form_pixels() {
     let image = ProceduralImage::showcase(Resolution::new(24, 16));
     let reference = image.reference();
-    let res = image.resolution;
     for kind in [
         ExchangeKind::IsPermutation,
         ExchangeKind::FrequentEquiEnergy { rings: 4 },
     ] {
-        let runs: Vec<Film> = (0..common::RUNS)
-            .map(|seed| {
-                render_replica(
-                    &image,
-                    &MaxChannel,
-                    &replica_settings(seed, 128, res, kind),
-                    &Silent,
-                )
-                .unwrap()
-                .film
-            })
-            .collect();
+        let method = Method::Replica(replica_settings(kind));
+        let runs = common::renders(&image, &MaxChannel, &method, 128, 0..common::RUNS);
         common::check(kind.name(), &runs, &reference);
     }
 }
@@ -587,20 +591,14 @@ fn oracle_tempering_images_match_a_gaussian_mixture() {
     // target differs and the MIS weights of eq. 5.13 matter.
     let mixture = GaussianMixture::random(6, 3, (0.03, 0.12), Resolution::new(12, 12), 4);
     let reference = mixture.reference(1.0);
-    let res = mixture.resolution;
     for kind in [
         ExchangeKind::NeighborSwap,
         ExchangeKind::thesis_equi_energy_sampler(50),
     ] {
-        let runs: Vec<Film> = (0..common::RUNS)
-            .map(|seed| {
-                let mut s = replica_settings(seed, 128, res, kind);
-                s.ensemble.tempering = Tempering::Oracle;
-                render_replica(&mixture, &Luminance, &s, &Silent)
-                    .unwrap()
-                    .film
-            })
-            .collect();
+        let mut replica = replica_settings(kind);
+        replica.ensemble.tempering = Tempering::Oracle;
+        let method = Method::Replica(replica);
+        let runs = common::renders(&mixture, &Luminance, &method, 128, 0..common::RUNS);
         common::check(kind.name(), &runs, &reference);
     }
 }
@@ -608,17 +606,16 @@ fn oracle_tempering_images_match_a_gaussian_mixture() {
 #[test]
 fn replica_renders_do_not_depend_on_the_thread_count() {
     let image = ProceduralImage::showcase(Resolution::new(20, 12));
-    let res = image.resolution;
+    let mut replica = replica_settings(ExchangeKind::IsSwap);
+    replica.ladder_tuning_sweeps = 40;
     let render = |threads: usize| {
         in_pool(threads, || {
-            let mut s = replica_settings(3, 16, res, ExchangeKind::IsSwap);
-            s.ladder_tuning_sweeps = 40;
-            render_replica(&image, &MaxChannel, &s, &Silent).unwrap()
+            run(&image, &MaxChannel, 3, 16, &replica).unwrap()
         })
     };
     let (one, two) = (render(1), render(2));
     assert_eq!(bits(&one.film), bits(&two.film));
-    assert_eq!(one.ladder, two.ladder);
+    assert_eq!(extras(&one).ladder, extras(&two).ladder);
     assert_eq!(one.visits, two.visits);
     // Every chain's state is counted once per sweep; under power tempering a
     // chain step is one trace, so the counts add up to the samples.
@@ -629,58 +626,51 @@ fn replica_renders_do_not_depend_on_the_thread_count() {
 fn ladder_tuning_equalizes_neighbour_rejection() {
     // A ladder far too wide at the cold end: most rejection there.
     let image = two_modes();
-    let res = image.resolution;
-    let mut s = replica_settings(1, 4, res, ExchangeKind::NonReversible);
+    let mut s = replica_settings(ExchangeKind::NonReversible);
     s.ensemble.ladder = Ladder::explicit(vec![1.0, 400.0, 600.0, 900.0]).unwrap();
     s.ensemble.tempering = Tempering::Oracle;
-    let before = render_replica(&image, &Luminance, &s, &Silent).unwrap();
+    let before = run(&image, &Luminance, 1, 4, &s).unwrap();
     s.ladder_tuning_sweeps = 600;
-    let after = render_replica(&image, &Luminance, &s, &Silent).unwrap();
+    let after = run(&image, &Luminance, 1, 4, &s).unwrap();
     let spread =
         |r: &[f64]| r.iter().copied().fold(0.0, f64::max) - r.iter().copied().fold(1.0, f64::min);
     let (rb, ra) = (
-        before.exchange.neighbor_rejection(),
-        after.exchange.neighbor_rejection(),
+        extras(&before).exchange.neighbor_rejection(),
+        extras(&after).exchange.neighbor_rejection(),
     );
     assert!(
         spread(&ra) < 0.5 * spread(&rb),
         "rejection per pair before {rb:?}, after {ra:?} (ladder {:?})",
-        after.ladder
+        extras(&after).ladder
     );
 }
 
 #[test]
 fn bad_settings_are_typed_errors() {
     let image = ProceduralImage::showcase(Resolution::new(8, 8));
-    let res = image.resolution;
-    let mut s = replica_settings(0, 1, res, ExchangeKind::IsPermutation);
+    let mut s = replica_settings(ExchangeKind::IsPermutation);
     s.ensembles = 0;
-    assert!(render_replica(&image, &MaxChannel, &s, &Silent).is_err());
-    let mut s = replica_settings(0, 1, res, ExchangeKind::IsPermutation);
+    assert!(run(&image, &MaxChannel, 0, 1, &s).is_err());
+    let mut s = replica_settings(ExchangeKind::IsPermutation);
     s.ensemble.ladder = Ladder::geometric(21, 100.0).unwrap();
     s.ensemble.bootstrap_candidates = 100;
-    assert!(render_replica(&image, &MaxChannel, &s, &Silent).is_err());
-    let mut s = replica_settings(
-        0,
-        1,
-        res,
-        ExchangeKind::EquiEnergySampler {
-            p_jump: 1.5,
-            rings: 4,
-            capacity: 64,
-            burn_in: 0,
-        },
-    );
+    assert!(run(&image, &MaxChannel, 0, 1, &s).is_err());
+    let mut s = replica_settings(ExchangeKind::EquiEnergySampler {
+        p_jump: 1.5,
+        rings: 4,
+        capacity: 64,
+        burn_in: 0,
+    });
     s.ensemble.bootstrap_candidates = 100;
-    assert!(render_replica(&image, &MaxChannel, &s, &Silent).is_err());
+    assert!(run(&image, &MaxChannel, 0, 1, &s).is_err());
     // A black scene is the typed bootstrap error, not a hang.
     let black = GaussianMixture {
         components: vec![],
-        resolution: res,
+        resolution: image.resolution,
     };
-    let s = replica_settings(0, 1, res, ExchangeKind::NeighborSwap);
+    let s = replica_settings(ExchangeKind::NeighborSwap);
     assert!(matches!(
-        render_replica(&black, &Luminance, &s, &Silent),
-        Err(strata::engine::Error::AllCandidatesBlack { .. })
+        run(&black, &Luminance, 0, 1, &s),
+        Err(Error::AllCandidatesBlack { .. })
     ));
 }

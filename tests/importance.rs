@@ -6,15 +6,14 @@
 mod common;
 
 use strata::engine::analytic::ProceduralImage;
-use strata::engine::render::{Budget, PssmltSettings, Silent, render_pssmlt};
-use strata::engine::stages::{MultiStageSettings, render_multistage};
+use strata::engine::method::{MultiStageSettings, PssmltSettings};
 use strata::engine::target::{FnImportance, MaxChannel};
-use strata::engine::{Film, FilmPoint, PathSample, Radiance, Resolution, Rgb};
+use strata::engine::{
+    Budget, FilmPoint, Method, PathSample, Radiance, Resolution, Rgb, Settings, Silent, render,
+};
 
-fn settings(seed: u64, res: Resolution) -> PssmltSettings {
+fn pssmlt() -> PssmltSettings {
     PssmltSettings {
-        seed,
-        budget: Budget::samples_per_pixel(128, res),
         chains: 64,
         bootstrap_candidates: 4096,
         ..Default::default()
@@ -26,7 +25,6 @@ fn an_importance_shader_weighting_a_region_tenfold_is_unbiased() {
     // The importance "shader" of seed 004 sec. 4.1: paths through a region
     // of interest (here the film's top-left quadrant) weighted x10.
     let image = ProceduralImage::showcase(Resolution::new(24, 16));
-    let res = image.resolution;
     let shader = FnImportance(|s: &PathSample<Rgb>, film: FilmPoint| {
         let boost = if film.x < 12.0 && film.y < 8.0 {
             10.0
@@ -35,13 +33,8 @@ fn an_importance_shader_weighting_a_region_tenfold_is_unbiased() {
         };
         boost * s.radiance.luminance() as f64
     });
-    let runs: Vec<Film> = (0..common::RUNS)
-        .map(|seed| {
-            render_pssmlt(&image, &shader, &settings(seed, res), &Silent)
-                .unwrap()
-                .film
-        })
-        .collect();
+    let method = Method::Pssmlt(pssmlt());
+    let runs = common::renders(&image, &shader, &method, 128, 0..common::RUNS);
     common::check("region x10 shader", &runs, &image.reference());
 }
 
@@ -50,21 +43,22 @@ fn multistage_and_noise_aware_mlt_are_unbiased() {
     let image = ProceduralImage::showcase(Resolution::new(24, 16));
     let res = image.resolution;
     for noise_aware in [false, true] {
-        let runs: Vec<Film> = (0..common::RUNS)
+        let runs: Vec<_> = (0..common::RUNS)
             .map(|seed| {
-                let s = MultiStageSettings {
-                    pssmlt: settings(seed, res),
-                    linear_stages: 10,
-                    noise_aware,
+                let settings = Settings {
+                    seed,
+                    budget: Budget::samples_per_pixel(128, res),
+                    method: Method::MultiStage(MultiStageSettings {
+                        pssmlt: pssmlt(),
+                        linear_stages: 10,
+                        noise_aware,
+                    }),
                 };
-                let out = render_multistage(&image, &MaxChannel, &s, &Silent).unwrap();
-                assert_eq!(out.stages.len(), 14);
+                let out = render(&image, &MaxChannel, &settings, &Silent).unwrap();
+                assert_eq!(out.extras.stages().map(<[_]>::len), Some(14));
                 // One counted state per chain step, over all stages.
-                assert_eq!(
-                    out.output.visits.iter().sum::<u64>(),
-                    out.output.stats.samples
-                );
-                out.output.film
+                assert_eq!(out.visits.iter().sum::<u64>(), out.stats.samples);
+                out.film
             })
             .collect();
         let label = if noise_aware {

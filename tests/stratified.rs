@@ -8,34 +8,51 @@
 //! unbiased and is checked like MC and PSSMLT (`common::check`).
 
 use strata::engine::analytic::ProceduralImage;
-use strata::engine::erpt::{ErptSettings, render_erpt};
+use strata::engine::method::{
+    ErptSettings, Initialization, PssmltSettings, Solver, StratifiedExtras, StratifiedSettings,
+};
 use strata::engine::metrics::compare;
 use strata::engine::reconstruct::LogSettings;
-use strata::engine::render::{
-    Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
-};
-use strata::engine::stratify::{
-    Initialization, Solver, StratifiedOutput, StratifiedSettings, render_stratified,
-};
 use strata::engine::target::MaxChannel;
 use strata::engine::tiles::{TileShape, Tiles};
 use strata::engine::{
-    Film, FilmPoint, PathOracle, PathSample, Resolution, Rgb, Sampler, Temperature,
+    Budget, Film, FilmPoint, FnOracle, Method, Output, PathOracle, PathSample, Resolution, Rgb,
+    Sampler, Settings, Silent, Temperature, render,
 };
 use strata::native::{builtin, native_tracer};
 
 mod common;
-use common::{RUNS, check};
+use common::{RUNS, check, renders};
 mod threads;
 use threads::{bits, in_pool};
 
-fn stratified<O: PathOracle>(oracle: &O, seed: u64, spp: u64) -> StratifiedOutput {
-    let settings = StratifiedSettings {
+/// `method` on `oracle` at `seed` with `spp` paths per pixel.
+fn run<O: PathOracle>(oracle: &O, seed: u64, spp: u64, method: Method) -> Output {
+    let settings = Settings {
         seed,
         budget: Budget::samples_per_pixel(spp, oracle.resolution()),
-        ..Default::default()
+        method,
     };
-    render_stratified(oracle, &MaxChannel, &settings, &Silent).unwrap()
+    render(oracle, &MaxChannel, &settings, &Silent).unwrap()
+}
+
+/// Stratified MCMC with `settings`.
+fn stratified_with<O: PathOracle>(
+    oracle: &O,
+    seed: u64,
+    spp: u64,
+    settings: StratifiedSettings,
+) -> Output {
+    run(oracle, seed, spp, Method::Stratified(settings))
+}
+
+/// Stratified MCMC with its defaults.
+fn stratified<O: PathOracle>(oracle: &O, seed: u64, spp: u64) -> Output {
+    stratified_with(oracle, seed, spp, StratifiedSettings::default())
+}
+
+fn extras(out: &Output) -> &StratifiedExtras {
+    out.extras.stratified().unwrap()
 }
 
 fn rel_mse(image: &Film, reference: &Film) -> f64 {
@@ -47,29 +64,24 @@ fn every_pixel_gets_exactly_the_configured_number_of_samples() {
     let image = ProceduralImage::showcase(Resolution::new(17, 11));
     for shape in [TileShape::Cross, TileShape::Square { radius: 1 }] {
         let settings = StratifiedSettings {
-            seed: 3,
-            budget: Budget::samples_per_pixel(200, image.resolution),
             shape,
             ..Default::default()
         };
-        let out = render_stratified(&image, &MaxChannel, &settings, &Silent).unwrap();
-        let sweeps = out.stratified.sweeps;
+        let out = stratified_with(&image, 3, 200, settings);
+        let sweeps = extras(&out).counters.sweeps;
         assert!(sweeps > 5, "{shape:?}: {sweeps} sweeps");
         let tiles = Tiles::new(image.resolution, shape).unwrap();
         let per_sweep: u64 = (0..tiles.count())
             .map(|s| tiles.pixels(s).count() as u64)
             .sum();
-        assert_eq!(out.stratified.tile_samples, sweeps * per_sweep);
-        assert_eq!(
-            out.render.stats.chains.proposals,
-            sweeps * tiles.count() as u64
-        );
-        for (j, &v) in out.render.visits.iter().enumerate() {
+        assert_eq!(extras(&out).counters.tile_samples, sweeps * per_sweep);
+        assert_eq!(out.stats.chains.proposals, sweeps * tiles.count() as u64);
+        for (j, &v) in out.visits.iter().enumerate() {
             let containing = tiles.tiles_of(j).count() as u64;
             assert_eq!(v, sweeps * containing, "{shape:?}: pixel {j}");
         }
-        let s = &out.stratified;
-        let stats = &out.render.stats;
+        let s = &extras(&out).counters;
+        let stats = &out.stats;
         assert_eq!(
             stats.samples + stats.bootstrap_samples,
             s.tile_samples + s.exchange_samples + s.initialization_samples
@@ -118,14 +130,13 @@ fn unscaled_estimates_have_the_pixel_ratios() {
     let tiles = Tiles::new(Checker.resolution(), TileShape::Cross).unwrap();
     let runs: Vec<Vec<f64>> = (0..16)
         .map(|seed| {
-            let settings = StratifiedSettings {
+            let settings = Settings {
                 seed,
                 budget: Budget::Samples(300_000),
-                ..Default::default()
+                method: Method::Stratified(StratifiedSettings::default()),
             };
-            render_stratified(&Checker, &MaxChannel, &settings, &Silent)
-                .unwrap()
-                .unscaled
+            let out = render(&Checker, &MaxChannel, &settings, &Silent).unwrap();
+            extras(&out).unscaled.clone()
         })
         .collect();
     let mut worst: f64 = 0.0;
@@ -153,10 +164,8 @@ fn procedural_errors(image: &ProceduralImage, spp: u64, seeds: u64) -> (f64, f64
     let reference = image.reference();
     let (mut strat, mut mc) = (0.0, 0.0);
     for seed in 0..seeds {
-        strat += rel_mse(&stratified(image, seed, spp).render.film, &reference);
-        let budget = Budget::samples_per_pixel(spp, image.resolution);
-        let m = render_mc(image, &McSettings { seed, budget }, &Silent).unwrap();
-        mc += rel_mse(&m.film, &reference);
+        strat += rel_mse(&stratified(image, seed, spp).film, &reference);
+        mc += rel_mse(&run(image, seed, spp, Method::Mc).film, &reference);
     }
     (strat / seeds as f64, mc / seeds as f64)
 }
@@ -181,31 +190,17 @@ fn the_reconstruction_converges_to_the_procedural_image() {
 fn the_environment_plane_is_close_to_mc_and_far_below_pssmlt() {
     let res = Resolution::new(32, 24);
     let tracer = native_tracer(builtin::envplane(res));
-    let reference = render_mc(
-        &tracer,
-        &McSettings {
-            seed: 99,
-            budget: Budget::samples_per_pixel(2048, res),
-        },
-        &Silent,
-    )
-    .unwrap()
-    .film;
+    let reference = run(&tracer, 99, 2048, Method::Mc).film;
+    let pssmlt = Method::Pssmlt(PssmltSettings {
+        chains: 64,
+        bootstrap_candidates: 20_000,
+        ..Default::default()
+    });
     let (mut strat, mut mc, mut pss) = (0.0, 0.0, 0.0);
     for seed in 0..3 {
-        let budget = Budget::samples_per_pixel(64, res);
-        strat += rel_mse(&stratified(&tracer, seed, 64).render.film, &reference);
-        let m = render_mc(&tracer, &McSettings { seed, budget }, &Silent).unwrap();
-        mc += rel_mse(&m.film, &reference);
-        let settings = PssmltSettings {
-            seed,
-            budget,
-            chains: 64,
-            bootstrap_candidates: 20_000,
-            ..Default::default()
-        };
-        let p = render_pssmlt(&tracer, &MaxChannel, &settings, &Silent).unwrap();
-        pss += rel_mse(&p.film, &reference);
+        strat += rel_mse(&stratified(&tracer, seed, 64).film, &reference);
+        mc += rel_mse(&run(&tracer, seed, 64, Method::Mc).film, &reference);
+        pss += rel_mse(&run(&tracer, seed, 64, pssmlt.clone()).film, &reference);
     }
     // Observed: stratified 2-4x MC's relMSE, PSSMLT ~200x MC's.
     assert!(strat < 8.0 * mc, "stratified {strat} vs MC {mc}");
@@ -217,20 +212,14 @@ fn renders_do_not_depend_on_the_thread_count() {
     let image = ProceduralImage::showcase(Resolution::new(23, 13));
     let strat = |threads| in_pool(threads, || stratified(&image, 7, 64));
     let (one, two) = (strat(1), strat(2));
-    assert_eq!(bits(&one.render.film), bits(&two.render.film));
-    assert_eq!(one.stratified, two.stratified);
-    assert!(one.stratified.initialized_by_global_chains > 0);
-    let settings = ErptSettings {
-        seed: 7,
-        budget: Budget::samples_per_pixel(100, image.resolution),
+    assert_eq!(bits(&one.film), bits(&two.film));
+    assert_eq!(extras(&one).counters, extras(&two).counters);
+    assert!(extras(&one).counters.initialized_by_global_chains > 0);
+    let method = Method::Erpt(ErptSettings {
         bootstrap_candidates: 5_000,
         ..Default::default()
-    };
-    let erpt = |threads| {
-        in_pool(threads, || {
-            render_erpt(&image, &MaxChannel, &settings, &Silent).unwrap()
-        })
-    };
+    });
+    let erpt = |threads| in_pool(threads, || run(&image, 7, 100, method.clone()));
     let (one, two) = (erpt(1), erpt(2));
     assert_eq!(bits(&one.film), bits(&two.film));
     assert_eq!(one.stats, two.stats);
@@ -239,58 +228,40 @@ fn renders_do_not_depend_on_the_thread_count() {
 #[test]
 fn erpt_matches_the_procedural_image() {
     let image = ProceduralImage::showcase(Resolution::new(24, 16));
-    let runs: Vec<Film> = (0..RUNS)
-        .map(|seed| {
-            let settings = ErptSettings {
-                seed,
-                budget: Budget::samples_per_pixel(400, image.resolution),
-                chain_length: 40,
-                bootstrap_candidates: 5_000,
-                ..Default::default()
-            };
-            render_erpt(&image, &MaxChannel, &settings, &Silent)
-                .unwrap()
-                .film
-        })
-        .collect();
+    let method = Method::Erpt(ErptSettings {
+        chain_length: 40,
+        bootstrap_candidates: 5_000,
+        ..Default::default()
+    });
+    let runs = renders(&image, &MaxChannel, &method, 400, 0..RUNS);
     check("erpt", &runs, &image.reference());
 }
 
-/// Black everywhere, or NaN on the right half and 1 elsewhere.
-struct Scripted {
-    nan: bool,
-}
-
-impl PathOracle for Scripted {
-    type Radiance = Rgb;
-    fn resolution(&self) -> Resolution {
-        Resolution::new(12, 9)
-    }
-    fn trace<S: Sampler + ?Sized>(
-        &self,
-        film: FilmPoint,
-        sampler: &mut S,
-        _: Temperature,
-    ) -> PathSample<Rgb> {
-        let u = sampler.next_1d();
-        match (self.nan, film.x > 6.0) {
-            (false, _) => PathSample::new(Rgb::BLACK),
-            (true, true) => PathSample::new(Rgb([f32::NAN, 0.0, 0.0])),
-            (true, false) => PathSample::new(Rgb([1.0 + u, 1.0, 1.0])),
-        }
-    }
+/// Black everywhere, or NaN on the right half and `1 + u` elsewhere.
+fn scripted(nan: bool) -> impl PathOracle<Radiance = Rgb> {
+    FnOracle::new(
+        Resolution::new(12, 9),
+        move |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature| {
+            let u = sampler.next_1d();
+            match (nan, film.x > 6.0) {
+                (false, _) => PathSample::new(Rgb::BLACK),
+                (true, true) => PathSample::new(Rgb([f32::NAN, 0.0, 0.0])),
+                (true, false) => PathSample::new(Rgb([1.0 + u, 1.0, 1.0])),
+            }
+        },
+    )
 }
 
 #[test]
 fn black_and_nan_scenes_finish_with_finite_images() {
-    let black = stratified(&Scripted { nan: false }, 1, 40);
-    assert!(black.render.film.data().iter().all(|&v| v == 0.0));
-    assert_eq!(black.stratified.never_initialized, 12 * 9);
-    let nan = stratified(&Scripted { nan: true }, 1, 40);
-    assert!(nan.render.film.data().iter().all(|v| v.is_finite()));
-    assert!(nan.render.stats.invalid_samples > 0);
+    let black = stratified(&scripted(false), 1, 40);
+    assert!(black.film.data().iter().all(|&v| v == 0.0));
+    assert_eq!(extras(&black).counters.never_initialized, 12 * 9);
+    let nan = stratified(&scripted(true), 1, 40);
+    assert!(nan.film.data().iter().all(|v| v.is_finite()));
+    assert!(nan.stats.invalid_samples > 0);
     // Left of the NaN region the value is 1.5 in red.
-    let left = nan.render.film.pixel(2, 4)[0];
+    let left = nan.film.pixel(2, 4)[0];
     assert!((left - 1.5).abs() < 0.2, "{left}");
 }
 
@@ -298,16 +269,14 @@ fn black_and_nan_scenes_finish_with_finite_images() {
 fn the_log_domain_solver_reconstructs_too() {
     let image = ProceduralImage::showcase(Resolution::new(32, 24));
     let reference = image.reference();
-    let weighted = rel_mse(&stratified(&image, 2, 256).render.film, &reference);
+    let weighted = rel_mse(&stratified(&image, 2, 256).film, &reference);
     let settings = StratifiedSettings {
-        seed: 2,
-        budget: Budget::samples_per_pixel(256, image.resolution),
         solver: Solver::LogDomain(LogSettings::default()),
         ..Default::default()
     };
-    let log = render_stratified(&image, &MaxChannel, &settings, &Silent).unwrap();
-    assert!(log.normalizations.is_empty());
-    let log = rel_mse(&log.render.film, &reference);
+    let log = stratified_with(&image, 2, 256, settings);
+    assert!(extras(&log).normalizations.is_empty());
+    let log = rel_mse(&log.film, &reference);
     // Seed 001 fig. 5: both work, the log-domain solver a little worse.
     assert!(log < 4.0 * weighted, "log {log} vs weighted {weighted}");
     assert!(log < 0.05, "{log}");
@@ -318,7 +287,7 @@ fn every_builtin_scene_renders() {
     for name in builtin::NAMES {
         let tracer = native_tracer(builtin::by_name(name, Resolution::new(16, 12)).unwrap());
         let out = stratified(&tracer, 1, 24);
-        let film = &out.render.film;
+        let film = &out.film;
         assert!(
             film.data().iter().all(|v| v.is_finite() && *v >= 0.0),
             "{name}"
@@ -327,34 +296,23 @@ fn every_builtin_scene_renders() {
     }
 }
 
-#[test]
-fn bad_settings_are_typed_errors() {
-    let image = ProceduralImage::showcase(Resolution::new(8, 8));
-    let settings = StratifiedSettings {
-        initialization: Initialization {
-            coverage: 1.5,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    assert!(render_stratified(&image, &MaxChannel, &settings, &Silent).is_err());
-    let settings = StratifiedSettings {
-        fallback_sigmas: Some(-1.0),
-        ..Default::default()
-    };
-    assert!(render_stratified(&image, &MaxChannel, &settings, &Silent).is_err());
-    let settings = ErptSettings {
-        chain_length: 0,
-        ..Default::default()
-    };
-    assert!(render_erpt(&image, &MaxChannel, &settings, &Silent).is_err());
-}
-
 /// A dim 15x15 film with one glint: the centre pixel returns `GLINT` with
 /// probability `P` (a rare path) and `DIM` otherwise.
 struct Glint;
 
 impl Glint {
+    fn oracle() -> impl PathOracle<Radiance = f32> {
+        FnOracle::new(
+            Resolution::new(15, 15),
+            |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature| {
+                let pixel = film.y as usize * 15 + film.x as usize;
+                let u = sampler.next_1d() as f64;
+                let hit = pixel == Self::CENTRE && u < Self::P;
+                PathSample::new(if hit { Self::GLINT } else { Self::DIM } as f32)
+            },
+        )
+    }
+
     const P: f64 = 0.05;
     const GLINT: f64 = 200.0;
     const DIM: f64 = 0.05;
@@ -369,24 +327,6 @@ impl Glint {
     }
 }
 
-impl PathOracle for Glint {
-    type Radiance = f32;
-    fn resolution(&self) -> Resolution {
-        Resolution::new(15, 15)
-    }
-    fn trace<S: Sampler + ?Sized>(
-        &self,
-        film: FilmPoint,
-        sampler: &mut S,
-        _: Temperature,
-    ) -> PathSample<f32> {
-        let pixel = film.y as usize * 15 + film.x as usize;
-        let u = sampler.next_1d() as f64;
-        let hit = pixel == Self::CENTRE && u < Self::P;
-        PathSample::new(if hit { Self::GLINT } else { Self::DIM } as f32)
-    }
-}
-
 /// Seed 001 sec. 5 (Fig. 9): tiles whose chains start away from a rare bright
 /// path carry start-up bias, and the reconstruction dims the glint. Global
 /// initialization is off so that every tile starts from uniform draws. The
@@ -394,10 +334,9 @@ impl PathOracle for Glint {
 /// regularizer's own noise and leaves the dim pixels alone.
 #[test]
 fn a_rare_glint_keeps_its_energy() {
+    let glint = Glint::oracle();
     let render = |fallback_sigmas| {
         let settings = StratifiedSettings {
-            seed: 5,
-            budget: Budget::samples_per_pixel(6000, Glint.resolution()),
             initialization: Initialization {
                 global_chains: 0,
                 ..Default::default()
@@ -405,28 +344,28 @@ fn a_rare_glint_keeps_its_energy() {
             fallback_sigmas,
             ..Default::default()
         };
-        render_stratified(&Glint, &MaxChannel, &settings, &Silent).unwrap()
+        stratified_with(&glint, 5, 6000, settings)
     };
     let exact = Glint::value(Glint::CENTRE);
     let without = render(None);
-    let dimmed = without.render.film.data()[Glint::CENTRE];
+    let dimmed = without.film.data()[Glint::CENTRE];
     assert!(
         dimmed < 0.5 * exact,
         "{dimmed} vs {exact}: no start-up bias to fix"
     );
     let with = render(StratifiedSettings::default().fallback_sigmas);
-    let kept = with.render.film.data()[Glint::CENTRE];
+    let kept = with.film.data()[Glint::CENTRE];
     // The regularizer pools the large steps of the 5 tiles containing the
     // glint: its standard error is GLINT sqrt(P (1 - P) / n).
-    let large = 5.0 * 0.3 * with.stratified.sweeps as f64;
+    let large = 5.0 * 0.3 * extras(&with).counters.sweeps as f64;
     let sigma = Glint::GLINT * (Glint::P * (1.0 - Glint::P) / large).sqrt();
     assert!(
         (kept - exact).abs() < 4.0 * sigma,
         "{kept} vs {exact} (sigma {sigma})"
     );
-    let replaced = with.stratified.fallback_pixels;
+    let replaced = extras(&with).counters.fallback_pixels;
     assert!((1..=5).contains(&replaced), "{replaced} pixels replaced");
-    let (a, b) = (with.render.film.data(), without.render.film.data());
+    let (a, b) = (with.film.data(), without.film.data());
     let changed = a.iter().zip(b).filter(|(x, y)| x != y).count() as u64;
     assert_eq!(changed, replaced);
 }

@@ -4,15 +4,14 @@
 //! Tolerances come from the spread of independent renders (fixed seeds).
 
 use glam::Vec3;
-use strata::engine::exchange::{
-    EnsembleSettings, ExchangeKind, ReplicaSettings, Tempering, render_replica,
-};
+use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Tempering};
+use strata::engine::method::{PssmltSettings, ReplicaSettings};
 use strata::engine::purity::check_purity;
-use strata::engine::render::{
-    Budget, McSettings, PssmltSettings, Silent, render_mc, render_pssmlt,
-};
 use strata::engine::target::MaxChannel;
-use strata::engine::{Film, FilmPoint, PathOracle, Resolution, Temperature};
+use strata::engine::{
+    Budget, Film, FilmPoint, Method, Output, PathOracle, Resolution, Settings, Silent, Temperature,
+    render,
+};
 use strata::native::builtin::{self, cuboid};
 use strata::native::material::{Material, Texture};
 use strata::native::tracer::Regularization;
@@ -45,14 +44,19 @@ fn assert_channel_means_agree(scene: &str, mc: &[Film], method: &str, other: &[F
     }
 }
 
+/// `method` on `oracle` at `seed` with `spp` paths per pixel.
+fn run<O: PathOracle>(oracle: &O, seed: u64, spp: u64, method: Method) -> Output {
+    let settings = Settings {
+        seed,
+        budget: Budget::samples_per_pixel(spp, oracle.resolution()),
+        method,
+    };
+    render(oracle, &MaxChannel, &settings, &Silent).unwrap()
+}
+
 fn mc_runs<O: PathOracle>(oracle: &O, spp: u64, runs: u64) -> Vec<Film> {
     (0..runs)
-        .map(|seed| {
-            let budget = Budget::samples_per_pixel(spp, oracle.resolution());
-            render_mc(oracle, &McSettings { seed, budget }, &Silent)
-                .unwrap()
-                .film
-        })
+        .map(|seed| run(oracle, seed, spp, Method::Mc).film)
         .collect()
 }
 
@@ -83,16 +87,12 @@ fn furnace() {
     }
     let runs: Vec<Film> = (0..8)
         .map(|seed| {
-            let settings = PssmltSettings {
-                seed,
-                budget: Budget::samples_per_pixel(64, res),
+            let pssmlt = PssmltSettings {
                 chains: 16,
                 bootstrap_candidates: 4096,
                 ..Default::default()
             };
-            render_pssmlt(&tracer, &MaxChannel, &settings, &Silent)
-                .unwrap()
-                .film
+            run(&tracer, seed, 64, Method::Pssmlt(pssmlt)).film
         })
         .collect();
     let (mean, se) = mean_se(&runs, |f| f.channel_mean(1));
@@ -176,26 +176,16 @@ fn tempering_only_acts_above_temperature_one() {
 #[test]
 fn same_seed_same_image_on_one_and_two_threads() {
     let tracer = native_tracer(builtin::cornell(Resolution::new(24, 24)));
-    let settings = PssmltSettings {
-        seed: 9,
-        budget: Budget::samples_per_pixel(16, Resolution::new(24, 24)),
+    let pssmlt = Method::Pssmlt(PssmltSettings {
         chains: 24,
         bootstrap_candidates: 2048,
         ..Default::default()
-    };
-    let one = in_pool(1, || {
-        render_pssmlt(&tracer, &MaxChannel, &settings, &Silent).unwrap()
     });
-    let two = in_pool(2, || {
-        render_pssmlt(&tracer, &MaxChannel, &settings, &Silent).unwrap()
-    });
+    let one = in_pool(1, || run(&tracer, 9, 16, pssmlt.clone()));
+    let two = in_pool(2, || run(&tracer, 9, 16, pssmlt.clone()));
     assert_eq!(bits(&one.film), bits(&two.film));
-    let mc = McSettings {
-        seed: 9,
-        budget: Budget::samples_per_pixel(4, Resolution::new(24, 24)),
-    };
-    let one = in_pool(1, || render_mc(&tracer, &mc, &Silent).unwrap());
-    let two = in_pool(2, || render_mc(&tracer, &mc, &Silent).unwrap());
+    let one = in_pool(1, || run(&tracer, 9, 4, Method::Mc));
+    let two = in_pool(2, || run(&tracer, 9, 4, Method::Mc));
     assert_eq!(bits(&one.film), bits(&two.film));
 }
 
@@ -208,25 +198,20 @@ fn nan_from_a_broken_material_does_not_poison_the_image() {
         reflectance: Texture::Constant(Vec3::new(f32::NAN, 0.5, 0.5)),
     };
     let tracer = native_tracer(scene);
-    let out = render_mc(
-        &tracer,
-        &McSettings {
-            seed: 1,
-            budget: Budget::samples_per_pixel(8, tracer.resolution()),
-        },
-        &Silent,
-    )
-    .unwrap();
+    let out = run(&tracer, 1, 8, Method::Mc);
     assert!(out.stats.invalid_samples > 0);
     assert!(out.film.data().iter().all(|v| v.is_finite()));
-    let settings = PssmltSettings {
-        seed: 1,
+    let pssmlt = PssmltSettings {
         chains: 8,
         bootstrap_candidates: 1024,
-        budget: Budget::Samples(20_000),
         ..Default::default()
     };
-    let pss = render_pssmlt(&tracer, &MaxChannel, &settings, &Silent).unwrap();
+    let settings = Settings {
+        seed: 1,
+        budget: Budget::Samples(20_000),
+        method: Method::Pssmlt(pssmlt),
+    };
+    let pss = render(&tracer, &MaxChannel, &settings, &Silent).unwrap();
     assert!(pss.stats.invalid_samples > 0 && pss.film.data().iter().all(|v| v.is_finite()));
 }
 
@@ -241,16 +226,12 @@ fn pssmlt_and_mc_agree_on_cornell_and_door() {
         let mc = mc_runs(&tracer, 64, 10);
         let pss: Vec<Film> = (0..10)
             .map(|seed| {
-                let settings = PssmltSettings {
-                    seed: 100 + seed,
-                    budget: Budget::samples_per_pixel(64, res),
+                let pssmlt = PssmltSettings {
                     chains: 32,
                     bootstrap_candidates: 16_384,
                     ..Default::default()
                 };
-                render_pssmlt(&tracer, &MaxChannel, &settings, &Silent)
-                    .unwrap()
-                    .film
+                run(&tracer, 100 + seed, 64, Method::Pssmlt(pssmlt)).film
             })
             .collect();
         assert_channel_means_agree(name, &mc, "PSSMLT", &pss);
@@ -271,17 +252,13 @@ fn replica_exchange_with_oracle_tempering_agrees_with_mc() {
                 let mut ensemble = EnsembleSettings::geometric(4, 100.0).unwrap();
                 ensemble.tempering = Tempering::Oracle;
                 ensemble.bootstrap_candidates = 4096;
-                let settings = ReplicaSettings {
-                    seed: 200 + seed,
-                    budget: Budget::samples_per_pixel(64, res),
+                let replica = ReplicaSettings {
                     ensembles: 8,
                     ensemble,
                     exchange: ExchangeKind::IsPermutation,
                     ladder_tuning_sweeps: 0,
                 };
-                render_replica(&tracer, &MaxChannel, &settings, &Silent)
-                    .unwrap()
-                    .film
+                run(&tracer, 200 + seed, 64, Method::Replica(replica)).film
             })
             .collect();
         assert_channel_means_agree(name, &mc, "replica exchange", &re);

@@ -22,6 +22,7 @@ use crate::chain::{Chain, KelemenWeights, PathChain, PathTarget, Traced};
 use crate::error::Error;
 use crate::mutate::SmallStep;
 use crate::oracle::PathOracle;
+use crate::parallel;
 use crate::rng::{self, Domain, uniform_f64};
 use crate::sample::MltSampler;
 use crate::target::{Evaluated, Importance};
@@ -106,28 +107,13 @@ impl Bootstrap {
         }
         let target = PathTarget { oracle, importance };
         let mut values = vec![0.0; candidates as usize * levels];
-        let evaluate = |(k, values): (usize, &mut [f64])| {
+        let traced = parallel::sum_chunks(&mut values, levels, |k, values| {
             let stream = rng::stream(seed, Domain::Candidate, k as u64);
             let (mut chain, mut traced) = Chain::start(&target, small_step, stream);
             let path = *chain.state();
             traced += row(chain.sampler_mut(), &path, values);
             traced
-        };
-        #[cfg(feature = "parallel")]
-        let traced = {
-            use rayon::prelude::*;
-            values
-                .par_chunks_mut(levels)
-                .enumerate()
-                .map(evaluate)
-                .reduce(Traced::default, sum)
-        };
-        #[cfg(not(feature = "parallel"))]
-        let traced = values
-            .chunks_mut(levels)
-            .enumerate()
-            .map(evaluate)
-            .fold(Traced::default(), sum);
+        });
 
         let mut cumulative = vec![Vec::with_capacity(candidates as usize); levels];
         let mut ranges = vec![(f64::INFINITY, 0.0f64); levels];
@@ -270,11 +256,6 @@ impl Bootstrap {
         };
         PathChain::new(started.chain, weights, started.decisions)
     }
-}
-
-fn sum(mut a: Traced, b: Traced) -> Traced {
-    a += b;
-    a
 }
 
 #[cfg(test)]

@@ -91,6 +91,14 @@ impl core::ops::AddAssign for Traced {
     }
 }
 
+impl core::ops::Add for Traced {
+    type Output = Traced;
+    fn add(mut self, other: Traced) -> Traced {
+        self += other;
+        self
+    }
+}
+
 /// What one step did.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepOutcome {

@@ -25,6 +25,13 @@ pub enum Error {
         /// How many candidates were drawn.
         candidates: u64,
     },
+    /// A buffer sized from the input could not be allocated.
+    AllocationFailed {
+        /// What the buffer is for.
+        what: &'static str,
+        /// Its size.
+        bytes: u64,
+    },
     /// Two films or images that must have the same shape do not.
     ShapeMismatch {
         /// Shape of the left operand (width, height, channels).
@@ -62,6 +69,9 @@ impl fmt::Display for Error {
                 f,
                 "all {candidates} bootstrap candidates have zero importance: nothing to start a chain from"
             ),
+            Error::AllocationFailed { what, bytes } => {
+                write!(f, "cannot allocate {bytes} bytes for the {what}")
+            }
             Error::ShapeMismatch { left, right } => {
                 write!(
                     f,

@@ -25,6 +25,25 @@ impl Film {
         }
     }
 
+    /// A black film, or [`Error::AllocationFailed`] if its memory (sized
+    /// from the input) cannot be had.
+    pub fn try_new(resolution: Resolution, channels: usize) -> Result<Self, Error> {
+        let len = resolution.pixel_count().saturating_mul(channels);
+        let bytes = (len as u64).saturating_mul(core::mem::size_of::<f64>() as u64);
+        let mut data = Vec::new();
+        data.try_reserve_exact(len)
+            .map_err(|_| Error::AllocationFailed {
+                what: "film",
+                bytes,
+            })?;
+        data.resize(len, 0.0);
+        Ok(Self {
+            resolution,
+            channels,
+            data,
+        })
+    }
+
     /// A film over existing values (`resolution.pixel_count() * channels` of them).
     pub fn from_data(
         resolution: Resolution,
@@ -152,5 +171,10 @@ mod tests {
         assert_eq!(b.scaled(0.5).pixel(1, 1), &[1.5, 2.5, 3.5]);
         assert!(b.merge(&Film::new(r, 1)).is_err());
         assert!(Film::from_data(r, 3, alloc::vec![0.0; 5]).is_err());
+        let huge = Film::try_new(Resolution::new(u32::MAX, u32::MAX), 3);
+        assert!(matches!(
+            huge,
+            Err(Error::AllocationFailed { what: "film", .. })
+        ));
     }
 }

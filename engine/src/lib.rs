@@ -41,26 +41,28 @@ pub mod bootstrap;
 pub mod chain;
 pub mod convergence;
 pub mod diagnose;
-pub mod erpt;
+pub mod drive;
 pub mod error;
 pub mod exchange;
 pub mod film;
+pub mod method;
 pub mod metrics;
 pub mod mutate;
 pub mod oracle;
+mod parallel;
+pub mod prelude;
 pub mod purity;
 pub mod reconstruct;
-pub mod render;
 pub mod rng;
 pub mod sample;
-mod splat;
-pub mod stages;
-pub mod stratify;
 pub mod target;
 pub mod tiles;
 
+pub use drive::{Budget, Observer, Progress, RenderStats, Silent};
 pub use error::Error;
 pub use film::Film;
+pub use method::{Extras, Method, Output, Settings, render};
 pub use oracle::{
-    FilmPoint, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb, Sampler, Temperature,
+    FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb, Sampler,
+    Temperature,
 };

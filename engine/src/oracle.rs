@@ -242,6 +242,52 @@ pub trait PathOracle: Sync {
     ) -> PathSample<Self::Radiance>;
 }
 
+/// A closure as an oracle: `trace(film, sampler, temperature)` over a film
+/// of `resolution`. For tests, analytic targets and quick experiments (each
+/// number is drawn through a `dyn Sampler`, a virtual call; implement
+/// [`PathOracle`] for a renderer).
+///
+/// ```
+/// use strata_engine::{FilmPoint, FnOracle, PathOracle, PathSample, Resolution, Sampler, Temperature};
+/// let oracle = FnOracle::new(Resolution::new(4, 4), |film: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+///     PathSample::new(if s.next_1d() < 0.5 { film.x } else { 0.0 })
+/// });
+/// assert_eq!(oracle.resolution().pixel_count(), 16);
+/// ```
+#[derive(Clone, Copy, Debug)]
+pub struct FnOracle<F> {
+    resolution: Resolution,
+    trace: F,
+}
+
+impl<F> FnOracle<F> {
+    /// `trace` over a film of `resolution`.
+    pub fn new(resolution: Resolution, trace: F) -> Self {
+        Self { resolution, trace }
+    }
+}
+
+impl<R, F> PathOracle for FnOracle<F>
+where
+    R: Radiance,
+    F: Fn(FilmPoint, &mut dyn Sampler, Temperature) -> PathSample<R> + Sync,
+{
+    type Radiance = R;
+
+    fn resolution(&self) -> Resolution {
+        self.resolution
+    }
+
+    fn trace<S: Sampler + ?Sized>(
+        &self,
+        film: FilmPoint,
+        mut sampler: &mut S,
+        temperature: Temperature,
+    ) -> PathSample<R> {
+        (self.trace)(film, &mut sampler, temperature)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

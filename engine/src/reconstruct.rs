@@ -22,6 +22,7 @@ use alloc::vec;
 use alloc::vec::Vec;
 
 use crate::error::Error;
+use crate::parallel::{self, map_indices, threads};
 use crate::tiles::Tiles;
 
 /// Parameters of the weighted iterative solver (seed 001 sec. 3.2 and 4).
@@ -51,6 +52,22 @@ impl Default for WeightedSettings {
     }
 }
 
+impl WeightedSettings {
+    /// Checks every parameter: `α`, `β1` and `β2` finite and positive.
+    pub fn validate(&self) -> Result<(), Error> {
+        for (name, v) in [
+            ("alpha", self.alpha),
+            ("beta1", self.beta1),
+            ("beta2", self.beta2),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::invalid(name, v, "a finite value > 0"));
+            }
+        }
+        Ok(())
+    }
+}
+
 fn check_shapes(tiles: &Tiles, g: &[f64], mc: &[f64]) -> Result<(), Error> {
     let (n, o) = (tiles.count(), tiles.offsets().len());
     if g.len() != n * o || mc.len() != n {
@@ -64,26 +81,6 @@ fn check_shapes(tiles: &Tiles, g: &[f64], mc: &[f64]) -> Result<(), Error> {
         return Err(Error::invalid("estimate", bad, "finite values >= 0"));
     }
     Ok(())
-}
-
-/// The threads that parallel loops may use (1 without `parallel`).
-fn threads() -> usize {
-    #[cfg(feature = "parallel")]
-    return rayon::current_num_threads();
-    #[cfg(not(feature = "parallel"))]
-    1
-}
-
-/// `f(i)` for `i` in `0..n`, in parallel under the `parallel` feature (each
-/// value computed by one task: deterministic).
-fn map_indices(n: usize, f: impl Fn(usize) -> f64 + Sync + Send) -> Vec<f64> {
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        (0..n).into_par_iter().map(f).collect()
-    }
-    #[cfg(not(feature = "parallel"))]
-    (0..n).map(f).collect()
 }
 
 /// The image of eq. 12: every pixel the mean of its tiles' `b_s G_s(j)`,
@@ -237,29 +234,13 @@ impl Planes {
         f: impl Fn(&mut S, usize, &mut [T]) + Sync + Send,
     ) {
         let (pad, height, width) = (self.pad, self.height, self.width);
-        let row = |scratch: &mut S, (r, row): (usize, &mut [T])| {
+        parallel::for_each_chunk_init(plane, self.stride, init, |scratch, r, row| {
             if r >= pad && r < pad + height {
                 let inside = &mut row[pad..pad + width];
                 inside.fill(T::default());
                 f(scratch, self.row(r - pad), inside);
             }
-        };
-        #[cfg(feature = "parallel")]
-        {
-            use rayon::prelude::*;
-            plane
-                .par_chunks_mut(self.stride)
-                .enumerate()
-                .for_each_init(init, row);
-        }
-        #[cfg(not(feature = "parallel"))]
-        {
-            let mut scratch = init();
-            plane
-                .chunks_mut(self.stride)
-                .enumerate()
-                .for_each(|r| row(&mut scratch, r));
-        }
+        });
     }
 
     /// An index distance as `(dx, dy)` (columns never shift by half a row).
@@ -647,15 +628,7 @@ pub fn weighted(
     initial: Option<&[f64]>,
 ) -> Result<Vec<f64>, Error> {
     check_shapes(tiles, g, mc)?;
-    for (name, v) in [
-        ("alpha", settings.alpha),
-        ("beta1", settings.beta1),
-        ("beta2", settings.beta2),
-    ] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(Error::invalid(name, v, "a finite value > 0"));
-        }
-    }
+    settings.validate()?;
     let n = tiles.count();
     let b0 = match initial {
         Some(b0) if b0.len() == n => b0.to_vec(),
@@ -989,13 +962,7 @@ impl Problem {
             }
             self.terms_row(weights, base, chunks, terms);
         };
-        #[cfg(feature = "parallel")]
-        {
-            use rayon::prelude::*;
-            linear.terms.par_chunks_mut(block).enumerate().for_each(row);
-        }
-        #[cfg(not(feature = "parallel"))]
-        linear.terms.chunks_mut(block).enumerate().for_each(row);
+        parallel::for_each_chunk(&mut linear.terms, block, |r, terms| row((r, terms)));
     }
 
     /// [`terms_row`](Self::terms_row) compiled for AVX2.
@@ -1113,6 +1080,24 @@ impl Default for LogSettings {
     }
 }
 
+impl LogSettings {
+    /// Checks every parameter: `α` finite and positive, the tolerance
+    /// finite and `>= 0`.
+    pub fn validate(&self) -> Result<(), Error> {
+        if !(self.alpha.is_finite() && self.alpha > 0.0) {
+            return Err(Error::invalid("alpha", self.alpha, "a finite value > 0"));
+        }
+        if !(self.tolerance.is_finite() && self.tolerance >= 0.0) {
+            return Err(Error::invalid(
+                "tolerance",
+                self.tolerance,
+                "a finite value >= 0",
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The ratio-based solver (eq. 17-20): unknowns `x_j = log 𝓘(j)`; every tile
 /// `c` asks `x_i - x_c = log G_c(i) - log G_c(c)` for its other pixels `i`,
 /// and `α (x_j - log Î(j))²` anchors pixels with a positive MC estimate. The
@@ -1126,13 +1111,7 @@ pub fn log_domain(
     settings: &LogSettings,
 ) -> Result<Vec<f64>, Error> {
     check_shapes(tiles, g, mc)?;
-    if !(settings.alpha.is_finite() && settings.alpha > 0.0) {
-        return Err(Error::invalid(
-            "alpha",
-            settings.alpha,
-            "a finite value > 0",
-        ));
-    }
+    settings.validate()?;
     let n = tiles.count();
     let o = tiles.offsets().len();
     // Edges per pixel (gathered, so the product is computed per pixel):

@@ -25,6 +25,20 @@ pub enum TileShape {
     },
 }
 
+impl TileShape {
+    /// Checks the shape's parameters (a square's radius is 1 to 16).
+    pub fn validate(&self) -> Result<(), Error> {
+        match *self {
+            TileShape::Square { radius } if radius == 0 || radius > 16 => Err(Error::invalid(
+                "radius",
+                radius as f64,
+                "a square tile radius between 1 and 16",
+            )),
+            _ => Ok(()),
+        }
+    }
+}
+
 /// The tiles of a film.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tiles {
@@ -39,16 +53,10 @@ impl Tiles {
         if resolution.pixel_count() == 0 {
             return Err(Error::EmptyResolution);
         }
+        shape.validate()?;
         let offsets = match shape {
             TileShape::Cross => alloc::vec![(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)],
             TileShape::Square { radius } => {
-                if radius == 0 || radius > 16 {
-                    return Err(Error::invalid(
-                        "radius",
-                        radius as f64,
-                        "a square tile radius between 1 and 16",
-                    ));
-                }
                 let r = radius as i32;
                 let mut o = alloc::vec![(0, 0)];
                 for dy in -r..=r {

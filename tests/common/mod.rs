@@ -8,7 +8,10 @@
 //! that any of ~1000 values of a correct estimator exceeds 6.5 is below 1e-3),
 //! and each channel's image mean within `Z_TOTAL`.
 
-use strata::engine::Film;
+use std::ops::Range;
+
+use strata::engine::target::Importance;
+use strata::engine::{Budget, Film, Method, PathOracle, Settings, Silent, render};
 
 pub const RUNS: u64 = 32;
 const Z_PIXEL: f64 = 6.5;
@@ -55,4 +58,25 @@ pub fn check(label: &str, runs: &[Film], reference: &Film) -> f64 {
         );
     }
     worst
+}
+
+/// The images of `method` on `oracle` with `spp` paths per pixel, one per
+/// seed of `seeds`.
+pub fn renders<O: PathOracle, I: Importance<O::Radiance>>(
+    oracle: &O,
+    importance: &I,
+    method: &Method,
+    spp: u64,
+    seeds: Range<u64>,
+) -> Vec<Film> {
+    seeds
+        .map(|seed| {
+            let settings = Settings {
+                seed,
+                budget: Budget::samples_per_pixel(spp, oracle.resolution()),
+                method: method.clone(),
+            };
+            render(oracle, importance, &settings, &Silent).unwrap().film
+        })
+        .collect()
 }

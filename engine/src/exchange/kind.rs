@@ -96,15 +96,33 @@ impl ExchangeKind {
         &self,
         bootstrap: &Bootstrap,
     ) -> Result<Box<dyn Move<Replica<R>> + Send + Sync>, Error> {
-        let m = bootstrap.levels();
-        let energy_levels = |rings| -> Result<Vec<EnergyLevels>, Error> {
-            (0..m)
+        self.build_with(bootstrap.levels(), |rings| {
+            (0..bootstrap.levels())
                 .map(|j| {
                     let (low, high) = bootstrap.value_range(j);
                     EnergyLevels::log_spaced(rings, low, high)
                 })
                 .collect()
-        };
+        })
+    }
+
+    /// Checks the move's parameters for an ensemble of `chains` chains.
+    pub fn validate(&self, chains: usize) -> Result<(), Error> {
+        self.build_with::<f32>(chains, |rings| {
+            (0..chains)
+                .map(|_| EnergyLevels::log_spaced(rings, 1.0, 1.0))
+                .collect()
+        })
+        .map(drop)
+    }
+
+    /// The move for `m` chains whose energy levels of `rings` rings are
+    /// `energy_levels(rings)`.
+    fn build_with<R: Radiance + Send + Sync + 'static>(
+        &self,
+        m: usize,
+        energy_levels: impl Fn(usize) -> Result<Vec<EnergyLevels>, Error>,
+    ) -> Result<Box<dyn Move<Replica<R>> + Send + Sync>, Error> {
         Ok(match *self {
             ExchangeKind::None => Box::new(NoExchange),
             ExchangeKind::NeighborSwap => Box::new(NeighborSwap),

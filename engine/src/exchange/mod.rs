@@ -9,8 +9,9 @@
 //! | [`Exchange`] | what a move sees and does: the values `π_i(u_j)`, swaps, permutations |
 //! | [`Decisions`] | the random choices of a move (a PCG stream, or a test's enumerator) |
 //! | [`PermutationSampler`] | eq. 5.7 sampled in `O(M 2^M)` (App. 5.C) |
-//! | [`Ensemble`] | `M` chains over an oracle, power or oracle tempering, MIS splatting (eq. 5.13) |
-//! | [`render_replica`] | the driver: many ensembles in parallel, deterministic |
+//! | [`Ensemble`] | `M` chains over an oracle, swept with a move's hooks |
+//! | [`Tempering`], [`TemperedPath`] | power or oracle tempering; a state valued at every temperature, MIS weights (eq. 5.13) |
+//! | [`ExchangeKind`] | the catalogue of moves, built per ensemble from its bootstrap |
 //! | [`ExchangeStats`] | per-pair rates, change probabilities, round trips, level transitions |
 //!
 //! # Correctness
@@ -31,7 +32,7 @@ mod stats;
 mod tempered;
 
 pub use decide::Decisions;
-pub use ensemble::{Ensemble, EnsembleSettings, ReplicaOutput, ReplicaSettings, render_replica};
+pub use ensemble::{Ensemble, EnsembleSettings};
 pub use equi_energy::{EnergyLevels, EquiEnergy, EquiEnergySampler};
 pub use kind::ExchangeKind;
 pub use ladder::Ladder;

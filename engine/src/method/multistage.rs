@@ -22,22 +22,32 @@
 //! to `p95/p5 <= 2`, clamped to `[p5, p95]`, unsampled pixels set to `p95`, and
 //! smoothed by a bilateral filter. Every stage stays unbiased: only the
 //! importance changes.
+//!
+//! Each stage is a PSSMLT render driven by the round loop, with its share of
+//! the budget (samples or time, in proportion to its grid size); the
+//! observer sees one progress over all stages and previews of the combined
+//! image.
 
 use alloc::vec;
 use alloc::vec::Vec;
 
+use core::sync::atomic::{AtomicU64, Ordering};
+
+use super::pssmlt::{Pssmlt, PssmltSettings};
+use super::{Extras, Job, Output};
+use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, drive};
 use crate::error::Error;
 use crate::film::Film;
-use crate::oracle::Sampler;
-use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Resolution, Temperature};
-use crate::render::{Budget, Observer, PssmltSettings, RenderOutput, RenderStats, render_pssmlt};
+use crate::oracle::{
+    FilmPoint, PathOracle, PathSample, Radiance, Resolution, Sampler, Temperature,
+};
 use crate::target::{FnImportance, Importance};
 
-/// Settings of [`render_multistage`].
+/// Settings of multi-stage MLT. The budget is split among the stages in
+/// proportion to their grid size; each stage counts it like PSSMLT.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MultiStageSettings {
-    /// Chains, mutations, seed, bootstrap candidates (per stage) and the total
-    /// sample budget (split among stages; time budgets are refused).
+    /// Chains, mutations and bootstrap candidates of every stage.
     pub pssmlt: PssmltSettings,
     /// Stages from half to full resolution (seed 004: 10).
     pub linear_stages: u32,
@@ -59,6 +69,13 @@ impl Default for MultiStageSettings {
     }
 }
 
+impl MultiStageSettings {
+    /// Checks every parameter.
+    pub fn validate(&self) -> Result<(), Error> {
+        self.pssmlt.validate()
+    }
+}
+
 /// One stage: its grid size and the paths it traced.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Stage {
@@ -68,15 +85,6 @@ pub struct Stage {
     pub samples: u64,
     /// The stage's `b*`.
     pub normalization: f64,
-}
-
-/// A multi-stage render.
-#[derive(Clone, Debug)]
-pub struct MultiStageOutput {
-    /// The sample-weighted mean of every stage's image.
-    pub output: RenderOutput,
-    /// The stages, in order.
-    pub stages: Vec<Stage>,
 }
 
 /// The grid sizes of Alg. 2 for an image whose larger side is `n`: `1, 2, 4,
@@ -320,35 +328,25 @@ fn noise_target(
     out
 }
 
-/// Multi-stage MLT (seed 004 Alg. 2) over `importance` (the base importance,
-/// e.g. [`MaxChannel`](crate::target::MaxChannel)); see the module docs.
-pub fn render_multistage<O, I>(
-    oracle: &O,
-    importance: &I,
+/// Multi-stage MLT (seed 004 Alg. 2) over `job`'s importance (the base
+/// importance, e.g. [`MaxChannel`](crate::target::MaxChannel)); see the
+/// module docs. The image is the sample-weighted mean of every stage's.
+pub(crate) fn render<O, I>(
     settings: &MultiStageSettings,
-    observer: &dyn Observer,
-) -> Result<MultiStageOutput, Error>
+    job: &Job<'_, O, I>,
+) -> Result<Output, Error>
 where
     O: PathOracle,
-    I: Importance<O::Radiance>,
+    I: Importance<O::Radiance> + ?Sized,
 {
-    #[allow(irrefutable_let_patterns)] // Budget has one variant without `std`.
-    let Budget::Samples(total) = settings.pssmlt.budget else {
-        return Err(Error::invalid(
-            "budget",
-            0.0,
-            "a sample budget (stages split it in proportion to their grid size)",
-        ));
-    };
-    settings.pssmlt.validate()?;
-    let resolution = oracle.resolution();
+    let resolution = job.resolution;
     let n = resolution.width.max(resolution.height).max(1);
     let grids = stage_grids(n, settings.linear_stages);
     let weight_sum: u64 = grids.iter().map(|&k| k as u64).sum();
     let channels = O::Radiance::CHANNELS;
     let pixels = resolution.pixel_count();
     // Sample-weighted sums of every stage's image and deviation channel.
-    let mut sum = Film::new(resolution, channels);
+    let mut sum = Film::try_new(resolution, channels)?;
     let mut deviation_sum = vec![0.0; pixels];
     let mut estimate = Film::new(resolution, channels);
     let mut luminance = vec![0.0; pixels];
@@ -357,8 +355,16 @@ where
     let mut visits = vec![0u64; pixels];
     let mut stages = Vec::with_capacity(grids.len());
     let mut cancelled = false;
+    let mut weight_done = 0u64;
     for (s, &k) in grids.iter().enumerate() {
-        let budget = (total * k as u64 / weight_sum).max(1);
+        let budget = match job.budget {
+            Budget::Samples(total) => Budget::Samples((total * k as u64 / weight_sum).max(1)),
+            #[cfg(feature = "std")]
+            Budget::Time(limit) => Budget::Time(
+                job.clock
+                    .share_of_remaining(limit, k as f64 / (weight_sum - weight_done) as f64),
+            ),
+        };
         let regions = RegionMeans::new(&estimate, k);
         let noise = if settings.noise_aware && stats.samples > 0 {
             let adaptation: Vec<f64> = (0..pixels)
@@ -374,27 +380,40 @@ where
         } else {
             vec![1.0; pixels]
         };
-        let mut stage_settings = settings.pssmlt;
-        stage_settings.budget = Budget::Samples(budget);
-        stage_settings.seed = settings
-            .pssmlt
-            .seed
-            .wrapping_add((s as u64).wrapping_mul(0x9e37_79b9));
         let staged = FnImportance(
             |sample: &PathSample<Probed<O::Radiance>>, film: FilmPoint| {
                 let inner = PathSample {
                     radiance: sample.radiance.radiance,
                     flags: sample.flags,
                 };
-                importance.importance(&inner, film) * noise[resolution.pixel_index(film)]
+                job.importance.importance(&inner, film) * noise[resolution.pixel_index(film)]
                     / regions.at(film)
             },
         );
         let probe = ProbeOracle {
-            oracle,
+            oracle: job.oracle,
             estimate: &luminance,
         };
-        let out = render_pssmlt(&probe, &staged, &stage_settings, observer)?;
+        let observer = StageObserver {
+            outer: job.observer,
+            sum: &sum,
+            samples: stats.samples,
+            stage_samples: AtomicU64::new(0),
+            fraction: weight_done as f64 / weight_sum as f64,
+            share: k as f64 / weight_sum as f64,
+        };
+        let stage_job = Job {
+            oracle: &probe,
+            importance: &staged,
+            seed: job.seed.wrapping_add((s as u64).wrapping_mul(0x9e37_79b9)),
+            budget,
+            observer: &observer,
+            resolution,
+            clock: Clock::start(budget),
+        };
+        let mut run = Pssmlt::start(&settings.pssmlt, &stage_job)?;
+        let driven = drive(&mut run, budget, &stage_job.clock, &observer);
+        let out = run.finish(driven);
         // Each stage's film is its mean image; weight it by its samples.
         let n = out.stats.samples as f64;
         for (i, dev) in deviation_sum.iter_mut().enumerate() {
@@ -418,6 +437,7 @@ where
             samples: out.stats.samples,
             normalization: out.stats.normalization.unwrap_or(0.0),
         });
+        weight_done += k as u64;
         let inverse = 1.0 / stats.samples.max(1) as f64;
         estimate = sum.scaled(inverse);
         for i in 0..pixels {
@@ -429,15 +449,64 @@ where
             break;
         }
     }
-    Ok(MultiStageOutput {
-        output: RenderOutput {
-            film: estimate,
-            stats,
-            cancelled,
-            visits,
-        },
-        stages,
+    Ok(Output {
+        film: estimate,
+        stats,
+        cancelled,
+        visits,
+        extras: Extras::MultiStage(stages),
     })
+}
+
+/// The observer of one stage, as the render's observer sees it: progress
+/// over all stages, previews of the combined image (without the deviation
+/// channel).
+struct StageObserver<'a> {
+    outer: &'a dyn Observer,
+    /// Sample-weighted sum of the earlier stages' images.
+    sum: &'a Film,
+    /// Their samples.
+    samples: u64,
+    /// This stage's samples at its last progress.
+    stage_samples: AtomicU64,
+    /// The budget fraction before this stage, and this stage's share.
+    fraction: f64,
+    share: f64,
+}
+
+impl Observer for StageObserver<'_> {
+    fn progress(&self, progress: &Progress) {
+        self.stage_samples
+            .store(progress.samples, Ordering::Relaxed);
+        self.outer.progress(&Progress {
+            samples: self.samples + progress.samples,
+            fraction: (self.fraction + self.share * progress.fraction).min(1.0),
+        });
+    }
+    fn wants_preview(&self) -> bool {
+        self.outer.wants_preview()
+    }
+    fn preview(&self, film: &Film) {
+        // As the render will combine the stages (same operations, same bits).
+        let n = self.stage_samples.load(Ordering::Relaxed) as f64;
+        let inverse =
+            1.0 / (self.samples + self.stage_samples.load(Ordering::Relaxed)).max(1) as f64;
+        let channels = self.sum.channels();
+        let mut combined = self.sum.clone();
+        for (pixel, staged) in combined
+            .data_mut()
+            .chunks_mut(channels)
+            .zip(film.data().chunks(channels + 1))
+        {
+            for (v, s) in pixel.iter_mut().zip(staged) {
+                *v = (*v + n * s) * inverse;
+            }
+        }
+        self.outer.preview(&combined);
+    }
+    fn should_stop(&self) -> bool {
+        self.outer.should_stop()
+    }
 }
 
 #[cfg(test)]

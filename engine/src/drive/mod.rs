@@ -1,0 +1,239 @@
+//! The one loop every method runs in: budgets, the clock, the observer
+//! (progress, previews, cancellation), rounds and the statistics of a render.
+//!
+//! A method puts its state behind [`Rounds`]: what one *unit* of its work
+//! costs and does (a step of every chain, a sweep of every tile, a pass),
+//! how many units a sample budget buys, and what its image is now. [`drive`]
+//! then runs rounds of units until the budget is spent or the observer stops
+//! it, calling the observer between rounds.
+//!
+//! Determinism: a sample budget fixes the number of units and the size of
+//! every round (from the settings only), every method runs a round's units in
+//! parallel with one random stream per chain, tile or row, and merges what
+//! they produced in a fixed order ([`splat`]). The same seed and a sample
+//! budget give a bit-identical image whatever the number of threads. A time
+//! budget ends after a machine-dependent number of rounds (which grow while
+//! they take under 50 ms), so it is reproducible only in distribution.
+
+pub(crate) mod splat;
+
+use crate::chain::ChainStats;
+use crate::film::Film;
+use crate::oracle::Resolution;
+
+/// When a render stops.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Budget {
+    /// A number of paths (oracle traces). Each method's docs say which
+    /// traces count; the bootstrap never does.
+    Samples(u64),
+    /// Wall-clock time from the start of the render, set-up included (needs
+    /// the `std` feature).
+    #[cfg(feature = "std")]
+    Time(core::time::Duration),
+}
+
+impl Budget {
+    /// `spp` paths per pixel of `resolution`.
+    pub fn samples_per_pixel(spp: u64, resolution: Resolution) -> Budget {
+        Budget::Samples(spp.saturating_mul(resolution.pixel_count() as u64))
+    }
+}
+
+/// Where a render is, reported between rounds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Progress {
+    /// Paths traced so far (bootstrap excluded).
+    pub samples: u64,
+    /// Fraction of the budget used, in `[0, 1]`.
+    pub fraction: f64,
+}
+
+/// Receives progress, optionally previews, and may stop a render early.
+/// All methods are called from the thread that called the render.
+pub trait Observer: Sync {
+    /// Called after every round.
+    fn progress(&self, progress: &Progress) {
+        let _ = progress;
+    }
+    /// Whether to build a normalized snapshot of the image after this round
+    /// (costs a copy of the film, or for stratified MCMC a quick
+    /// reconstruction).
+    fn wants_preview(&self) -> bool {
+        false
+    }
+    /// A normalized snapshot: what the render would return if it stopped now.
+    fn preview(&self, film: &Film) {
+        let _ = film;
+    }
+    /// Checked before every round; `true` stops the render, which then
+    /// returns what it has, normalized, with `cancelled` set.
+    fn should_stop(&self) -> bool {
+        false
+    }
+}
+
+/// An observer that does nothing.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Silent;
+
+impl Observer for Silent {}
+
+/// Counters of a render.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RenderStats {
+    /// Paths traced for the image (bootstrap excluded).
+    pub samples: u64,
+    /// Paths traced by the bootstrap (and other set-up that does not count
+    /// toward the budget).
+    pub bootstrap_samples: u64,
+    /// Samples with NaN, infinite or negative radiance (or importance), excluded.
+    pub invalid_samples: u64,
+    /// The bootstrap normalization `b*` (MCMC methods with a bootstrap).
+    pub normalization: Option<f64>,
+    /// Chain counters summed over chains (MCMC methods).
+    pub chains: ChainStats,
+}
+
+/// A method's work, as the driver runs it.
+pub(crate) trait Rounds {
+    /// Oracle traces one unit of work costs (expected, rounded up; at least 1).
+    fn unit_cost(&self) -> u64;
+    /// Units a budget of `samples` traces buys (each method's rounding; at
+    /// least one).
+    fn planned_units(&self, samples: u64) -> u64;
+    /// Runs `units` more units, deterministically.
+    fn run(&mut self, units: u64);
+    /// Paths traced so far that count toward the budget.
+    fn samples(&self) -> u64;
+    /// Whether the work so far makes an image: a time budget does not end
+    /// the render before.
+    fn ready(&self) -> bool {
+        true
+    }
+    /// The normalized image now (for previews).
+    fn preview(&self) -> Film;
+}
+
+/// What [`drive`] did.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Driven {
+    /// The observer stopped the render.
+    pub cancelled: bool,
+}
+
+/// Splat buffers are bounded by capping a round at about this many traces.
+const MAX_ROUND_SAMPLES: u64 = 1 << 21;
+
+/// A time budget grows rounds while they take less than this (seconds).
+const MIN_ROUND_SECONDS: f64 = 0.05;
+
+/// The round loop: runs `work` round after round until `budget` is spent
+/// (measured by `clock` for a time budget), or the observer stops it.
+pub(crate) fn drive(
+    work: &mut impl Rounds,
+    budget: Budget,
+    clock: &Clock,
+    observer: &dyn Observer,
+) -> Driven {
+    let planned = match budget {
+        Budget::Samples(n) => Some(work.planned_units(n).max(1)),
+        #[cfg(feature = "std")]
+        Budget::Time(_) => None,
+    };
+    let max_round = (MAX_ROUND_SAMPLES / work.unit_cost().max(1)).max(1);
+    let mut round = planned.map_or(1, |n| n.div_ceil(64).clamp(1, max_round));
+    let mut done = 0u64;
+    let mut cancelled = false;
+    loop {
+        if observer.should_stop() {
+            cancelled = true;
+            break;
+        }
+        let units = planned.map_or(round, |n| round.min(n - done));
+        let round_clock = Clock::start(budget);
+        work.run(units);
+        done += units;
+        let fraction = planned.map_or_else(|| clock.fraction(), |n| done as f64 / n as f64);
+        observer.progress(&Progress {
+            samples: work.samples(),
+            fraction: fraction.clamp(0.0, 1.0),
+        });
+        if observer.wants_preview() {
+            observer.preview(&work.preview());
+        }
+        let spent = planned.map_or_else(|| clock.expired(), |n| done >= n);
+        if spent && work.ready() {
+            break;
+        }
+        if planned.is_none() && round_clock.seconds() < MIN_ROUND_SECONDS {
+            round = (round * 2).min(max_round);
+        }
+    }
+    Driven { cancelled }
+}
+
+/// Wall clock for time budgets; a no-op for sample budgets or without `std`.
+#[derive(Clone, Debug)]
+pub(crate) struct Clock {
+    #[cfg(feature = "std")]
+    start: std::time::Instant,
+    #[cfg(feature = "std")]
+    limit: Option<core::time::Duration>,
+}
+
+impl Clock {
+    /// A clock started now, running out at `budget` if it is a time budget.
+    pub(crate) fn start(budget: Budget) -> Self {
+        #[cfg(feature = "std")]
+        {
+            let limit = match budget {
+                Budget::Time(t) => Some(t),
+                Budget::Samples(_) => None,
+            };
+            Clock {
+                start: std::time::Instant::now(),
+                limit,
+            }
+        }
+        #[cfg(not(feature = "std"))]
+        {
+            let _ = budget;
+            Clock {}
+        }
+    }
+
+    /// Seconds since the start (0 without `std`).
+    pub(crate) fn seconds(&self) -> f64 {
+        #[cfg(feature = "std")]
+        return self.start.elapsed().as_secs_f64();
+        #[cfg(not(feature = "std"))]
+        0.0
+    }
+
+    /// The fraction of the time budget used (1 without one).
+    pub(crate) fn fraction(&self) -> f64 {
+        #[cfg(feature = "std")]
+        if let Some(limit) = self.limit {
+            return self.seconds() / limit.as_secs_f64().max(1e-9);
+        }
+        1.0
+    }
+
+    /// Whether the time budget is spent (always, without one).
+    pub(crate) fn expired(&self) -> bool {
+        self.fraction() >= 1.0
+    }
+
+    /// `share` of the time left of `limit` (a time budget started with
+    /// this clock).
+    #[cfg(feature = "std")]
+    pub(crate) fn share_of_remaining(
+        &self,
+        limit: core::time::Duration,
+        share: f64,
+    ) -> core::time::Duration {
+        let left = (limit.as_secs_f64() - self.seconds()).max(0.0);
+        core::time::Duration::try_from_secs_f64(left * share).unwrap_or(core::time::Duration::MAX)
+    }
+}

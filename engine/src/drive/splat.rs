@@ -1,0 +1,200 @@
+//! Deterministic accumulation of weighted splats from many workers (chains,
+//! ensembles, rows of start paths).
+//!
+//! Workers run in parallel and push their contributions into per-band
+//! buffers; after each round the buffers are added to the film band by band
+//! (bands in parallel), and within a band worker by worker in a fixed order,
+//! so the order of additions to every pixel never depends on the thread count.
+
+use alloc::vec;
+use alloc::vec::Vec;
+
+use crate::film::Film;
+use crate::oracle::{FilmPoint, Radiance, Resolution};
+use crate::parallel;
+
+/// One weighted contribution waiting to be added to the film.
+#[derive(Clone, Copy, Debug)]
+struct Splat<R> {
+    pixel: u32,
+    weight: f64,
+    radiance: R,
+}
+
+/// What one worker produced in a round: splats bucketed by band, and the
+/// pixels of its states (for sample-density maps).
+pub(crate) struct RoundBuffers<R> {
+    bands: SplatBands,
+    splats: Vec<Vec<Splat<R>>>,
+    visited: Vec<u32>,
+}
+
+impl<R> RoundBuffers<R> {
+    pub fn new(bands: SplatBands) -> Self {
+        Self {
+            bands,
+            splats: (0..bands.count).map(|_| Vec::new()).collect(),
+            visited: Vec::new(),
+        }
+    }
+
+    /// Queues `radiance · weight` at film point `p`.
+    #[inline]
+    pub fn splat(&mut self, p: FilmPoint, radiance: R, weight: f64) {
+        let pixel = self.bands.resolution.pixel_index(p);
+        self.splats[self.bands.band_of(pixel)].push(Splat {
+            pixel: pixel as u32,
+            weight,
+            radiance,
+        });
+    }
+
+    /// Counts a chain state at film point `p`.
+    #[inline]
+    pub fn visit(&mut self, p: FilmPoint) {
+        self.visited
+            .push(self.bands.resolution.pixel_index(p) as u32);
+    }
+}
+
+/// A worker of a round-based method: it owns round buffers.
+pub(crate) trait Worker<R> {
+    fn buffers(&self) -> &RoundBuffers<R>;
+    fn buffers_mut(&mut self) -> &mut RoundBuffers<R>;
+}
+
+/// Horizontal bands of the film.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SplatBands {
+    resolution: Resolution,
+    pixels_per_band: usize,
+    count: usize,
+}
+
+impl SplatBands {
+    const MAX_BANDS: usize = 32;
+
+    pub fn new(resolution: Resolution) -> Self {
+        let height = resolution.height as usize;
+        let rows_per_band = height.div_ceil(Self::MAX_BANDS);
+        let width = resolution.width as usize;
+        Self {
+            resolution,
+            pixels_per_band: width * rows_per_band,
+            count: height.div_ceil(rows_per_band),
+        }
+    }
+
+    #[inline]
+    fn band_of(&self, pixel: usize) -> usize {
+        pixel / self.pixels_per_band
+    }
+
+    /// Adds every worker's splats to `film` in worker order and its visits to
+    /// `visits` (integer counts: order does not matter), then clears them.
+    pub fn merge<R: Radiance, W: Worker<R> + Sync + Send>(
+        &self,
+        work: &mut [W],
+        film: &mut Film,
+        visits: &mut [u64],
+    ) {
+        let channels = film.channels();
+        let band_len = self.pixels_per_band * channels;
+        parallel::for_each_chunk(film.data_mut(), band_len, |band, values| {
+            let base = band * self.pixels_per_band;
+            for w in work.iter() {
+                for s in &w.buffers().splats[band] {
+                    let at = (s.pixel as usize - base) * channels;
+                    for (c, v) in values[at..at + channels].iter_mut().enumerate() {
+                        *v += s.weight * s.radiance.channel(c) as f64;
+                    }
+                }
+            }
+        });
+        for w in work.iter_mut() {
+            let buffers = w.buffers_mut();
+            for &p in &buffers.visited {
+                visits[p as usize] += 1;
+            }
+            buffers.visited.clear();
+            buffers.splats.iter_mut().for_each(Vec::clear);
+        }
+    }
+}
+
+/// Workers that splat into one film, each unit of work (a chain step, an
+/// ensemble sweep) estimating the image once: the rounds of PSSMLT and
+/// replica exchange. After `u` units of `n` workers the image is the film
+/// scaled by `W·H / (u n)`.
+pub(crate) struct Splatting<W> {
+    /// The workers, in merge order.
+    pub work: Vec<W>,
+    bands: SplatBands,
+    film: Film,
+    visits: Vec<u64>,
+    units: u64,
+    unit_samples: u64,
+}
+
+impl<W> Splatting<W> {
+    /// `work` splatting into a black film of `channels` values per pixel;
+    /// a unit costs each worker `unit_samples` traces.
+    pub fn new(work: Vec<W>, bands: SplatBands, channels: usize, unit_samples: u64) -> Self {
+        let resolution = bands.resolution;
+        Self {
+            work,
+            bands,
+            film: Film::new(resolution, channels),
+            visits: vec![0; resolution.pixel_count()],
+            units: 0,
+            unit_samples,
+        }
+    }
+
+    /// Traces of one unit of every worker.
+    pub fn unit_cost(&self) -> u64 {
+        self.work.len().max(1) as u64 * self.unit_samples
+    }
+
+    /// Units for a budget of `samples` traces: enough to spend it (rounded up).
+    pub fn planned_units(&self, samples: u64) -> u64 {
+        samples.div_ceil(self.unit_cost()).max(1)
+    }
+
+    /// Traces so far.
+    pub fn samples(&self) -> u64 {
+        self.units * self.unit_cost()
+    }
+
+    fn scale(&self) -> f64 {
+        self.bands.resolution.pixel_count() as f64 / (self.units * self.work.len() as u64) as f64
+    }
+
+    /// The normalized image now.
+    pub fn preview(&self) -> Film {
+        self.film.scaled(self.scale())
+    }
+
+    /// The normalized image and the states per pixel.
+    pub fn finish(mut self) -> (Film, Vec<u64>, Vec<W>) {
+        if self.units > 0 {
+            let scale = self.scale();
+            self.film.scale(scale);
+        }
+        (self.film, self.visits, self.work)
+    }
+}
+
+impl<W: Send + Sync> Splatting<W> {
+    /// Runs `step(worker, units)` on every worker in parallel, then merges
+    /// their splats in worker order.
+    pub fn run<R: Radiance>(&mut self, units: u64, step: impl Fn(&mut W, u64) + Sync + Send)
+    where
+        W: Worker<R>,
+    {
+        parallel::for_each(&mut self.work, |w| step(w, units));
+        self.bands
+            .merge(&mut self.work, &mut self.film, &mut self.visits);
+        self.units += units;
+    }
+}

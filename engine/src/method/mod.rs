@@ -1,0 +1,250 @@
+//! Rendering: one entry point, [`render`], for every method. A [`Settings`]
+//! holds the seed, the budget and the [`Method`] with its own settings;
+//! switching methods is changing that one value. Every method returns the
+//! same [`Output`]: the image, the statistics and the method's [`Extras`].
+//!
+//! | method | module | seed |
+//! |---|---|---|
+//! | [`Method::Mc`] | `mc` | independent path sampling, the reference |
+//! | [`Method::Pssmlt`] | `pssmlt` | primary sample space MLT (002 sec. 4.2.1) |
+//! | [`Method::Replica`] | `replica` | replica exchange with every move of 002 ch. 5 |
+//! | [`Method::Stratified`] | `stratified` | stratified MCMC (001) |
+//! | [`Method::Erpt`] | `erpt` | energy redistribution path tracing (001 sec. 4) |
+//! | [`Method::MultiStage`] | `multistage` | multi-stage and noise-aware MLT (004 sec. 4) |
+//!
+//! Every method validates all its settings before any work, runs its work in
+//! rounds through the driver core ([`drive`](crate::drive)), and gives the
+//! same image for the same seed and sample budget whatever the thread count.
+//!
+//! A new method is a new module here: its settings type (with `Default` and
+//! `validate`), its state behind the driver's round interface, and a variant
+//! of [`Method`].
+
+mod erpt;
+mod mc;
+mod multistage;
+mod pssmlt;
+mod replica;
+mod stratified;
+
+use alloc::vec::Vec;
+
+pub use erpt::ErptSettings;
+pub use multistage::{MultiStageSettings, Probed, Stage, stage_grids, tvi};
+pub use pssmlt::PssmltSettings;
+pub use replica::{ReplicaExtras, ReplicaSettings};
+pub use stratified::{
+    Initialization, Solver, StratifiedExtras, StratifiedSettings, StratifiedStats,
+};
+
+use crate::drive::{Budget, Clock, Observer, RenderStats};
+use crate::error::Error;
+use crate::film::Film;
+use crate::oracle::{PathOracle, Resolution};
+use crate::target::Importance;
+
+/// What to render and how.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Settings {
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// When the render stops (each method's settings say which paths count).
+    pub budget: Budget,
+    /// The method and its own settings.
+    pub method: Method,
+}
+
+impl Default for Settings {
+    /// PSSMLT with its defaults, seed 0, 2^20 paths.
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            budget: Budget::Samples(1 << 20),
+            method: Method::Pssmlt(PssmltSettings::default()),
+        }
+    }
+}
+
+impl Settings {
+    /// Checks every parameter of the method ([`render`] calls it first).
+    pub fn validate(&self) -> Result<(), Error> {
+        self.method.validate()
+    }
+}
+
+/// A rendering method with its settings.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Method {
+    /// Independent path sampling (MC): the reference estimator.
+    Mc,
+    /// Primary sample space MLT.
+    Pssmlt(PssmltSettings),
+    /// Replica-exchange MLT.
+    Replica(ReplicaSettings),
+    /// Stratified MCMC.
+    Stratified(StratifiedSettings),
+    /// Energy redistribution path tracing.
+    Erpt(ErptSettings),
+    /// Multi-stage (and noise-aware) MLT.
+    MultiStage(MultiStageSettings),
+}
+
+impl Method {
+    /// The names of the methods, as [`name`](Self::name) gives them.
+    pub const NAMES: [&'static str; 6] = [
+        "mc",
+        "pssmlt",
+        "replica",
+        "stratified",
+        "erpt",
+        "multistage",
+    ];
+
+    /// Every method, with its default settings, in [`NAMES`](Self::NAMES) order.
+    pub fn all() -> [Method; 6] {
+        [
+            Method::Mc,
+            Method::Pssmlt(PssmltSettings::default()),
+            Method::Replica(ReplicaSettings::default()),
+            Method::Stratified(StratifiedSettings::default()),
+            Method::Erpt(ErptSettings::default()),
+            Method::MultiStage(MultiStageSettings::default()),
+        ]
+    }
+
+    /// The method called `name` (one of [`NAMES`](Self::NAMES)) with its
+    /// default settings.
+    pub fn from_name(name: &str) -> Option<Method> {
+        Method::all().into_iter().find(|m| m.name() == name)
+    }
+
+    /// A short name for tables and command lines.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Method::Mc => "mc",
+            Method::Pssmlt(_) => "pssmlt",
+            Method::Replica(_) => "replica",
+            Method::Stratified(_) => "stratified",
+            Method::Erpt(_) => "erpt",
+            Method::MultiStage(_) => "multistage",
+        }
+    }
+
+    /// Checks every parameter.
+    pub fn validate(&self) -> Result<(), Error> {
+        match self {
+            Method::Mc => Ok(()),
+            Method::Pssmlt(s) => s.validate(),
+            Method::Replica(s) => s.validate(),
+            Method::Stratified(s) => s.validate(),
+            Method::Erpt(s) => s.validate(),
+            Method::MultiStage(s) => s.validate(),
+        }
+    }
+}
+
+/// A finished (or cancelled) render.
+#[derive(Clone, Debug)]
+pub struct Output {
+    /// The image: each pixel is the mean radiance over its area.
+    pub film: Film,
+    /// Counters.
+    pub stats: RenderStats,
+    /// The observer stopped the render before its budget was spent.
+    pub cancelled: bool,
+    /// Per pixel, how many chain states fell in it: where an MCMC method
+    /// spends its samples (see each method's extras for what counts). Empty
+    /// for MC, whose density is uniform.
+    pub visits: Vec<u64>,
+    /// What the method returns beyond the image.
+    pub extras: Extras,
+}
+
+/// What a method returns beyond the image.
+#[derive(Clone, Debug)]
+pub enum Extras {
+    /// Nothing more (MC, PSSMLT, ERPT).
+    None,
+    /// Exchange statistics and the ladder.
+    Replica(ReplicaExtras),
+    /// Stratified MCMC's counters, regularizer and tile estimates.
+    Stratified(StratifiedExtras),
+    /// The stages of multi-stage MLT, in order.
+    MultiStage(Vec<Stage>),
+}
+
+impl Extras {
+    /// Replica exchange's extras.
+    pub fn replica(&self) -> Option<&ReplicaExtras> {
+        match self {
+            Extras::Replica(r) => Some(r),
+            _ => None,
+        }
+    }
+
+    /// Stratified MCMC's extras.
+    pub fn stratified(&self) -> Option<&StratifiedExtras> {
+        match self {
+            Extras::Stratified(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// Multi-stage MLT's stages.
+    pub fn stages(&self) -> Option<&[Stage]> {
+        match self {
+            Extras::MultiStage(s) => Some(s),
+            _ => None,
+        }
+    }
+}
+
+/// What every method renders: the oracle, its importance, the shared
+/// settings and the observer, with the film size checked and the clock
+/// started.
+pub(crate) struct Job<'a, O, I: ?Sized> {
+    pub oracle: &'a O,
+    pub importance: &'a I,
+    pub seed: u64,
+    pub budget: Budget,
+    pub observer: &'a dyn Observer,
+    pub resolution: Resolution,
+    pub clock: Clock,
+}
+
+/// Renders `oracle` with `settings`, sampling in proportion to `importance`
+/// (MCMC methods; MC ignores it). Checks every setting and the oracle's
+/// resolution before any work; the observer is called between rounds.
+pub fn render<O, I>(
+    oracle: &O,
+    importance: &I,
+    settings: &Settings,
+    observer: &dyn Observer,
+) -> Result<Output, Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    settings.validate()?;
+    let resolution = oracle.resolution();
+    if resolution.pixel_count() == 0 {
+        return Err(Error::EmptyResolution);
+    }
+    let job = Job {
+        oracle,
+        importance,
+        seed: settings.seed,
+        budget: settings.budget,
+        observer,
+        resolution,
+        clock: Clock::start(settings.budget),
+    };
+    match &settings.method {
+        Method::Mc => mc::render(&job),
+        Method::Pssmlt(s) => pssmlt::render(s, &job),
+        Method::Replica(s) => replica::render(s, &job),
+        Method::Stratified(s) => stratified::render(s, &job),
+        Method::Erpt(s) => erpt::render(s, &job),
+        Method::MultiStage(s) => multistage::render(s, &job),
+    }
+}

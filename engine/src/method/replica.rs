@@ -1,0 +1,238 @@
+//! Replica-exchange MLT (seed 002 sec. 5.4): `ensembles` independent
+//! ensembles of tempered chains with the chosen exchange move, all chains'
+//! samples combined by eq. 5.13's MIS weights (see
+//! [`exchange`](crate::exchange)). A unit of work is a sweep of every
+//! ensemble.
+
+use alloc::boxed::Box;
+use alloc::vec;
+use alloc::vec::Vec;
+
+use super::{Extras, Job, Output};
+use crate::bootstrap::Bootstrap;
+use crate::chain::ChainStats;
+use crate::drive::splat::{RoundBuffers, SplatBands, Splatting, Worker};
+use crate::drive::{Driven, RenderStats, Rounds, drive};
+use crate::error::Error;
+use crate::exchange::{
+    Ensemble, EnsembleSettings, ExchangeKind, ExchangeStats, Ladder, Move, Replica,
+};
+use crate::film::Film;
+use crate::oracle::{PathOracle, Radiance};
+use crate::parallel;
+use crate::target::Importance;
+
+/// Settings of replica exchange. The budget counts the ensembles' traces,
+/// split evenly among them and rounded up to whole sweeps (a sweep costs `M`
+/// traces under power tempering, `M²` under oracle tempering); the bootstrap
+/// and the ladder tuning are not counted.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReplicaSettings {
+    /// Independent ensembles run in parallel.
+    pub ensembles: u32,
+    /// Ladder, tempering, mutations, bootstrap.
+    pub ensemble: EnsembleSettings,
+    /// The exchange move.
+    pub exchange: ExchangeKind,
+    /// Sweeps per ensemble spent before the render equalizing the ladder
+    /// (Syed et al. 2021; [`Ladder::equalized`]) in rounds of doubling length;
+    /// 0 keeps the given ladder. Not splatted, not counted in the budget.
+    pub ladder_tuning_sweeps: u64,
+}
+
+impl Default for ReplicaSettings {
+    fn default() -> Self {
+        Self {
+            ensembles: 32,
+            ensemble: EnsembleSettings::geometric(8, 2500.0)
+                .expect("8 chains up to 2500 is a valid ladder"),
+            exchange: ExchangeKind::IsPermutation,
+            ladder_tuning_sweeps: 0,
+        }
+    }
+}
+
+impl ReplicaSettings {
+    /// Checks every parameter.
+    pub fn validate(&self) -> Result<(), Error> {
+        if self.ensembles == 0 {
+            return Err(Error::invalid("ensembles", 0.0, "at least 1"));
+        }
+        self.ensemble.validate()?;
+        self.exchange.validate(self.ensemble.ladder.len())
+    }
+}
+
+/// What replica exchange returns beyond the image ([`Extras::Replica`]).
+/// The render's `visits` count every chain's state after every sweep, and
+/// its `chains` counters sum every level's mutations.
+#[derive(Clone, Debug)]
+pub struct ReplicaExtras {
+    /// Exchange counters summed over ensembles.
+    pub exchange: ExchangeStats,
+    /// Mutation counters per temperature level, summed over ensembles.
+    pub levels: Vec<ChainStats>,
+    /// The ladder used (after tuning, if any).
+    pub ladder: Ladder,
+}
+
+/// Replica exchange under `job`.
+pub(crate) fn render<O, I>(settings: &ReplicaSettings, job: &Job<'_, O, I>) -> Result<Output, Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let (oracle, importance) = (job.oracle, job.importance);
+    let mut ensemble = settings.ensemble.clone();
+    let mut bootstrap = ensemble.bootstrap(oracle, importance, job.seed)?;
+    let mut set_up = bootstrap.traced().paths;
+    let bands = SplatBands::new(job.resolution);
+    let start = |i: usize, bootstrap: &Bootstrap| -> Result<EnsembleWork<O::Radiance>, Error> {
+        Ok(EnsembleWork {
+            ensemble: Ensemble::start(oracle, importance, &ensemble, bootstrap, i as u64),
+            exchange: settings.exchange.build(bootstrap)?,
+            buffers: RoundBuffers::new(bands),
+        })
+    };
+    let mut work = (0..settings.ensembles as usize)
+        .map(|i| start(i, &bootstrap))
+        .collect::<Result<Vec<_>, Error>>()?;
+    let traces_per_sweep = ensemble.ladder.len() as u64 * ensemble.traces_per_proposal();
+
+    // Ladder tuning: rounds of 16, 32, ... sweeps, not splatted.
+    let mut tuned = 0;
+    let mut round_length = 16u64;
+    while tuned < settings.ladder_tuning_sweeps && ensemble.ladder.len() > 2 {
+        let sweeps = round_length.min(settings.ladder_tuning_sweeps - tuned);
+        parallel::for_each(&mut work, |w| {
+            for _ in 0..sweeps {
+                w.ensemble
+                    .sweep(oracle, importance, w.exchange.as_mut(), |_, _, _| {});
+            }
+        });
+        tuned += sweeps;
+        round_length *= 2;
+        set_up += sweeps * traces_per_sweep * work.len() as u64;
+        let mut merged = ExchangeStats::default();
+        for w in &work {
+            merged.merge(w.ensemble.stats());
+        }
+        ensemble.ladder = ensemble.ladder.equalized(&merged.neighbor_rejection())?;
+        bootstrap = ensemble.bootstrap(oracle, importance, job.seed)?;
+        set_up += bootstrap.traced().paths;
+        for w in work.iter_mut() {
+            w.ensemble
+                .set_ladder(oracle, importance, &ensemble.ladder, &bootstrap);
+            w.exchange = settings.exchange.build(&bootstrap)?;
+        }
+    }
+
+    let mut run = Sweeps {
+        oracle,
+        importance,
+        ensembles: Splatting::new(work, bands, O::Radiance::CHANNELS, traces_per_sweep),
+    };
+    let driven = drive(&mut run, job.budget, &job.clock, job.observer);
+    Ok(run.finish(driven, ensemble.ladder, &bootstrap, set_up))
+}
+
+/// An ensemble, its exchange move and what it produced in the current round.
+struct EnsembleWork<R> {
+    ensemble: Ensemble<R>,
+    exchange: Box<dyn Move<Replica<R>> + Send + Sync>,
+    buffers: RoundBuffers<R>,
+}
+
+impl<R> Worker<R> for EnsembleWork<R> {
+    fn buffers(&self) -> &RoundBuffers<R> {
+        &self.buffers
+    }
+    fn buffers_mut(&mut self) -> &mut RoundBuffers<R> {
+        &mut self.buffers
+    }
+}
+
+/// Replica exchange's state between rounds: the ensembles and their film.
+struct Sweeps<'a, O: PathOracle, I: ?Sized> {
+    oracle: &'a O,
+    importance: &'a I,
+    ensembles: Splatting<EnsembleWork<O::Radiance>>,
+}
+
+impl<O, I> Sweeps<'_, O, I>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    fn finish(self, driven: Driven, ladder: Ladder, bootstrap: &Bootstrap, set_up: u64) -> Output {
+        let samples = self.ensembles.samples();
+        let (film, visits, work) = self.ensembles.finish();
+        let mut exchange = ExchangeStats::default();
+        let mut levels = vec![ChainStats::default(); ladder.len()];
+        let mut stats = RenderStats {
+            samples,
+            bootstrap_samples: set_up,
+            normalization: Some(bootstrap.normalization()),
+            ..Default::default()
+        };
+        for w in &work {
+            exchange.merge(w.ensemble.stats());
+            for (level, s) in levels.iter_mut().zip(w.ensemble.chain_stats()) {
+                level.merge(s);
+                stats.chains.merge(s);
+            }
+        }
+        stats.invalid_samples = stats.chains.invalid + bootstrap.traced().invalid;
+        Output {
+            film,
+            stats,
+            cancelled: driven.cancelled,
+            visits,
+            extras: Extras::Replica(ReplicaExtras {
+                exchange,
+                levels,
+                ladder,
+            }),
+        }
+    }
+}
+
+impl<O, I> Rounds for Sweeps<'_, O, I>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    fn unit_cost(&self) -> u64 {
+        self.ensembles.unit_cost()
+    }
+
+    fn planned_units(&self, samples: u64) -> u64 {
+        self.ensembles.planned_units(samples)
+    }
+
+    fn run(&mut self, units: u64) {
+        let (oracle, importance) = (self.oracle, self.importance);
+        self.ensembles.run(units, |w, sweeps| {
+            for _ in 0..sweeps {
+                let buffers = &mut w.buffers;
+                w.ensemble.sweep(
+                    oracle,
+                    importance,
+                    w.exchange.as_mut(),
+                    |p, radiance, weight| buffers.splat(p, radiance, weight),
+                );
+                for r in w.ensemble.replicas() {
+                    w.buffers.visit(r.state().film);
+                }
+            }
+        });
+    }
+
+    fn samples(&self) -> u64 {
+        self.ensembles.samples()
+    }
+
+    fn preview(&self) -> Film {
+        self.ensembles.preview()
+    }
+}

@@ -1,0 +1,175 @@
+//! Initialization of the tile chains by global chains (seed 001 sec. 3.3):
+//! PSSMLT over the union of the tile targets, whose film position picks the
+//! tile and whose fraction is the jitter; a tile takes the state of the first
+//! global chain that visits it, until enough tiles are initialized or the
+//! initialization budget is spent.
+
+use alloc::vec;
+use alloc::vec::Vec;
+use core::sync::atomic::{AtomicU64, Ordering};
+
+use super::StratifiedSettings;
+use super::tile::{Context, Start, TileChain};
+use crate::bootstrap::Bootstrap;
+use crate::chain::PathChain;
+use crate::drive::Clock;
+use crate::error::Error;
+use crate::oracle::{FilmPoint, PathOracle, PathSample, Resolution, Sampler, Temperature};
+use crate::parallel;
+use crate::sample::MltSampler;
+use crate::target::{Importance, MaxChannel};
+
+/// The union of the tile targets as one oracle for the global chains: the
+/// film position picks the tile, its fractional part the jitter, and the
+/// "radiance" is `T_s` there.
+struct GlobalTarget<'a, 'b, O, I: ?Sized> {
+    ctx: &'a Context<'b, O, I>,
+    traces: AtomicU64,
+}
+
+/// The jitter of a film point inside its pixel.
+fn jitter_of(p: FilmPoint) -> FilmPoint {
+    FilmPoint {
+        x: p.x - libm::floorf(p.x),
+        y: p.y - libm::floorf(p.y),
+    }
+}
+
+impl<O, I> PathOracle for GlobalTarget<'_, '_, O, I>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    type Radiance = f32;
+
+    fn resolution(&self) -> Resolution {
+        self.ctx.tiles.resolution()
+    }
+
+    fn trace<S: Sampler + ?Sized>(
+        &self,
+        film: FilmPoint,
+        sampler: &mut S,
+        _temperature: Temperature,
+    ) -> PathSample<f32> {
+        let tile = self.ctx.tiles.resolution().pixel_index(film);
+        let jitter = jitter_of(film);
+        let mut target = 0.0f64;
+        let mut traces = 0;
+        for (_, q) in self.ctx.tiles.pixels(tile) {
+            let (v, _) = self.ctx.trace_in(sampler, q, jitter);
+            target = target.max(v.importance);
+            traces += 1;
+        }
+        self.traces.fetch_add(traces, Ordering::Relaxed);
+        PathSample::new(target as f32)
+    }
+}
+
+/// A global chain's first visit of a tile in a round.
+struct Visit {
+    tile: usize,
+    jitter: FilmPoint,
+    sampler: MltSampler,
+}
+
+/// Runs the global chains until the coverage or the budget is reached and
+/// installs their states; returns paths traced, and how many of them the
+/// bootstrap traced.
+pub(super) fn initialize<O, I>(
+    ctx: &Context<'_, O, I>,
+    chains: &mut [TileChain<O::Radiance>],
+    settings: &StratifiedSettings,
+    seed: u64,
+    max_traces: u64,
+    clock: Option<&Clock>,
+) -> Result<(u64, u64), Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let init = &settings.initialization;
+    let n = chains.len();
+    let wanted = libm::ceil(init.coverage * n as f64) as usize;
+    if init.global_chains == 0 || wanted == 0 || max_traces == 0 {
+        return Ok((0, 0));
+    }
+    let target = GlobalTarget {
+        ctx,
+        traces: AtomicU64::new(0),
+    };
+    let offsets = ctx.tiles.offsets().len() as u64;
+    let candidates = init
+        .bootstrap_candidates
+        .min(max_traces / (2 * offsets))
+        .max(1);
+    let seed = seed ^ 0x6a09_e667_f3bc_c908;
+    let small_step = settings.mutation.small_step;
+    let bootstrap = match Bootstrap::run(&target, &MaxChannel, small_step, seed, candidates) {
+        Ok(b) => b,
+        // A black scene (for these candidates): tiles fall back on uniform draws.
+        Err(Error::AllCandidatesBlack { .. }) => {
+            let traced = target.traces.load(Ordering::Relaxed);
+            return Ok((traced, traced));
+        }
+        Err(e) => return Err(e),
+    };
+    let bootstrap_traces = target.traces.load(Ordering::Relaxed);
+    let p_large = settings.mutation.large_step_probability;
+    let mut global: Vec<_> = (0..init.global_chains as u64)
+        .map(|i| bootstrap.start_path_chain(&target, &MaxChannel, i, p_large))
+        .collect();
+    let mut initialized = vec![false; n];
+    let mut count = 0usize;
+    const STEPS_PER_ROUND: usize = 64;
+    while count < wanted
+        && target.traces.load(Ordering::Relaxed) < max_traces
+        && !clock.is_some_and(Clock::expired)
+    {
+        let run = |chain: &mut PathChain<f32>| -> Vec<Visit> {
+            let mut visits: Vec<Visit> = Vec::new();
+            for _ in 0..STEPS_PER_ROUND {
+                chain.step(&target, &MaxChannel, |_, _| {});
+                let state = chain.current();
+                let tile = ctx.tiles.resolution().pixel_index(state.film);
+                if state.importance > 0.0
+                    && !initialized[tile]
+                    && !visits.iter().any(|v| v.tile == tile)
+                {
+                    visits.push(Visit {
+                        tile,
+                        jitter: jitter_of(state.film),
+                        sampler: chain.chain().sampler().clone(),
+                    });
+                }
+            }
+            visits
+        };
+        let visits = parallel::map_each(&mut global, run);
+        for visit in visits.into_iter().flatten() {
+            if initialized[visit.tile] || count >= wanted {
+                continue;
+            }
+            initialized[visit.tile] = true;
+            count += 1;
+            let chain = &mut chains[visit.tile];
+            let mut sampler = visit.sampler;
+            sampler.set_film([visit.jitter.x, visit.jitter.y]);
+            chain.take_sampler(sampler);
+            chain.pending = true;
+            chain.start = Start::Global;
+        }
+    }
+    let replays = parallel::sum_chunks(chains, 1, |s, c| {
+        let c = &mut c[0];
+        if c.pending {
+            c.evaluate_current(ctx, s)
+        } else {
+            0
+        }
+    });
+    Ok((
+        target.traces.load(Ordering::Relaxed) + replays,
+        bootstrap_traces,
+    ))
+}

@@ -1,0 +1,196 @@
+//! Local replica exchange between neighbouring tiles (seed 001 sec. 3.4,
+//! eq. 21): disjoint pairs, alternating horizontal and vertical, even and odd
+//! offsets, accepted with `min(1, T_s(x_t) T_t(x_s) / (T_s(x_s) T_t(x_t)))`;
+//! a tile without a state borrows its neighbour's instead (sec. 3.3).
+
+use alloc::vec;
+use alloc::vec::Vec;
+
+use super::tile::{Context, Start, TileChain, Value};
+use crate::oracle::PathOracle;
+use crate::parallel;
+use crate::rng::uniform_f64;
+use crate::target::Importance;
+use crate::tiles::Tiles;
+
+/// What one local exchange did.
+#[derive(Clone, Copy, Default)]
+pub(super) struct ExchangeCount {
+    pub traces: u64,
+    pub invalid: u64,
+    pub attempts: u64,
+    pub accepted: u64,
+}
+
+impl core::ops::Add for ExchangeCount {
+    type Output = Self;
+    fn add(self, o: Self) -> Self {
+        Self {
+            traces: self.traces + o.traces,
+            invalid: self.invalid + o.invalid,
+            attempts: self.attempts + o.attempts,
+            accepted: self.accepted + o.accepted,
+        }
+    }
+}
+
+/// Replica exchange between neighbouring tiles `s` and `t` (eq. 21), or state
+/// borrowing when exactly one of them is initialized. `scratch` holds two
+/// buffers of one value per tile offset, reused across pairs.
+fn exchange<O, I>(
+    ctx: &Context<'_, O, I>,
+    (s, a): (usize, &mut TileChain<O::Radiance>),
+    (t, b): (usize, &mut TileChain<O::Radiance>),
+    scratch: &mut Scratch<O::Radiance>,
+) -> ExchangeCount
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let mut count = ExchangeCount::default();
+    match (a.target() > 0.0, b.target() > 0.0) {
+        (false, false) => {}
+        (true, true) => {
+            let [a_in_t, b_in_s] = scratch;
+            let (ta, traced_a) = a.evaluate_in(ctx, s, t, a_in_t);
+            let (tb, traced_b) = b.evaluate_in(ctx, t, s, b_in_s);
+            count.traces = traced_a.paths + traced_b.paths;
+            count.invalid = traced_a.invalid + traced_b.invalid;
+            count.attempts = 1;
+            let ratio = (tb * ta) / (a.target() * b.target());
+            if uniform_f64(&mut a.decisions) < ratio {
+                // The states change tiles; each tile keeps its random stream.
+                core::mem::swap(a.chain.sampler_mut(), b.chain.sampler_mut());
+                a.chain.sampler_mut().swap_rng(b.chain.sampler_mut());
+                a.set_state(b_in_s, tb);
+                b.set_state(a_in_t, ta);
+                count.accepted = 1;
+            }
+        }
+        (true, false) => count = borrow(ctx, (s, a), (t, b), &mut scratch[0]),
+        (false, true) => count = borrow(ctx, (t, b), (s, a), &mut scratch[0]),
+    }
+    count
+}
+
+/// Two buffers of one value per tile offset (see [`exchange`]).
+type Scratch<R> = [Vec<Value<R>>; 2];
+
+/// Tile `t` (not initialized) copies the state of its neighbour `s` if it has
+/// `T_t > 0` there (`values` is scratch of one value per tile offset).
+fn borrow<O, I>(
+    ctx: &Context<'_, O, I>,
+    (s, a): (usize, &mut TileChain<O::Radiance>),
+    (t, b): (usize, &mut TileChain<O::Radiance>),
+    values: &mut [Value<O::Radiance>],
+) -> ExchangeCount
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let (target, traced) = a.evaluate_in(ctx, s, t, values);
+    if target > 0.0 {
+        b.take_sampler(a.chain.sampler().clone());
+        b.set_state(values, target);
+        if b.start == Start::None {
+            b.start = Start::Borrowed;
+        }
+    }
+    ExchangeCount {
+        traces: traced.paths,
+        invalid: traced.invalid,
+        ..Default::default()
+    }
+}
+
+/// The pairs of sweep `sweep`: horizontal on even exchange rounds, vertical on
+/// odd ones, starting at even or odd columns/rows in turn (seed 001 fig. 7).
+fn pairing(round: u64) -> (bool, usize) {
+    (round.is_multiple_of(2), ((round / 2) % 2) as usize)
+}
+
+/// Runs every exchange of one pairing, pairs in parallel.
+pub(super) fn exchange_all<O, I>(
+    ctx: &Context<'_, O, I>,
+    chains: &mut [TileChain<O::Radiance>],
+    width: usize,
+    round: u64,
+) -> ExchangeCount
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let (horizontal, parity) = pairing(round);
+    let scratch = |chains: &[TileChain<O::Radiance>]| -> Scratch<O::Radiance> {
+        let offsets = chains.first().map_or(0, |c| c.chain.state().values.len());
+        [
+            vec![Value::default(); offsets],
+            vec![Value::default(); offsets],
+        ]
+    };
+    if horizontal {
+        let row = |y: usize, row: &mut [TileChain<O::Radiance>]| {
+            let mut count = ExchangeCount::default();
+            let mut scratch = scratch(row);
+            let mut x = parity;
+            while x + 1 < width {
+                let (left, right) = row.split_at_mut(x + 1);
+                let s = y * width + x;
+                let (a, b) = ((s, &mut left[x]), (s + 1, &mut right[0]));
+                count = count + exchange(ctx, a, b, &mut scratch);
+                x += 2;
+            }
+            count
+        };
+        parallel::sum_chunks(chains, width, row)
+    } else {
+        let skip = (parity * width).min(chains.len());
+        let rows = |k: usize, pair: &mut [TileChain<O::Radiance>]| {
+            let mut count = ExchangeCount::default();
+            if pair.len() < 2 * width {
+                return count;
+            }
+            let mut scratch = scratch(pair);
+            let (top, bottom) = pair.split_at_mut(width);
+            let y = parity + 2 * k;
+            for (x, (a, b)) in top.iter_mut().zip(bottom.iter_mut()).enumerate() {
+                let s = y * width + x;
+                count = count + exchange(ctx, (s, a), (s + width, b), &mut scratch);
+            }
+            count
+        };
+        parallel::sum_chunks(&mut chains[skip..], 2 * width, rows)
+    }
+}
+
+/// Paths traced by one exchange round, averaged over the four pairings, if
+/// every pair were initialized.
+pub(super) fn exchange_cost(tiles: &Tiles) -> f64 {
+    let r = tiles.resolution();
+    let (w, h) = (r.width as usize, r.height as usize);
+    let pair = |s: usize, t: usize| {
+        let new = |from: usize, to: usize| {
+            tiles
+                .pixels(to)
+                .filter(|&(_, q)| tiles.offset_of(from, q).is_none())
+                .count()
+        };
+        (new(s, t) + new(t, s)) as f64
+    };
+    let mut total = 0.0;
+    for round in 0..4 {
+        let (horizontal, parity) = pairing(round);
+        for y in 0..h {
+            for x in 0..w {
+                let s = y * w + x;
+                if horizontal && x % 2 == parity && x + 1 < w {
+                    total += pair(s, s + 1);
+                }
+                if !horizontal && y % 2 == parity && y + 1 < h {
+                    total += pair(s, s + w);
+                }
+            }
+        }
+    }
+    total / 4.0
+}

@@ -1,0 +1,550 @@
+//! Stratified MCMC (seed 001, Gruson, West and Hachisuka 2020): one Markov
+//! chain per pixel-centred tile, so that every pixel receives exactly the same
+//! number of samples, followed by the reconstruction of the tiles' unknown
+//! normalizations.
+//!
+//! * **Tile target** (sec. 3.1, eq. 6-10). A tile chain's state is a primary
+//!   sample whose film coordinates are a *jitter* inside a pixel. Coherent
+//!   sampling replays the state in every pixel of the tile (the same numbers
+//!   at `pixel + jitter`), and the tile target is the largest importance of
+//!   those evaluations, `T_s(x) = max_k I(x^k)`. Each step splats, by expected
+//!   values, `a f_k(y) / T_s(y)` and `(1 - a) f_k(x) / T_s(x)` into the
+//!   unscaled estimates `G_s(k)` of eq. 10.
+//! * **Large steps** are replica exchange with the uniform distribution
+//!   (sec. 3.4): an independence proposal accepted with `min(1, T_s(y) /
+//!   T_s(x))`, and every large-step proposal is also an ordinary Monte Carlo
+//!   sample of each tile pixel. Pooled over the tiles containing a pixel, they
+//!   give the regularizer `Î(j)` of eq. 11.
+//! * **Initialization** (sec. 3.3). Global chains run PSSMLT over the union of
+//!   the tile targets (the film position picks the tile, its fraction the
+//!   jitter); a tile takes the state of the first global chain that visits it,
+//!   until [`Initialization::coverage`] of the tiles are initialized or the
+//!   initialization budget is spent. A tile still without a state draws
+//!   uniform states (its large steps) until one has `T_s > 0`, and borrows a
+//!   neighbour's state during local exchange.
+//! * **Local replica exchange** (sec. 3.4, eq. 21) between neighbouring tiles,
+//!   pairs alternating horizontal/vertical and even/odd offsets sweep by sweep,
+//!   accepted with `min(1, T_s(x_t) T_t(x_s) / (T_s(x_s) T_t(x_t)))`.
+//! * **Reconstruction** (sec. 3.2) of the normalizations `b_s` from the
+//!   overlaps by [`reconstruct::weighted`](crate::reconstruct::weighted)
+//!   (eq. 13-16, the paper's choice) or of the image by
+//!   [`reconstruct::log_domain`](crate::reconstruct::log_domain) (eq. 17-20); the image is
+//!   eq. 12, channel by channel. The solvers see one scalar per estimate: the
+//!   mean of the channels.
+//! * **Fallback to the regularizer** (ours, not in seed 001): a pixel whose
+//!   reconstruction lies more than [`StratifiedSettings::fallback_sigmas`]
+//!   standard errors below its Monte Carlo estimate takes that estimate, so
+//!   rare bright paths that the tile chains found too late (start-up bias,
+//!   seed 001 sec. 5 and Fig. 9) are not dimmed.
+//!
+//! A tile's chain does not know its normalization, so steps spent before it
+//! is initialized scale all its `G_s(k)` by the same factor, which the
+//! reconstruction absorbs into `b_s`. A unit of work is a sweep: every tile
+//! steps once, in parallel, each with its own PCG streams; exchanges pair
+//! disjoint tiles; the result does not depend on the thread count.
+//!
+//! | file | owns |
+//! |---|---|
+//! | `tile.rs` | a tile's chain: its state, target and weights, its accumulators |
+//! | `local.rs` | local replica exchange and state borrowing |
+//! | `init.rs` | the global chains' initialization |
+//! | this file | settings, the sweeps, the reconstruction and the fallback |
+
+mod init;
+mod local;
+mod tile;
+
+use alloc::vec;
+use alloc::vec::Vec;
+
+use self::init::initialize;
+use self::local::{exchange_all, exchange_cost};
+use self::tile::{Context, Start, TileChain};
+use super::{Extras, Job, Output};
+use crate::chain::ChainStats;
+use crate::drive::{Budget, Driven, RenderStats, Rounds, drive};
+use crate::error::{Error, check_probability};
+use crate::film::Film;
+use crate::mutate::MutationParams;
+use crate::oracle::{PathOracle, Radiance};
+use crate::parallel;
+use crate::reconstruct::{self, LogSettings, WeightedSettings};
+use crate::target::Importance;
+use crate::tiles::{TileShape, Tiles};
+
+/// How the tile normalizations are reconstructed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Solver {
+    /// The weighted iterative solver, eq. 13-16 (seed 001's choice).
+    Weighted(WeightedSettings),
+    /// The log-domain solver, eq. 17-20.
+    LogDomain(LogSettings),
+}
+
+impl Default for Solver {
+    fn default() -> Self {
+        Solver::Weighted(WeightedSettings::default())
+    }
+}
+
+/// Global-chain initialization of the tile chains (seed 001 sec. 3.3 and 4).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Initialization {
+    /// Number of global chains (0 disables global initialization: tiles then
+    /// start from uniform draws and borrowing only).
+    pub global_chains: u32,
+    /// Stop once this fraction of the tiles is initialized (0.3).
+    pub coverage: f64,
+    /// At most this many paths per pixel (seed 001: an effective 32).
+    pub max_samples_per_pixel: f64,
+    /// And at most this fraction of the render's budget (samples or time).
+    pub max_budget_fraction: f64,
+    /// Bootstrap candidates of the global chains (capped at half of the
+    /// initialization budget).
+    pub bootstrap_candidates: u64,
+}
+
+impl Default for Initialization {
+    fn default() -> Self {
+        Self {
+            global_chains: 16,
+            coverage: 0.3,
+            max_samples_per_pixel: 32.0,
+            max_budget_fraction: 0.25,
+            bootstrap_candidates: 20_000,
+        }
+    }
+}
+
+/// Settings of stratified MCMC. The budget counts every path traced
+/// (initialization, tile steps and exchanges); a sample budget is turned
+/// into the nearest whole number of sweeps (at least one) at the cost of a
+/// sweep whose exchanges all trace.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StratifiedSettings {
+    /// The tile shape (cross by default).
+    pub shape: TileShape,
+    /// Small steps and the large step probability (0.3 in seed 001).
+    pub mutation: MutationParams,
+    /// Local replica exchange after every `exchange_every` sweeps (0: never).
+    pub exchange_every: u32,
+    /// Global-chain initialization.
+    pub initialization: Initialization,
+    /// The reconstruction.
+    pub solver: Solver,
+    /// Pixels whose reconstructed value (channel mean) lies more than this
+    /// many standard errors *below* their Monte Carlo regularizer `Î(j)` take
+    /// the regularizer instead (`None`: never). Our addition, not in seed
+    /// 001: tile chains that start far from a rare bright path (a caustic,
+    /// a glint) carry start-up bias in their within-tile ratios, and the
+    /// reconstruction, which treats such tiles as outliers, then dims the
+    /// brightest pixels (seed 001 sec. 5 and Fig. 9 report the same loss).
+    /// The test is one-sided: a regularizer that missed a rare path is low
+    /// and never replaces anything, and one that caught a firefly has a
+    /// standard error as large as its excess. Pixels with fewer than 32
+    /// large steps (their sample variance is unreliable) are left alone.
+    pub fallback_sigmas: Option<f64>,
+}
+
+impl Default for StratifiedSettings {
+    fn default() -> Self {
+        Self {
+            shape: TileShape::Cross,
+            mutation: MutationParams::default(),
+            exchange_every: 1,
+            initialization: Initialization::default(),
+            solver: Solver::default(),
+            fallback_sigmas: Some(3.0),
+        }
+    }
+}
+
+impl StratifiedSettings {
+    /// Checks every parameter.
+    pub fn validate(&self) -> Result<(), Error> {
+        self.shape.validate()?;
+        self.mutation.validate()?;
+        match &self.solver {
+            Solver::Weighted(w) => w.validate()?,
+            Solver::LogDomain(l) => l.validate()?,
+        }
+        let init = &self.initialization;
+        check_probability("coverage", init.coverage)?;
+        check_probability("max_budget_fraction", init.max_budget_fraction)?;
+        if let Some(k) = self.fallback_sigmas
+            && !(k.is_finite() && k > 0.0)
+        {
+            return Err(Error::invalid("fallback_sigmas", k, "a finite value > 0"));
+        }
+        if !(init.max_samples_per_pixel.is_finite() && init.max_samples_per_pixel >= 0.0) {
+            return Err(Error::invalid(
+                "max_samples_per_pixel",
+                init.max_samples_per_pixel,
+                "a finite value >= 0",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Counters of a stratified render.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StratifiedStats {
+    /// Sweeps: steps made by every tile chain (all the same).
+    pub sweeps: u64,
+    /// Paths traced by the tile chains' steps.
+    pub tile_samples: u64,
+    /// Paths traced to evaluate exchanged and borrowed states.
+    pub exchange_samples: u64,
+    /// Paths traced by the initialization (bootstrap included, global
+    /// chains, replays of installed states).
+    pub initialization_samples: u64,
+    /// Tiles initialized by a global chain.
+    pub initialized_by_global_chains: u64,
+    /// Tiles initialized by borrowing a neighbour's state.
+    pub initialized_by_borrowing: u64,
+    /// Tiles initialized by one of their own uniform draws.
+    pub initialized_by_uniform_draws: u64,
+    /// Tiles that never found a state with `T_s > 0` (black tiles).
+    pub never_initialized: u64,
+    /// Local exchanges attempted (both tiles initialized).
+    pub exchange_attempts: u64,
+    /// Local exchanges accepted.
+    pub exchange_accepted: u64,
+    /// Pixels that took their regularizer's value
+    /// ([`StratifiedSettings::fallback_sigmas`]).
+    pub fallback_pixels: u64,
+}
+
+/// What stratified MCMC returns beyond the image ([`Extras::Stratified`]).
+/// The render's `visits` count, per pixel, the tile-chain states evaluated
+/// in it (every tile containing the pixel, once per sweep).
+#[derive(Clone, Debug)]
+pub struct StratifiedExtras {
+    /// Counters specific to stratified MCMC.
+    pub counters: StratifiedStats,
+    /// The Monte Carlo estimate of the large steps (the regularizer `Î`).
+    pub regularizer: Film,
+    /// The reconstructed `b_s` per tile (empty for the log-domain solver).
+    pub normalizations: Vec<f64>,
+    /// The unscaled estimates `G_s(k)` of eq. 10, indexed `(tile · offsets +
+    /// offset) · channels + channel` (offsets in [`Tiles::offsets`] order; 0
+    /// where the tile is clipped). Within a tile their ratios estimate the
+    /// ratios of the pixel values.
+    pub unscaled: Vec<f64>,
+}
+
+/// Stratified MCMC under `job` (see the module docs).
+pub(crate) fn render<O, I>(
+    settings: &StratifiedSettings,
+    job: &Job<'_, O, I>,
+) -> Result<Output, Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let tiles = Tiles::new(job.resolution, settings.shape)?;
+    let ctx = Context {
+        oracle: job.oracle,
+        importance: job.importance,
+        tiles: &tiles,
+        p_large: settings.mutation.large_step_probability,
+    };
+    let n = tiles.count();
+    let offsets = tiles.offsets().len();
+    let mut chains: Vec<TileChain<O::Radiance>> = (0..n)
+        .map(|s| TileChain::new(job.seed, s, n, offsets, &settings.mutation))
+        .collect();
+
+    // Initialization, within its share of the budget.
+    let init = &settings.initialization;
+    let (init_traces, init_clock) = match job.budget {
+        Budget::Samples(total) => {
+            let cap = (init.max_samples_per_pixel * n as f64)
+                .min(init.max_budget_fraction * total as f64);
+            (cap as u64, None)
+        }
+        #[cfg(feature = "std")]
+        Budget::Time(t) => (
+            libm::ceil(init.max_samples_per_pixel * n as f64) as u64,
+            Some(crate::drive::Clock::start(Budget::Time(
+                t.mul_f64(init.max_budget_fraction),
+            ))),
+        ),
+    };
+    let (traced, bootstrap_traces) = initialize(
+        &ctx,
+        &mut chains,
+        settings,
+        job.seed,
+        init_traces,
+        init_clock.as_ref(),
+    )?;
+    let mut sweeps = Sweeps {
+        ctx: &ctx,
+        settings,
+        chains,
+        stats: StratifiedStats {
+            initialization_samples: traced,
+            ..Default::default()
+        },
+        exchange_rounds: 0,
+        exchange_invalid: 0,
+    };
+    let driven = drive(&mut sweeps, job.budget, &job.clock, job.observer);
+    sweeps.finish(driven, bootstrap_traces)
+}
+
+/// Stratified MCMC's state between rounds: the tile chains and their counters.
+struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
+    ctx: &'a Context<'b, O, I>,
+    settings: &'a StratifiedSettings,
+    chains: Vec<TileChain<O::Radiance>>,
+    stats: StratifiedStats,
+    exchange_rounds: u64,
+    exchange_invalid: u64,
+}
+
+impl<O, I> Sweeps<'_, '_, O, I>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    /// The reconstruction, the fallback and the counters.
+    fn finish(mut self, driven: Driven, bootstrap_traces: u64) -> Result<Output, Error> {
+        let tiles = self.ctx.tiles;
+        let channels = O::Radiance::CHANNELS;
+        let (unscaled, regularizer) = estimates(tiles, &self.chains, self.stats.sweeps.max(1));
+        let g = channel_means(&unscaled, channels);
+        let mc = channel_means(regularizer.data(), channels);
+        let (mut film, normalizations) = match self.settings.solver {
+            Solver::Weighted(w) => {
+                let b = reconstruct::weighted(tiles, &g, &mc, &w, None)?;
+                (image(tiles, &unscaled, &b, channels), b)
+            }
+            Solver::LogDomain(l) => {
+                let solved = reconstruct::log_domain(tiles, &g, &mc, &l)?;
+                (log_image(tiles, &unscaled, &solved, channels), Vec::new())
+            }
+        };
+        let stats = &mut self.stats;
+        if let Some(sigmas) = self.settings.fallback_sigmas {
+            let errors = regularizer_errors(tiles, &self.chains, &regularizer);
+            stats.fallback_pixels = fall_back(&mut film, &regularizer, &errors, sigmas);
+        }
+        let mut chain_stats = ChainStats::default();
+        let mut visits = vec![0u64; tiles.count()];
+        for (s, c) in self.chains.iter().enumerate() {
+            chain_stats.merge(&c.stats);
+            for (_, q) in tiles.pixels(s) {
+                visits[q] += c.stats.proposals;
+            }
+            match c.start {
+                Start::None => stats.never_initialized += 1,
+                Start::Global => stats.initialized_by_global_chains += 1,
+                Start::Borrowed => stats.initialized_by_borrowing += 1,
+                Start::Uniform => stats.initialized_by_uniform_draws += 1,
+            }
+        }
+        let traced = stats.initialization_samples + stats.tile_samples + stats.exchange_samples;
+        Ok(Output {
+            film,
+            stats: RenderStats {
+                samples: traced - bootstrap_traces,
+                bootstrap_samples: bootstrap_traces,
+                invalid_samples: chain_stats.invalid + self.exchange_invalid,
+                normalization: None,
+                chains: chain_stats,
+            },
+            cancelled: driven.cancelled,
+            visits,
+            extras: Extras::Stratified(StratifiedExtras {
+                counters: self.stats,
+                regularizer,
+                normalizations,
+                unscaled,
+            }),
+        })
+    }
+
+    /// Paths a sweep traces if every tile steps (a sweep's local exchanges
+    /// counted at their mean cost).
+    fn sweep_cost(&self) -> f64 {
+        let tiles = self.ctx.tiles;
+        let step_cost: u64 = (0..tiles.count())
+            .map(|s| tiles.pixels(s).count() as u64)
+            .sum();
+        let exchange = if self.settings.exchange_every > 0 {
+            exchange_cost(tiles) / self.settings.exchange_every as f64
+        } else {
+            0.0
+        };
+        step_cost as f64 + exchange
+    }
+}
+
+impl<O, I> Rounds for Sweeps<'_, '_, O, I>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    fn unit_cost(&self) -> u64 {
+        libm::ceil(self.sweep_cost()) as u64
+    }
+
+    fn planned_units(&self, samples: u64) -> u64 {
+        let remaining = samples.saturating_sub(self.stats.initialization_samples);
+        let sweeps = remaining as f64 / self.sweep_cost();
+        (libm::round(sweeps) as u64).max(1)
+    }
+
+    fn run(&mut self, units: u64) {
+        let ctx = self.ctx;
+        let width = ctx.tiles.resolution().width as usize;
+        let every = self.settings.exchange_every as u64;
+        for _ in 0..units {
+            let traced = parallel::sum_chunks(&mut self.chains, width, |y, row| {
+                let mut traces = 0;
+                for (x, chain) in row.iter_mut().enumerate() {
+                    traces += chain.step(ctx, y * width + x);
+                }
+                traces
+            });
+            let stats = &mut self.stats;
+            stats.tile_samples += traced;
+            stats.sweeps += 1;
+            if every > 0 && stats.sweeps.is_multiple_of(every) {
+                let c = exchange_all(ctx, &mut self.chains, width, self.exchange_rounds);
+                self.exchange_rounds += 1;
+                stats.exchange_samples += c.traces;
+                stats.exchange_attempts += c.attempts;
+                stats.exchange_accepted += c.accepted;
+                self.exchange_invalid += c.invalid;
+            }
+        }
+    }
+
+    fn samples(&self) -> u64 {
+        let s = &self.stats;
+        s.initialization_samples + s.tile_samples + s.exchange_samples
+    }
+
+    /// Eq. 12 with the initial normalizations (a quick reconstruction).
+    fn preview(&self) -> Film {
+        let tiles = self.ctx.tiles;
+        let channels = O::Radiance::CHANNELS;
+        let (unscaled, regularizer) = estimates(tiles, &self.chains, self.stats.sweeps);
+        let b = reconstruct::initial_normalizations(
+            tiles,
+            &channel_means(&unscaled, channels),
+            &channel_means(regularizer.data(), channels),
+        );
+        image(tiles, &unscaled, &b, channels)
+    }
+}
+
+/// Per tile, offset and channel `G_s(k)` (eq. 10, over `sweeps` steps), and
+/// the pooled large-step MC estimate per pixel.
+fn estimates<R: Radiance>(tiles: &Tiles, chains: &[TileChain<R>], sweeps: u64) -> (Vec<f64>, Film) {
+    let channels = R::CHANNELS;
+    let mut unscaled = Vec::with_capacity(chains.len() * tiles.offsets().len() * channels);
+    for c in chains {
+        unscaled.extend(c.unscaled.iter().map(|v| v / sweeps as f64));
+    }
+    let resolution = tiles.resolution();
+    let mut regularizer = Film::new(resolution, channels);
+    let data = regularizer.data_mut();
+    for j in 0..tiles.count() {
+        let mut count = 0u64;
+        for (s, o) in tiles.tiles_of(j) {
+            count += chains[s].large_steps;
+            for c in 0..channels {
+                data[j * channels + c] += chains[s].uniform[o * channels + c];
+            }
+        }
+        if count > 0 {
+            for c in 0..channels {
+                data[j * channels + c] /= count as f64;
+            }
+        }
+    }
+    (unscaled, regularizer)
+}
+
+/// Large steps a pixel's regularizer needs before its sample variance is
+/// trusted by the fallback.
+const FALLBACK_MIN_LARGE_STEPS: u64 = 32;
+
+/// Per pixel, the standard error of the regularizer's channel mean, from the
+/// large steps' sums of squares pooled like the regularizer itself
+/// (infinite with fewer than [`FALLBACK_MIN_LARGE_STEPS`]).
+fn regularizer_errors<R: Radiance>(
+    tiles: &Tiles,
+    chains: &[TileChain<R>],
+    regularizer: &Film,
+) -> Vec<f64> {
+    let means = channel_means(regularizer.data(), R::CHANNELS);
+    (0..tiles.count())
+        .map(|j| {
+            let (mut count, mut squares) = (0u64, 0.0);
+            for (s, o) in tiles.tiles_of(j) {
+                count += chains[s].large_steps;
+                squares += chains[s].uniform_squares[o];
+            }
+            if count < FALLBACK_MIN_LARGE_STEPS {
+                return f64::INFINITY;
+            }
+            let n = count as f64;
+            let variance = (squares / n - means[j] * means[j]).max(0.0) * n / (n - 1.0);
+            libm::sqrt(variance / n)
+        })
+        .collect()
+}
+
+/// [`StratifiedSettings::fallback_sigmas`]: replaces every pixel of `film`
+/// more than `sigmas` standard errors below the regularizer by the
+/// regularizer. Returns the number replaced.
+fn fall_back(film: &mut Film, regularizer: &Film, errors: &[f64], sigmas: f64) -> u64 {
+    let channels = film.channels();
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / channels as f64;
+    let mut replaced = 0;
+    let pixels = film.data_mut().chunks_mut(channels);
+    for ((pixel, mc), error) in pixels.zip(regularizer.data().chunks(channels)).zip(errors) {
+        if mean(pixel) < mean(mc) - sigmas * error {
+            pixel.copy_from_slice(mc);
+            replaced += 1;
+        }
+    }
+    replaced
+}
+
+/// The mean over the `channels` channels of each value.
+fn channel_means(values: &[f64], channels: usize) -> Vec<f64> {
+    values
+        .chunks(channels)
+        .map(|v| v.iter().sum::<f64>() / channels as f64)
+        .collect()
+}
+
+/// Eq. 12 channel by channel ([`reconstruct::image`]) as a film.
+fn image(tiles: &Tiles, unscaled: &[f64], b: &[f64], channels: usize) -> Film {
+    let data = reconstruct::image(tiles, unscaled, b, channels);
+    Film::from_data(tiles.resolution(), channels, data).expect("one value per pixel and channel")
+}
+
+/// The log-domain solver's scalar image, split into channels in the
+/// proportions of the pixel's own tile (`G_j(j)`, eq. 17).
+fn log_image(tiles: &Tiles, unscaled: &[f64], solved: &[f64], channels: usize) -> Film {
+    let offsets = tiles.offsets().len();
+    let mut film = Film::new(tiles.resolution(), channels);
+    for (j, pixel) in film.data_mut().chunks_mut(channels).enumerate() {
+        let own = &unscaled[j * offsets * channels..(j * offsets + 1) * channels];
+        let mean = own.iter().sum::<f64>() / channels as f64;
+        if mean > 0.0 {
+            for (v, g) in pixel.iter_mut().zip(own) {
+                *v = solved[j] * g / mean;
+            }
+        }
+    }
+    film
+}

@@ -1,0 +1,327 @@
+//! A tile's Markov chain (seed 001 sec. 3.1, eq. 6-10): its state is a
+//! primary sample whose film coordinates are a jitter inside a pixel,
+//! replayed in every pixel of the tile (coherent sampling); its target is the
+//! largest importance of those evaluations; its steps splat into the tile's
+//! unscaled estimates `G_s(k)`, and its large steps also into the Monte
+//! Carlo regularizer.
+
+use alloc::vec;
+use alloc::vec::Vec;
+
+use rand_pcg::Pcg32;
+
+use crate::chain::{Chain, ChainStats, Target, Traced, Weights};
+use crate::mutate::MutationParams;
+use crate::oracle::{FilmPoint, PathOracle, Radiance, Resolution, Sampler, Temperature};
+use crate::rng::{self, Domain, uniform_f64};
+use crate::sample::{MltSampler, Proposal};
+use crate::target::{Importance, evaluate};
+use crate::tiles::Tiles;
+
+/// One tile pixel's evaluation of a state.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Value<R> {
+    pub radiance: R,
+    pub importance: f64,
+}
+
+/// A tile chain's state: its jitter replayed in every tile pixel.
+#[derive(Clone, Debug, Default)]
+pub(super) struct TileState<R> {
+    /// The evaluation in every tile pixel (offset order; zero where the tile
+    /// is clipped).
+    pub values: Vec<Value<R>>,
+    /// `T_s`, the largest importance of the values (eq. 9).
+    pub target: f64,
+}
+
+/// How a tile got its first state with `T_s > 0`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Start {
+    None,
+    Global,
+    Borrowed,
+    Uniform,
+}
+
+/// A tile's chain and its accumulators.
+pub(super) struct TileChain<R> {
+    pub chain: Chain<TileState<R>>,
+    pub decisions: Pcg32,
+    /// `N G_s(k)` per offset and channel.
+    pub unscaled: Vec<f64>,
+    /// Sum of the large steps' radiance per offset and channel.
+    pub uniform: Vec<f64>,
+    /// Sum of the squared channel mean of the large steps' radiance per
+    /// offset (the regularizer's variance).
+    pub uniform_squares: Vec<f64>,
+    pub large_steps: u64,
+    pub stats: ChainStats,
+    pub start: Start,
+    /// A global chain's state was installed and must be evaluated.
+    pub pending: bool,
+}
+
+/// What the tile chains share.
+pub(super) struct Context<'a, O, I: ?Sized> {
+    pub oracle: &'a O,
+    pub importance: &'a I,
+    pub tiles: &'a Tiles,
+    pub p_large: f64,
+}
+
+/// A jitter's film "resolution": the film stream read as a point of `[0, 1)²`.
+pub(super) const UNIT: Resolution = Resolution::new(1, 1);
+
+impl<O, I> Context<'_, O, I>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    /// Replays the state `sampler` is positioned on (film stream read) at
+    /// `jitter` in pixel `pixel`.
+    pub fn trace_in<S: Sampler + ?Sized>(
+        &self,
+        sampler: &mut S,
+        pixel: usize,
+        jitter: FilmPoint,
+    ) -> (Value<O::Radiance>, bool) {
+        sampler.start_stream(0);
+        let film = self.tiles.pixel_point(pixel, jitter);
+        let traced = self.oracle.trace(film, sampler, Temperature::ONE);
+        let e = evaluate(self.importance, traced, film);
+        (
+            Value {
+                radiance: e.sample.radiance,
+                importance: e.importance,
+            },
+            e.invalid,
+        )
+    }
+
+    /// Evaluates a state in every pixel of `tile` into `out` (coherent
+    /// sampling, eq. 10): `T_s` and what was traced.
+    pub fn trace_tile<S: Sampler>(
+        &self,
+        sampler: &mut S,
+        tile: usize,
+        jitter: FilmPoint,
+        out: &mut TileState<O::Radiance>,
+    ) -> Traced {
+        out.values.clear();
+        out.values
+            .resize(self.tiles.offsets().len(), Value::default());
+        out.target = 0.0;
+        let mut traced = Traced::default();
+        for (o, q) in self.tiles.pixels(tile) {
+            let (v, bad) = self.trace_in(sampler, q, jitter);
+            out.target = out.target.max(v.importance);
+            out.values[o] = v;
+            traced.paths += 1;
+            traced.invalid += bad as u64;
+        }
+        traced
+    }
+}
+
+/// Tile `tile`'s target `T_s` (eq. 9), a state traced by coherent sampling.
+pub(super) struct TileTarget<'a, 'b, O, I: ?Sized> {
+    pub ctx: &'a Context<'b, O, I>,
+    pub tile: usize,
+}
+
+impl<O, I> Target for TileTarget<'_, '_, O, I>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    type State = TileState<O::Radiance>;
+
+    fn evaluate(&self, proposal: &mut Proposal<'_>, state: &mut Self::State) -> Traced {
+        let jitter = proposal.film_point(UNIT);
+        self.ctx.trace_tile(proposal, self.tile, jitter, state)
+    }
+
+    fn value(&self, state: &Self::State) -> f64 {
+        state.target
+    }
+}
+
+/// The expected-values weights of a tile chain (eq. 10): `a / T_s(y)` and
+/// `(1 - a) / T_s(x)`; large steps are independence proposals of the same
+/// chain, weighted alike.
+pub(super) struct TileWeights;
+
+impl<R> Weights<TileState<R>> for TileWeights {
+    fn weights(
+        &self,
+        acceptance: f64,
+        _large_step: bool,
+        current: &TileState<R>,
+        proposed: &TileState<R>,
+    ) -> [f64; 2] {
+        [
+            if proposed.target > 0.0 && acceptance > 0.0 {
+                acceptance / proposed.target
+            } else {
+                0.0
+            },
+            if current.target > 0.0 && acceptance < 1.0 {
+                (1.0 - acceptance) / current.target
+            } else {
+                0.0
+            },
+        ]
+    }
+}
+
+/// Adds `weight ·` the radiance of every tile pixel of `values` into `into`
+/// (offset by offset, channel by channel).
+pub(super) fn add<R: Radiance>(values: &[Value<R>], weight: f64, into: &mut [f64]) {
+    let channels = R::CHANNELS;
+    for (o, v) in values.iter().enumerate() {
+        for c in 0..channels {
+            into[o * channels + c] += weight * v.radiance.channel(c) as f64;
+        }
+    }
+}
+
+impl<R: Radiance> TileChain<R> {
+    pub fn new(
+        seed: u64,
+        tile: usize,
+        tiles: usize,
+        offsets: usize,
+        mutation: &MutationParams,
+    ) -> Self {
+        let per_offset = offsets * R::CHANNELS;
+        let sampler = MltSampler::new(
+            mutation.small_step,
+            rng::stream(seed, Domain::Tile, tile as u64),
+        );
+        let state = TileState {
+            values: vec![Value::default(); offsets],
+            target: 0.0,
+        };
+        Self {
+            chain: Chain::new(sampler, state),
+            decisions: rng::stream(seed, Domain::Tile, (tile + tiles) as u64),
+            unscaled: vec![0.0; per_offset],
+            uniform: vec![0.0; per_offset],
+            uniform_squares: vec![0.0; offsets],
+            large_steps: 0,
+            stats: ChainStats::default(),
+            start: Start::None,
+            pending: false,
+        }
+    }
+
+    /// `T_s` of the current state.
+    pub fn target(&self) -> f64 {
+        self.chain.state().target
+    }
+
+    /// One Metropolis-Hastings step on `T_s` with coherent sampling (eq. 10).
+    /// Until the tile has a state with `T_s > 0` every step is a uniform draw.
+    /// Returns paths traced.
+    pub fn step<O, I>(&mut self, ctx: &Context<'_, O, I>, tile: usize) -> u64
+    where
+        O: PathOracle<Radiance = R>,
+        I: Importance<R> + ?Sized,
+    {
+        let dark = self.target() <= 0.0;
+        let large = dark || uniform_f64(&mut self.decisions) < ctx.p_large;
+        let unscaled = &mut self.unscaled;
+        let outcome = self.chain.step(
+            &TileTarget { ctx, tile },
+            &TileWeights,
+            large,
+            &mut self.decisions,
+            &mut self.stats,
+            |state, weight| add(&state.values, weight, unscaled),
+        );
+        if large {
+            let proposed = self.chain.last_proposal();
+            add(&proposed.values, 1.0, &mut self.uniform);
+            let channels = R::CHANNELS;
+            for (sq, v) in self.uniform_squares.iter_mut().zip(&proposed.values) {
+                let mean = (0..channels)
+                    .map(|c| v.radiance.channel(c) as f64)
+                    .sum::<f64>()
+                    / channels as f64;
+                *sq += mean * mean;
+            }
+            self.large_steps += 1;
+        }
+        if outcome.accepted && dark && self.target() > 0.0 && self.start == Start::None {
+            self.start = Start::Uniform;
+        }
+        outcome.traced.paths
+    }
+
+    /// Evaluates the current state again in every tile pixel (after a
+    /// global chain's state was installed). Returns paths traced.
+    pub fn evaluate_current<O, I>(&mut self, ctx: &Context<'_, O, I>, tile: usize) -> u64
+    where
+        O: PathOracle<Radiance = R>,
+        I: Importance<R> + ?Sized,
+    {
+        let (sampler, state) = self.chain.parts_mut();
+        let mut replay = sampler.replay();
+        let jitter = replay.film_point(UNIT);
+        let traced = ctx.trace_tile(&mut replay, tile, jitter, state);
+        self.stats.invalid += traced.invalid;
+        self.pending = false;
+        traced.paths
+    }
+
+    /// The current state (of tile `from`) evaluated in every pixel of tile
+    /// `to` into `out`, reusing the pixels the two tiles share. Returns `T_to`
+    /// and what was traced.
+    pub fn evaluate_in<O, I>(
+        &mut self,
+        ctx: &Context<'_, O, I>,
+        from: usize,
+        to: usize,
+        out: &mut [Value<R>],
+    ) -> (f64, Traced)
+    where
+        O: PathOracle<Radiance = R>,
+        I: Importance<R> + ?Sized,
+    {
+        out.fill(Value::default());
+        let (sampler, state) = self.chain.parts_mut();
+        let mut replay = sampler.replay();
+        let jitter = replay.film_point(UNIT);
+        let mut target = 0.0f64;
+        let mut traced = Traced::default();
+        for (o, q) in ctx.tiles.pixels(to) {
+            let v = match ctx.tiles.offset_of(from, q) {
+                Some(known) => state.values[known],
+                None => {
+                    let (v, bad) = ctx.trace_in(&mut replay, q, jitter);
+                    traced.paths += 1;
+                    traced.invalid += bad as u64;
+                    v
+                }
+            };
+            target = target.max(v.importance);
+            out[o] = v;
+        }
+        (target, traced)
+    }
+
+    /// Takes the primary sample `sampler`, keeping this tile's own random
+    /// stream; its state must then be set or evaluated.
+    pub fn take_sampler(&mut self, mut sampler: MltSampler) {
+        sampler.swap_rng(self.chain.sampler_mut());
+        *self.chain.sampler_mut() = sampler;
+    }
+
+    /// Sets the current state's tile values and target (evaluated elsewhere).
+    pub fn set_state(&mut self, values: &[Value<R>], target: f64) {
+        let state = self.chain.state_mut();
+        state.values.copy_from_slice(values);
+        state.target = target;
+    }
+}

@@ -1,0 +1,17 @@
+//! What an embedder needs: `use strata_engine::prelude::*;` (or
+//! `strata::prelude::*`) brings in the oracle contract, the one entry point
+//! with its settings and output, budgets and observers, and the importance
+//! functions.
+
+pub use crate::drive::{Budget, Observer, Progress, RenderStats, Silent};
+pub use crate::error::Error;
+pub use crate::film::Film;
+pub use crate::method::{
+    ErptSettings, Extras, Method, MultiStageSettings, Output, PssmltSettings, ReplicaSettings,
+    Settings, StratifiedSettings, render,
+};
+pub use crate::oracle::{
+    FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb, Sampler,
+    Temperature,
+};
+pub use crate::target::{FnImportance, Importance, Luminance, MaxChannel};

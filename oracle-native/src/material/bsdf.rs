@@ -1,162 +1,17 @@
-//! Materials and their BSDFs, in a local shading frame where `z` is the normal.
-//!
-//! Microfacet lobes use the GGX (Trowbridge-Reitz) distribution with
-//! height-correlated Smith masking (Walter et al. 2007); rough dielectrics
-//! follow Walter et al.'s generalized half vector. Every BSDF can be
-//! *tempered* (seed 002 sec. 5.2, eq. 5.5): its roughness `ρ` becomes
-//! `sqrt(T)·max(ρ, ρ_min)` with `ρ_min = 1e-4` for specular surfaces, so
-//! specular lobes widen into glossy ones as the temperature rises.
+//! A BSDF at one shading point: evaluation, density and sampling in the
+//! local shading frame, and tempering (seed 002 eq. 5.5).
 
-use std::f32::consts::{FRAC_1_PI, PI};
+use std::f32::consts::FRAC_1_PI;
 
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 
-/// Smallest roughness a tempered specular surface gets (seed 002 eq. 5.5).
-pub const MIN_TEMPERED_ROUGHNESS: f32 = 1e-4;
+use super::microfacet::{
+    Ggx, conductor_fresnel, fr_dielectric, reflect, refract, rough_dielectric, smooth_dielectric,
+};
+use super::{ConductorFresnel, MIN_TEMPERED_ROUGHNESS};
 
-/// A spatially varying color.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Texture {
-    /// One color everywhere.
-    Constant(Vec3),
-    /// An image, linear RGB, row 0 at the top, repeated outside `[0, 1]`.
-    Image {
-        /// Width in texels.
-        width: u32,
-        /// Height in texels.
-        height: u32,
-        /// Linear RGB texels.
-        texels: Vec<Vec3>,
-        /// `(u, v)` scale.
-        scale: Vec2,
-    },
-    /// Two colors in a checkerboard of `scale` checks per unit of `(u, v)`.
-    Checkerboard {
-        /// Color of even checks.
-        even: Vec3,
-        /// Color of odd checks.
-        odd: Vec3,
-        /// Checks per unit.
-        scale: Vec2,
-    },
-}
-
-impl Texture {
-    /// The color at texture coordinates `uv` (bilinear for images).
-    pub fn eval(&self, uv: Vec2) -> Vec3 {
-        match self {
-            Texture::Constant(c) => *c,
-            Texture::Checkerboard { even, odd, scale } => {
-                let p = uv * *scale;
-                if (p.x.floor() as i64 + p.y.floor() as i64) % 2 == 0 {
-                    *even
-                } else {
-                    *odd
-                }
-            }
-            Texture::Image {
-                width,
-                height,
-                texels,
-                scale,
-            } => {
-                let (w, h) = (*width as i64, *height as i64);
-                // pbrt's v points up the image.
-                let p = uv * *scale;
-                let x = p.x * w as f32 - 0.5;
-                let y = (1.0 - p.y) * h as f32 - 0.5;
-                let (x0, y0) = (x.floor(), y.floor());
-                let (fx, fy) = (x - x0, y - y0);
-                let texel =
-                    |i: i64, j: i64| texels[(j.rem_euclid(h) * w + i.rem_euclid(w)) as usize];
-                let (i, j) = (x0 as i64, y0 as i64);
-                texel(i, j) * (1.0 - fx) * (1.0 - fy)
-                    + texel(i + 1, j) * fx * (1.0 - fy)
-                    + texel(i, j + 1) * (1.0 - fx) * fy
-                    + texel(i + 1, j + 1) * fx * fy
-            }
-        }
-    }
-}
-
-/// What a conductor reflects.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum ConductorFresnel {
-    /// Complex index of refraction `eta + i k`, per RGB channel.
-    Complex {
-        /// Real part.
-        eta: Vec3,
-        /// Imaginary part (absorption).
-        k: Vec3,
-    },
-    /// A constant reflectance (an ideal mirror with color `Kr`).
-    Constant(Vec3),
-}
-
-/// A surface material.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Material {
-    /// Lambertian reflection.
-    Diffuse {
-        /// Albedo.
-        reflectance: Texture,
-    },
-    /// Metal: GGX reflection, or a perfect mirror when `alpha == 0`.
-    Conductor {
-        /// Fresnel term.
-        fresnel: ConductorFresnel,
-        /// GGX roughness α.
-        alpha: f32,
-    },
-    /// Glass: GGX reflection and refraction, or smooth when `alpha == 0`.
-    Dielectric {
-        /// Relative index of refraction (inside / outside).
-        eta: f32,
-        /// GGX roughness α.
-        alpha: f32,
-    },
-    /// pbrt-v3's plastic: Lambertian plus a GGX lobe with dielectric Fresnel (η = 1.5).
-    Plastic {
-        /// Diffuse albedo.
-        diffuse: Texture,
-        /// Specular color.
-        specular: Vec3,
-        /// GGX roughness α.
-        alpha: f32,
-    },
-}
-
-impl Material {
-    /// The BSDF at texture coordinates `uv`.
-    pub fn bsdf(&self, uv: Vec2) -> Bsdf {
-        match self {
-            Material::Diffuse { reflectance } => Bsdf::Diffuse(reflectance.eval(uv)),
-            Material::Conductor { fresnel, alpha } => Bsdf::Conductor {
-                fresnel: *fresnel,
-                alpha: *alpha,
-            },
-            Material::Dielectric { eta, alpha } => Bsdf::Dielectric {
-                eta: *eta,
-                alpha: *alpha,
-            },
-            Material::Plastic {
-                diffuse,
-                specular,
-                alpha,
-            } => Bsdf::Plastic {
-                kd: diffuse.eval(uv),
-                ks: *specular,
-                alpha: *alpha,
-            },
-        }
-    }
-}
-
-/// pbrt-v3's `RoughnessToAlpha` for GGX (`remaproughness true`).
-pub fn roughness_to_alpha(roughness: f32) -> f32 {
-    let x = roughness.max(1e-3).ln();
-    1.62142 + 0.819955 * x + 0.1734 * x * x + 0.0171201 * x * x * x + 0.000640711 * x * x * x * x
-}
+/// pbrt-v3's plastic coat index.
+const PLASTIC_ETA: f32 = 1.5;
 
 /// A BSDF at one shading point.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -421,209 +276,10 @@ impl Bsdf {
     }
 }
 
-const PLASTIC_ETA: f32 = 1.5;
-
-/// The GGX distribution with roughness α.
-#[derive(Clone, Copy, Debug)]
-struct Ggx(f32);
-
-impl Ggx {
-    /// `D(m)` for `m` in the upper hemisphere.
-    fn d(&self, m: Vec3) -> f32 {
-        if m.z <= 0.0 {
-            return 0.0;
-        }
-        let a2 = self.0 * self.0;
-        let c2 = m.z * m.z;
-        let t = c2 * (a2 - 1.0) + 1.0;
-        a2 / (PI * t * t)
-    }
-
-    /// Smith Λ.
-    fn lambda(&self, v: Vec3) -> f32 {
-        let c2 = v.z * v.z;
-        if c2 <= 0.0 {
-            return f32::INFINITY;
-        }
-        let tan2 = (1.0 - c2).max(0.0) / c2;
-        0.5 * ((1.0 + self.0 * self.0 * tan2).sqrt() - 1.0)
-    }
-
-    /// Height-correlated masking-shadowing.
-    fn g(&self, wo: Vec3, wi: Vec3) -> f32 {
-        1.0 / (1.0 + self.lambda(wo) + self.lambda(wi))
-    }
-
-    /// A normal with density `D(m) cos θ_m`.
-    fn sample_m(&self, u: [f32; 2]) -> Vec3 {
-        let tan2 = self.0 * self.0 * u[0] / (1.0 - u[0]).max(1e-12);
-        let cos = 1.0 / (1.0 + tan2).sqrt();
-        let sin = (1.0 - cos * cos).max(0.0).sqrt();
-        let phi = 2.0 * PI * u[1];
-        Vec3::new(sin * phi.cos(), sin * phi.sin(), cos)
-    }
-
-    /// Density of a reflected direction whose half vector is `m`.
-    fn reflection_pdf(&self, wo: Vec3, m: Vec3) -> f32 {
-        let c = wo.dot(m).abs();
-        if c == 0.0 {
-            0.0
-        } else {
-            self.d(m) * m.z / (4.0 * c)
-        }
-    }
-}
-
-fn reflect(wo: Vec3, m: Vec3) -> Vec3 {
-    2.0 * wo.dot(m) * m - wo
-}
-
-/// Refraction of `wi` through a surface with normal `n` (any side) and
-/// relative index `eta` (inside over outside, `n` pointing outside): the
-/// refracted direction and the ratio of indices it crossed (`η_t/η_i`), or
-/// `None` for total internal reflection.
-fn refract(wi: Vec3, n: Vec3, eta: f32) -> Option<(Vec3, f32)> {
-    let mut cos_i = n.dot(wi);
-    let (mut eta, mut n) = (eta, n);
-    if cos_i < 0.0 {
-        eta = 1.0 / eta;
-        cos_i = -cos_i;
-        n = -n;
-    }
-    let sin2_t = (1.0 - cos_i * cos_i).max(0.0) / (eta * eta);
-    if sin2_t >= 1.0 {
-        return None;
-    }
-    let cos_t = (1.0 - sin2_t).sqrt();
-    Some((-wi / eta + (cos_i / eta - cos_t) * n, eta))
-}
-
-/// Unpolarized Fresnel reflectance of a dielectric interface (`cos_i` signed:
-/// negative means arriving from inside).
-pub fn fr_dielectric(cos_i: f32, eta: f32) -> f32 {
-    let mut cos_i = cos_i.clamp(-1.0, 1.0);
-    let mut eta = eta;
-    if cos_i < 0.0 {
-        eta = 1.0 / eta;
-        cos_i = -cos_i;
-    }
-    let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
-    if sin2_t >= 1.0 {
-        return 1.0;
-    }
-    let cos_t = (1.0 - sin2_t).sqrt();
-    let r_parl = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-    let r_perp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
-    0.5 * (r_parl * r_parl + r_perp * r_perp)
-}
-
-/// Fresnel reflectance of a conductor (pbrt-v3's `FrConductor`, per channel).
-fn conductor_fresnel(fresnel: ConductorFresnel, cos_i: f32) -> Vec3 {
-    match fresnel {
-        ConductorFresnel::Constant(c) => c,
-        ConductorFresnel::Complex { eta, k } => {
-            let c = cos_i.clamp(0.0, 1.0);
-            let channel = |eta: f32, k: f32| {
-                let cos2 = c * c;
-                let sin2 = 1.0 - cos2;
-                let (eta2, k2) = (eta * eta, k * k);
-                let t0 = eta2 - k2 - sin2;
-                let a2b2 = (t0 * t0 + 4.0 * eta2 * k2).sqrt();
-                let t1 = a2b2 + cos2;
-                let a = (0.5 * (a2b2 + t0)).max(0.0).sqrt();
-                let t2 = 2.0 * c * a;
-                let rs = (t1 - t2) / (t1 + t2);
-                let t3 = cos2 * a2b2 + sin2 * sin2;
-                let t4 = t2 * sin2;
-                let rp = rs * (t3 - t4) / (t3 + t4);
-                0.5 * (rp + rs)
-            };
-            Vec3::new(
-                channel(eta.x, k.x),
-                channel(eta.y, k.y),
-                channel(eta.z, k.z),
-            )
-        }
-    }
-}
-
-/// A smooth dielectric: reflect with probability `F`, refract otherwise.
-fn smooth_dielectric(eta: f32, wo: Vec3, uc: f32) -> Option<BsdfSample> {
-    let r = fr_dielectric(wo.z, eta);
-    if uc < r {
-        let wi = Vec3::new(-wo.x, -wo.y, wo.z);
-        return Some(BsdfSample {
-            wi,
-            f: Vec3::splat(r / wi.z.abs()),
-            pdf: r,
-            specular: true,
-        });
-    }
-    let (wi, etap) = refract(wo, Vec3::Z, eta)?;
-    let t = 1.0 - r;
-    // Radiance is scaled by 1/η² when crossing into a denser medium.
-    Some(BsdfSample {
-        wi,
-        f: Vec3::splat(t / wi.z.abs() / (etap * etap)),
-        pdf: t,
-        specular: true,
-    })
-}
-
-struct DielectricEval {
-    f: f32,
-    pdf: f32,
-}
-
-/// Value and density of a rough dielectric (Walter et al. 2007, in the form
-/// of pbrt-v4's `DielectricBxDF`, with `D(m) cos θ_m` sampling of normals).
-fn rough_dielectric(eta: f32, alpha: f32, wo: Vec3, wi: Vec3) -> Option<DielectricEval> {
-    let (co, ci) = (wo.z, wi.z);
-    if co == 0.0 || ci == 0.0 {
-        return None;
-    }
-    let reflect = co * ci > 0.0;
-    let etap = if reflect {
-        1.0
-    } else if co > 0.0 {
-        eta
-    } else {
-        1.0 / eta
-    };
-    let mut m = wi * etap + wo;
-    if m.length_squared() == 0.0 {
-        return None;
-    }
-    m = m.normalize();
-    if m.z < 0.0 {
-        m = -m;
-    }
-    if m.dot(wi) * ci < 0.0 || m.dot(wo) * co < 0.0 {
-        return None;
-    }
-    let ggx = Ggx(alpha);
-    let r = fr_dielectric(wo.dot(m), eta);
-    let pdf_m = ggx.d(m) * m.z;
-    if reflect {
-        let f = ggx.d(m) * ggx.g(wo, wi) * r / (4.0 * ci * co).abs();
-        let pdf = pdf_m / (4.0 * wo.dot(m).abs()) * r;
-        Some(DielectricEval { f, pdf })
-    } else {
-        let denom = wi.dot(m) + wo.dot(m) / etap;
-        let denom2 = denom * denom;
-        let f = ggx.d(m)
-            * (1.0 - r)
-            * ggx.g(wo, wi)
-            * (wi.dot(m) * wo.dot(m) / (denom2 * ci * co)).abs()
-            / (etap * etap);
-        let pdf = pdf_m * wi.dot(m).abs() / denom2 * (1.0 - r);
-        Some(DielectricEval { f, pdf })
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f32::consts::PI;
     use strata_engine::rng::{Domain, stream, uniform_f32};
 
     fn bsdfs() -> Vec<(&'static str, Bsdf)> {
@@ -690,6 +346,7 @@ mod tests {
 
     /// `sample` returns what `eval` and `pdf` say, and its pdf integrates
     /// (numerically, over the sphere) to the probability that it succeeds.
+
     #[test]
     fn sampling_matches_evaluation_and_pdfs_integrate() {
         let mut rng = stream(1, Domain::User, 0);
@@ -852,26 +509,5 @@ mod tests {
         assert_eq!(glass.eval(wo, -wo), Vec3::ZERO);
         assert!((fr_dielectric(1.0, 1.5) - 0.04).abs() < 1e-6);
         assert_eq!(fr_dielectric(-0.1, 1.5), 1.0); // total internal reflection
-    }
-
-    #[test]
-    fn textures() {
-        let check = Texture::Checkerboard {
-            even: Vec3::ZERO,
-            odd: Vec3::ONE,
-            scale: Vec2::splat(2.0),
-        };
-        assert_eq!(check.eval(Vec2::new(0.1, 0.1)), Vec3::ZERO);
-        assert_eq!(check.eval(Vec2::new(0.6, 0.1)), Vec3::ONE);
-        let img = Texture::Image {
-            width: 2,
-            height: 1,
-            texels: vec![Vec3::ZERO, Vec3::ONE],
-            scale: Vec2::ONE,
-        };
-        assert!((img.eval(Vec2::new(0.5, 0.5)).x - 0.5).abs() < 1e-6);
-        // pbrt-v3's polynomial: 1.62142 at roughness 1, 0.1389 at 0.01 (the metal default).
-        assert!((roughness_to_alpha(1.0) - 1.62142).abs() < 1e-5);
-        assert!((roughness_to_alpha(0.01) - 0.1389).abs() < 1e-3);
     }
 }

@@ -12,7 +12,9 @@ use strata::engine::bootstrap::Bootstrap;
 use strata::engine::diagnose::integrated_autocorrelation_time;
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
-use strata::engine::{PathOracle, Resolution};
+use strata::engine::{
+    FilmPoint, FnOracle, PathOracle, PathSample, Resolution, Sampler, Temperature,
+};
 
 fn kernels() -> Vec<(&'static str, SmallStep)> {
     vec![
@@ -128,28 +130,19 @@ fn chains_sample_a_two_dimensional_gaussian_mixture() {
 /// a slightly different one (a 30 % linear tilt) is caught.
 #[test]
 fn the_goodness_of_fit_test_detects_a_wrong_target() {
-    struct Tilted;
-    impl PathOracle for Tilted {
-        type Radiance = f32;
-        fn resolution(&self) -> Resolution {
-            Resolution::new(1, 1)
-        }
-        fn trace<S: strata::engine::Sampler + ?Sized>(
-            &self,
-            f: strata::engine::FilmPoint,
-            _: &mut S,
-            _: strata::engine::Temperature,
-        ) -> strata::engine::PathSample<f32> {
+    let tilted = FnOracle::new(
+        Resolution::new(1, 1),
+        |f: FilmPoint, _: &mut dyn Sampler, _: Temperature| {
             let u = f.x;
-            strata::engine::PathSample::new((u - 0.5) * (u - 0.5) * (0.85 + 0.3 * u))
-        }
-    }
+            PathSample::new((u - 0.5) * (u - 0.5) * (0.85 + 0.3 * u))
+        },
+    );
     let bins = 16;
     let expected: Vec<f64> = (0..bins)
         .map(|k| Parabola::probability(k as f64 / bins as f64, (k + 1) as f64 / bins as f64))
         .collect();
     let params = MutationParams::default();
-    let states = run_chain(&Tilted, params, 11, 400_000, |x, _| {
+    let states = run_chain(&tilted, params, 11, 400_000, |x, _| {
         ((x * bins as f32) as usize).min(bins - 1)
     });
     // Over seeds 0..6 the worst bin is 10.4 to 12.1 standard errors off.

@@ -98,27 +98,21 @@ impl Checker {
     fn value(pixel: usize) -> f64 {
         0.2 + ((pixel * 7) % 5) as f64
     }
-}
 
-impl PathOracle for Checker {
-    type Radiance = f32;
-    fn resolution(&self) -> Resolution {
-        Resolution::new(5, 5)
-    }
-    fn trace<S: Sampler + ?Sized>(
-        &self,
-        film: FilmPoint,
-        sampler: &mut S,
-        _: Temperature,
-    ) -> PathSample<f32> {
-        let (x, y) = (film.x as usize, film.y as usize);
-        let u = sampler.next_1d();
-        let factor = if (x + y) % 2 == 0 {
-            2.0 * u
-        } else {
-            2.0 * (1.0 - u)
-        };
-        PathSample::new(Self::value(y * 5 + x) as f32 * factor)
+    fn oracle() -> impl PathOracle<Radiance = f32> {
+        FnOracle::new(
+            Resolution::new(5, 5),
+            |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature| {
+                let (x, y) = (film.x as usize, film.y as usize);
+                let u = sampler.next_1d();
+                let factor = if (x + y) % 2 == 0 {
+                    2.0 * u
+                } else {
+                    2.0 * (1.0 - u)
+                };
+                PathSample::new(Self::value(y * 5 + x) as f32 * factor)
+            },
+        )
     }
 }
 
@@ -127,7 +121,8 @@ impl PathOracle for Checker {
 /// tile against the spread of 16 independent runs.
 #[test]
 fn unscaled_estimates_have_the_pixel_ratios() {
-    let tiles = Tiles::new(Checker.resolution(), TileShape::Cross).unwrap();
+    let checker = Checker::oracle();
+    let tiles = Tiles::new(checker.resolution(), TileShape::Cross).unwrap();
     let runs: Vec<Vec<f64>> = (0..16)
         .map(|seed| {
             let settings = Settings {
@@ -135,7 +130,7 @@ fn unscaled_estimates_have_the_pixel_ratios() {
                 budget: Budget::Samples(300_000),
                 method: Method::Stratified(StratifiedSettings::default()),
             };
-            let out = render(&Checker, &MaxChannel, &settings, &Silent).unwrap();
+            let out = render(&checker, &MaxChannel, &settings, &Silent).unwrap();
             extras(&out).unscaled.clone()
         })
         .collect();

@@ -261,41 +261,24 @@ impl Bootstrap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::oracle::Sampler;
-    use crate::oracle::{FilmPoint, PathSample, Resolution, Temperature};
+    use crate::oracle::{FilmPoint, FnOracle, PathSample, Resolution, Sampler, Temperature};
     use crate::target::MaxChannel;
 
     /// Bright only where the film x is in the left tenth.
-    struct Strip;
-    impl PathOracle for Strip {
-        type Radiance = f32;
-        fn resolution(&self) -> Resolution {
-            Resolution::new(10, 1)
-        }
-        fn trace<S: Sampler + ?Sized>(
-            &self,
-            f: FilmPoint,
-            s: &mut S,
-            _: Temperature,
-        ) -> PathSample<f32> {
-            PathSample::new(if f.x < 1.0 { 1.0 + s.next_1d() } else { 0.0 })
-        }
+    fn strip() -> impl PathOracle<Radiance = f32> {
+        FnOracle::new(
+            Resolution::new(10, 1),
+            |f: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+                PathSample::new(if f.x < 1.0 { 1.0 + s.next_1d() } else { 0.0 })
+            },
+        )
     }
 
-    struct Black;
-    impl PathOracle for Black {
-        type Radiance = f32;
-        fn resolution(&self) -> Resolution {
-            Resolution::new(4, 4)
-        }
-        fn trace<S: Sampler + ?Sized>(
-            &self,
-            _: FilmPoint,
-            _: &mut S,
-            _: Temperature,
-        ) -> PathSample<f32> {
-            PathSample::new(0.0)
-        }
+    fn black() -> impl PathOracle<Radiance = f32> {
+        FnOracle::new(
+            Resolution::new(4, 4),
+            |_: FilmPoint, _: &mut dyn Sampler, _: Temperature| PathSample::new(0.0f32),
+        )
     }
 
     #[test]
@@ -303,7 +286,7 @@ mod tests {
         // Integral of I over PSS: 0.1 * E[1 + u] = 0.15. Var of one candidate's
         // I: 0.1 * E[(1+u)^2] - 0.15^2 = 0.1 * 7/3 - 0.0225; 5 sigma tolerance.
         let n = 40_000u64;
-        let b = Bootstrap::run(&Strip, &MaxChannel, SmallStep::default(), 9, n).unwrap();
+        let b = Bootstrap::run(&strip(), &MaxChannel, SmallStep::default(), 9, n).unwrap();
         let sd = libm::sqrt((0.1 * 7.0 / 3.0 - 0.0225) / n as f64);
         assert!(
             (b.normalization() - 0.15).abs() < 5.0 * sd,
@@ -314,9 +297,9 @@ mod tests {
 
     #[test]
     fn chains_start_only_from_bright_candidates() {
-        let b = Bootstrap::run(&Strip, &MaxChannel, SmallStep::default(), 10, 1000).unwrap();
+        let b = Bootstrap::run(&strip(), &MaxChannel, SmallStep::default(), 10, 1000).unwrap();
         for i in 0..200 {
-            let started = b.start(&Strip, &MaxChannel, 0, i, |_, path| path);
+            let started = b.start(&strip(), &MaxChannel, 0, i, |_, path| path);
             assert!(started.chain.state().importance > 0.0);
             assert!(started.chain.state().film.x < 1.0);
         }
@@ -327,8 +310,8 @@ mod tests {
 
     #[test]
     fn black_scene_is_a_typed_error_not_a_loop() {
-        let e = Bootstrap::run(&Black, &MaxChannel, SmallStep::default(), 1, 500).unwrap_err();
+        let e = Bootstrap::run(&black(), &MaxChannel, SmallStep::default(), 1, 500).unwrap_err();
         assert_eq!(e, Error::AllCandidatesBlack { candidates: 500 });
-        assert!(Bootstrap::run(&Black, &MaxChannel, SmallStep::default(), 1, 0).is_err());
+        assert!(Bootstrap::run(&black(), &MaxChannel, SmallStep::default(), 1, 0).is_err());
     }
 }

@@ -114,51 +114,32 @@ impl Sampler for Replaying<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::oracle::Resolution;
+    use crate::oracle::{FnOracle, Resolution};
     use core::sync::atomic::{AtomicU32, Ordering};
-
-    struct Pure;
-    impl PathOracle for Pure {
-        type Radiance = f32;
-        fn resolution(&self) -> Resolution {
-            Resolution::new(1, 1)
-        }
-        fn trace<S: Sampler + ?Sized>(
-            &self,
-            f: FilmPoint,
-            s: &mut S,
-            _: Temperature,
-        ) -> PathSample<f32> {
-            let mut v = f.x;
-            while s.next_1d() < 0.7 {
-                v += s.next_1d();
-            }
-            PathSample::new(v)
-        }
-    }
-
-    /// Depends on hidden state: a counter bumped per call.
-    struct Impure(AtomicU32);
-    impl PathOracle for Impure {
-        type Radiance = f32;
-        fn resolution(&self) -> Resolution {
-            Resolution::new(1, 1)
-        }
-        fn trace<S: Sampler + ?Sized>(
-            &self,
-            _: FilmPoint,
-            s: &mut S,
-            _: Temperature,
-        ) -> PathSample<f32> {
-            let n = self.0.fetch_add(1, Ordering::Relaxed);
-            PathSample::new(s.next_1d() + n as f32)
-        }
-    }
 
     #[test]
     fn purity_check_accepts_pure_and_rejects_impure_oracles() {
+        let pure = FnOracle::new(
+            Resolution::new(1, 1),
+            |f: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+                let mut v = f.x;
+                while s.next_1d() < 0.7 {
+                    v += s.next_1d();
+                }
+                PathSample::new(v)
+            },
+        );
+        // Depends on hidden state: a counter bumped per call.
+        let calls = AtomicU32::new(0);
+        let impure = FnOracle::new(
+            Resolution::new(1, 1),
+            |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+                let n = calls.fetch_add(1, Ordering::Relaxed);
+                PathSample::new(s.next_1d() + n as f32)
+            },
+        );
         let p = FilmPoint { x: 0.25, y: 0.5 };
-        assert!(check_purity(&Pure, p, Temperature::ONE, 7, 50).is_ok());
-        assert!(check_purity(&Impure(AtomicU32::new(0)), p, Temperature::ONE, 7, 1).is_err());
+        assert!(check_purity(&pure, p, Temperature::ONE, 7, 50).is_ok());
+        assert!(check_purity(&impure, p, Temperature::ONE, 7, 1).is_err());
     }
 }

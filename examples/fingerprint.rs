@@ -48,6 +48,19 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     pool.install(|| -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         let procedural = ProceduralImage::showcase(RESOLUTION);
         render_all("procedural", &procedural, &args.out)?;
+        // ERPT's passes in several blocks (a film over 1024 pixels).
+        let wide = ProceduralImage::showcase(Resolution::new(64, 48));
+        let erpt = Method::Erpt(ErptSettings {
+            chain_length: 20,
+            ..Default::default()
+        });
+        let settings = Settings {
+            seed: SEED,
+            budget: Budget::samples_per_pixel(SPP, wide.resolution),
+            method: erpt,
+        };
+        let out = render(&wide, &MaxChannel, &settings, &Silent)?;
+        write(&args.out, "procedural-64x48", "erpt", &out);
         for name in ["cornell", "caustic"] {
             let scene = builtin::by_name(name, RESOLUTION).expect("a built-in scene");
             render_all(name, &native_tracer(scene), &args.out)?;

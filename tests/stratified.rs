@@ -16,10 +16,12 @@ use strata::engine::reconstruct::LogSettings;
 use strata::engine::target::MaxChannel;
 use strata::engine::tiles::{TileShape, Tiles};
 use strata::engine::{
-    Budget, Film, FilmPoint, FnOracle, Method, Output, PathOracle, PathSample, Resolution, Rgb,
-    Sampler, Settings, Silent, Temperature, render,
+    Budget, Film, FilmPoint, FnOracle, Method, Observer, Output, PathOracle, PathSample, Progress,
+    Resolution, Rgb, Sampler, Settings, Silent, Temperature, render,
 };
 use strata::native::{builtin, native_tracer};
+
+use std::sync::atomic::{AtomicU32, Ordering};
 
 mod common;
 use common::{RUNS, check, renders};
@@ -230,6 +232,52 @@ fn erpt_matches_the_procedural_image() {
     });
     let runs = renders(&image, &MaxChannel, &method, 400, 0..RUNS);
     check("erpt", &runs, &image.reference());
+}
+
+/// Stops a render after `rounds` rounds.
+struct StopAfter {
+    rounds: u32,
+    seen: AtomicU32,
+}
+
+impl Observer for StopAfter {
+    fn progress(&self, _: &Progress) {
+        self.seen.fetch_add(1, Ordering::Relaxed);
+    }
+    fn should_stop(&self) -> bool {
+        self.seen.load(Ordering::Relaxed) >= self.rounds
+    }
+}
+
+/// An ERPT pass stopped after 2 of its 3 blocks (a time budget or a cancel
+/// inside a pass) is still an unbiased image: the blocks run in a random
+/// rotation, so each is in the 2 with probability 2/3, and the film is
+/// divided by 2/3 of a pass.
+#[test]
+fn erpt_passes_cut_short_stay_unbiased() {
+    let image = ProceduralImage::showcase(Resolution::new(64, 48));
+    let method = Method::Erpt(ErptSettings {
+        chain_length: 40,
+        bootstrap_candidates: 5_000,
+        ..Default::default()
+    });
+    let runs: Vec<Film> = (0..RUNS)
+        .map(|seed| {
+            let settings = Settings {
+                seed,
+                budget: Budget::samples_per_pixel(41, image.resolution),
+                method: method.clone(),
+            };
+            let two_blocks = StopAfter {
+                rounds: 2,
+                seen: AtomicU32::new(0),
+            };
+            let out = render(&image, &MaxChannel, &settings, &two_blocks).unwrap();
+            assert!(out.cancelled);
+            out.film
+        })
+        .collect();
+    check("erpt, 2 of 3 blocks", &runs, &image.reference());
 }
 
 /// Black everywhere, or NaN on the right half and `1 + u` elsewhere.

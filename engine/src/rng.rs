@@ -23,6 +23,8 @@ pub enum Domain {
     Tile = 0x2545_f491_4f6c_dd1d,
     /// ERPT: MC path `i`'s chain decisions and mutations.
     Energy = 0x9fb2_1c65_1e98_df25,
+    /// ERPT: the order of pass `i`'s blocks.
+    Pass = 0x3c79_ac49_2ba7_b653,
     /// Anything a test or caller wants to seed.
     User = 0xa076_1d64_78bd_642f,
 }

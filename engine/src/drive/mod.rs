@@ -106,11 +106,6 @@ pub(crate) trait Rounds {
     fn run(&mut self, units: u64);
     /// Paths traced so far that count toward the budget.
     fn samples(&self) -> u64;
-    /// Whether the work so far makes an image: a time budget does not end
-    /// the render before.
-    fn ready(&self) -> bool {
-        true
-    }
     /// The normalized image now (for previews).
     fn preview(&self) -> Film;
 }
@@ -162,8 +157,7 @@ pub(crate) fn drive(
         if observer.wants_preview() {
             observer.preview(&work.preview());
         }
-        let spent = planned.map_or_else(|| clock.expired(), |n| done >= n);
-        if spent && work.ready() {
+        if planned.map_or_else(|| clock.expired(), |n| done >= n) {
             break;
         }
         if planned.is_none() && round_clock.seconds() < MIN_ROUND_SECONDS {

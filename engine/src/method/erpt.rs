@@ -13,12 +13,12 @@
 //! importance, so a path starts `r` chains on average. The importance must
 //! be positive wherever the radiance is (paths with `I = 0` start nothing).
 //!
-//! A unit of work is a block of 16 rows of a pass (their start paths in
-//! parallel, one task per row, merged in row order). Only whole passes are
-//! unbiased (a start path's chains deposit anywhere on the film), so when a
-//! time budget or the observer stops a render inside a pass, that pass is
-//! dropped: the image is the mean of the passes completed. A time budget
-//! always completes the first pass.
+//! A unit of work is a block of 1024 consecutive start pixels (16 tasks of
+//! 64, merged in task order). A pass visits its blocks in a rotation drawn
+//! per pass, so the blocks done when a time budget or the observer stops the
+//! render inside a pass are a uniform sample of the pass's blocks: each block
+//! is in it with probability `m / B` (`m` done of `B`), and the film divided
+//! by `passes + m / B` stays an unbiased image (cluster sampling).
 
 use alloc::vec::Vec;
 
@@ -107,36 +107,23 @@ where
     )?;
     let resolution = job.resolution;
     let bands = SplatBands::new(resolution);
-    let rows = ROWS_PER_BLOCK.min(resolution.height as usize);
-    let film = Film::try_new(resolution, O::Radiance::CHANNELS)?;
     let mut run = Passes {
         job,
         settings,
         energy: bootstrap.normalization()
             / (settings.chain_length as f64 * settings.chains_per_path),
-        work: (0..rows).map(|_| RowWork::new(bands)).collect(),
+        work: (0..TASKS).map(|_| Segment::new(bands)).collect(),
         bands,
-        pass_start: PassStart {
-            film: film.clone(),
-            visits: alloc::vec![0; resolution.pixel_count()],
-            rows: alloc::vec![PassTotals::default(); rows],
-        },
-        film,
+        film: Film::try_new(resolution, O::Radiance::CHANNELS)?,
         visits: alloc::vec![0; resolution.pixel_count()],
         passes: 0,
-        block: 0,
+        done: 0,
+        rotation: 0,
     };
     let driven = drive(&mut run, job.budget, &job.clock, job.observer);
-    if run.block != 0 {
-        // A pass cut short: keep the passes completed.
-        let start = run.pass_start;
-        (run.film, run.visits) = (start.film, start.visits);
-        for (w, totals) in run.work.iter_mut().zip(start.rows) {
-            w.totals = totals;
-        }
-    }
+    let scale = run.scale();
     let mut film = run.film;
-    film.scale(1.0 / run.passes.max(1) as f64);
+    film.scale(scale);
     let mut stats = RenderStats {
         bootstrap_samples: bootstrap.traced().paths,
         normalization: Some(bootstrap.normalization()),
@@ -187,43 +174,42 @@ impl<R> Weights<Evaluated<R>> for EnergyWeights {
     }
 }
 
-/// Rows in a unit of work (one task each), merged in row order.
-const ROWS_PER_BLOCK: usize = 16;
+/// Tasks per unit of work (merged in task order) and start pixels per task.
+const TASKS: usize = 16;
+const PIXELS_PER_TASK: usize = 64;
+/// Start pixels per unit of work.
+const BLOCK: usize = TASKS * PIXELS_PER_TASK;
 
-/// Counters of a row's work.
+/// Counters of a task's work.
 #[derive(Clone, Copy, Debug, Default)]
-struct PassTotals {
+struct Totals {
     chains: ChainStats,
     traces: u64,
     invalid: u64,
 }
 
-/// What a cut pass is rolled back to.
-struct PassStart {
-    film: Film,
-    visits: Vec<u64>,
-    rows: Vec<PassTotals>,
-}
-
-/// One row of start paths and what it produced.
-struct RowWork<R> {
-    y: usize,
+/// A task: a run of start pixels and what it produced.
+struct Segment<R> {
+    /// The first pixel and the number of pixels of the current run.
+    first: usize,
+    pixels: usize,
     buffers: RoundBuffers<R>,
-    /// Counters over every pass so far.
-    totals: PassTotals,
+    /// Counters over every run so far.
+    totals: Totals,
 }
 
-impl<R> RowWork<R> {
+impl<R> Segment<R> {
     fn new(bands: SplatBands) -> Self {
         Self {
-            y: 0,
+            first: 0,
+            pixels: 0,
             buffers: RoundBuffers::new(bands),
-            totals: PassTotals::default(),
+            totals: Totals::default(),
         }
     }
 }
 
-impl<R> Worker<R> for RowWork<R> {
+impl<R> Worker<R> for Segment<R> {
     fn buffers(&self) -> &RoundBuffers<R> {
         &self.buffers
     }
@@ -238,15 +224,14 @@ struct Passes<'a, 'j, O: PathOracle, I: ?Sized> {
     settings: &'j ErptSettings,
     energy: f64,
     bands: SplatBands,
-    work: Vec<RowWork<O::Radiance>>,
+    work: Vec<Segment<O::Radiance>>,
     film: Film,
     visits: Vec<u64>,
-    /// The film, visits and counters before the current pass.
-    pass_start: PassStart,
     /// Passes completed.
     passes: u64,
-    /// The next block of the current pass.
-    block: usize,
+    /// Blocks done of the current pass, and the block it started at.
+    done: usize,
+    rotation: usize,
 }
 
 impl<O, I> Passes<'_, '_, O, I>
@@ -254,28 +239,35 @@ where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
+    /// Blocks per pass `B`.
     fn blocks(&self) -> usize {
-        (self.job.resolution.height as usize).div_ceil(ROWS_PER_BLOCK)
+        self.job.resolution.pixel_count().div_ceil(BLOCK)
     }
 
-    /// The start paths of rows `first..first + rows` of the current pass, in
-    /// parallel, merged in row order.
-    fn run_block(&mut self, first: usize, rows: usize) {
-        for (k, w) in self.work.iter_mut().enumerate() {
-            w.y = first + k;
+    /// The film's scale: one over the passes done, `passes + m / B`.
+    fn scale(&self) -> f64 {
+        let passes = self.passes as f64 + self.done as f64 / self.blocks() as f64;
+        if passes > 0.0 { 1.0 / passes } else { 0.0 }
+    }
+
+    /// The start paths of block `block` of the current pass, in tasks run in
+    /// parallel and merged in order.
+    fn run_block(&mut self, block: usize) {
+        let pixels = self.job.resolution.pixel_count();
+        let first = block * BLOCK;
+        for (t, w) in self.work.iter_mut().enumerate() {
+            w.first = (first + t * PIXELS_PER_TASK).min(pixels);
+            w.pixels = PIXELS_PER_TASK.min(pixels - w.first);
         }
-        let width = self.job.resolution.width as usize;
-        let pixels = self.job.resolution.pixel_count() as u64;
-        let pass = self.passes;
+        let pass = self.passes * pixels as u64;
         let (job, settings, energy) = (self.job, self.settings, self.energy);
-        parallel::for_each(&mut self.work[..rows], |w| {
-            for x in 0..width {
-                let index = pass * pixels + (w.y * width + x) as u64;
-                redistribute(job, settings, energy, index, w, x);
+        parallel::for_each(&mut self.work, |w| {
+            for pixel in w.first..w.first + w.pixels {
+                redistribute(job, settings, energy, pass + pixel as u64, w, pixel);
             }
         });
         self.bands
-            .merge(&mut self.work[..rows], &mut self.film, &mut self.visits);
+            .merge(&mut self.work, &mut self.film, &mut self.visits);
     }
 }
 
@@ -285,9 +277,7 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     fn unit_cost(&self) -> u64 {
-        let paths = (ROWS_PER_BLOCK * self.job.resolution.width as usize) as f64
-            * self.settings.paths_per_pixel();
-        libm::ceil(paths) as u64
+        libm::ceil(BLOCK as f64 * self.settings.paths_per_pixel()) as u64
     }
 
     fn planned_units(&self, samples: u64) -> u64 {
@@ -297,21 +287,16 @@ where
     }
 
     fn run(&mut self, units: u64) {
-        let height = self.job.resolution.height as usize;
+        let blocks = self.blocks();
         for _ in 0..units {
-            if self.block == 0 {
-                let start = &mut self.pass_start;
-                start.film.clone_from(&self.film);
-                start.visits.clone_from(&self.visits);
-                for (totals, w) in start.rows.iter_mut().zip(&self.work) {
-                    *totals = w.totals;
-                }
+            if self.done == 0 {
+                let mut order = rng::stream(self.job.seed, Domain::Pass, self.passes);
+                self.rotation = (uniform_f64(&mut order) * blocks as f64) as usize % blocks;
             }
-            let first = self.block * ROWS_PER_BLOCK;
-            self.run_block(first, ROWS_PER_BLOCK.min(height - first));
-            self.block += 1;
-            if self.block == self.blocks() {
-                self.block = 0;
+            self.run_block((self.rotation + self.done) % blocks);
+            self.done += 1;
+            if self.done == blocks {
+                self.done = 0;
                 self.passes += 1;
             }
         }
@@ -321,31 +306,26 @@ where
         self.work.iter().map(|w| w.totals.traces).sum()
     }
 
-    fn ready(&self) -> bool {
-        self.passes > 0
-    }
-
     fn preview(&self) -> Film {
-        let passes = self.passes as f64 + self.block as f64 / self.blocks() as f64;
-        self.film.scaled(1.0 / passes.max(1.0))
+        self.film.scaled(self.scale())
     }
 }
 
-/// One MC path in pixel `(x, w.y)` and the chains it starts.
+/// One MC path in pixel `pixel` (the `index`-th of the render) and the
+/// chains it starts.
 fn redistribute<O, I>(
     job: &Job<'_, O, I>,
     settings: &ErptSettings,
     energy: f64,
     index: u64,
-    w: &mut RowWork<O::Radiance>,
-    x: usize,
+    w: &mut Segment<O::Radiance>,
+    pixel: usize,
 ) where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
     let (oracle, importance, seed) = (job.oracle, job.importance, job.seed);
     let resolution = job.resolution;
-    let pixel = w.y * resolution.width as usize + x;
     let mut decisions = rng::stream(seed, Domain::Energy, index);
     let mut start = MltSampler::new(
         settings.small_step,

@@ -9,6 +9,8 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
+use super::Rounds;
+use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{FilmPoint, Radiance, Resolution};
 use crate::parallel;
@@ -58,9 +60,18 @@ impl<R> RoundBuffers<R> {
 }
 
 /// A worker of a round-based method: it owns round buffers.
-pub(crate) trait Worker<R> {
-    fn buffers(&self) -> &RoundBuffers<R>;
-    fn buffers_mut(&mut self) -> &mut RoundBuffers<R>;
+pub(crate) trait Worker {
+    /// What its film holds.
+    type Radiance: Radiance;
+    fn buffers(&self) -> &RoundBuffers<Self::Radiance>;
+    fn buffers_mut(&mut self) -> &mut RoundBuffers<Self::Radiance>;
+}
+
+/// A worker of [`Splatting`]: a chain or an ensemble that runs its own units
+/// of work (steps, sweeps) into its buffers.
+pub(crate) trait Runs: Worker + Send + Sync {
+    /// Runs `units` more units.
+    fn run(&mut self, units: u64);
 }
 
 /// Horizontal bands of the film.
@@ -92,7 +103,7 @@ impl SplatBands {
 
     /// Adds every worker's splats to `film` in worker order and its visits to
     /// `visits` (integer counts: order does not matter), then clears them.
-    pub fn merge<R: Radiance, W: Worker<R> + Sync + Send>(
+    pub fn merge<W: Worker + Sync + Send>(
         &self,
         work: &mut [W],
         film: &mut Film,
@@ -136,43 +147,23 @@ pub(crate) struct Splatting<W> {
     unit_samples: u64,
 }
 
-impl<W> Splatting<W> {
-    /// `work` splatting into a black film of `channels` values per pixel;
-    /// a unit costs each worker `unit_samples` traces.
-    pub fn new(work: Vec<W>, bands: SplatBands, channels: usize, unit_samples: u64) -> Self {
+impl<W: Runs> Splatting<W> {
+    /// `work` splatting into a black film; a unit costs each worker
+    /// `unit_samples` traces.
+    pub fn new(work: Vec<W>, bands: SplatBands, unit_samples: u64) -> Result<Self, Error> {
         let resolution = bands.resolution;
-        Self {
+        Ok(Self {
             work,
             bands,
-            film: Film::new(resolution, channels),
+            film: Film::try_new(resolution, W::Radiance::CHANNELS)?,
             visits: vec![0; resolution.pixel_count()],
             units: 0,
             unit_samples,
-        }
-    }
-
-    /// Traces of one unit of every worker.
-    pub fn unit_cost(&self) -> u64 {
-        self.work.len().max(1) as u64 * self.unit_samples
-    }
-
-    /// Units for a budget of `samples` traces: enough to spend it (rounded up).
-    pub fn planned_units(&self, samples: u64) -> u64 {
-        samples.div_ceil(self.unit_cost()).max(1)
-    }
-
-    /// Traces so far.
-    pub fn samples(&self) -> u64 {
-        self.units * self.unit_cost()
+        })
     }
 
     fn scale(&self) -> f64 {
         self.bands.resolution.pixel_count() as f64 / (self.units * self.work.len() as u64) as f64
-    }
-
-    /// The normalized image now.
-    pub fn preview(&self) -> Film {
-        self.film.scaled(self.scale())
     }
 
     /// The normalized image and the states per pixel.
@@ -185,16 +176,30 @@ impl<W> Splatting<W> {
     }
 }
 
-impl<W: Send + Sync> Splatting<W> {
-    /// Runs `step(worker, units)` on every worker in parallel, then merges
-    /// their splats in worker order.
-    pub fn run<R: Radiance>(&mut self, units: u64, step: impl Fn(&mut W, u64) + Sync + Send)
-    where
-        W: Worker<R>,
-    {
-        parallel::for_each(&mut self.work, |w| step(w, units));
+impl<W: Runs> Rounds for Splatting<W> {
+    fn unit_cost(&self) -> u64 {
+        self.work.len().max(1) as u64 * self.unit_samples
+    }
+
+    /// Enough units to spend the budget (rounded up).
+    fn planned_units(&self, samples: u64) -> u64 {
+        samples.div_ceil(self.unit_cost()).max(1)
+    }
+
+    /// Every worker's units in parallel, then their splats merged in worker
+    /// order.
+    fn run(&mut self, units: u64) {
+        parallel::for_each(&mut self.work, |w| w.run(units));
         self.bands
             .merge(&mut self.work, &mut self.film, &mut self.visits);
         self.units += units;
+    }
+
+    fn samples(&self) -> u64 {
+        self.units * self.unit_cost()
+    }
+
+    fn preview(&self) -> Film {
+        self.film.scaled(self.scale())
     }
 }

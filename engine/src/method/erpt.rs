@@ -209,7 +209,8 @@ impl<R> Segment<R> {
     }
 }
 
-impl<R> Worker<R> for Segment<R> {
+impl<R: Radiance> Worker for Segment<R> {
+    type Radiance = R;
     fn buffers(&self) -> &RoundBuffers<R> {
         &self.buffers
     }

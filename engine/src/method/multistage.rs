@@ -412,7 +412,7 @@ where
             clock: Clock::start(budget),
         };
         let mut run = Pssmlt::start(&settings.pssmlt, &stage_job)?;
-        let driven = drive(&mut run, budget, &stage_job.clock, &observer);
+        let driven = drive(&mut run.chains, budget, &stage_job.clock, &observer);
         let out = run.finish(driven);
         // Each stage's film is its mean image; weight it by its samples.
         let n = out.stats.samples as f64;

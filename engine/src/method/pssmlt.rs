@@ -3,17 +3,15 @@
 //! step weights (see [`chain`](crate::chain)): `chains` chains run in
 //! parallel, each a unit of work one step.
 
-use alloc::vec::Vec;
-
 use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
 use crate::chain::PathChain;
-use crate::drive::splat::{RoundBuffers, SplatBands, Splatting, Worker};
+use crate::drive::splat::{RoundBuffers, Runs, SplatBands, Splatting, Worker};
 use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
-use crate::film::Film;
 use crate::mutate::MutationParams;
-use crate::oracle::{PathOracle, Radiance};
+use crate::oracle::PathOracle;
+use crate::parallel;
 use crate::target::Importance;
 
 /// Settings of PSSMLT. The budget counts the chains' paths, split evenly
@@ -59,16 +57,15 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let mut run = Pssmlt::start(settings, job)?;
-    let driven = drive(&mut run, job.budget, &job.clock, job.observer);
+    let driven = drive(&mut run.chains, job.budget, &job.clock, job.observer);
     Ok(run.finish(driven))
 }
 
-/// PSSMLT's state between rounds: its chains and their film.
+/// PSSMLT's state: its bootstrap, and its chains with their film.
 pub(crate) struct Pssmlt<'a, O: PathOracle, I: ?Sized> {
-    oracle: &'a O,
-    importance: &'a I,
     bootstrap: Bootstrap,
-    chains: Splatting<ChainWork<O::Radiance>>,
+    /// The chains, driven by the round loop.
+    pub chains: Splatting<ChainWork<'a, O, I>>,
 }
 
 impl<'a, O, I> Pssmlt<'a, O, I>
@@ -89,14 +86,14 @@ where
         let bands = SplatBands::new(job.resolution);
         let p_large = settings.mutation.large_step_probability;
         let start = |i: usize| ChainWork {
+            oracle,
+            importance,
             chain: bootstrap.start_path_chain(oracle, importance, i as u64, p_large),
             buffers: RoundBuffers::new(bands),
         };
-        let work: Vec<_> = crate::parallel::map_indices(settings.chains as usize, start);
+        let work = parallel::map_indices(settings.chains as usize, start);
         Ok(Self {
-            oracle,
-            importance,
-            chains: Splatting::new(work, bands, O::Radiance::CHANNELS, 1),
+            chains: Splatting::new(work, bands, 1)?,
             bootstrap,
         })
     }
@@ -125,52 +122,38 @@ where
     }
 }
 
-impl<O, I> Rounds for Pssmlt<'_, O, I>
+/// A chain and what it produced in the current round.
+pub(crate) struct ChainWork<'a, O: PathOracle, I: ?Sized> {
+    oracle: &'a O,
+    importance: &'a I,
+    chain: PathChain<O::Radiance>,
+    buffers: RoundBuffers<O::Radiance>,
+}
+
+impl<O: PathOracle, I: ?Sized> Worker for ChainWork<'_, O, I> {
+    type Radiance = O::Radiance;
+    fn buffers(&self) -> &RoundBuffers<O::Radiance> {
+        &self.buffers
+    }
+    fn buffers_mut(&mut self) -> &mut RoundBuffers<O::Radiance> {
+        &mut self.buffers
+    }
+}
+
+impl<O, I> Runs for ChainWork<'_, O, I>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    fn unit_cost(&self) -> u64 {
-        self.chains.unit_cost()
-    }
-
-    fn planned_units(&self, samples: u64) -> u64 {
-        self.chains.planned_units(samples)
-    }
-
-    fn run(&mut self, units: u64) {
-        let (oracle, importance) = (self.oracle, self.importance);
-        self.chains.run(units, |w, steps| {
-            for _ in 0..steps {
-                let buffers = &mut w.buffers;
-                w.chain.step(oracle, importance, |path, weight| {
+    /// `steps` steps, each splatting its weighted paths and counting its state.
+    fn run(&mut self, steps: u64) {
+        for _ in 0..steps {
+            let buffers = &mut self.buffers;
+            self.chain
+                .step(self.oracle, self.importance, |path, weight| {
                     buffers.splat(path.film, path.sample.radiance, weight);
                 });
-                w.buffers.visit(w.chain.current().film);
-            }
-        });
-    }
-
-    fn samples(&self) -> u64 {
-        self.chains.samples()
-    }
-
-    fn preview(&self) -> Film {
-        self.chains.preview()
-    }
-}
-
-/// A chain and what it produced in the current round.
-struct ChainWork<R> {
-    chain: PathChain<R>,
-    buffers: RoundBuffers<R>,
-}
-
-impl<R> Worker<R> for ChainWork<R> {
-    fn buffers(&self) -> &RoundBuffers<R> {
-        &self.buffers
-    }
-    fn buffers_mut(&mut self) -> &mut RoundBuffers<R> {
-        &mut self.buffers
+            self.buffers.visit(self.chain.current().film);
+        }
     }
 }

@@ -11,14 +11,13 @@ use alloc::vec::Vec;
 use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
 use crate::chain::ChainStats;
-use crate::drive::splat::{RoundBuffers, SplatBands, Splatting, Worker};
+use crate::drive::splat::{RoundBuffers, Runs, SplatBands, Splatting, Worker};
 use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
 use crate::exchange::{
     Ensemble, EnsembleSettings, ExchangeKind, ExchangeStats, Ladder, Move, Replica,
 };
-use crate::film::Film;
-use crate::oracle::{PathOracle, Radiance};
+use crate::oracle::PathOracle;
 use crate::parallel;
 use crate::target::Importance;
 
@@ -87,8 +86,10 @@ where
     let mut bootstrap = ensemble.bootstrap(oracle, importance, job.seed)?;
     let mut set_up = bootstrap.traced().paths;
     let bands = SplatBands::new(job.resolution);
-    let start = |i: usize, bootstrap: &Bootstrap| -> Result<EnsembleWork<O::Radiance>, Error> {
+    let start = |i: usize, bootstrap: &Bootstrap| -> Result<EnsembleWork<'_, O, I>, Error> {
         Ok(EnsembleWork {
+            oracle,
+            importance,
             ensemble: Ensemble::start(oracle, importance, &ensemble, bootstrap, i as u64),
             exchange: settings.exchange.build(bootstrap)?,
             buffers: RoundBuffers::new(bands),
@@ -127,112 +128,98 @@ where
         }
     }
 
-    let mut run = Sweeps {
-        oracle,
-        importance,
-        ensembles: Splatting::new(work, bands, O::Radiance::CHANNELS, traces_per_sweep),
-    };
-    let driven = drive(&mut run, job.budget, &job.clock, job.observer);
-    Ok(run.finish(driven, ensemble.ladder, &bootstrap, set_up))
+    let mut ensembles = Splatting::new(work, bands, traces_per_sweep)?;
+    let driven = drive(&mut ensembles, job.budget, &job.clock, job.observer);
+    Ok(finish(
+        ensembles,
+        driven,
+        ensemble.ladder,
+        &bootstrap,
+        set_up,
+    ))
 }
 
 /// An ensemble, its exchange move and what it produced in the current round.
-struct EnsembleWork<R> {
-    ensemble: Ensemble<R>,
-    exchange: Box<dyn Move<Replica<R>> + Send + Sync>,
-    buffers: RoundBuffers<R>,
+struct EnsembleWork<'a, O: PathOracle, I: ?Sized> {
+    oracle: &'a O,
+    importance: &'a I,
+    ensemble: Ensemble<O::Radiance>,
+    exchange: Box<dyn Move<Replica<O::Radiance>> + Send + Sync>,
+    buffers: RoundBuffers<O::Radiance>,
 }
 
-impl<R> Worker<R> for EnsembleWork<R> {
-    fn buffers(&self) -> &RoundBuffers<R> {
+impl<O: PathOracle, I: ?Sized> Worker for EnsembleWork<'_, O, I> {
+    type Radiance = O::Radiance;
+    fn buffers(&self) -> &RoundBuffers<O::Radiance> {
         &self.buffers
     }
-    fn buffers_mut(&mut self) -> &mut RoundBuffers<R> {
+    fn buffers_mut(&mut self) -> &mut RoundBuffers<O::Radiance> {
         &mut self.buffers
     }
 }
 
-/// Replica exchange's state between rounds: the ensembles and their film.
-struct Sweeps<'a, O: PathOracle, I: ?Sized> {
-    oracle: &'a O,
-    importance: &'a I,
-    ensembles: Splatting<EnsembleWork<O::Radiance>>,
-}
-
-impl<O, I> Sweeps<'_, O, I>
+impl<O, I> Runs for EnsembleWork<'_, O, I>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    fn finish(self, driven: Driven, ladder: Ladder, bootstrap: &Bootstrap, set_up: u64) -> Output {
-        let samples = self.ensembles.samples();
-        let (film, visits, work) = self.ensembles.finish();
-        let mut exchange = ExchangeStats::default();
-        let mut levels = vec![ChainStats::default(); ladder.len()];
-        let mut stats = RenderStats {
-            samples,
-            bootstrap_samples: set_up,
-            normalization: Some(bootstrap.normalization()),
-            ..Default::default()
-        };
-        for w in &work {
-            exchange.merge(w.ensemble.stats());
-            for (level, s) in levels.iter_mut().zip(w.ensemble.chain_stats()) {
-                level.merge(s);
-                stats.chains.merge(s);
+    /// `sweeps` sweeps, each splatting its weighted states and counting every
+    /// chain's state.
+    fn run(&mut self, sweeps: u64) {
+        for _ in 0..sweeps {
+            let buffers = &mut self.buffers;
+            self.ensemble.sweep(
+                self.oracle,
+                self.importance,
+                self.exchange.as_mut(),
+                |p, radiance, weight| buffers.splat(p, radiance, weight),
+            );
+            for r in self.ensemble.replicas() {
+                self.buffers.visit(r.state().film);
             }
-        }
-        stats.invalid_samples = stats.chains.invalid + bootstrap.traced().invalid;
-        Output {
-            film,
-            stats,
-            cancelled: driven.cancelled,
-            visits,
-            extras: Extras::Replica(ReplicaExtras {
-                exchange,
-                levels,
-                ladder,
-            }),
         }
     }
 }
 
-impl<O, I> Rounds for Sweeps<'_, O, I>
+/// The normalized image, the counters and the extras.
+fn finish<O, I>(
+    ensembles: Splatting<EnsembleWork<'_, O, I>>,
+    driven: Driven,
+    ladder: Ladder,
+    bootstrap: &Bootstrap,
+    set_up: u64,
+) -> Output
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    fn unit_cost(&self) -> u64 {
-        self.ensembles.unit_cost()
+    let samples = ensembles.samples();
+    let (film, visits, work) = ensembles.finish();
+    let mut exchange = ExchangeStats::default();
+    let mut levels = vec![ChainStats::default(); ladder.len()];
+    let mut stats = RenderStats {
+        samples,
+        bootstrap_samples: set_up,
+        normalization: Some(bootstrap.normalization()),
+        ..Default::default()
+    };
+    for w in &work {
+        exchange.merge(w.ensemble.stats());
+        for (level, s) in levels.iter_mut().zip(w.ensemble.chain_stats()) {
+            level.merge(s);
+            stats.chains.merge(s);
+        }
     }
-
-    fn planned_units(&self, samples: u64) -> u64 {
-        self.ensembles.planned_units(samples)
-    }
-
-    fn run(&mut self, units: u64) {
-        let (oracle, importance) = (self.oracle, self.importance);
-        self.ensembles.run(units, |w, sweeps| {
-            for _ in 0..sweeps {
-                let buffers = &mut w.buffers;
-                w.ensemble.sweep(
-                    oracle,
-                    importance,
-                    w.exchange.as_mut(),
-                    |p, radiance, weight| buffers.splat(p, radiance, weight),
-                );
-                for r in w.ensemble.replicas() {
-                    w.buffers.visit(r.state().film);
-                }
-            }
-        });
-    }
-
-    fn samples(&self) -> u64 {
-        self.ensembles.samples()
-    }
-
-    fn preview(&self) -> Film {
-        self.ensembles.preview()
+    stats.invalid_samples = stats.chains.invalid + bootstrap.traced().invalid;
+    Output {
+        film,
+        stats,
+        cancelled: driven.cancelled,
+        visits,
+        extras: Extras::Replica(ReplicaExtras {
+            exchange,
+            levels,
+            ladder,
+        }),
     }
 }

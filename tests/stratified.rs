@@ -24,19 +24,9 @@ use strata::native::{builtin, native_tracer};
 use std::sync::atomic::{AtomicU32, Ordering};
 
 mod common;
-use common::{RUNS, check, renders};
+use common::{RUNS, check, renders, run};
 mod threads;
 use threads::{bits, in_pool};
-
-/// `method` on `oracle` at `seed` with `spp` paths per pixel.
-fn run<O: PathOracle>(oracle: &O, seed: u64, spp: u64, method: Method) -> Output {
-    let settings = Settings {
-        seed,
-        budget: Budget::samples_per_pixel(spp, oracle.resolution()),
-        method,
-    };
-    render(oracle, &MaxChannel, &settings, &Silent).unwrap()
-}
 
 /// Stratified MCMC with `settings`.
 fn stratified_with<O: PathOracle>(

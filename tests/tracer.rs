@@ -9,14 +9,15 @@ use strata::engine::method::{PssmltSettings, ReplicaSettings};
 use strata::engine::purity::check_purity;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
-    Budget, Film, FilmPoint, Method, Output, PathOracle, Resolution, Settings, Silent, Temperature,
-    render,
+    Budget, Film, FilmPoint, Method, PathOracle, Resolution, Settings, Silent, Temperature, render,
 };
 use strata::native::builtin::{self, cuboid};
 use strata::native::material::{Material, Texture};
 use strata::native::tracer::Regularization;
 use strata::native::{Camera, Scene, native_tracer};
 
+mod common;
+use common::run;
 mod threads;
 use threads::{bits, in_pool};
 
@@ -42,16 +43,6 @@ fn assert_channel_means_agree(scene: &str, mc: &[Film], method: &str, other: &[F
         );
         assert!(a > 0.0);
     }
-}
-
-/// `method` on `oracle` at `seed` with `spp` paths per pixel.
-fn run<O: PathOracle>(oracle: &O, seed: u64, spp: u64, method: Method) -> Output {
-    let settings = Settings {
-        seed,
-        budget: Budget::samples_per_pixel(spp, oracle.resolution()),
-        method,
-    };
-    render(oracle, &MaxChannel, &settings, &Silent).unwrap()
 }
 
 fn mc_runs<O: PathOracle>(oracle: &O, spp: u64, runs: u64) -> Vec<Film> {

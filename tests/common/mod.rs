@@ -8,10 +8,13 @@
 //! that any of ~1000 values of a correct estimator exceeds 6.5 is below 1e-3),
 //! and each channel's image mean within `Z_TOTAL`.
 
+// Every test crate that includes this module uses some of it.
+#![allow(dead_code)]
+
 use std::ops::Range;
 
-use strata::engine::target::Importance;
-use strata::engine::{Budget, Film, Method, PathOracle, Settings, Silent, render};
+use strata::engine::target::{Importance, MaxChannel};
+use strata::engine::{Budget, Film, Method, Output, PathOracle, Settings, Silent, render};
 
 pub const RUNS: u64 = 32;
 const Z_PIXEL: f64 = 6.5;
@@ -58,6 +61,17 @@ pub fn check(label: &str, runs: &[Film], reference: &Film) -> f64 {
         );
     }
     worst
+}
+
+/// `method` on `oracle` (importance: the largest channel) at `seed` with
+/// `spp` paths per pixel.
+pub fn run<O: PathOracle>(oracle: &O, seed: u64, spp: u64, method: Method) -> Output {
+    let settings = Settings {
+        seed,
+        budget: Budget::samples_per_pixel(spp, oracle.resolution()),
+        method,
+    };
+    render(oracle, &MaxChannel, &settings, &Silent).unwrap()
 }
 
 /// The images of `method` on `oracle` with `spp` paths per pixel, one per

@@ -274,7 +274,7 @@ pub fn rank_normalized_rhat(chains: &[Vec<f64>]) -> f64 {
 }
 
 /// A sample-density map: `visits` (per pixel, e.g.
-/// [`RenderOutput::visits`](crate::render::RenderOutput::visits)) as a
+/// [`Output::visits`](crate::Output::visits)) as a
 /// one-channel film scaled to mean 1, so 1 is "uniform" and 4 is "four times
 /// the average number of samples". `None` if the shape does not match or
 /// nothing was visited.

@@ -1,32 +1,26 @@
 //! # strata-engine
 //!
 //! A `no_std` + `alloc` Markov-chain Monte Carlo engine for light transport. It
-//! knows nothing of rays: it drives a [`PathOracle`](oracle::PathOracle) that maps
+//! knows nothing of rays: it drives a [`PathOracle`] that maps
 //! a film point and a stream of numbers in `[0, 1)` to a path contribution.
 //!
-//! The pieces, by module:
+//! Render with any method through one entry point, [`render`]: a
+//! [`Settings`] holds the seed, the [`Budget`] and the [`Method`] with its own
+//! settings; every method returns the same [`Output`]. [`prelude`] has what an
+//! embedder needs.
 //!
-//! | module | owns |
-//! |---|---|
-//! | [`oracle`] | the oracle contract: [`PathOracle`](oracle::PathOracle), [`Sampler`](oracle::Sampler), [`Radiance`](oracle::Radiance), [`PathSample`](oracle::PathSample) |
-//! | [`purity`] | checking that an oracle is a pure function of its inputs |
-//! | [`sample`] | the lazily mutated primary-sample-space sampler, the independent sampler |
-//! | [`mutate`] | small-step kernels (Kelemen, Gaussian, adaptive) and their parameters |
-//! | [`target`] | importance functions (max channel, luminance, closures) |
-//! | [`chain`] | one Metropolis-Hastings chain with expected-values splatting |
-//! | [`bootstrap`] | start-up bias elimination (normalization `b*`, resampled chain starts) |
-//! | [`render`] | the drivers: independent MC and PSSMLT, budgets, observers |
-//! | [`stages`] | multi-stage MLT: importance equalized over a refining grid of image regions (seed 004 Alg. 2) |
-//! | [`tiles`] | the overlapping per-pixel tiles of stratified MCMC (seed 001 sec. 3) |
-//! | [`stratify`] | stratified MCMC: tile chains with coherent sampling, global-chain initialization, local replica exchange, `render_stratified` (seed 001) |
-//! | [`erpt`] | energy redistribution path tracing in primary sample space (seed 001's baseline) |
-//! | [`reconstruct`] | the tile normalizations from overlapping unscaled estimates: weighted iterative and log-domain solvers (seed 001 sec. 3.2) |
-//! | [`exchange`] | replica exchange: ladders, every exchange move of seed 002 ch. 5, ensembles, their driver |
-//! | [`film`] | f64 accumulation buffers |
-//! | [`metrics`] | MAPE, relMSE, L1, L2, MSE |
-//! | [`diagnose`] | autocorrelation, effective sample size, rank-normalized split R-hat |
-//! | [`convergence`] | the convergence constant of seed 003: predicted nMSE of an MCMC configuration (Alg. 1-2) |
-//! | [`analytic`] | targets and oracles with known answers |
+//! The pieces, by layer (a module uses only the layers below it):
+//!
+//! | layer | module | owns |
+//! |---|---|---|
+//! | contract | [`oracle`] | what a renderer implements: [`PathOracle`], [`Sampler`], [`Radiance`], [`PathSample`]; [`FnOracle`] |
+//! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], [`purity`] | random streams; the small-step kernels whole (catch-up included); the lazily mutated primary sample; importance functions; accumulation buffers; the purity check |
+//! | one step | [`chain`] | the Metropolis-Hastings step with expected-values splatting, over any [`Target`](chain::Target) and [`Weights`](chain::Weights) |
+//! | set-up | [`bootstrap`] | start-up bias elimination: `b*` per level, importance-resampled chain starts |
+//! | one loop | [`drive`] | budgets, clock, observer, the round loop, the deterministic merge, statistics |
+//! | methods | [`method`] | [`Settings`], [`Method`], [`Output`], [`render`]; MC, PSSMLT, replica exchange, stratified MCMC, ERPT, multi-stage MLT |
+//! | method parts | [`exchange`], [`tiles`], [`reconstruct`] | replica exchange's ensembles, ladders and every move of seed 002 ch. 5; stratified MCMC's tiles and the reconstruction of their normalizations (seed 001 sec. 3.2) |
+//! | diagnostics | [`metrics`], [`diagnose`], [`convergence`], [`analytic`] | error metrics; autocorrelation, ESS, R-hat; seed 003's predicted error; targets with known answers |
 //!
 //! Features: `std` (default) adds time budgets; `parallel` runs chains on rayon.
 //! Results never depend on the number of threads.

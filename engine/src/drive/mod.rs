@@ -1,16 +1,17 @@
 //! The one loop every method runs in: budgets, the clock, the observer
 //! (progress, previews, cancellation), rounds and the statistics of a render.
 //!
-//! A method puts its state behind [`Rounds`]: what one *unit* of its work
-//! costs and does (a step of every chain, a sweep of every tile, a pass),
-//! how many units a sample budget buys, and what its image is now. [`drive`]
-//! then runs rounds of units until the budget is spent or the observer stops
-//! it, calling the observer between rounds.
+//! A method puts its state behind the crate's `Rounds` trait: what one
+//! *unit* of its work costs and does (a step of every chain, a sweep of every
+//! tile, a block of start paths), how many units a sample budget buys, and
+//! what its image is now. The round loop then runs rounds of units until the
+//! budget is spent or the observer stops it, calling the observer between
+//! rounds.
 //!
 //! Determinism: a sample budget fixes the number of units and the size of
 //! every round (from the settings only), every method runs a round's units in
 //! parallel with one random stream per chain, tile or row, and merges what
-//! they produced in a fixed order ([`splat`]). The same seed and a sample
+//! they produced in a fixed order (the `splat` module). The same seed and a sample
 //! budget give a bit-identical image whatever the number of threads. A time
 //! budget ends after a machine-dependent number of rounds (which grow while
 //! they take under 50 ms), so it is reproducible only in distribution.

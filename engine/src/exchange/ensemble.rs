@@ -72,7 +72,7 @@ impl EnsembleSettings {
     }
 
     /// The bootstrap of an ensemble with these settings (see
-    /// [`tempered`](super::tempered)): `b_j` per chain, the chains' starts and
+    /// [`TemperedPath`](super::TemperedPath)): `b_j` per chain, the chains' starts and
     /// the value ranges of their energy levels.
     pub fn bootstrap<O, I>(&self, oracle: &O, importance: &I, seed: u64) -> Result<Bootstrap, Error>
     where
@@ -251,7 +251,7 @@ impl<R: Radiance> Ensemble<R> {
     /// One sweep: chains mutate from the hottest down, with `exchange`'s hooks
     /// around each mutation and after the sweep. `splat(film, f, weight)`
     /// receives the weighted contributions (see
-    /// [`tempered`](super::tempered)); the method scales them by `W·H / sweeps`.
+    /// [`TemperedPath`](super::TemperedPath)); the method scales them by `W·H / sweeps`.
     pub fn sweep<O, I>(
         &mut self,
         oracle: &O,

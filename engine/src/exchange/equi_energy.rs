@@ -234,6 +234,7 @@ impl<S> EquiEnergySampler<S> {
 
     /// Replaces chain `chain`'s records (sorted by `key`, the value of chain
     /// `chain - 1`'s target) — for tests that need exact ring contents.
+    #[cfg(any(test, feature = "test-hooks"))]
     pub fn set_records(&mut self, chain: usize, mut records: Vec<(f64, S)>) {
         records.sort_by(|a, b| a.0.total_cmp(&b.0));
         let r = &mut self.reservoirs[chain];

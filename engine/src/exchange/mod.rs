@@ -37,11 +37,11 @@ pub use equi_energy::{EnergyLevels, EquiEnergy, EquiEnergySampler};
 pub use kind::ExchangeKind;
 pub use ladder::Ladder;
 pub use moves::{IsPermutation, IsSwap, NeighborSwap, NonReversible};
-pub use permutation::{
-    MAX_PERMUTATION_CHAINS, PermutationSampler, for_each_permutation,
-    log_normalization_by_enumeration,
-};
-pub use stats::{ExchangeStats, SweepRecorder};
+pub use permutation::{MAX_PERMUTATION_CHAINS, PermutationSampler};
+#[cfg(any(test, feature = "test-hooks"))]
+pub use permutation::{for_each_permutation, log_normalization_by_enumeration};
+pub use stats::ExchangeStats;
+pub(crate) use stats::SweepRecorder;
 pub use tempered::{Replica, TemperedPath, Tempering};
 
 /// A state of the ensemble that knows the value of every chain's target at

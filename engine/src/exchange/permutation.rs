@@ -237,6 +237,7 @@ impl PermutationSampler {
 /// `ln b_O` by enumerating all `M!` permutations (with the same row and
 /// column scaling, products of `M` scaled values each):
 /// the reference the subset recursion is tested and benchmarked against.
+#[cfg(any(test, feature = "test-hooks"))]
 pub fn log_normalization_by_enumeration(log_values: &[f64], chains: usize) -> f64 {
     let mut scaled = vec![0.0; chains * chains];
     let log_scale = scale_rows_and_columns(log_values, chains, &mut scaled);
@@ -252,6 +253,7 @@ pub fn log_normalization_by_enumeration(log_values: &[f64], chains: usize) -> f6
 }
 
 /// Calls `f` with every permutation of `0..n` (Heap's algorithm).
+#[cfg(any(test, feature = "test-hooks"))]
 pub fn for_each_permutation(n: usize, mut f: impl FnMut(&[usize])) {
     let mut o: Vec<usize> = (0..n).collect();
     let mut c = vec![0usize; n];

@@ -195,7 +195,7 @@ enum Heading {
 /// Per-sweep bookkeeping of an ensemble: where each state (label) was at the
 /// start of the sweep, and where it is heading.
 #[derive(Clone, Debug)]
-pub struct SweepRecorder {
+pub(crate) struct SweepRecorder {
     start: Vec<usize>,
     jumped: Vec<bool>,
     heading: Vec<Heading>,

@@ -108,9 +108,10 @@ where
         jitter: FilmPoint,
         out: &mut TileState<O::Radiance>,
     ) -> Traced {
-        out.values.clear();
+        // Sized once (a chain's spare state starts empty), then overwritten.
         out.values
             .resize(self.tiles.offsets().len(), Value::default());
+        out.values.fill(Value::default());
         out.target = 0.0;
         let mut traced = Traced::default();
         for (o, q) in self.tiles.pixels(tile) {

@@ -238,7 +238,8 @@ fn run(args: &Args) -> AnyResult<()> {
     );
     if let Some(b) = s.normalization {
         println!(
-            "b* = {b:.6}, acceptance = {:.3}",
+            "b = {b:.6} (relative standard error {:.2} %), acceptance = {:.3}",
+            100.0 * s.normalization_error.unwrap_or(f64::NAN),
             s.chains.acceptance_rate()
         );
     }

@@ -5,7 +5,10 @@ use strata::engine::analytic::{GaussianMixture, ProceduralImage};
 use strata::engine::method::PssmltSettings;
 use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
 use strata::engine::target::{Luminance, MaxChannel};
-use strata::engine::{Method, Resolution};
+use strata::engine::{
+    Budget, FilmPoint, FnOracle, Method, PathOracle, PathSample, Resolution, Sampler, Settings,
+    Silent, Temperature, render,
+};
 
 mod common;
 use common::{RUNS, check, renders};
@@ -45,4 +48,58 @@ fn pssmlt_matches_a_four_dimensional_gaussian_mixture() {
     let method = pssmlt(MutationParams::default());
     let runs = renders(&mixture, &Luminance, &method, 128, 0..RUNS);
     check("pssmlt gaussian mixture", &runs, &reference);
+}
+
+/// PSSMLT's normalization pools the large steps with the bootstrap (seed 002
+/// eq. 3.12 over every uniform sample the render draws), so the image's
+/// brightness error falls with the render time instead of staying at the
+/// bootstrap's. A light reached by 5 % of the paths and a bootstrap of 1024
+/// candidates: `b*` alone has a relative standard deviation of
+/// `sqrt(0.95 / (0.05 · 1024)) = 13.6 %`, which a bootstrap-only render's
+/// image mean inherits. Over 16 seeds at 2048 paths per pixel the image
+/// mean's spread must be a third of that or less (observed ~3 %).
+#[test]
+fn pssmlt_brightness_error_falls_below_the_bootstraps() {
+    let q = 0.05;
+    let oracle = FnOracle::new(
+        Resolution::new(16, 16),
+        move |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+            PathSample::new(if s.next_1d() < q as f32 { 10.0f32 } else { 0.0 })
+        },
+    );
+    let candidates = 1024;
+    let method = Method::Pssmlt(PssmltSettings {
+        chains: 16,
+        bootstrap_candidates: candidates,
+        ..Default::default()
+    });
+    let bootstrap_only = ((1.0 - q) / (q * candidates as f64)).sqrt();
+    let (mut means, mut reported) = (Vec::new(), Vec::new());
+    for seed in 0..16 {
+        let settings = Settings {
+            seed,
+            budget: Budget::samples_per_pixel(2048, oracle.resolution()),
+            method: method.clone(),
+        };
+        let out = render(&oracle, &MaxChannel, &settings, &Silent).unwrap();
+        means.push(out.film.channel_mean(0) / (10.0 * q));
+        reported.push(out.stats.normalization_error.unwrap());
+    }
+    let n = means.len() as f64;
+    let mean = means.iter().sum::<f64>() / n;
+    let sd = (means.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    assert!(
+        sd < bootstrap_only / 3.0,
+        "image mean spread {sd:.4} vs the bootstrap's {bootstrap_only:.4}"
+    );
+    // The reported error is that of every uniform sample pooled (~1.2 %).
+    assert!(
+        reported.iter().all(|&e| e < bootstrap_only / 5.0),
+        "{reported:?}"
+    );
+    // And the brightness is right: within 4 standard errors of the mean.
+    assert!(
+        (mean - 1.0).abs() < 4.0 * sd / n.sqrt(),
+        "mean {mean}, sd {sd}"
+    );
 }

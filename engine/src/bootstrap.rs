@@ -18,7 +18,7 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
-use crate::chain::{Chain, KelemenWeights, PathChain, PathTarget, Traced};
+use crate::chain::{Chain, KelemenWeights, Normalization, PathChain, PathTarget, Traced};
 use crate::error::Error;
 use crate::mutate::SmallStep;
 use crate::oracle::PathOracle;
@@ -153,6 +153,16 @@ impl Bootstrap {
     /// primary sample space.
     pub fn normalization(&self) -> f64 {
         self.normalizations[0]
+    }
+
+    /// The samples behind `b*` of `level` (to pool with later uniform
+    /// samples of the same values, such as large steps).
+    pub fn estimate(&self, level: usize) -> Normalization {
+        let mut estimate = Normalization::default();
+        for row in self.values.chunks(self.levels) {
+            estimate.add(row[level]);
+        }
+        estimate
     }
 
     /// `b*` of every level.

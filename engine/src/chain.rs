@@ -314,6 +314,64 @@ where
     }
 }
 
+/// A running estimate of a normalization `b = ∫ π` from independent uniform
+/// samples of `π` (bootstrap candidates, large-step proposals): their mean
+/// (seed 002 eq. 3.12) and its standard error.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Normalization {
+    samples: u64,
+    sum: f64,
+    squares: f64,
+}
+
+impl Normalization {
+    /// Adds the sample `value` (`π` at a uniform primary sample; 0 where the
+    /// path was invalid).
+    #[inline]
+    pub fn add(&mut self, value: f64) {
+        self.samples += 1;
+        self.sum += value;
+        self.squares += value * value;
+    }
+
+    /// Adds `other`'s samples.
+    pub fn merge(&mut self, other: &Normalization) {
+        self.samples += other.samples;
+        self.sum += other.sum;
+        self.squares += other.squares;
+    }
+
+    /// Samples so far.
+    pub fn samples(&self) -> u64 {
+        self.samples
+    }
+
+    /// Their sum.
+    pub fn sum(&self) -> f64 {
+        self.sum
+    }
+
+    /// The estimate of `b`: the samples' mean (0 without samples).
+    pub fn value(&self) -> f64 {
+        if self.samples == 0 {
+            0.0
+        } else {
+            self.sum / self.samples as f64
+        }
+    }
+
+    /// The estimate's relative standard error, `sd / (b √n)` (infinite with
+    /// fewer than two samples or a zero mean).
+    pub fn relative_error(&self) -> f64 {
+        let (n, mean) = (self.samples as f64, self.value());
+        if self.samples < 2 || mean <= 0.0 {
+            return f64::INFINITY;
+        }
+        let variance = (self.squares / n - mean * mean).max(0.0) * n / (n - 1.0);
+        libm::sqrt(variance / n) / mean
+    }
+}
+
 /// Kelemen's weights (see the module docs) with normalization `b` and large
 /// step probability `p`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -371,13 +429,15 @@ pub fn splat_weights(
 /// A chain over paths that draws its own large steps and weights its
 /// samples by Kelemen's weights, with its own decisions and counters: the
 /// chain of PSSMLT, of stratified MCMC's global chains and of seed 003's
-/// predictions.
+/// predictions. Its large-step proposals are uniform samples of the
+/// importance, summed for the normalization.
 #[derive(Clone, Debug)]
 pub struct PathChain<R> {
     chain: Chain<Evaluated<R>>,
     weights: KelemenWeights,
     decisions: Pcg32,
     stats: ChainStats,
+    large_steps: Normalization,
 }
 
 impl<R: Radiance> PathChain<R> {
@@ -388,7 +448,18 @@ impl<R: Radiance> PathChain<R> {
             weights,
             decisions,
             stats: ChainStats::default(),
+            large_steps: Normalization::default(),
         }
+    }
+
+    /// The importance at this chain's large-step proposals.
+    pub fn large_steps(&self) -> &Normalization {
+        &self.large_steps
+    }
+
+    /// Weights the next steps' samples with normalization `b`.
+    pub fn set_normalization(&mut self, b: f64) {
+        self.weights.normalization = b;
     }
 
     /// The current path.
@@ -420,13 +491,17 @@ impl<R: Radiance> PathChain<R> {
         I: Importance<R> + ?Sized,
     {
         let large = uniform_f64(&mut self.decisions) < self.weights.large_step_probability;
-        self.chain.step(
+        let outcome = self.chain.step(
             &PathTarget { oracle, importance },
             &self.weights,
             large,
             &mut self.decisions,
             &mut self.stats,
             splat,
-        )
+        );
+        if large {
+            self.large_steps.add(self.chain.last_proposal().importance);
+        }
+        outcome
     }
 }

@@ -90,8 +90,12 @@ pub struct RenderStats {
     pub bootstrap_samples: u64,
     /// Samples with NaN, infinite or negative radiance (or importance), excluded.
     pub invalid_samples: u64,
-    /// The bootstrap normalization `b*` (MCMC methods with a bootstrap).
+    /// The normalization `b`, the integral of the importance (MCMC methods
+    /// with a bootstrap): the mean importance of the bootstrap candidates and,
+    /// for PSSMLT and replica exchange, of every large-step proposal too.
     pub normalization: Option<f64>,
+    /// The relative standard error of `normalization`.
+    pub normalization_error: Option<f64>,
     /// Chain counters summed over chains (MCMC methods).
     pub chains: ChainStats,
 }

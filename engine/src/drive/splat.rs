@@ -72,6 +72,15 @@ pub(crate) trait Worker {
 pub(crate) trait Runs: Worker + Send + Sync {
     /// Runs `units` more units.
     fn run(&mut self, units: u64);
+
+    /// After every round, once its splats are merged, with every worker in
+    /// merge order (e.g. to refine a normalization they share).
+    fn after_round(workers: &mut [Self])
+    where
+        Self: Sized,
+    {
+        let _ = workers;
+    }
 }
 
 /// Horizontal bands of the film.
@@ -192,6 +201,7 @@ impl<W: Runs> Rounds for Splatting<W> {
         parallel::for_each(&mut self.work, |w| w.run(units));
         self.bands
             .merge(&mut self.work, &mut self.film, &mut self.visits);
+        W::after_round(&mut self.work);
         self.units += units;
     }
 

@@ -11,7 +11,7 @@ use rand_pcg::Pcg32;
 use super::tempered::{EnsembleWeights, Levels, Replica, TemperedPath, TemperedTarget, Tempering};
 use super::{Exchange, ExchangeStats, Ladder, Move, SweepRecorder};
 use crate::bootstrap::Bootstrap;
-use crate::chain::ChainStats;
+use crate::chain::{ChainStats, Normalization};
 use crate::error::{Error, check_probability};
 use crate::mutate::MutationParams;
 use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance};
@@ -107,6 +107,8 @@ pub struct Ensemble<R> {
     chain_stats: Vec<ChainStats>,
     sweep: u64,
     neighbor: Vec<f64>,
+    /// Per level, `π_k` at the large-step proposals of every chain.
+    large_steps: Vec<Normalization>,
 }
 
 impl<R: Radiance> Ensemble<R> {
@@ -167,7 +169,20 @@ impl<R: Radiance> Ensemble<R> {
             chain_stats: vec![ChainStats::default(); m],
             sweep: 0,
             neighbor: vec![0.0; m.saturating_sub(1)],
+            large_steps: vec![Normalization::default(); m],
         }
+    }
+
+    /// Per level, the value of its target at every large-step proposal of
+    /// every chain (uniform samples: the row of a proposal holds every
+    /// level's value), since the ladder was set.
+    pub fn large_steps(&self) -> &[Normalization] {
+        &self.large_steps
+    }
+
+    /// The normalizations `b_j` the next sweeps weight with.
+    pub fn set_normalizations(&mut self, normalizations: &[f64]) {
+        self.normalizations.copy_from_slice(normalizations);
     }
 
     /// The states, chain by chain (chain 0 samples the exact target).
@@ -246,6 +261,7 @@ impl<R: Radiance> Ensemble<R> {
         let m = self.temperatures.len();
         self.stats = ExchangeStats::new(m);
         self.chain_stats = vec![ChainStats::default(); m];
+        self.large_steps = vec![Normalization::default(); m];
     }
 
     /// One sweep: chains mutate from the hottest down, with `exchange`'s hooks
@@ -328,6 +344,12 @@ impl<R: Radiance> Ensemble<R> {
                 &mut self.chain_stats[c],
                 |path, weight| splat(path.film, path.radiance, weight),
             );
+            if large {
+                let row = &self.replicas[c].last_proposal().values;
+                for (sums, &value) in self.large_steps.iter_mut().zip(row) {
+                    sums.add(value);
+                }
+            }
             exchange.after_mutation(&mut ex!(), c);
         }
         exchange.after_sweep(&mut ex!());

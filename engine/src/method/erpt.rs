@@ -127,6 +127,7 @@ where
     let mut stats = RenderStats {
         bootstrap_samples: bootstrap.traced().paths,
         normalization: Some(bootstrap.normalization()),
+        normalization_error: Some(bootstrap.estimate(0).relative_error()),
         ..Default::default()
     };
     for w in &run.work {

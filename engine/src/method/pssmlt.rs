@@ -5,7 +5,7 @@
 
 use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
-use crate::chain::PathChain;
+use crate::chain::{Normalization, PathChain};
 use crate::drive::splat::{RoundBuffers, Runs, SplatBands, Splatting, Worker};
 use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
@@ -85,11 +85,13 @@ where
         )?;
         let bands = SplatBands::new(job.resolution);
         let p_large = settings.mutation.large_step_probability;
+        let prior = bootstrap.estimate(0);
         let start = |i: usize| ChainWork {
             oracle,
             importance,
             chain: bootstrap.start_path_chain(oracle, importance, i as u64, p_large),
             buffers: RoundBuffers::new(bands),
+            prior,
         };
         let work = parallel::map_indices(settings.chains as usize, start);
         Ok(Self {
@@ -102,10 +104,12 @@ where
     pub(crate) fn finish(self, driven: Driven) -> Output {
         let samples = self.chains.samples();
         let (film, visits, work) = self.chains.finish();
+        let normalization = ChainWork::pooled(&work);
         let mut stats = RenderStats {
             samples,
             bootstrap_samples: self.bootstrap.traced().paths,
-            normalization: Some(self.bootstrap.normalization()),
+            normalization: Some(normalization.value()),
+            normalization_error: Some(normalization.relative_error()),
             ..Default::default()
         };
         for w in &work {
@@ -128,6 +132,20 @@ pub(crate) struct ChainWork<'a, O: PathOracle, I: ?Sized> {
     importance: &'a I,
     chain: PathChain<O::Radiance>,
     buffers: RoundBuffers<O::Radiance>,
+    /// The bootstrap's samples of the normalization (the same in every chain).
+    prior: Normalization,
+}
+
+impl<O: PathOracle, I: ?Sized> ChainWork<'_, O, I> {
+    /// The normalization from the bootstrap and every chain's large steps,
+    /// pooled in chain order.
+    fn pooled(work: &[Self]) -> Normalization {
+        let mut pooled = work.first().map(|w| w.prior).unwrap_or_default();
+        for w in work {
+            pooled.merge(w.chain.large_steps());
+        }
+        pooled
+    }
 }
 
 impl<O: PathOracle, I: ?Sized> Worker for ChainWork<'_, O, I> {
@@ -154,6 +172,17 @@ where
                     buffers.splat(path.film, path.sample.radiance, weight);
                 });
             self.buffers.visit(self.chain.current().film);
+        }
+    }
+
+    /// The chains weight their next samples with the normalization of every
+    /// uniform sample so far, the bootstrap's and the large steps', whose
+    /// error falls as the render runs (the weights are unbiased with the exact
+    /// `b`, see [`chain`](crate::chain)).
+    fn after_round(work: &mut [Self]) {
+        let b = Self::pooled(work).value();
+        for w in work {
+            w.chain.set_normalization(b);
         }
     }
 }

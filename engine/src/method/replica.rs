@@ -10,7 +10,7 @@ use alloc::vec::Vec;
 
 use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
-use crate::chain::ChainStats;
+use crate::chain::{ChainStats, Normalization};
 use crate::drive::splat::{RoundBuffers, Runs, SplatBands, Splatting, Worker};
 use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
@@ -93,6 +93,7 @@ where
             ensemble: Ensemble::start(oracle, importance, &ensemble, bootstrap, i as u64),
             exchange: settings.exchange.build(bootstrap)?,
             buffers: RoundBuffers::new(bands),
+            prior: priors(bootstrap),
         })
     };
     let mut work = (0..settings.ensembles as usize)
@@ -125,6 +126,7 @@ where
             w.ensemble
                 .set_ladder(oracle, importance, &ensemble.ladder, &bootstrap);
             w.exchange = settings.exchange.build(&bootstrap)?;
+            w.prior = priors(&bootstrap);
         }
     }
 
@@ -139,6 +141,13 @@ where
     ))
 }
 
+/// The bootstrap's samples of every level's normalization.
+fn priors(bootstrap: &Bootstrap) -> Vec<Normalization> {
+    (0..bootstrap.levels())
+        .map(|j| bootstrap.estimate(j))
+        .collect()
+}
+
 /// An ensemble, its exchange move and what it produced in the current round.
 struct EnsembleWork<'a, O: PathOracle, I: ?Sized> {
     oracle: &'a O,
@@ -146,6 +155,23 @@ struct EnsembleWork<'a, O: PathOracle, I: ?Sized> {
     ensemble: Ensemble<O::Radiance>,
     exchange: Box<dyn Move<Replica<O::Radiance>> + Send + Sync>,
     buffers: RoundBuffers<O::Radiance>,
+    /// The bootstrap's samples of every level's normalization (the same in
+    /// every ensemble).
+    prior: Vec<Normalization>,
+}
+
+impl<O: PathOracle, I: ?Sized> EnsembleWork<'_, O, I> {
+    /// Every level's normalization from the bootstrap and every ensemble's
+    /// large steps, pooled in ensemble order.
+    fn pooled(work: &[Self]) -> Vec<Normalization> {
+        let mut pooled = work.first().map(|w| w.prior.clone()).unwrap_or_default();
+        for w in work {
+            for (level, sums) in pooled.iter_mut().zip(w.ensemble.large_steps()) {
+                level.merge(sums);
+            }
+        }
+        pooled
+    }
 }
 
 impl<O: PathOracle, I: ?Sized> Worker for EnsembleWork<'_, O, I> {
@@ -179,6 +205,19 @@ where
             }
         }
     }
+
+    /// The ensembles weight their next samples with every level's
+    /// normalization from every uniform sample so far (see `ChainWork` of
+    /// PSSMLT).
+    fn after_round(work: &mut [Self]) {
+        let b: Vec<f64> = Self::pooled(work)
+            .iter()
+            .map(Normalization::value)
+            .collect();
+        for w in work {
+            w.ensemble.set_normalizations(&b);
+        }
+    }
 }
 
 /// The normalized image, the counters and the extras.
@@ -195,12 +234,14 @@ where
 {
     let samples = ensembles.samples();
     let (film, visits, work) = ensembles.finish();
+    let normalization = EnsembleWork::pooled(&work)[0];
     let mut exchange = ExchangeStats::default();
     let mut levels = vec![ChainStats::default(); ladder.len()];
     let mut stats = RenderStats {
         samples,
         bootstrap_samples: set_up,
-        normalization: Some(bootstrap.normalization()),
+        normalization: Some(normalization.value()),
+        normalization_error: Some(normalization.relative_error()),
         ..Default::default()
     };
     for w in &work {

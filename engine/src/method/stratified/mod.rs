@@ -353,8 +353,8 @@ where
                 samples: traced - bootstrap_traces,
                 bootstrap_samples: bootstrap_traces,
                 invalid_samples: chain_stats.invalid + self.exchange_invalid,
-                normalization: None,
                 chains: chain_stats,
+                ..Default::default()
             },
             cancelled: driven.cancelled,
             visits,

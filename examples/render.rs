@@ -380,7 +380,8 @@ fn report_extras(extras: &Extras) {
             println!(
                 "{} sweeps; paths: tiles {}, exchanges {}, initialization {}; tiles started by \
                  global chains {}, borrowing {}, uniform draws {}, never {}; exchanges \
-                 accepted {}/{}; pixels that took their MC estimate {}",
+                 accepted {}/{}; pixels that took their MC estimate {}; image scaled by {:.4} \
+                 to the MC total",
                 s.sweeps,
                 s.tile_samples,
                 s.exchange_samples,
@@ -391,7 +392,8 @@ fn report_extras(extras: &Extras) {
                 s.never_initialized,
                 s.exchange_accepted,
                 s.exchange_attempts,
-                s.fallback_pixels
+                s.fallback_pixels,
+                s.total_scale
             );
         }
         Extras::MultiStage(stages) => {

@@ -58,15 +58,28 @@ pub(super) fn check_shapes(tiles: &Tiles, g: &[f64], mc: &[f64]) -> Result<(), E
     Ok(())
 }
 
+/// Whether each tile has an estimate: some `G_s(k) > 0` (`g` holds
+/// `channels` values per tile and offset). A tile whose chain never found a
+/// state with `T_s > 0` has none: its zeros are no estimate of its pixels,
+/// and eq. 12 and the weighted solver leave it out.
+pub fn informative(tiles: &Tiles, g: &[f64], channels: usize) -> Vec<bool> {
+    let per_tile = tiles.offsets().len() * channels;
+    g.chunks(per_tile)
+        .map(|tile| tile.iter().any(|&v| v > 0.0))
+        .collect()
+}
+
 /// The image of eq. 12: every pixel the mean of its tiles' `b_s G_s(j)`,
-/// channel by channel. `g` holds `channels` values per tile and offset
-/// (`(s · offsets + o) · channels + c`); the result `channels` per pixel.
+/// channel by channel, over the [`informative`] tiles holding it. `g` holds
+/// `channels` values per tile and offset (`(s · offsets + o) · channels +
+/// c`); the result `channels` per pixel.
 pub fn image(tiles: &Tiles, g: &[f64], b: &[f64], channels: usize) -> Vec<f64> {
     let o = tiles.offsets().len();
+    let informative = informative(tiles, g, channels);
     let mut out = vec![0.0; tiles.count() * channels];
     for (j, pixel) in out.chunks_mut(channels).enumerate() {
         let mut count = 0;
-        for (s, off) in tiles.tiles_of(j) {
+        for (s, off) in tiles.tiles_of(j).filter(|&(s, _)| informative[s]) {
             count += 1;
             for (c, v) in pixel.iter_mut().enumerate() {
                 *v += b[s] * g[(s * o + off) * channels + c];

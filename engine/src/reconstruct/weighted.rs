@@ -7,7 +7,7 @@ use alloc::vec::Vec;
 
 use super::planes::{Planes, Stencil};
 use super::stencil::{Chunks, Linear};
-use super::{check_shapes, initial_normalizations, tile_means};
+use super::{check_shapes, informative, initial_normalizations, tile_means};
 use crate::error::Error;
 use crate::parallel::{self, map_indices, threads};
 use crate::tiles::Tiles;
@@ -182,11 +182,11 @@ struct Problem {
     stencil: Stencil,
     /// `G_s(o) · g_scale`, one plane per tile offset `o`.
     gp: Vec<Vec<f32>>,
-    /// 1 / the number of tiles containing each pixel (eq. 12).
+    /// 1 / the number of informative tiles containing each pixel (eq. 12).
     per_pixel: Vec<f32>,
     /// 1 / the number of pixels of each tile.
     per_tile: Vec<f32>,
-    /// 1 on tiles, 0 on the padding.
+    /// 1 on [`informative`] tiles, 0 on the others and on the padding.
     inside: Vec<f32>,
     /// `Î_s · mc_scale`, each tile's mean MC estimate.
     mc_mean: Vec<f32>,
@@ -208,7 +208,8 @@ impl Problem {
         let counts = |count: &(dyn Fn(usize) -> usize + Sync)| -> Vec<f32> {
             planes.pad(&map_indices(n, |i| 1.0 / count(i).max(1) as f64), 1, 0, 1.0)
         };
-        let per_pixel = counts(&|j| tiles.tiles_of(j).count());
+        let informative = informative(tiles, g, 1);
+        let per_pixel = counts(&|j| tiles.tiles_of(j).filter(|&(s, _)| informative[s]).count());
         let per_tile = counts(&|s| tiles.pixels(s).count());
         let g_mean = planes.map_rows(|base, row| {
             for gp_o in &gp {
@@ -226,7 +227,15 @@ impl Problem {
             gp,
             per_pixel,
             per_tile,
-            inside: planes.pad(&vec![1.0; n], 1, 0, 1.0),
+            inside: planes.pad(
+                &informative
+                    .iter()
+                    .map(|&i| i as u8 as f64)
+                    .collect::<Vec<_>>(),
+                1,
+                0,
+                1.0,
+            ),
             mc_mean: planes.pad(&tile_means(tiles, mc), 1, 0, mc_scale),
             g_mean,
             g_scale,
@@ -308,8 +317,11 @@ impl Problem {
         // The residuals are in the planes' units, `mc_scale` times the
         // estimates' (kept normal, so that no weight is infinite).
         let floor = (floor * self.mc_scale).max(f64::MIN_POSITIVE);
-        for (w, e) in row.iter_mut().zip(&residuals) {
-            *w = 1.0 / (*e as f64 + floor);
+        // A tile without an estimate weighs nothing: it neither pulls its
+        // neighbours (w(s,t) = 0) nor moves (D = 0 keeps its b).
+        let inside = planes.at(&self.inside, base, 0);
+        for ((w, e), &inside) in row.iter_mut().zip(&residuals).zip(inside) {
+            *w = inside as f64 / (*e as f64 + floor);
         }
         rows.residuals = residuals;
     }
@@ -586,15 +598,20 @@ mod tests {
     /// estimates so large that the floor in the planes' units underflows,
     /// the weight still stays finite.
     #[test]
-    fn black_tiles_get_finite_weights_whatever_the_scale() {
+    fn zero_residuals_get_finite_weights_whatever_the_scale() {
         let tiles = Tiles::new(Resolution::new(9, 7), TileShape::Cross).unwrap();
         let o = tiles.offsets().len();
-        // Bright (1e300) on the left half, black on the right.
+        // Every tile has an estimate; the MC is 1e300 on the left half and 0
+        // on the right, where b = 0: the right tiles' residuals are exactly
+        // 0 and their weights 1/floor, with the floor at the planes' scale.
         let bright = |p: usize| p % 9 < 4;
         let g: Vec<f64> = (0..tiles.count() * o)
-            .map(|i| match tiles.pixel(i / o, i % o) {
-                Some(p) if bright(p) => 0.5,
-                _ => 0.0,
+            .map(|i| {
+                if tiles.pixel(i / o, i % o).is_some() {
+                    0.5
+                } else {
+                    0.0
+                }
             })
             .collect();
         let mc: Vec<f64> = (0..tiles.count())
@@ -602,11 +619,40 @@ mod tests {
             .collect();
         let problem = Problem::new(&tiles, &g, &mc, 0.05);
         let planes = &problem.planes;
-        let b = planes.pad(&vec![1.0; tiles.count()], 1, 0, problem.b_scale());
+        let b0: Vec<f64> = (0..tiles.count())
+            .map(|s| if bright(s) { 1.0 } else { 0.0 })
+            .collect();
+        let b = planes.pad(&b0, 1, 0, problem.b_scale());
         let mut weights = vec![0.0; planes.len()];
         problem.weights(&b, 1e-290, &mut weights);
         for (s, w) in planes.unpad(&weights).iter().enumerate() {
             assert!(w.is_finite() && *w > 0.0, "tile {s}: weight {w}");
+        }
+    }
+
+    /// A tile without an estimate (its chain never found `T_s > 0`) is left
+    /// out: with noise-free estimates elsewhere, every pixel is recovered,
+    /// those of the empty tile from the other tiles holding them (counted
+    /// as zeros they would drag them, and through the overlaps their
+    /// neighbours, down).
+    #[test]
+    fn tiles_without_an_estimate_are_left_out() {
+        let res = Resolution::new(13, 9);
+        let (tiles, mut g, intensity, _) = synthetic(res, TileShape::Cross);
+        let o = tiles.offsets().len();
+        let empty = 4 * 13 + 6;
+        g[empty * o..(empty + 1) * o].fill(0.0);
+        let settings = WeightedSettings {
+            iterations: 20_000,
+            ..Default::default()
+        };
+        let b = weighted(&tiles, &g, &intensity, &settings, None).unwrap();
+        let image = super::super::image(&tiles, &g, &b, 1);
+        for (j, (got, want)) in image.iter().zip(&intensity).enumerate() {
+            assert!(
+                (got / want - 1.0).abs() < 1e-4,
+                "pixel {j}: {got} vs {want}"
+            );
         }
     }
 

@@ -36,6 +36,9 @@
 //!   standard errors below its Monte Carlo estimate takes that estimate, so
 //!   rare bright paths that the tile chains found too late (start-up bias,
 //!   seed 001 sec. 5 and Fig. 9) are not dimmed.
+//! * **The image's total** (ours, not in seed 001): the image is scaled so
+//!   that its total is the regularizer's ([`StratifiedSettings::anchor_total`]),
+//!   which makes the whole-image mean unbiased at every budget.
 //!
 //! A tile's chain does not know its normalization, so steps spent before it
 //! is initialized scale all its `G_s(k)` by the same factor, which the
@@ -48,10 +51,12 @@
 //! | `tile.rs` | a tile's chain: its state, target and weights, its accumulators |
 //! | `local.rs` | local replica exchange and state borrowing |
 //! | `init.rs` | the global chains' initialization |
-//! | this file | settings, the sweeps, the reconstruction and the fallback |
+//! | `regularizer.rs` | the large steps' Monte Carlo estimate, the fallback to it and the total it anchors |
+//! | this file | settings, the sweeps, the reconstruction |
 
 mod init;
 mod local;
+mod regularizer;
 mod tile;
 
 use alloc::vec;
@@ -59,6 +64,7 @@ use alloc::vec::Vec;
 
 use self::init::initialize;
 use self::local::{exchange_all, exchange_cost};
+use self::regularizer::{LargeSteps, anchor_total, fall_back};
 use self::tile::{Context, Start, TileChain};
 use super::{Extras, Job, Output};
 use crate::chain::ChainStats;
@@ -135,15 +141,19 @@ pub struct StratifiedSettings {
     /// Pixels whose reconstructed value (channel mean) lies more than this
     /// many standard errors *below* their Monte Carlo regularizer `Î(j)` take
     /// the regularizer instead (`None`: never). Our addition, not in seed
-    /// 001: tile chains that start far from a rare bright path (a caustic,
-    /// a glint) carry start-up bias in their within-tile ratios, and the
-    /// reconstruction, which treats such tiles as outliers, then dims the
-    /// brightest pixels (seed 001 sec. 5 and Fig. 9 report the same loss).
-    /// The test is one-sided: a regularizer that missed a rare path is low
-    /// and never replaces anything, and one that caught a firefly has a
-    /// standard error as large as its excess. Pixels with fewer than 32
-    /// large steps (their sample variance is unreliable) are left alone.
+    /// 001 (see `regularizer.rs`): tile chains that start far from a rare
+    /// bright path (a caustic, a glint) carry start-up bias, and the
+    /// reconstruction then dims the brightest pixels. Pixels with fewer than
+    /// 32 large steps are left alone.
     pub fallback_sigmas: Option<f64>,
+    /// Scale the image so that its total is the regularizer's, the large
+    /// steps' unbiased Monte Carlo estimate of it (true by default). Our
+    /// addition, not in seed 001: the reconstruction anchors the
+    /// normalizations with IRLS weights, close to a weighted *median* of the
+    /// tiles' MC means, which is not their mean when few large steps make
+    /// those means skewed; see `regularizer.rs` for what it cost and why the
+    /// scaled image is unbiased.
+    pub anchor_total: bool,
 }
 
 impl Default for StratifiedSettings {
@@ -155,6 +165,7 @@ impl Default for StratifiedSettings {
             initialization: Initialization::default(),
             solver: Solver::default(),
             fallback_sigmas: Some(3.0),
+            anchor_total: true,
         }
     }
 }
@@ -214,6 +225,9 @@ pub struct StratifiedStats {
     /// Pixels that took their regularizer's value
     /// ([`StratifiedSettings::fallback_sigmas`]).
     pub fallback_pixels: u64,
+    /// The factor that gave the image the regularizer's total (1 without
+    /// [`StratifiedSettings::anchor_total`]).
+    pub total_scale: f64,
 }
 
 /// What stratified MCMC returns beyond the image ([`Extras::Stratified`]).
@@ -230,7 +244,8 @@ pub struct StratifiedExtras {
     /// The unscaled estimates `G_s(k)` of eq. 10, indexed `(tile · offsets +
     /// offset) · channels + channel` (offsets in [`Tiles::offsets`] order; 0
     /// where the tile is clipped). Within a tile their ratios estimate the
-    /// ratios of the pixel values.
+    /// ratios of the pixel values. A tile whose chain never found a state
+    /// with `T_s > 0` holds the regularizer's values.
     pub unscaled: Vec<f64>,
 }
 
@@ -314,7 +329,8 @@ where
     fn finish(mut self, driven: Driven, bootstrap_traces: u64) -> Result<Output, Error> {
         let tiles = self.ctx.tiles;
         let channels = O::Radiance::CHANNELS;
-        let (unscaled, regularizer) = estimates(tiles, &self.chains, self.stats.sweeps.max(1));
+        let (samples, regularizer) = LargeSteps::gather(tiles, &self.chains);
+        let unscaled = unscaled(tiles, &self.chains, self.stats.sweeps.max(1), &regularizer);
         let g = channel_means(&unscaled, channels);
         let mc = channel_means(regularizer.data(), channels);
         let (mut film, normalizations) = match self.settings.solver {
@@ -329,8 +345,11 @@ where
         };
         let stats = &mut self.stats;
         if let Some(sigmas) = self.settings.fallback_sigmas {
-            let errors = regularizer_errors(tiles, &self.chains, &regularizer);
-            stats.fallback_pixels = fall_back(&mut film, &regularizer, &errors, sigmas);
+            stats.fallback_pixels = fall_back(&mut film, &regularizer, &samples, sigmas);
+        }
+        stats.total_scale = 1.0;
+        if self.settings.anchor_total {
+            stats.total_scale = anchor_total(&mut film, &regularizer);
         }
         let mut chain_stats = ChainStats::default();
         let mut visits = vec![0u64; tiles.count()];
@@ -433,89 +452,52 @@ where
     fn preview(&self) -> Film {
         let tiles = self.ctx.tiles;
         let channels = O::Radiance::CHANNELS;
-        let (unscaled, regularizer) = estimates(tiles, &self.chains, self.stats.sweeps);
+        let (_, regularizer) = LargeSteps::gather(tiles, &self.chains);
+        let unscaled = unscaled(tiles, &self.chains, self.stats.sweeps, &regularizer);
         let b = reconstruct::initial_normalizations(
             tiles,
             &channel_means(&unscaled, channels),
             &channel_means(regularizer.data(), channels),
         );
-        image(tiles, &unscaled, &b, channels)
+        let mut film = image(tiles, &unscaled, &b, channels);
+        if self.settings.anchor_total {
+            anchor_total(&mut film, &regularizer);
+        }
+        film
     }
 }
 
-/// Per tile, offset and channel `G_s(k)` (eq. 10, over `sweeps` steps), and
-/// the pooled large-step MC estimate per pixel.
-fn estimates<R: Radiance>(tiles: &Tiles, chains: &[TileChain<R>], sweeps: u64) -> (Vec<f64>, Film) {
-    let channels = R::CHANNELS;
-    let mut unscaled = Vec::with_capacity(chains.len() * tiles.offsets().len() * channels);
-    for c in chains {
-        unscaled.extend(c.unscaled.iter().map(|v| v / sweeps as f64));
-    }
-    let resolution = tiles.resolution();
-    let mut regularizer = Film::new(resolution, channels);
-    let data = regularizer.data_mut();
-    for j in 0..tiles.count() {
-        let mut count = 0u64;
-        for (s, o) in tiles.tiles_of(j) {
-            count += chains[s].large_steps;
-            for c in 0..channels {
-                data[j * channels + c] += chains[s].uniform[o * channels + c];
-            }
-        }
-        if count > 0 {
-            for c in 0..channels {
-                data[j * channels + c] /= count as f64;
-            }
-        }
-    }
-    (unscaled, regularizer)
-}
-
-/// Large steps a pixel's regularizer needs before its sample variance is
-/// trusted by the fallback.
-const FALLBACK_MIN_LARGE_STEPS: u64 = 32;
-
-/// Per pixel, the standard error of the regularizer's channel mean, from the
-/// large steps' sums of squares pooled like the regularizer itself
-/// (infinite with fewer than [`FALLBACK_MIN_LARGE_STEPS`]).
-fn regularizer_errors<R: Radiance>(
+/// Per tile, offset and channel `G_s(k)` (eq. 10, over `sweeps` steps). A
+/// tile whose chain never found a state with `T_s > 0` (at low budgets, one
+/// sweep leaves some) has no estimate of its own; it takes the regularizer's
+/// values `Î(k)` instead (an unscaled estimate whose normalization is 1), so
+/// that in eq. 12 and in the solver's overlaps it stands for the Monte
+/// Carlo estimate of its pixels, not for zeros: counted as zeros, such tiles
+/// made stratified MCMC ~25 % dark at one sweep; left out, they left some
+/// pixels to one weakly constrained tile. A tile black for the regularizer
+/// too stays without an estimate and is left out
+/// ([`reconstruct::informative`]).
+fn unscaled<R: Radiance>(
     tiles: &Tiles,
     chains: &[TileChain<R>],
+    sweeps: u64,
     regularizer: &Film,
 ) -> Vec<f64> {
-    let means = channel_means(regularizer.data(), R::CHANNELS);
-    (0..tiles.count())
-        .map(|j| {
-            let (mut count, mut squares) = (0u64, 0.0);
-            for (s, o) in tiles.tiles_of(j) {
-                count += chains[s].large_steps;
-                squares += chains[s].uniform_squares[o];
+    let channels = R::CHANNELS;
+    let per_tile = tiles.offsets().len() * channels;
+    let mut g: Vec<f64> = chains
+        .iter()
+        .flat_map(|c| c.unscaled.iter().map(move |v| v / sweeps as f64))
+        .collect();
+    for (s, tile) in g.chunks_mut(per_tile).enumerate() {
+        if tile.iter().all(|&v| v == 0.0) {
+            for (o, pixel) in tiles.pixels(s) {
+                tile[o * channels..(o + 1) * channels]
+                    .copy_from_slice(&regularizer.data()[pixel * channels..(pixel + 1) * channels]);
             }
-            if count < FALLBACK_MIN_LARGE_STEPS {
-                return f64::INFINITY;
-            }
-            let n = count as f64;
-            let variance = (squares / n - means[j] * means[j]).max(0.0) * n / (n - 1.0);
-            libm::sqrt(variance / n)
-        })
-        .collect()
-}
-
-/// [`StratifiedSettings::fallback_sigmas`]: replaces every pixel of `film`
-/// more than `sigmas` standard errors below the regularizer by the
-/// regularizer. Returns the number replaced.
-fn fall_back(film: &mut Film, regularizer: &Film, errors: &[f64], sigmas: f64) -> u64 {
-    let channels = film.channels();
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / channels as f64;
-    let mut replaced = 0;
-    let pixels = film.data_mut().chunks_mut(channels);
-    for ((pixel, mc), error) in pixels.zip(regularizer.data().chunks(channels)).zip(errors) {
-        if mean(pixel) < mean(mc) - sigmas * error {
-            pixel.copy_from_slice(mc);
-            replaced += 1;
         }
     }
-    replaced
+    g
 }
 
 /// The mean over the `channels` channels of each value.

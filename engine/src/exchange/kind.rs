@@ -34,7 +34,12 @@ pub enum ExchangeKind {
         /// Number of rings (the thesis uses 8).
         rings: usize,
     },
-    /// [`EquiEnergySampler`].
+    /// [`EquiEnergySampler`]. Only asymptotically exact: its cold chain
+    /// jumps to the hotter chain's records, not to its target, so its
+    /// estimates are biased while the records are young (measured low by
+    /// ~10 % at 1 000 samples per chain, ~3 % at 10 000, < 1 % at 100 000,
+    /// whatever the burn-in; docs/RESULTS.md). Prefer an exact move for
+    /// short runs.
     EquiEnergySampler {
         /// Probability of a jump in place of a small step (0.1).
         p_jump: f64,

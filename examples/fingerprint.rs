@@ -73,17 +73,27 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
 fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), Error> {
     let budget = Budget::samples_per_pixel(SPP, oracle.resolution());
     let run = |name: &str, method: Method| -> Result<(), Error> {
-        let settings = Settings {
+        let mut settings = Settings {
             seed: SEED,
             budget,
             method,
         };
-        write(
-            out,
-            scene,
-            name,
-            &render(oracle, &MaxChannel, &settings, &Silent)?,
-        );
+        match render(oracle, &MaxChannel, &settings, &Silent) {
+            Ok(output) => write(out, scene, name, &output),
+            // The oracle's tempering changes nothing on this scene: the
+            // refusal is part of the fingerprint, then power tempering runs
+            // the same move.
+            Err(e @ Error::LevelsIndistinguishable { .. }) => {
+                let path = out.join(format!("{scene}-{name}.error"));
+                std::fs::write(path, e.to_string()).expect("writable output directory");
+                if let Method::Replica(r) = &mut settings.method {
+                    r.ensemble.tempering = Tempering::Power;
+                }
+                let output = render(oracle, &MaxChannel, &settings, &Silent)?;
+                write(out, scene, &format!("{name}-power"), &output);
+            }
+            Err(e) => return Err(e),
+        }
         Ok(())
     };
     run("mc", Method::Mc)?;

@@ -29,8 +29,8 @@ use strata::engine::reconstruct::{LogSettings, WeightedSettings};
 use strata::engine::target::MaxChannel;
 use strata::engine::tiles::TileShape;
 use strata::engine::{
-    Budget, Extras, Film, Method, Observer, Output, PathOracle, Progress, Resolution, Settings,
-    render,
+    Budget, Error, Extras, Film, Method, Observer, Output, PathOracle, Progress, Resolution,
+    Settings, render,
 };
 use strata::native::{PathTracer, builtin, native_tracer};
 
@@ -185,9 +185,22 @@ fn main() -> ExitCode {
     }
 }
 
+/// More threads than this many per core only add switching (2048 threads
+/// took 7 s for a 0.03 s job).
+const THREADS_PER_CORE: usize = 4;
+
 fn run(args: &Args) -> AnyResult<()> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut threads = args.threads;
+    if threads > THREADS_PER_CORE * cores {
+        threads = THREADS_PER_CORE * cores;
+        eprintln!(
+            "note: --threads {} capped at {threads} ({THREADS_PER_CORE} per core); the image does not depend on it",
+            args.threads
+        );
+    }
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads)
+        .num_threads(threads)
         .build()?;
     let resolution = Resolution::new(args.width.unwrap_or(256), args.height.unwrap_or(256));
     let (output, reference) = pool.install(|| -> AnyResult<_> {
@@ -220,6 +233,12 @@ fn run(args: &Args) -> AnyResult<()> {
                     scene.triangles.len(),
                     scene.lights.len()
                 );
+                if scene.lights.is_empty() && scene.environment.is_none() {
+                    return Err(format!(
+                        "{name} has no light (no emissive triangle, no environment): every path would be black"
+                    )
+                    .into());
+                }
                 match args.backend {
                     Backend::Native => (render_with(&native_tracer(scene), args)?, None),
                     Backend::Embree => {
@@ -236,6 +255,11 @@ fn run(args: &Args) -> AnyResult<()> {
         "paths: {} (+{} bootstrap), invalid: {}",
         s.samples, s.bootstrap_samples, s.invalid_samples
     );
+    if s.samples > 0 && s.invalid_samples >= s.samples {
+        eprintln!(
+            "warning: every path was invalid (the oracle returned NaN, infinite or negative radiance): the image is black"
+        );
+    }
     if let Some(b) = s.normalization {
         println!(
             "b = {b:.6} (relative standard error {:.2} %), acceptance = {:.3}",
@@ -328,7 +352,7 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<Output> {
         Some(t) => Budget::Time(Duration::try_from_secs_f64(t)?),
         None => Budget::samples_per_pixel(args.spp, resolution),
     };
-    let settings = Settings {
+    let mut settings = Settings {
         seed: args.seed,
         budget,
         method: method(args)?,
@@ -338,7 +362,18 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<Output> {
     )?);
     let observer = Bar(bar.clone());
     let start = Instant::now();
-    let output = render(oracle, &MaxChannel, &settings, &observer)?;
+    let output = match render(oracle, &MaxChannel, &settings, &observer) {
+        // The oracle's tempering changes nothing here (an all-diffuse scene):
+        // power tempering always does.
+        Err(e @ Error::LevelsIndistinguishable { .. }) => {
+            eprintln!("note: {e}; rendering with --tempering power");
+            if let Method::Replica(s) = &mut settings.method {
+                s.ensemble.tempering = Tempering::Power;
+            }
+            render(oracle, &MaxChannel, &settings, &observer)?
+        }
+        other => other?,
+    };
     bar.finish_and_clear();
     println!(
         "{} {}: {:.2} s",

@@ -1,6 +1,7 @@
 //! What every method does the same way, through the one entry point:
 //! thread-count independence, invalid samples excluded, bad settings refused
-//! before any work, black scenes and empty films, observers (progress,
+//! before any work, films too large for the machine, black scenes and empty
+//! films, observers (progress,
 //! previews, cancellation) and time budgets.
 
 use std::sync::Mutex;
@@ -8,7 +9,7 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use strata::engine::analytic::ProceduralImage;
-use strata::engine::exchange::{EnsembleSettings, ExchangeKind};
+use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Tempering};
 use strata::engine::method::{
     ErptSettings, Initialization, MultiStageSettings, PssmltSettings, ReplicaSettings,
     StratifiedSettings,
@@ -141,6 +142,80 @@ fn nan_infinite_and_negative_radiance_is_excluded_and_counted() {
     // MC drops them: right-half pixels average 0.75 of the left-half value.
     let right = mc.film.pixel(12, 4)[2];
     assert!((right - 0.75).abs() < 0.2, "right half blue {right}");
+}
+
+/// An oracle that returns NaN for every path: the methods with a bootstrap
+/// say that every candidate was invalid (not merely black), the others
+/// render black and count every path as invalid.
+#[test]
+fn an_oracle_that_only_returns_nan_is_named_as_the_cause() {
+    let nan = FnOracle::new(
+        Resolution::new(8, 8),
+        |_: FilmPoint, _: &mut dyn Sampler, _: Temperature| PathSample::new(f32::NAN),
+    );
+    for method in methods() {
+        let name = method.name();
+        match render(&nan, &MaxChannel, &settings(2, 6_400, &method), &Silent) {
+            Ok(out) => {
+                assert!(
+                    matches!(method, Method::Mc | Method::Stratified(_)),
+                    "{name}"
+                );
+                assert!(out.film.data().iter().all(|v| *v == 0.0), "{name}");
+                assert!(out.stats.samples > 0, "{name}");
+                let traced = out.stats.samples + out.stats.bootstrap_samples;
+                assert_eq!(out.stats.invalid_samples, traced, "{name}");
+            }
+            Err(
+                e @ Error::AllCandidatesBlack {
+                    candidates,
+                    invalid,
+                },
+            ) => {
+                assert!(invalid >= candidates, "{name}: {invalid} of {candidates}");
+                assert!(e.to_string().contains("were invalid"), "{name}: {e}");
+            }
+            Err(e) => panic!("{name}: {e}"),
+        }
+    }
+}
+
+/// Replica exchange under the oracle's tempering on an oracle that ignores
+/// the temperature (as the native tracer does on an all-diffuse scene): every
+/// level is the same target, which is a typed error instead of a render of
+/// identical chains; power tempering of the same oracle renders.
+#[test]
+fn replica_exchange_refuses_a_tempering_that_changes_nothing() {
+    let deaf = FnOracle::new(
+        Resolution::new(8, 8),
+        |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| PathSample::new(s.next_1d()),
+    );
+    let mut ensemble = EnsembleSettings::geometric(4, 100.0).unwrap();
+    ensemble.bootstrap_candidates = 2_000;
+    ensemble.tempering = Tempering::Oracle;
+    let mut replica = ReplicaSettings {
+        ensembles: 2,
+        ensemble,
+        exchange: ExchangeKind::IsPermutation,
+        ladder_tuning_sweeps: 0,
+    };
+    let run = |r: &ReplicaSettings| {
+        render(
+            &deaf,
+            &MaxChannel,
+            &settings(1, 6_400, &Method::Replica(r.clone())),
+            &Silent,
+        )
+    };
+    assert_eq!(
+        run(&replica).unwrap_err(),
+        Error::LevelsIndistinguishable {
+            levels: 4,
+            candidates: 2_000
+        }
+    );
+    replica.ensemble.tempering = Tempering::Power;
+    assert!(run(&replica).is_ok());
 }
 
 /// Counts the oracle's traces: bad settings must be refused before any.
@@ -280,6 +355,36 @@ fn black_scenes_and_empty_films_end_with_a_typed_error_or_a_black_image() {
             render(&empty, &MaxChannel, &settings(3, 100, &method), &Silent).unwrap_err(),
             Error::EmptyResolution
         );
+    }
+}
+
+/// A film too large for the machine is a typed error naming its size,
+/// before any path is traced (it aborted the process in `Film::new`): 10^10
+/// pixels need more than a terabyte with any method, and `u32::MAX` squared
+/// overflows any count. The oracle panics if it is ever called.
+#[test]
+fn films_too_large_for_the_machine_are_typed_errors_before_any_work() {
+    for side in [100_000, u32::MAX] {
+        let huge = FnOracle::new(
+            Resolution::new(side, side),
+            |_: FilmPoint, _: &mut dyn Sampler, _: Temperature| -> PathSample<Rgb> {
+                panic!("traced a path")
+            },
+        );
+        for method in methods() {
+            let budget = Budget::Samples(1_000);
+            let settings = Settings {
+                seed: 1,
+                budget,
+                method: method.clone(),
+            };
+            match render(&huge, &MaxChannel, &settings, &Silent) {
+                Err(Error::AllocationFailed { bytes, .. }) => {
+                    assert!(bytes > 1 << 40, "{}: {bytes} bytes", method.name());
+                }
+                other => panic!("{}: {:?}", method.name(), other.map(|o| o.stats)),
+            }
+        }
     }
 }
 

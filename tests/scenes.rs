@@ -57,10 +57,10 @@ fn veach_ajar_loads_with_textures_and_ply_meshes() {
             .any(|m| matches!(m, strata::native::material::Material::Dielectric { .. }))
     );
     assert!(
-        loaded
-            .ignored
-            .iter()
-            .all(|i| i.starts_with("Sampler") || i.starts_with("PixelFilter")),
+        loaded.ignored.iter().all(|i| i.starts_with("Sampler")
+                || i.starts_with("PixelFilter")
+                // 62 zero-area triangles in its meshes, skipped and counted.
+                || i.ends_with("degenerate triangles (zero area)")),
         "{:?}",
         loaded.ignored
     );

@@ -135,7 +135,10 @@ impl Bootstrap {
             ));
         }
         if totals[0] <= 0.0 {
-            return Err(Error::AllCandidatesBlack { candidates });
+            return Err(Error::AllCandidatesBlack {
+                candidates,
+                invalid: traced.invalid,
+            });
         }
         Ok(Self {
             seed,
@@ -178,6 +181,15 @@ impl Bootstrap {
     /// Values per candidate.
     pub fn levels(&self) -> usize {
         self.levels
+    }
+
+    /// Whether every candidate has the same value at every level: the levels
+    /// are one target (e.g. an oracle's tempering that changes nothing on
+    /// this scene).
+    pub fn levels_agree(&self) -> bool {
+        self.values
+            .chunks(self.levels)
+            .all(|row| row.iter().all(|&v| v == row[0]))
     }
 
     /// Number of candidates drawn.
@@ -321,7 +333,13 @@ mod tests {
     #[test]
     fn black_scene_is_a_typed_error_not_a_loop() {
         let e = Bootstrap::run(&black(), &MaxChannel, SmallStep::default(), 1, 500).unwrap_err();
-        assert_eq!(e, Error::AllCandidatesBlack { candidates: 500 });
+        assert_eq!(
+            e,
+            Error::AllCandidatesBlack {
+                candidates: 500,
+                invalid: 0
+            }
+        );
         assert!(Bootstrap::run(&black(), &MaxChannel, SmallStep::default(), 1, 0).is_err());
     }
 }

@@ -24,6 +24,20 @@ pub enum Error {
     AllCandidatesBlack {
         /// How many candidates were drawn.
         candidates: u64,
+        /// How many of them the oracle returned invalid (NaN, infinite or
+        /// negative radiance), counted as zero.
+        invalid: u64,
+    },
+    /// Under the oracle's tempering, every temperature level of a
+    /// replica-exchange ensemble gave the same target on every bootstrap
+    /// candidate: the tempering changes nothing on this scene (the native
+    /// tracer on an all-diffuse scene), and the ensemble would run identical
+    /// chains. Use `Tempering::Power`.
+    LevelsIndistinguishable {
+        /// Temperature levels.
+        levels: usize,
+        /// Bootstrap candidates compared.
+        candidates: u64,
     },
     /// A buffer sized from the input could not be allocated.
     AllocationFailed {
@@ -65,9 +79,28 @@ impl fmt::Display for Error {
                 )
             }
             Error::EmptyResolution => write!(f, "the oracle's resolution has no pixels"),
-            Error::AllCandidatesBlack { candidates } => write!(
+            Error::AllCandidatesBlack {
+                candidates,
+                invalid,
+            } if invalid >= candidates => write!(
                 f,
-                "all {candidates} bootstrap candidates have zero importance: nothing to start a chain from"
+                "all {candidates} bootstrap candidates were invalid (the oracle returned NaN, \
+                 infinite or negative radiance for every one): nothing to start a chain from"
+            ),
+            Error::AllCandidatesBlack {
+                candidates,
+                invalid,
+            } => write!(
+                f,
+                "all {candidates} bootstrap candidates have zero importance ({invalid} of them \
+                 invalid: NaN, infinite or negative radiance): nothing to start a chain from; \
+                 does the scene have a light the camera can reach?"
+            ),
+            Error::LevelsIndistinguishable { levels, candidates } => write!(
+                f,
+                "all {levels} temperature levels give the same target on the {candidates} \
+                 bootstrap candidates: the tempering changes nothing on this scene, and replica \
+                 exchange would run identical chains; use power tempering"
             ),
             Error::AllocationFailed { what, bytes } => {
                 write!(f, "cannot allocate {bytes} bytes for the {what}")

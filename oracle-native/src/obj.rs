@@ -6,7 +6,7 @@ use glam::{Vec2, Vec3};
 
 use crate::SceneError;
 use crate::material::{Material, Texture};
-use crate::scene::{Mesh, Scene};
+use crate::scene::{MAX_COORDINATE, Mesh, Scene};
 
 /// Adds the meshes of the OBJ file at `path` to `scene`; each MTL material
 /// becomes a Lambertian material (its `Kd`), and `Ke > 0` makes an area light.
@@ -79,21 +79,27 @@ pub fn add_obj(scene: &mut Scene, path: &Path) -> Result<(), SceneError> {
     Ok(())
 }
 
-/// The first line (1-based) whose statement tobj cannot parse: a vertex,
-/// normal or texture coordinate with non-numeric or too few values, or a face
-/// with fewer than three vertices or non-integer indices.
+/// The first line (1-based) whose statement tobj cannot parse or would pass
+/// on wrong: a vertex, normal or texture coordinate with non-numeric,
+/// non-finite or too few values (a vertex coordinate beyond
+/// [`MAX_COORDINATE`]), or a face with fewer than three vertices or
+/// non-integer indices.
 fn first_bad_line(text: &str) -> Option<usize> {
     text.lines()
         .position(|line| {
             let mut words = line.split_whitespace();
-            let numbers_ok = |words: std::str::SplitWhitespace, min: usize| {
+            let bad_numbers = |words: std::str::SplitWhitespace, min: usize, limit: f32| {
                 let v: Vec<&str> = words.collect();
-                v.len() < min || v.iter().any(|w| w.parse::<f32>().is_err())
+                v.len() < min
+                    || v.iter().any(|w| {
+                        w.parse::<f32>()
+                            .map_or(true, |x| !(x.is_finite() && x.abs() <= limit))
+                    })
             };
             match words.next() {
-                Some("v") => numbers_ok(words, 3),
-                Some("vn") => numbers_ok(words, 3),
-                Some("vt") => numbers_ok(words, 1),
+                Some("v") => bad_numbers(words, 3, MAX_COORDINATE),
+                Some("vn") => bad_numbers(words, 3, f32::MAX),
+                Some("vt") => bad_numbers(words, 1, f32::MAX),
                 Some("f") => {
                     let v: Vec<&str> = words.collect();
                     v.len() < 3
@@ -161,5 +167,10 @@ mod tests {
         })
         .unwrap_err();
         assert_eq!(e.line, 4, "{e}");
+        for bad in ["v 1 nan 0", "v 1e30 0 0", "vn inf 0 1"] {
+            let text = format!("v 0 0 0\nv 1 0 0\n{bad}\nf 1 2 3\n");
+            let e = with_file("hostile.obj", &text, |p| add_obj(&mut s, p)).unwrap_err();
+            assert_eq!(e.line, 3, "{bad}: {e}");
+        }
     }
 }

@@ -18,7 +18,7 @@ use glam::{Mat4, Vec2, Vec3};
 use strata_engine::Resolution;
 
 use crate::material::{ConductorFresnel, Material, Texture, roughness_to_alpha};
-use crate::scene::{Camera, Mesh, Scene};
+use crate::scene::{Camera, MAX_COORDINATE, Mesh, Scene};
 use crate::{SceneError, ply};
 
 /// Where the shared test scenes live: `$STRATA_SCENES`, or `../shared/scenes`
@@ -46,7 +46,13 @@ pub struct Loaded {
 /// Loads a pbrt-v3 file; relative paths inside resolve from its directory.
 pub fn load(path: &Path) -> Result<Loaded, SceneError> {
     let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
-    let tokens = tokenize(&text).map_err(|(line, m)| SceneError::at(path, line, m))?;
+    parse(&text, path)
+}
+
+/// Parses pbrt-v3 scene text as if read from `path`: relative paths inside
+/// resolve from its directory, and errors name it.
+pub fn parse(text: &str, path: &Path) -> Result<Loaded, SceneError> {
+    let tokens = tokenize(text).map_err(|(line, m)| SceneError::at(path, line, m))?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     Parser {
         path: path.to_path_buf(),
@@ -302,31 +308,38 @@ impl Parser {
                     None => return self.err("TransformEnd without TransformBegin"),
                 },
                 "Identity" => self.state.ctm = Mat4::IDENTITY,
-                "Transform" => self.state.ctm = self.matrix()?,
+                "Transform" => {
+                    let m = self.matrix()?;
+                    self.set_transform(m)?;
+                }
                 "ConcatTransform" => {
                     let m = self.matrix()?;
-                    self.state.ctm *= m;
+                    self.set_transform(self.state.ctm * m)?;
                 }
                 "Translate" => {
-                    let v = self.numbers(3)?;
-                    self.state.ctm *= Mat4::from_translation(vec3(&v));
+                    let v = self.finite_numbers(3, "Translate")?;
+                    self.set_transform(self.state.ctm * Mat4::from_translation(vec3(&v)))?;
                 }
                 "Scale" => {
-                    let v = self.numbers(3)?;
-                    self.state.ctm *= Mat4::from_scale(vec3(&v));
+                    let v = self.finite_numbers(3, "Scale")?;
+                    if v.contains(&0.0) {
+                        return self.err(format!("Scale by zero ({v:?}) flattens the scene"));
+                    }
+                    self.set_transform(self.state.ctm * Mat4::from_scale(vec3(&v)))?;
                 }
                 "Rotate" => {
-                    let v = self.numbers(4)?;
+                    let v = self.finite_numbers(4, "Rotate")?;
                     let axis = vec3(&v[1..]).normalize_or_zero();
                     if axis == Vec3::ZERO {
                         return self.err("Rotate about a zero axis");
                     }
-                    self.state.ctm *= Mat4::from_axis_angle(axis, (v[0] as f32).to_radians());
+                    let r = Mat4::from_axis_angle(axis, (v[0] as f32).to_radians());
+                    self.set_transform(self.state.ctm * r)?;
                 }
                 "LookAt" => {
-                    let v = self.numbers(9)?;
+                    let v = self.finite_numbers(9, "LookAt")?;
                     let m = self.look_at(vec3(&v[0..3]), vec3(&v[3..6]), vec3(&v[6..9]))?;
-                    self.state.ctm *= m;
+                    self.set_transform(self.state.ctm * m)?;
                 }
                 "Camera" => {
                     let ty = self.string()?;
@@ -337,25 +350,24 @@ impl Parser {
                             .insert(format!("Camera \"{ty}\" (treated as perspective)"));
                     }
                     self.out.camera_from_world = Some(self.state.ctm);
-                    self.out.fov = p.num("fov").unwrap_or(90.0) as f32;
+                    let fov = p.num("fov").unwrap_or(90.0);
+                    if !(fov > 0.0 && fov < 180.0) {
+                        return self.err(format!("fov must be in (0, 180) degrees, got {fov}"));
+                    }
+                    self.out.fov = fov as f32;
                 }
                 "Film" => {
                     let _ = self.string()?;
                     let p = self.params()?;
-                    let (w, h) = (
-                        p.num("xresolution").unwrap_or(640.0),
-                        p.num("yresolution").unwrap_or(480.0),
-                    );
-                    if !(w >= 1.0 && h >= 1.0 && w <= 65536.0 && h <= 65536.0) {
-                        return self.err(format!("film resolution {w}x{h} out of range"));
-                    }
-                    self.out.resolution = Some(Resolution::new(w as u32, h as u32));
+                    let w = self.whole(&p, "xresolution", 640, 1..=MAX_FILM_SIDE)?;
+                    let h = self.whole(&p, "yresolution", 480, 1..=MAX_FILM_SIDE)?;
+                    self.out.resolution = Some(Resolution::new(w, h));
                 }
                 "Integrator" => {
                     let _ = self.string()?;
                     let p = self.params()?;
-                    if let Some(d) = p.num("maxdepth") {
-                        self.out.max_depth = Some(d.clamp(1.0, 1024.0) as u32);
+                    if p.num("maxdepth").is_some() {
+                        self.out.max_depth = Some(self.whole(&p, "maxdepth", 16, 1..=1024)?);
                     }
                 }
                 "Sampler" | "PixelFilter" | "Accelerator" | "SurfaceIntegrator" => {
@@ -426,6 +438,48 @@ impl Parser {
         self.finish()
     }
 
+    /// `n` numbers (see [`numbers`](Self::numbers)), all finite.
+    fn finite_numbers(&mut self, n: usize, directive: &str) -> Result<Vec<f64>, SceneError> {
+        let v = self.numbers(n)?;
+        if v.iter().any(|x| !x.is_finite()) {
+            return self.err(format!("{directive} needs finite numbers, got {v:?}"));
+        }
+        Ok(v)
+    }
+
+    /// Makes `m` the current transform: finite and invertible (a singular
+    /// transform flattens what follows; a huge one overflows f32).
+    fn set_transform(&mut self, m: Mat4) -> Result<(), SceneError> {
+        let det = m.determinant();
+        if !(m.is_finite() && det.is_finite() && det != 0.0 && m.inverse().is_finite()) {
+            return self.err(format!(
+                "the transform becomes singular or non-finite (determinant {det})"
+            ));
+        }
+        self.state.ctm = m;
+        Ok(())
+    }
+
+    /// Integer parameter `name` (or `default`): a whole number in `range`.
+    fn whole(
+        &self,
+        p: &Params,
+        name: &str,
+        default: u32,
+        range: std::ops::RangeInclusive<u32>,
+    ) -> Result<u32, SceneError> {
+        let Some(v) = p.num(name) else {
+            return Ok(default);
+        };
+        let (lo, hi) = (*range.start() as f64, *range.end() as f64);
+        if !(v.fract() == 0.0 && v >= lo && v <= hi) {
+            return self.err(format!(
+                "`{name}` must be a whole number in {lo}..={hi}, got {v}"
+            ));
+        }
+        Ok(v as u32)
+    }
+
     fn matrix(&mut self) -> Result<Mat4, SceneError> {
         let v = self.numbers(16)?;
         let a: [f32; 16] = std::array::from_fn(|i| v[i] as f32);
@@ -480,18 +534,21 @@ impl Parser {
         ))
     }
 
-    fn roughness(&self, p: &Params, default: f64) -> f32 {
+    fn roughness(&self, p: &Params, default: f64) -> Result<f32, SceneError> {
         let r = p
             .num("roughness")
             .or_else(|| p.num("uroughness"))
-            .unwrap_or(default) as f32;
-        let remap = p.bool("remaproughness").unwrap_or(true);
-        let alpha = if remap { roughness_to_alpha(r) } else { r };
-        if alpha.is_finite() {
-            alpha.clamp(0.0, 1.0)
-        } else {
-            0.0
+            .unwrap_or(default);
+        if !(r.is_finite() && r >= 0.0) {
+            return self.err(format!("roughness must be finite and >= 0, got {r}"));
         }
+        let remap = p.bool("remaproughness").unwrap_or(true);
+        let alpha = if remap {
+            roughness_to_alpha(r as f32)
+        } else {
+            r as f32
+        };
+        Ok(alpha.clamp(0.0, 1.0))
     }
 
     fn material(&mut self, ty: &str, p: &Params) -> Result<Material, SceneError> {
@@ -508,7 +565,7 @@ impl Parser {
                         eta: self.checked_color(eta, "eta")?,
                         k: self.checked_color(k, "k")?,
                     },
-                    alpha: self.roughness(p, 0.01),
+                    alpha: self.roughness(p, 0.01)?,
                 }
             }
             "glass" => {
@@ -518,7 +575,7 @@ impl Parser {
                 }
                 Material::Dielectric {
                     eta,
-                    alpha: self.roughness(p, 0.0),
+                    alpha: self.roughness(p, 0.0)?,
                 }
             }
             "mirror" => Material::Conductor {
@@ -530,7 +587,7 @@ impl Parser {
             "plastic" => Material::Plastic {
                 diffuse: self.color_or_texture(p, "Kd", Vec3::splat(0.25))?,
                 specular: self.checked_color(p.rgb("Ks").unwrap_or(Vec3::splat(0.25)), "Ks")?,
-                alpha: self.roughness(p, 0.1).max(1e-3),
+                alpha: self.roughness(p, 0.1)?.max(1e-3),
             },
             other => {
                 self.out
@@ -548,10 +605,16 @@ impl Parser {
         let _kind = self.string()?;
         let class = self.string()?;
         let p = self.params()?;
-        let scale = Vec2::new(
-            p.num("uscale").unwrap_or(1.0) as f32,
-            p.num("vscale").unwrap_or(1.0) as f32,
+        let (u, v) = (
+            p.num("uscale").unwrap_or(1.0),
+            p.num("vscale").unwrap_or(1.0),
         );
+        if !(u.is_finite() && v.is_finite() && u != 0.0 && v != 0.0) {
+            return self.err(format!(
+                "texture scales must be finite and non-zero, got {u}, {v}"
+            ));
+        }
+        let scale = Vec2::new(u as f32, v as f32);
         let tex = match class.as_str() {
             "imagemap" => {
                 let file = p.string("filename").unwrap_or_default();
@@ -586,14 +649,17 @@ impl Parser {
                 }
             }
             "checkerboard" => {
-                let color = |n: &str, d: f32| p.rgb(n).unwrap_or(Vec3::splat(d));
+                let color =
+                    |n: &str, d: f32| self.checked_color(p.rgb(n).unwrap_or(Vec3::splat(d)), n);
                 Texture::Checkerboard {
-                    even: color("tex1", 1.0),
-                    odd: color("tex2", 0.0),
+                    even: color("tex1", 1.0)?,
+                    odd: color("tex2", 0.0)?,
                     scale,
                 }
             }
-            "constant" => Texture::Constant(p.rgb("value").unwrap_or(Vec3::ONE)),
+            "constant" => {
+                Texture::Constant(self.checked_color(p.rgb("value").unwrap_or(Vec3::ONE), "value")?)
+            }
             other => {
                 self.out
                     .ignored
@@ -665,6 +731,20 @@ impl Parser {
         };
         let ctm = self.state.ctm;
         let mut mesh = mesh.transformed(&ctm);
+        let out_of_range = |v: &Vec3| !(v.is_finite() && v.abs().max_element() <= MAX_COORDINATE);
+        if let Some(p) = mesh.positions.iter().find(|p| out_of_range(p)) {
+            return self.err(format!(
+                "a vertex of the {ty} is not finite or lies beyond ±{MAX_COORDINATE:e} after its transform ({p})"
+            ));
+        }
+        if let Some(n) = mesh.normals.iter().flatten().find(|n| !n.is_finite()) {
+            return self.err(format!("a normal of the {ty} is not finite ({n})"));
+        }
+        if let Some(uv) = mesh.uvs.iter().flatten().find(|uv| !uv.is_finite()) {
+            return self.err(format!(
+                "a texture coordinate of the {ty} is not finite ({uv})"
+            ));
+        }
         if ctm.determinant() < 0.0 && mesh.normals.is_none() {
             // pbrt flips the orientation of shapes under a mirroring transform.
             mesh.indices.iter_mut().for_each(|t| t.swap(1, 2));
@@ -696,17 +776,25 @@ impl Parser {
         };
         let mut scene = Scene::new(camera);
         scene.materials = self.out.materials;
-        for (mesh, material, emission) in &self.out.meshes {
-            scene.add_mesh(mesh, *material, *emission);
+        let mut ignored = self.out.ignored;
+        let skipped: usize = self
+            .out
+            .meshes
+            .iter()
+            .map(|(mesh, material, emission)| scene.add_mesh(mesh, *material, *emission))
+            .sum();
+        if skipped > 0 {
+            ignored.insert(format!("{skipped} degenerate triangles (zero area)"));
         }
         scene.environment = self.out.environment;
         scene.max_depth = self.out.max_depth.unwrap_or(16);
-        Ok(Loaded {
-            scene,
-            ignored: self.out.ignored,
-        })
+        Ok(Loaded { scene, ignored })
     }
 }
+
+/// The largest film side the loader accepts (the film's memory is checked
+/// again when a render allocates it).
+pub const MAX_FILM_SIDE: u32 = 65536;
 
 fn vec3(v: &[f64]) -> Vec3 {
     Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32)
@@ -717,8 +805,9 @@ mod tests {
     use super::*;
 
     fn load_str(text: &str) -> Result<Loaded, SceneError> {
-        let dir =
-            std::env::temp_dir().join(format!("strata-pbrt-{}-{}", std::process::id(), text.len()));
+        static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let dir = std::env::temp_dir().join(format!("strata-pbrt-{}-{n}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("scene.pbrt");
         std::fs::write(&path, text).unwrap();
@@ -754,6 +843,80 @@ WorldEnd
         // pbrt's LookAt: the camera at +5 z looking at the origin sees world +x on the image's left.
         let (o, d) = l.scene.camera.ray(0.0, 8.0);
         assert!((o - Vec3::new(0.0, 0.0, 5.0)).length() < 1e-5 && d.x > 0.0 && d.z < 0.0);
+    }
+
+    /// Every number the loader reads is checked: each edit of the minimal
+    /// scene below is an error naming its line and what is wrong.
+    #[test]
+    fn bad_numbers_are_errors_that_say_what_is_wrong() {
+        let cases = [
+            (
+                "LookAt 0 0 5",
+                "Translate nan 0 0\nLookAt 0 0 5",
+                "Translate needs finite",
+            ),
+            (
+                "LookAt 0 0 5",
+                "Rotate nan 0 1 0\nLookAt 0 0 5",
+                "Rotate needs finite",
+            ),
+            ("LookAt 0 0 5", "Scale 0 0 0\nLookAt 0 0 5", "Scale by zero"),
+            (
+                "LookAt 0 0 5",
+                "Scale 1e30 1e30 1e30\nLookAt 0 0 5",
+                "singular or non-finite",
+            ),
+            (
+                "LookAt 0 0 5",
+                "LookAt inf 0 0 0 0 0 0 1 0\nLookAt 0 0 5",
+                "LookAt needs finite",
+            ),
+            ("[ 40 ]", "[ nan ]", "fov must be in (0, 180)"),
+            ("[ 40 ]", "[ 180 ]", "fov must be in (0, 180)"),
+            (
+                "xresolution\" [ 32 ]",
+                "xresolution\" [ 2.5 ]",
+                "`xresolution` must be a whole number",
+            ),
+            (
+                "yresolution\" [ 16 ]",
+                "yresolution\" [ nan ]",
+                "`yresolution` must be a whole number",
+            ),
+            (
+                "Sampler \"sobol\"",
+                "Integrator \"path\" \"integer maxdepth\" [ nan ]",
+                "`maxdepth` must be a whole number",
+            ),
+            (
+                "Sampler \"sobol\"",
+                "Integrator \"path\" \"integer maxdepth\" [ 0 ]",
+                "`maxdepth` must be a whole number",
+            ),
+            (
+                "\"float roughness\" 0.1",
+                "\"float roughness\" nan",
+                "roughness must be finite",
+            ),
+            ("[ 4 4 4 ]", "[ 4 nan 4 ]", "`L` must be finite"),
+            (
+                "[ -1 -1 0 1",
+                "[ -1 -1 nan 1",
+                "is not finite or lies beyond",
+            ),
+            (
+                "WorldBegin",
+                "WorldBegin\nScale 1e11 1e11 1e11",
+                "is not finite or lies beyond",
+            ),
+        ];
+        for (from, to, message) in cases {
+            assert!(MINIMAL.contains(from), "{from}");
+            let text = MINIMAL.replacen(from, to, 1);
+            let e = load_str(&text).unwrap_err().to_string();
+            assert!(e.contains(message), "{to}: {e}");
+            assert!(e.contains("scene.pbrt:"), "{to}: no line in {e}");
+        }
     }
 
     #[test]

@@ -193,7 +193,9 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, (usize, String)> {
     let truncated = || (0, "file ends before all elements were read".to_string());
     let mut mesh = Mesh::default();
     let (mut normals, mut uvs) = (Vec::new(), Vec::new());
-    for e in &elements {
+    // An element without properties holds no data, whatever its count
+    // (counting to a hostile 10^19 would never end).
+    for e in elements.iter().filter(|e| !e.properties.is_empty()) {
         for _ in 0..e.count {
             let mut v = [0.0f64; 8]; // x y z nx ny nz u v
             let mut seen = [false; 8];
@@ -249,6 +251,25 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, (usize, String)> {
             }
         }
     }
+    let left = if format == Format::Ascii {
+        reader.tokens.len() - reader.token.min(reader.tokens.len())
+    } else {
+        let rest = &reader.bytes[reader.at.min(reader.bytes.len())..];
+        rest.iter().filter(|b| !b.is_ascii_whitespace()).count()
+    };
+    if left > 0 {
+        return Err((
+            0,
+            format!(
+                "the file holds more data than its header declares ({left} {} left after the last element)",
+                if format == Format::Ascii {
+                    "values"
+                } else {
+                    "bytes"
+                }
+            ),
+        ));
+    }
     let n = mesh.positions.len();
     if let Some(bad) = mesh.indices.iter().flatten().find(|&&i| i as usize >= n) {
         return Err((0, format!("face refers to vertex {bad} of {n}")));
@@ -288,6 +309,8 @@ mod tests {
         let m = parse(&b).unwrap();
         assert_eq!(m.positions[1], Vec3::X);
         assert_eq!(m.indices, vec![[0, 1, 2]]);
+        b.extend([0u8; 12]);
+        assert!(parse(&b).unwrap_err().1.contains("12 bytes left"));
     }
 
     #[test]
@@ -310,5 +333,9 @@ mod tests {
                 .contains("vertex 9")
         );
         assert!(parse(b"").is_err());
+        // A header that declares fewer elements than the file holds.
+        let fewer = ASCII.replace("element vertex 4", "element vertex 3");
+        let e = parse(fewer.as_bytes()).unwrap_err().1;
+        assert!(e.contains("more data than its header declares"), "{e}");
     }
 }

@@ -37,6 +37,11 @@ impl Mesh {
     }
 }
 
+/// The largest magnitude of a world-space vertex coordinate the loaders
+/// accept: beyond it the squared lengths of f32 edge cross products
+/// (~coordinate⁴) overflow and triangles vanish.
+pub const MAX_COORDINATE: f32 = 1e9;
+
 /// A pinhole perspective camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {

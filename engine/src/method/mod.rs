@@ -40,7 +40,8 @@ pub use stratified::{
 use crate::drive::{Budget, Clock, Observer, RenderStats};
 use crate::error::Error;
 use crate::film::Film;
-use crate::oracle::{PathOracle, Resolution};
+use crate::oracle::{PathOracle, Radiance, Resolution};
+use crate::parallel;
 use crate::target::Importance;
 
 /// What to render and how.
@@ -127,6 +128,24 @@ impl Method {
             Method::Stratified(_) => "stratified",
             Method::Erpt(_) => "erpt",
             Method::MultiStage(_) => "multistage",
+        }
+    }
+
+    /// An upper bound on the bytes a render with this method keeps per
+    /// pixel, for `channels` channels and `workers` threads: films, per-worker
+    /// buffers and, for stratified MCMC, every tile's chain, estimates and the
+    /// solver's planes (measured ~2.9 KB per pixel at 512², with paths of the
+    /// native tracer's depth; docs/RESULTS.md, hostile input).
+    pub fn bytes_per_pixel(&self, channels: usize, workers: usize) -> u64 {
+        let film = 8 * (channels as u64 + 1);
+        let buffers = workers as u64 + 3;
+        match self {
+            Method::Mc | Method::Pssmlt(_) | Method::Erpt(_) => buffers * film,
+            Method::Replica(s) => {
+                (buffers + s.ensembles as u64 * s.ensemble.ladder.len() as u64) * film
+            }
+            Method::MultiStage(_) => (buffers + 8) * film,
+            Method::Stratified(_) => 4096 + buffers * film,
         }
     }
 
@@ -230,6 +249,13 @@ where
     if resolution.pixel_count() == 0 {
         return Err(Error::EmptyResolution);
     }
+    let per_pixel = settings
+        .method
+        .bytes_per_pixel(O::Radiance::CHANNELS, parallel::threads());
+    check_memory(
+        per_pixel.saturating_mul(resolution.pixel_count() as u64),
+        "render's films and buffers (a bound for this method and film size)",
+    )?;
     let job = Job {
         oracle,
         importance,
@@ -247,4 +273,14 @@ where
         Method::Erpt(s) => erpt::render(s, &job),
         Method::MultiStage(s) => multistage::render(s, &job),
     }
+}
+
+/// Whether `bytes` can be had, by reserving them and letting them go before
+/// any work: a film too large for the machine is an error naming its size,
+/// not an abort half way through (the reservation touches no page).
+fn check_memory(bytes: u64, what: &'static str) -> Result<(), Error> {
+    let failed = Error::AllocationFailed { what, bytes };
+    let len = usize::try_from(bytes).map_err(|_| failed.clone())?;
+    let mut trial: Vec<u8> = Vec::new();
+    trial.try_reserve_exact(len).map_err(|_| failed)
 }

@@ -15,7 +15,7 @@ use crate::drive::splat::{RoundBuffers, Runs, SplatBands, Splatting, Worker};
 use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
 use crate::exchange::{
-    Ensemble, EnsembleSettings, ExchangeKind, ExchangeStats, Ladder, Move, Replica,
+    Ensemble, EnsembleSettings, ExchangeKind, ExchangeStats, Ladder, Move, Replica, Tempering,
 };
 use crate::oracle::PathOracle;
 use crate::parallel;
@@ -84,6 +84,16 @@ where
     let (oracle, importance) = (job.oracle, job.importance);
     let mut ensemble = settings.ensemble.clone();
     let mut bootstrap = ensemble.bootstrap(oracle, importance, job.seed)?;
+    // Under the oracle's tempering the levels may all be one target (an
+    // all-diffuse scene for the native tracer); power tempering differs
+    // wherever the importance is neither 0 nor 1.
+    if ensemble.tempering == Tempering::Oracle && bootstrap.levels() > 1 && bootstrap.levels_agree()
+    {
+        return Err(Error::LevelsIndistinguishable {
+            levels: bootstrap.levels(),
+            candidates: bootstrap.candidates(),
+        });
+    }
     let mut set_up = bootstrap.traced().paths;
     let bands = SplatBands::new(job.resolution);
     let start = |i: usize, bootstrap: &Bootstrap| -> Result<EnsembleWork<'_, O, I>, Error> {

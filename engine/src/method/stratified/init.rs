@@ -25,6 +25,8 @@ use crate::target::{Importance, MaxChannel};
 struct GlobalTarget<'a, 'b, O, I: ?Sized> {
     ctx: &'a Context<'b, O, I>,
     traces: AtomicU64,
+    /// Traces with invalid radiance (valued zero).
+    invalid: AtomicU64,
 }
 
 /// The jitter of a film point inside its pixel.
@@ -55,13 +57,15 @@ where
         let tile = self.ctx.tiles.resolution().pixel_index(film);
         let jitter = jitter_of(film);
         let mut target = 0.0f64;
-        let mut traces = 0;
+        let (mut traces, mut invalid) = (0, 0);
         for (_, q) in self.ctx.tiles.pixels(tile) {
-            let (v, _) = self.ctx.trace_in(sampler, q, jitter);
+            let (v, bad) = self.ctx.trace_in(sampler, q, jitter);
             target = target.max(v.importance);
             traces += 1;
+            invalid += bad as u64;
         }
         self.traces.fetch_add(traces, Ordering::Relaxed);
+        self.invalid.fetch_add(invalid, Ordering::Relaxed);
         PathSample::new(target as f32)
     }
 }
@@ -73,9 +77,19 @@ struct Visit {
     sampler: MltSampler,
 }
 
+/// What the initialization traced.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Initialized {
+    /// Paths traced in all.
+    pub traced: u64,
+    /// Of them, by the global chains' bootstrap.
+    pub bootstrap: u64,
+    /// Of them, invalid (valued zero) outside the tile chains' own counters.
+    pub invalid: u64,
+}
+
 /// Runs the global chains until the coverage or the budget is reached and
-/// installs their states; returns paths traced, and how many of them the
-/// bootstrap traced.
+/// installs their states.
 pub(super) fn initialize<O, I>(
     ctx: &Context<'_, O, I>,
     chains: &mut [TileChain<O::Radiance>],
@@ -83,7 +97,7 @@ pub(super) fn initialize<O, I>(
     seed: u64,
     max_traces: u64,
     clock: Option<&Clock>,
-) -> Result<(u64, u64), Error>
+) -> Result<Initialized, Error>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
@@ -92,11 +106,12 @@ where
     let n = chains.len();
     let wanted = libm::ceil(init.coverage * n as f64) as usize;
     if init.global_chains == 0 || wanted == 0 || max_traces == 0 {
-        return Ok((0, 0));
+        return Ok(Initialized::default());
     }
     let target = GlobalTarget {
         ctx,
         traces: AtomicU64::new(0),
+        invalid: AtomicU64::new(0),
     };
     let offsets = ctx.tiles.offsets().len() as u64;
     let candidates = init
@@ -110,7 +125,11 @@ where
         // A black scene (for these candidates): tiles fall back on uniform draws.
         Err(Error::AllCandidatesBlack { .. }) => {
             let traced = target.traces.load(Ordering::Relaxed);
-            return Ok((traced, traced));
+            return Ok(Initialized {
+                traced,
+                bootstrap: traced,
+                invalid: target.invalid.load(Ordering::Relaxed),
+            });
         }
         Err(e) => return Err(e),
     };
@@ -168,8 +187,9 @@ where
             0
         }
     });
-    Ok((
-        target.traces.load(Ordering::Relaxed) + replays,
-        bootstrap_traces,
-    ))
+    Ok(Initialized {
+        traced: target.traces.load(Ordering::Relaxed) + replays,
+        bootstrap: bootstrap_traces,
+        invalid: target.invalid.load(Ordering::Relaxed),
+    })
 }

@@ -287,7 +287,7 @@ where
             ))),
         ),
     };
-    let (traced, bootstrap_traces) = initialize(
+    let initialized = initialize(
         &ctx,
         &mut chains,
         settings,
@@ -300,14 +300,14 @@ where
         settings,
         chains,
         stats: StratifiedStats {
-            initialization_samples: traced,
+            initialization_samples: initialized.traced,
             ..Default::default()
         },
         exchange_rounds: 0,
-        exchange_invalid: 0,
+        invalid: initialized.invalid,
     };
     let driven = drive(&mut sweeps, job.budget, &job.clock, job.observer);
-    sweeps.finish(driven, bootstrap_traces)
+    sweeps.finish(driven, initialized.bootstrap)
 }
 
 /// Stratified MCMC's state between rounds: the tile chains and their counters.
@@ -317,7 +317,9 @@ struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
     chains: Vec<TileChain<O::Radiance>>,
     stats: StratifiedStats,
     exchange_rounds: u64,
-    exchange_invalid: u64,
+    /// Invalid traces outside the tile chains' counters (initialization,
+    /// exchanges).
+    invalid: u64,
 }
 
 impl<O, I> Sweeps<'_, '_, O, I>
@@ -371,7 +373,7 @@ where
             stats: RenderStats {
                 samples: traced - bootstrap_traces,
                 bootstrap_samples: bootstrap_traces,
-                invalid_samples: chain_stats.invalid + self.exchange_invalid,
+                invalid_samples: chain_stats.invalid + self.invalid,
                 chains: chain_stats,
                 ..Default::default()
             },
@@ -438,7 +440,7 @@ where
                 stats.exchange_samples += c.traces;
                 stats.exchange_attempts += c.attempts;
                 stats.exchange_accepted += c.accepted;
-                self.exchange_invalid += c.invalid;
+                self.invalid += c.invalid;
             }
         }
     }

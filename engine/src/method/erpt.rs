@@ -2,7 +2,9 @@
 //! primary sample space: the baseline of seed 001 sec. 4 ("a version of ERPT
 //! that uses primary sample space mutations", chain length 100).
 //!
-//! Every pass traces one path per pixel, uniform in the pixel, like MC. A
+//! Every pass traces one path per pixel, uniform in the pixel, like MC (on
+//! films of fewer than [`MIN_STARTS`] pixels, `⌈MIN_STARTS / pixels⌉` per
+//! pixel, so that a pass of a tiny film is not one path that may be black). A
 //! path `y` of importance `I(y)` then starts `⌊I(y) / (N e_d) + ξ⌋` chains of
 //! `N` small steps on the target `I`; each step deposits the energy `e_d` at
 //! the chain's state, coloured `f/I` (by expected values: `a e_d f(y)/I(y)`
@@ -37,7 +39,9 @@ use crate::sample::MltSampler;
 use crate::target::{Evaluated, Importance, evaluate};
 
 /// Settings of ERPT. The budget counts MC paths and chain steps, rounded to
-/// whole passes (at least one) at the expected cost of a pass.
+/// whole passes (at least one) at the expected cost of a pass; a pass has at
+/// least 16 start paths, so films of fewer pixels spend more than a budget
+/// smaller than that.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ErptSettings {
     /// Steps per chain `N` (100 in seed 001).
@@ -116,6 +120,7 @@ where
         bands,
         film: Film::try_new(resolution, O::Radiance::CHANNELS)?,
         visits: alloc::vec![0; resolution.pixel_count()],
+        starts: resolution.pixel_count() * MIN_STARTS.div_ceil(resolution.pixel_count()),
         passes: 0,
         done: 0,
         rotation: 0,
@@ -178,8 +183,10 @@ impl<R> Weights<Evaluated<R>> for EnergyWeights {
 /// Tasks per unit of work (merged in task order) and start pixels per task.
 const TASKS: usize = 16;
 const PIXELS_PER_TASK: usize = 64;
-/// Start pixels per unit of work.
+/// Start paths per unit of work.
 const BLOCK: usize = TASKS * PIXELS_PER_TASK;
+/// The fewest start paths of a pass.
+const MIN_STARTS: usize = 16;
 
 /// Counters of a task's work.
 #[derive(Clone, Copy, Debug, Default)]
@@ -191,7 +198,7 @@ struct Totals {
 
 /// A task: a run of start pixels and what it produced.
 struct Segment<R> {
-    /// The first pixel and the number of pixels of the current run.
+    /// The first start path and the number of start paths of the current run.
     first: usize,
     pixels: usize,
     buffers: RoundBuffers<R>,
@@ -229,6 +236,9 @@ struct Passes<'a, 'j, O: PathOracle, I: ?Sized> {
     work: Vec<Segment<O::Radiance>>,
     film: Film,
     visits: Vec<u64>,
+    /// Start paths per pass: a whole number of paths per pixel, at least
+    /// [`MIN_STARTS`].
+    starts: usize,
     /// Passes completed.
     passes: u64,
     /// Blocks done of the current pass, and the block it started at.
@@ -243,29 +253,36 @@ where
 {
     /// Blocks per pass `B`.
     fn blocks(&self) -> usize {
-        self.job.resolution.pixel_count().div_ceil(BLOCK)
+        self.starts.div_ceil(BLOCK)
     }
 
-    /// The film's scale: one over the passes done, `passes + m / B`.
+    /// The film's scale: one over the start paths per pixel done,
+    /// `(passes + m / B) · starts / pixels`.
     fn scale(&self) -> f64 {
         let passes = self.passes as f64 + self.done as f64 / self.blocks() as f64;
-        if passes > 0.0 { 1.0 / passes } else { 0.0 }
+        let per_pixel = (self.starts / self.job.resolution.pixel_count()) as f64;
+        if passes > 0.0 {
+            1.0 / (passes * per_pixel)
+        } else {
+            0.0
+        }
     }
 
     /// The start paths of block `block` of the current pass, in tasks run in
     /// parallel and merged in order.
     fn run_block(&mut self, block: usize) {
-        let pixels = self.job.resolution.pixel_count();
+        let (pixels, starts) = (self.job.resolution.pixel_count(), self.starts);
         let first = block * BLOCK;
         for (t, w) in self.work.iter_mut().enumerate() {
-            w.first = (first + t * PIXELS_PER_TASK).min(pixels);
-            w.pixels = PIXELS_PER_TASK.min(pixels - w.first);
+            w.first = (first + t * PIXELS_PER_TASK).min(starts);
+            w.pixels = PIXELS_PER_TASK.min(starts - w.first);
         }
-        let pass = self.passes * pixels as u64;
+        let pass = self.passes * starts as u64;
         let (job, settings, energy) = (self.job, self.settings, self.energy);
         parallel::for_each(&mut self.work, |w| {
-            for pixel in w.first..w.first + w.pixels {
-                redistribute(job, settings, energy, pass + pixel as u64, w, pixel);
+            for start in w.first..w.first + w.pixels {
+                let pixel = start % pixels;
+                redistribute(job, settings, energy, pass + start as u64, w, pixel);
             }
         });
         self.bands
@@ -283,7 +300,7 @@ where
     }
 
     fn planned_units(&self, samples: u64) -> u64 {
-        let pass = self.job.resolution.pixel_count() as f64 * self.settings.paths_per_pixel();
+        let pass = self.starts as f64 * self.settings.paths_per_pixel();
         let passes = ((samples as f64 / pass) as u64).max(1);
         passes * self.blocks() as u64
     }

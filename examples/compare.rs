@@ -29,6 +29,7 @@ use std::time::{Duration, Instant};
 use clap::Parser;
 use clap::builder::PossibleValuesParser;
 use strata::engine::exchange::EnsembleSettings;
+use strata::engine::method::Solver;
 use strata::engine::metrics::{self, ImageErrors};
 use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
@@ -61,6 +62,14 @@ struct Args {
         value_parser = PossibleValuesParser::new(Method::NAMES)
     )]
     methods: Vec<String>,
+    /// Stratified MCMC: plain MC paths per pixel and sweep for its
+    /// regularizer (`StratifiedSettings::regularizer_paths`).
+    #[arg(long)]
+    regularizer_paths: Option<u32>,
+    /// Stratified MCMC: weight α of the regularizer in the weighted solver
+    /// (seed 001: 0.05).
+    #[arg(long)]
+    alpha: Option<f64>,
     /// Paths per pixel of the MC reference.
     #[arg(long, default_value_t = 8192)]
     reference_spp: u64,
@@ -170,7 +179,7 @@ fn main() -> AnyResult<()> {
     );
     let mut rows = Vec::new();
     for name in &args.methods {
-        let method = compared(name)?;
+        let method = compared(name, &args)?;
         for &fraction in &args.checkpoints {
             let budget = args.time * fraction;
             let settings = Settings {
@@ -319,7 +328,7 @@ fn reference_error(reference: &Film, check: &Film) -> ImageErrors {
 /// The method called `name` as seed 001 sec. 4 compares it: Kelemen small
 /// steps from 1/1024 to 1/32, large steps 0.3; replica exchange with 4
 /// chains up to T = 100.
-fn compared(name: &str) -> AnyResult<Method> {
+fn compared(name: &str, args: &Args) -> AnyResult<Method> {
     let mutation = MutationParams {
         small_step: SmallStep::Kelemen(Kelemen::SEED_001),
         large_step_probability: 0.3,
@@ -329,7 +338,15 @@ fn compared(name: &str) -> AnyResult<Method> {
         Method::Mc => {}
         Method::Pssmlt(s) => s.mutation = mutation,
         Method::Erpt(s) => s.small_step = mutation.small_step,
-        Method::Stratified(s) => s.mutation = mutation,
+        Method::Stratified(s) => {
+            s.mutation = mutation;
+            if let Some(k) = args.regularizer_paths {
+                s.regularizer_paths = k;
+            }
+            if let (Some(alpha), Solver::Weighted(w)) = (args.alpha, &mut s.solver) {
+                w.alpha = alpha;
+            }
+        }
         Method::MultiStage(s) => s.pssmlt.mutation = mutation,
         Method::Replica(s) => {
             s.ensemble = EnsembleSettings::geometric(4, 100.0)?;

@@ -19,7 +19,8 @@ pub enum Domain {
     Independent = 0xd6e8_feb8_6659_fd93,
     /// Ensemble `i`'s exchange decisions (replica exchange).
     Exchange = 0xe703_7ed1_a0b4_28db,
-    /// Tile `i`'s chain in stratified MCMC (mutations, then decisions at `i + pixels`).
+    /// Tile `i`'s chain in stratified MCMC (mutations, then decisions at
+    /// `i + pixels`, then its regularizer paths at `i + 2 pixels`).
     Tile = 0x2545_f491_4f6c_dd1d,
     /// ERPT: MC path `i`'s chain decisions and mutations.
     Energy = 0x9fb2_1c65_1e98_df25,

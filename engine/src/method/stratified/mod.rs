@@ -14,7 +14,8 @@
 //!   (sec. 3.4): an independence proposal accepted with `min(1, T_s(y) /
 //!   T_s(x))`, and every large-step proposal is also an ordinary Monte Carlo
 //!   sample of each tile pixel. Pooled over the tiles containing a pixel, they
-//!   give the regularizer `Î(j)` of eq. 11.
+//!   give the regularizer `Î(j)` of eq. 11 (with, optionally, plain MC paths
+//!   traced for it alone: [`StratifiedSettings::regularizer_paths`]).
 //! * **Initialization** (sec. 3.3). Global chains run PSSMLT over the union of
 //!   the tile targets (the film position picks the tile, its fraction the
 //!   jitter); a tile takes the state of the first global chain that visits it,
@@ -67,7 +68,7 @@ use self::local::{exchange_all, exchange_cost};
 use self::regularizer::{LargeSteps, anchor_total, fall_back};
 use self::tile::{Context, Start, TileChain};
 use super::{Extras, Job, Output};
-use crate::chain::ChainStats;
+use crate::chain::{ChainStats, Traced};
 use crate::drive::{Budget, Driven, RenderStats, Rounds, drive};
 use crate::error::{Error, check_probability};
 use crate::film::Film;
@@ -154,6 +155,12 @@ pub struct StratifiedSettings {
     /// those means skewed; see `regularizer.rs` for what it cost and why the
     /// scaled image is unbiased.
     pub anchor_total: bool,
+    /// Plain MC paths per pixel and sweep traced for the regularizer alone,
+    /// one tile at a time at its centre pixel (0 by default: seed 001's large
+    /// steps only). Ours, issue 18: the regularizer is the reconstruction's
+    /// one absolute anchor, and its noise is what limits the image on
+    /// veach-ajar (docs/RESULTS.md).
+    pub regularizer_paths: u32,
 }
 
 impl Default for StratifiedSettings {
@@ -166,6 +173,7 @@ impl Default for StratifiedSettings {
             solver: Solver::default(),
             fallback_sigmas: Some(3.0),
             anchor_total: true,
+            regularizer_paths: 0,
         }
     }
 }
@@ -205,6 +213,9 @@ pub struct StratifiedStats {
     pub sweeps: u64,
     /// Paths traced by the tile chains' steps.
     pub tile_samples: u64,
+    /// Paths traced for the regularizer alone
+    /// ([`StratifiedSettings::regularizer_paths`]).
+    pub regularizer_samples: u64,
     /// Paths traced to evaluate exchanged and borrowed states.
     pub exchange_samples: u64,
     /// Paths traced by the initialization (bootstrap included, global
@@ -367,7 +378,10 @@ where
                 Start::Uniform => stats.initialized_by_uniform_draws += 1,
             }
         }
-        let traced = stats.initialization_samples + stats.tile_samples + stats.exchange_samples;
+        let traced = stats.initialization_samples
+            + stats.tile_samples
+            + stats.regularizer_samples
+            + stats.exchange_samples;
         Ok(Output {
             film,
             stats: RenderStats {
@@ -400,7 +414,8 @@ where
         } else {
             0.0
         };
-        step_cost as f64 + exchange
+        let regularizer = self.settings.regularizer_paths as u64 * tiles.count() as u64;
+        (step_cost + regularizer) as f64 + exchange
     }
 }
 
@@ -424,15 +439,22 @@ where
         let width = ctx.tiles.resolution().width as usize;
         let every = self.settings.exchange_every as u64;
         for _ in 0..units {
+            let paths = self.settings.regularizer_paths;
             let traced = parallel::sum_chunks(&mut self.chains, width, |y, row| {
-                let mut traces = 0;
+                let mut traced = SweepTraces::default();
                 for (x, chain) in row.iter_mut().enumerate() {
-                    traces += chain.step(ctx, y * width + x);
+                    traced.steps += chain.step(ctx, y * width + x);
+                    if paths > 0 {
+                        let (paths, invalid) = chain.trace_regularizer(ctx, y * width + x, paths);
+                        traced.regularizer += Traced { paths, invalid };
+                    }
                 }
-                traces
+                traced
             });
+            self.invalid += traced.regularizer.invalid;
             let stats = &mut self.stats;
-            stats.tile_samples += traced;
+            stats.tile_samples += traced.steps;
+            stats.regularizer_samples += traced.regularizer.paths;
             stats.sweeps += 1;
             if every > 0 && stats.sweeps.is_multiple_of(every) {
                 let c = exchange_all(ctx, &mut self.chains, width, self.exchange_rounds);
@@ -447,7 +469,7 @@ where
 
     fn samples(&self) -> u64 {
         let s = &self.stats;
-        s.initialization_samples + s.tile_samples + s.exchange_samples
+        s.initialization_samples + s.tile_samples + s.regularizer_samples + s.exchange_samples
     }
 
     /// Eq. 12 with the initial normalizations (a quick reconstruction).
@@ -466,6 +488,23 @@ where
             anchor_total(&mut film, &regularizer);
         }
         film
+    }
+}
+
+/// Paths a sweep's tile steps and regularizer paths traced.
+#[derive(Clone, Copy, Debug, Default)]
+struct SweepTraces {
+    steps: u64,
+    regularizer: Traced,
+}
+
+impl core::ops::Add for SweepTraces {
+    type Output = Self;
+    fn add(self, other: Self) -> Self {
+        Self {
+            steps: self.steps + other.steps,
+            regularizer: self.regularizer + other.regularizer,
+        }
     }
 }
 

@@ -69,6 +69,10 @@ impl LargeSteps {
             for (s, o) in tiles.tiles_of(j) {
                 let chain = &chains[s];
                 samples.counts[j] += chain.large_steps;
+                if s == j {
+                    // The centre pixel's plain MC paths.
+                    samples.counts[j] += chain.centre_paths;
+                }
                 samples.squares[j] += chain.uniform_squares[o];
                 for c in 0..channels {
                     data[j * channels + c] += chain.uniform[o * channels + c];

@@ -14,7 +14,7 @@ use crate::chain::{Chain, ChainStats, Target, Traced, Weights};
 use crate::mutate::MutationParams;
 use crate::oracle::{FilmPoint, PathOracle, Radiance, Resolution, Sampler, Temperature};
 use crate::rng::{self, Domain, uniform_f64};
-use crate::sample::{MltSampler, Proposal};
+use crate::sample::{IndependentSampler, MltSampler, Proposal};
 use crate::target::{Importance, evaluate};
 use crate::tiles::Tiles;
 
@@ -56,6 +56,12 @@ pub(super) struct TileChain<R> {
     /// offset (the regularizer's variance).
     pub uniform_squares: Vec<f64>,
     pub large_steps: u64,
+    /// Plain MC paths traced at the tile's centre pixel for the regularizer
+    /// ([`StratifiedSettings::regularizer_paths`](super::StratifiedSettings)),
+    /// summed into `uniform` and `uniform_squares` at the centre's offset.
+    pub centre_paths: u64,
+    /// Their sampler.
+    mc: IndependentSampler,
     pub stats: ChainStats,
     pub start: Start,
     /// A global chain's state was installed and must be evaluated.
@@ -211,6 +217,8 @@ impl<R: Radiance> TileChain<R> {
             uniform: vec![0.0; per_offset],
             uniform_squares: vec![0.0; offsets],
             large_steps: 0,
+            centre_paths: 0,
+            mc: IndependentSampler::new(rng::stream(seed, Domain::Tile, (tile + 2 * tiles) as u64)),
             stats: ChainStats::default(),
             start: Start::None,
             pending: false,
@@ -258,6 +266,40 @@ impl<R: Radiance> TileChain<R> {
             self.start = Start::Uniform;
         }
         outcome.traced.paths
+    }
+
+    /// Traces `paths` plain MC paths at the tile's centre pixel into the
+    /// regularizer's sums. Returns paths traced and how many were invalid.
+    pub fn trace_regularizer<O, I>(
+        &mut self,
+        ctx: &Context<'_, O, I>,
+        tile: usize,
+        paths: u32,
+    ) -> (u64, u64)
+    where
+        O: PathOracle<Radiance = R>,
+        I: Importance<R> + ?Sized,
+    {
+        let Some(centre) = ctx.tiles.offset_of(tile, tile) else {
+            return (0, 0);
+        };
+        let channels = R::CHANNELS;
+        let mut invalid = 0;
+        for _ in 0..paths {
+            let [x, y] = self.mc.next_2d();
+            let (v, bad) = ctx.trace_in(&mut self.mc, tile, FilmPoint { x, y });
+            invalid += bad as u64;
+            let sums = &mut self.uniform[centre * channels..(centre + 1) * channels];
+            let mut mean = 0.0;
+            for (c, sum) in sums.iter_mut().enumerate() {
+                let value = v.radiance.channel(c) as f64;
+                *sum += value;
+                mean += value / channels as f64;
+            }
+            self.uniform_squares[centre] += mean * mean;
+        }
+        self.centre_paths += paths as u64;
+        (paths as u64, invalid)
     }
 
     /// Evaluates the current state again in every tile pixel (after a

@@ -1,10 +1,13 @@
-//! The main job: render a scene with a chosen method and write a tone-mapped
-//! PNG and a linear EXR.
+//! The `strata` command. `strata render SCENE` renders a scene with a chosen
+//! method and writes a tone-mapped PNG and a linear EXR, with a progress bar;
+//! it exits with 0 on success, 1 on an error (printed), 2 on bad arguments.
 //!
 //! ```text
-//! cargo run --release --example render -- --scene procedural --method pssmlt --spp 64 --out out/procedural
-//! cargo run --release --example render -- --scene caustic --method replica --exchange is-permutation --spp 64
-//! cargo run --release --example render -- --scene door --method stratified --spp 64
+//! cargo install --path .          # or: cargo run --release -- render ...
+//! strata render cornell --method pssmlt --spp 64 --out out/cornell
+//! strata render procedural --method pssmlt --spp 64 --out out/procedural
+//! strata render caustic --method replica --exchange is-permutation --spp 64
+//! strata render ../shared/scenes/veach-ajar/scene.pbrt --method stratified --time 30
 //! ```
 //!
 //! Scenes: the path tracer's built-ins (`cornell`, `door`, `envplane`,
@@ -18,7 +21,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use clap::builder::PossibleValuesParser;
-use clap::{Parser, ValueEnum};
+use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use strata::embree::EmbreeIntersector;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
@@ -77,12 +80,26 @@ enum Backend {
     Embree,
 }
 
-/// Render a scene with strata.
+/// strata: Markov-chain Monte Carlo light transport (PSSMLT, replica
+/// exchange, stratified MCMC, ERPT, multi-stage MLT) and plain MC.
 #[derive(Parser, Debug)]
-#[command(version, about)]
+#[command(name = "strata", version)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Render a scene: a tone-mapped PNG and a linear EXR.
+    Render(Args),
+}
+
+/// What `strata render` takes.
+#[derive(clap::Args, Debug)]
 struct Args {
     /// Scene: cornell, door, envplane, caustic, procedural, mixture, or a .pbrt file.
-    #[arg(long, default_value = "cornell")]
+    #[arg(default_value = "cornell")]
     scene: String,
     /// Estimator: mc, pssmlt, replica, stratified, erpt or multistage.
     #[arg(long, default_value = "pssmlt", value_parser = PossibleValuesParser::new(Method::NAMES))]
@@ -175,7 +192,7 @@ impl Observer for Bar {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
+    let Command::Render(args) = Cli::parse().command;
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

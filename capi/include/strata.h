@@ -105,6 +105,17 @@ enum StrataStatus strata_render(const struct StrataOracle *oracle,
                                 void *progress_user,
                                 struct StrataFilm **film);
 
+// Checks that `oracle.trace` is a pure function of its inputs at the film
+// point (`x`, `y`) and `temperature`: traces it twice with the same
+// numbers, `trials` times; `STRATA_STATUS_OK` if every pair agrees bit for
+// bit, `STRATA_STATUS_INVALID_ARGUMENT` (and what differed) if not. An
+// oracle that passes may still be impure elsewhere; one that fails is wrong.
+enum StrataStatus strata_check_purity(const struct StrataOracle *oracle,
+                                      float x,
+                                      float y,
+                                      float temperature,
+                                      uint32_t trials);
+
 // The film's width (0 for null).
 uint32_t strata_film_width(const struct StrataFilm *film);
 

@@ -145,3 +145,40 @@ fn a_render_gives_its_film_and_the_progress_callback_can_cancel() {
     strata_film_free(film);
     strata_settings_free(settings);
 }
+
+static CALLS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+
+/// Impure: its value depends on how often it was called.
+extern "C" fn counting(
+    _: *mut c_void,
+    _: f32,
+    _: f32,
+    _: *mut StrataSampler,
+    _: f32,
+    rgb: *mut f32,
+) {
+    let n = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    // SAFETY: the engine passes room for three floats.
+    unsafe { std::slice::from_raw_parts_mut(rgb, 3).fill(n as f32) };
+}
+
+#[test]
+fn the_purity_check_tells_a_pure_oracle_from_an_impure_one() {
+    assert_eq!(
+        strata_check_purity(&oracle(uniform), 3.5, 2.5, 1.0, 16),
+        StrataStatus::Ok
+    );
+    assert_eq!(
+        strata_check_purity(&oracle(counting), 3.5, 2.5, 1.0, 16),
+        StrataStatus::InvalidArgument
+    );
+    assert!(
+        last_error().contains("not a pure function"),
+        "{}",
+        last_error()
+    );
+    assert_eq!(
+        strata_check_purity(null(), 0.0, 0.0, 1.0, 1),
+        StrataStatus::InvalidArgument
+    );
+}

@@ -94,6 +94,14 @@ enum StrataStatus strata_settings_set_samples_per_pixel(struct StrataSettings *s
 // A time budget of `seconds` (finite, > 0).
 enum StrataStatus strata_settings_set_seconds(struct StrataSettings *settings, double seconds);
 
+// Sets the method's numeric setting `name` to `value` (the names each
+// method takes are in the message of a wrong one); an unknown name or an
+// invalid value is `STRATA_STATUS_INVALID_ARGUMENT` and leaves the settings
+// as they were.
+enum StrataStatus strata_settings_set(struct StrataSettings *settings,
+                                      const char *name,
+                                      double value);
+
 // Worker threads (0: all cores). The image does not depend on it.
 enum StrataStatus strata_settings_set_threads(struct StrataSettings *settings, uint32_t threads);
 

@@ -25,6 +25,8 @@ use std::ffi::{CStr, CString, c_char, c_void};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::Duration;
 
+use strata_engine::exchange::Ladder;
+use strata_engine::method::Solver;
 use strata_engine::purity::check_purity;
 use strata_engine::target::MaxChannel;
 use strata_engine::{
@@ -282,6 +284,113 @@ pub extern "C" fn strata_settings_set_seconds(
             StrataStatus::Ok
         }
         Err(e) => e,
+    }
+}
+
+/// The numeric settings [`strata_settings_set`] knows, per method.
+const NAMES: &str = "pssmlt: chains, bootstrap_candidates, large_step_probability; \
+replica: ensembles, replicas, t_max, bootstrap_candidates, large_step_probability, \
+ladder_tuning_sweeps; stratified: exchange_every, fallback_sigmas (0: off), \
+regularizer_paths, alpha, large_step_probability; erpt: chain_length, chains_per_path, \
+bootstrap_candidates; multistage: linear_stages, chains, bootstrap_candidates, \
+large_step_probability";
+
+/// `value` as a whole number that fits `T`.
+fn whole<T: TryFrom<u64>>(name: &str, value: f64) -> Result<T, String> {
+    let bad = || format!("`{name}` must be a whole number >= 0, got {value}");
+    if !(value >= 0.0 && value.fract() == 0.0 && value < 1.8e19) {
+        return Err(bad());
+    }
+    T::try_from(value as u64).map_err(|_| bad())
+}
+
+/// Sets the numeric setting `name` of the method to `value`.
+fn set_number(method: &mut Method, name: &str, value: f64) -> Result<(), String> {
+    let method_name = method.name();
+    let unknown = || format!("{method_name} has no setting `{name}` ({NAMES})");
+    match (&mut *method, name) {
+        (Method::Pssmlt(s), "chains") => s.chains = whole(name, value)?,
+        (Method::Pssmlt(s), "bootstrap_candidates") => s.bootstrap_candidates = whole(name, value)?,
+        (Method::Pssmlt(s), "large_step_probability") => s.mutation.large_step_probability = value,
+        (Method::Replica(s), "ensembles") => s.ensembles = whole(name, value)?,
+        (Method::Replica(s), "replicas" | "t_max") => {
+            let (mut levels, mut t_max) = (
+                s.ensemble.ladder.len(),
+                s.ensemble
+                    .ladder
+                    .temperatures()
+                    .last()
+                    .copied()
+                    .unwrap_or(1.0),
+            );
+            if name == "replicas" {
+                levels = whole(name, value)?;
+            } else {
+                t_max = value;
+            }
+            s.ensemble.ladder = Ladder::geometric(levels, t_max).map_err(|e| e.to_string())?;
+        }
+        (Method::Replica(s), "bootstrap_candidates") => {
+            s.ensemble.bootstrap_candidates = whole(name, value)?
+        }
+        (Method::Replica(s), "large_step_probability") => {
+            s.ensemble.mutation.large_step_probability = value
+        }
+        (Method::Replica(s), "ladder_tuning_sweeps") => {
+            s.ladder_tuning_sweeps = whole(name, value)?
+        }
+        (Method::Stratified(s), "exchange_every") => s.exchange_every = whole(name, value)?,
+        (Method::Stratified(s), "fallback_sigmas") => {
+            s.fallback_sigmas = (value != 0.0).then_some(value)
+        }
+        (Method::Stratified(s), "regularizer_paths") => s.regularizer_paths = whole(name, value)?,
+        (Method::Stratified(s), "alpha") => match &mut s.solver {
+            Solver::Weighted(w) => w.alpha = value,
+            Solver::LogDomain(_) => return Err(unknown()),
+        },
+        (Method::Stratified(s), "large_step_probability") => {
+            s.mutation.large_step_probability = value
+        }
+        (Method::Erpt(s), "chain_length") => s.chain_length = whole(name, value)?,
+        (Method::Erpt(s), "chains_per_path") => s.chains_per_path = value,
+        (Method::Erpt(s), "bootstrap_candidates") => s.bootstrap_candidates = whole(name, value)?,
+        (Method::MultiStage(s), "linear_stages") => s.linear_stages = whole(name, value)?,
+        (Method::MultiStage(s), "chains") => s.pssmlt.chains = whole(name, value)?,
+        (Method::MultiStage(s), "bootstrap_candidates") => {
+            s.pssmlt.bootstrap_candidates = whole(name, value)?
+        }
+        (Method::MultiStage(s), "large_step_probability") => {
+            s.pssmlt.mutation.large_step_probability = value
+        }
+        _ => return Err(unknown()),
+    }
+    method.validate().map_err(|e| e.to_string())
+}
+
+/// Sets the method's numeric setting `name` to `value` (the names each
+/// method takes are in the message of a wrong one); an unknown name or an
+/// invalid value is `STRATA_STATUS_INVALID_ARGUMENT` and leaves the settings
+/// as they were.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_settings_set(
+    settings: *mut StrataSettings,
+    name: *const c_char,
+    value: f64,
+) -> StrataStatus {
+    let s = match settings_mut(settings) {
+        Ok(s) => s,
+        Err(e) => return e,
+    };
+    let Some(name) = text(name) else {
+        return fail(StrataStatus::InvalidArgument, "null or non-UTF-8 name");
+    };
+    let mut method = s.method.clone();
+    match set_number(&mut method, name, value) {
+        Ok(()) => {
+            s.method = method;
+            StrataStatus::Ok
+        }
+        Err(message) => fail(StrataStatus::InvalidArgument, message),
     }
 }
 

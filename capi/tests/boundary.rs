@@ -182,3 +182,57 @@ fn the_purity_check_tells_a_pure_oracle_from_an_impure_one() {
         StrataStatus::InvalidArgument
     );
 }
+
+#[test]
+fn methods_take_their_settings_by_name_and_refuse_bad_ones() {
+    let settings = strata_settings_new(c"stratified".as_ptr());
+    assert_eq!(
+        strata_settings_set(settings, c"regularizer_paths".as_ptr(), 4.0),
+        StrataStatus::Ok
+    );
+    assert_eq!(
+        strata_settings_set(settings, c"alpha".as_ptr(), 1.0),
+        StrataStatus::Ok
+    );
+    assert_eq!(
+        strata_settings_set(settings, c"regularizer_paths".as_ptr(), 2.5),
+        StrataStatus::InvalidArgument
+    );
+    assert!(last_error().contains("whole number"), "{}", last_error());
+    assert_eq!(
+        strata_settings_set(settings, c"chains".as_ptr(), 4.0),
+        StrataStatus::InvalidArgument
+    );
+    assert!(
+        last_error().contains("stratified has no setting `chains`"),
+        "{}",
+        last_error()
+    );
+    assert_eq!(
+        strata_settings_set(settings, c"large_step_probability".as_ptr(), 1.5),
+        StrataStatus::InvalidArgument
+    );
+    let mut film = null_mut();
+    strata_settings_set_samples_per_pixel(settings, 16);
+    assert_eq!(
+        strata_render(&oracle(uniform), settings, None, null_mut(), &mut film),
+        StrataStatus::Ok
+    );
+    strata_film_free(film);
+    strata_settings_free(settings);
+
+    let replica = strata_settings_new(c"replica".as_ptr());
+    assert_eq!(
+        strata_settings_set(replica, c"replicas".as_ptr(), 3.0),
+        StrataStatus::Ok
+    );
+    assert_eq!(
+        strata_settings_set(replica, c"t_max".as_ptr(), f64::NAN),
+        StrataStatus::InvalidArgument
+    );
+    assert_eq!(
+        strata_settings_set(null_mut(), c"t_max".as_ptr(), 2.0),
+        StrataStatus::InvalidArgument
+    );
+    strata_settings_free(replica);
+}

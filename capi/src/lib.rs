@@ -146,6 +146,29 @@ struct COracle {
     trace: extern "C" fn(*mut c_void, f32, f32, *mut StrataSampler, f32, *mut f32),
 }
 
+impl COracle {
+    /// The engine's view of the caller's oracle, or the error for a null
+    /// pointer or a missing `trace`.
+    fn new(oracle: *const StrataOracle) -> Result<Self, StrataStatus> {
+        if oracle.is_null() {
+            return Err(fail(StrataStatus::InvalidArgument, "null oracle"));
+        }
+        // SAFETY: a non-null pointer to the caller's live oracle.
+        let oracle = unsafe { &*oracle };
+        let Some(trace) = oracle.trace else {
+            return Err(fail(
+                StrataStatus::InvalidArgument,
+                "the oracle has no trace callback",
+            ));
+        };
+        Ok(Self {
+            resolution: Resolution::new(oracle.width, oracle.height),
+            user: oracle.user as usize,
+            trace,
+        })
+    }
+}
+
 impl PathOracle for COracle {
     type Radiance = Rgb;
 
@@ -456,20 +479,13 @@ pub extern "C" fn strata_render(
             "null oracle, settings or film pointer",
         );
     }
-    // SAFETY: non-null pointers to the caller's live objects.
-    let (oracle, settings) = unsafe { (&*oracle, &*settings) };
-    // SAFETY: as above.
+    // SAFETY: a non-null pointer to the caller's live settings.
+    let settings = unsafe { &*settings };
+    // SAFETY: checked non-null; the caller passes room for a pointer.
     unsafe { *film = std::ptr::null_mut() };
-    let Some(trace) = oracle.trace else {
-        return fail(
-            StrataStatus::InvalidArgument,
-            "the oracle has no trace callback",
-        );
-    };
-    let c_oracle = COracle {
-        resolution: Resolution::new(oracle.width, oracle.height),
-        user: oracle.user as usize,
-        trace,
+    let c_oracle = match COracle::new(oracle) {
+        Ok(o) => o,
+        Err(e) => return e,
     };
     let budget = match settings.budget {
         RequestedBudget::SamplesPerPixel(spp) => {
@@ -532,21 +548,9 @@ pub extern "C" fn strata_check_purity(
     temperature: f32,
     trials: u32,
 ) -> StrataStatus {
-    if oracle.is_null() {
-        return fail(StrataStatus::InvalidArgument, "null oracle");
-    }
-    // SAFETY: a non-null pointer to the caller's live oracle.
-    let oracle = unsafe { &*oracle };
-    let Some(trace) = oracle.trace else {
-        return fail(
-            StrataStatus::InvalidArgument,
-            "the oracle has no trace callback",
-        );
-    };
-    let c_oracle = COracle {
-        resolution: Resolution::new(oracle.width, oracle.height),
-        user: oracle.user as usize,
-        trace,
+    let c_oracle = match COracle::new(oracle) {
+        Ok(o) => o,
+        Err(e) => return e,
     };
     let film = FilmPoint { x, y };
     let checked = catch_unwind(AssertUnwindSafe(|| {

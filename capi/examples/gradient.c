@@ -16,10 +16,22 @@ static void trace(void *user, float x, float y, StrataSampler *sampler, float te
     rgb[2] = strata_sampler_next_1d(sampler);
 }
 
+/* What the observer saw. */
+typedef struct {
+    uint64_t reported;
+    unsigned previews;
+} Watch;
+
 static int32_t progress(void *user, double fraction, uint64_t paths) {
     (void)fraction;
-    *(uint64_t *)user = paths;
+    ((Watch *)user)->reported = paths;
     return 0; /* non-zero would cancel */
+}
+
+/* The image so far: a real program would display or save it. */
+static void preview(void *user, uint32_t width, uint32_t height, const double *rgb) {
+    (void)width, (void)height, (void)rgb;
+    ((Watch *)user)->previews += 1;
 }
 
 int main(int argc, char **argv) {
@@ -42,9 +54,10 @@ int main(int argc, char **argv) {
     strata_settings_set_seed(settings, 7);
     strata_settings_set_samples_per_pixel(settings, 16);
     strata_settings_set_threads(settings, 2);
-    uint64_t reported = 0;
+    Watch watch = {0, 0};
+    StrataObserver observer = {&watch, progress, preview, 0.5};
     StrataFilm *film = NULL;
-    StrataStatus status = strata_render(&oracle, settings, progress, &reported, &film);
+    StrataStatus status = strata_render(&oracle, settings, &observer, &film);
     strata_settings_free(settings);
     if (status != STRATA_STATUS_OK) {
         fprintf(stderr, "error: %s\n", strata_last_error());
@@ -58,9 +71,12 @@ int main(int argc, char **argv) {
         return 1;
     }
     fclose(out);
-    printf("%s: %ux%u, %llu paths (last progress report %llu)\n", argv[1],
-           strata_film_width(film), strata_film_height(film),
-           (unsigned long long)strata_film_paths(film), (unsigned long long)reported);
+    StrataStats stats;
+    strata_film_stats(film, &stats);
+    printf("%s: %ux%u, %llu paths (last progress report %llu, %u previews), acceptance %.3f\n",
+           argv[1], strata_film_width(film), strata_film_height(film),
+           (unsigned long long)stats.paths, (unsigned long long)watch.reported, watch.previews,
+           stats.acceptance_rate);
     strata_film_free(film);
     return 0;
 }

@@ -42,7 +42,7 @@ int main(int argc, char **argv) {
     strata_settings_set_samples_per_pixel(settings.get(), 16);
     strata_settings_set_threads(settings.get(), 2);
     StrataFilm *raw = nullptr;
-    if (strata_render(&oracle.oracle, settings.get(), nullptr, nullptr, &raw) != STRATA_STATUS_OK) {
+    if (strata_render(&oracle.oracle, settings.get(), nullptr, &raw) != STRATA_STATUS_OK) {
         std::fprintf(stderr, "error: %s\n", strata_last_error());
         return 1;
     }

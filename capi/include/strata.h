@@ -52,10 +52,51 @@ typedef struct StrataOracle {
                 float *rgb);
 } StrataOracle;
 
-// Called between rounds with the fraction of the budget done and the paths
-// traced; return non-zero to stop the render (it then returns
-// `STRATA_STATUS_CANCELLED` with the film of the work done).
-typedef int32_t (*StrataProgress)(void *user, double fraction, uint64_t paths);
+// What a render reports while it runs (every member may be null/0). All
+// callbacks are called between rounds, from the thread that called
+// [`strata_render`].
+typedef struct StrataObserver {
+  // Passed to the callbacks unchanged.
+  void *user;
+  // Called after every round with the fraction of the budget done and
+  // the paths traced; return non-zero to stop the render (it then returns
+  // `STRATA_STATUS_CANCELLED` with the film of the work done).
+  int32_t (*progress)(void *user, double fraction, uint64_t paths);
+  // Called with the image so far, normalized as if the render stopped
+  // now (`width · height · 3` doubles, valid during the call), after the
+  // first round and then whenever `preview_every_seconds` have passed
+  // since the last preview. Costs a copy of the film (for stratified
+  // MCMC, a quick reconstruction).
+  void (*preview)(void *user, uint32_t width, uint32_t height, const double *rgb);
+  // Seconds between previews (0: after every round).
+  double preview_every_seconds;
+} StrataObserver;
+
+// The counters of a render ([`strata_film_stats`]).
+typedef struct StrataStats {
+  // Paths traced for the image (bootstraps and set-up not included).
+  uint64_t paths;
+  // Paths traced by bootstraps and other set-up.
+  uint64_t bootstrap_paths;
+  // Paths whose radiance was NaN, infinite or negative (not counted in
+  // the image).
+  uint64_t invalid_paths;
+  // The normalization `b`, the integral of the importance (NaN for
+  // methods without one: mc, stratified).
+  double normalization;
+  // Its relative standard error (NaN without one).
+  double normalization_error;
+  // Metropolis-Hastings proposals, summed over chains (0 for mc).
+  uint64_t proposals;
+  // Proposals accepted.
+  uint64_t accepted;
+  // Large steps proposed.
+  uint64_t large_steps;
+  // Mean acceptance probability.
+  double acceptance_rate;
+  // 1 if the progress callback stopped the render, else 0.
+  int32_t cancelled;
+} StrataStats;
 
 #ifdef __cplusplus
 extern "C" {
@@ -102,15 +143,23 @@ enum StrataStatus strata_settings_set(struct StrataSettings *settings,
                                       const char *name,
                                       double value);
 
+// Sets the method's named choice `name` (a kernel, an exchange move, a
+// tempering, a solver) to the option called `value`, with that option's
+// default parameters; the names and options are in the message of a wrong
+// one. An unknown name or option is `STRATA_STATUS_INVALID_ARGUMENT` and
+// leaves the settings as they were.
+enum StrataStatus strata_settings_set_choice(struct StrataSettings *settings,
+                                             const char *name,
+                                             const char *value);
+
 // Worker threads (0: all cores). The image does not depend on it.
 enum StrataStatus strata_settings_set_threads(struct StrataSettings *settings, uint32_t threads);
 
-// Renders `oracle` with `settings`, reporting to `progress` (may be null),
+// Renders `oracle` with `settings`, reporting to `observer` (may be null),
 // into a new film at `*film` (free it with [`strata_film_free`]).
 enum StrataStatus strata_render(const struct StrataOracle *oracle,
                                 const struct StrataSettings *settings,
-                                StrataProgress progress,
-                                void *progress_user,
+                                const struct StrataObserver *observer,
                                 struct StrataFilm **film);
 
 // Checks that `oracle.trace` is a pure function of its inputs at the film
@@ -134,8 +183,8 @@ uint32_t strata_film_height(const struct StrataFilm *film);
 // from the top (null for null); valid until [`strata_film_free`].
 const double *strata_film_data(const struct StrataFilm *film);
 
-// Paths the render traced (bootstraps not included).
-uint64_t strata_film_paths(const struct StrataFilm *film);
+// The render's counters into `*stats`.
+enum StrataStatus strata_film_stats(const struct StrataFilm *film, struct StrataStats *stats);
 
 // Frees a film (null is ignored).
 void strata_film_free(struct StrataFilm *film);

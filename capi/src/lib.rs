@@ -23,15 +23,19 @@
 use std::cell::RefCell;
 use std::ffi::{CStr, CString, c_char, c_void};
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::time::Duration;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
-use strata_engine::exchange::Ladder;
+use strata_engine::exchange::{ExchangeKind, Ladder, Tempering};
 use strata_engine::method::Solver;
+use strata_engine::mutate::SmallStep;
 use strata_engine::purity::check_purity;
 use strata_engine::target::MaxChannel;
+use strata_engine::tiles::TileShape;
 use strata_engine::{
-    Budget, Error, Film, FilmPoint, Method, Observer, PathOracle, PathSample, Progress, Resolution,
-    Rgb, Sampler, Settings, Temperature, render,
+    Budget, Error, Film, FilmPoint, Method, Observer, Output, PathOracle, PathSample, Progress,
+    Resolution, Rgb, Sampler, Settings, Temperature, render,
 };
 
 /// What a call did.
@@ -314,9 +318,14 @@ pub extern "C" fn strata_settings_set_seconds(
 const NAMES: &str = "pssmlt: chains, bootstrap_candidates, large_step_probability; \
 replica: ensembles, replicas, t_max, bootstrap_candidates, large_step_probability, \
 ladder_tuning_sweeps; stratified: exchange_every, fallback_sigmas (0: off), \
-regularizer_paths, alpha, large_step_probability; erpt: chain_length, chains_per_path, \
-bootstrap_candidates; multistage: linear_stages, chains, bootstrap_candidates, \
-large_step_probability";
+regularizer_paths, alpha, large_step_probability, tile_radius (0: the cross); erpt: \
+chain_length, chains_per_path, bootstrap_candidates; multistage: linear_stages, chains, \
+bootstrap_candidates, large_step_probability, noise_aware (0 or 1)";
+
+/// The named choices [`strata_settings_set_choice`] knows, per method.
+const CHOICES: &str = "small_step (every method but mc): kelemen, gaussian, adaptive; \
+replica: exchange (none, neighbor, is-permutation, is-swap, original-eem, frequent-eem, \
+ees, non-reversible), tempering (power, oracle); stratified: solver (weighted, log)";
 
 /// `value` as a whole number that fits `T`.
 fn whole<T: TryFrom<u64>>(name: &str, value: f64) -> Result<T, String> {
@@ -374,6 +383,12 @@ fn set_number(method: &mut Method, name: &str, value: f64) -> Result<(), String>
         (Method::Stratified(s), "large_step_probability") => {
             s.mutation.large_step_probability = value
         }
+        (Method::Stratified(s), "tile_radius") => {
+            s.shape = match whole(name, value)? {
+                0 => TileShape::Cross,
+                radius => TileShape::Square { radius },
+            }
+        }
         (Method::Erpt(s), "chain_length") => s.chain_length = whole(name, value)?,
         (Method::Erpt(s), "chains_per_path") => s.chains_per_path = value,
         (Method::Erpt(s), "bootstrap_candidates") => s.bootstrap_candidates = whole(name, value)?,
@@ -385,7 +400,47 @@ fn set_number(method: &mut Method, name: &str, value: f64) -> Result<(), String>
         (Method::MultiStage(s), "large_step_probability") => {
             s.pssmlt.mutation.large_step_probability = value
         }
+        (Method::MultiStage(s), "noise_aware") => {
+            s.noise_aware = match value {
+                0.0 => false,
+                1.0 => true,
+                _ => return Err(format!("`noise_aware` is 0 or 1, got {value}")),
+            }
+        }
         _ => return Err(unknown()),
+    }
+    method.validate().map_err(|e| e.to_string())
+}
+
+/// Sets the method's named choice `name` to `value`.
+fn set_choice(method: &mut Method, name: &str, value: &str) -> Result<(), String> {
+    fn pick<T>(name: &str, value: &str, names: &[&str], found: Option<T>) -> Result<T, String> {
+        found.ok_or_else(|| format!("`{name}` is one of {names:?}, got \"{value}\""))
+    }
+    let method_name = method.name();
+    let kernel = || pick(name, value, &SmallStep::NAMES, SmallStep::from_name(value));
+    match (&mut *method, name) {
+        (Method::Pssmlt(s), "small_step") => s.mutation.small_step = kernel()?,
+        (Method::Replica(s), "small_step") => s.ensemble.mutation.small_step = kernel()?,
+        (Method::Stratified(s), "small_step") => s.mutation.small_step = kernel()?,
+        (Method::Erpt(s), "small_step") => s.small_step = kernel()?,
+        (Method::MultiStage(s), "small_step") => s.pssmlt.mutation.small_step = kernel()?,
+        (Method::Replica(s), "exchange") => {
+            s.exchange = pick(
+                name,
+                value,
+                &ExchangeKind::NAMES,
+                ExchangeKind::from_name(value),
+            )?
+        }
+        (Method::Replica(s), "tempering") => {
+            s.ensemble.tempering =
+                pick(name, value, &Tempering::NAMES, Tempering::from_name(value))?
+        }
+        (Method::Stratified(s), "solver") => {
+            s.solver = pick(name, value, &Solver::NAMES, Solver::from_name(value))?
+        }
+        _ => return Err(format!("{method_name} has no choice `{name}` ({CHOICES})")),
     }
     method.validate().map_err(|e| e.to_string())
 }
@@ -417,6 +472,37 @@ pub extern "C" fn strata_settings_set(
     }
 }
 
+/// Sets the method's named choice `name` (a kernel, an exchange move, a
+/// tempering, a solver) to the option called `value`, with that option's
+/// default parameters; the names and options are in the message of a wrong
+/// one. An unknown name or option is `STRATA_STATUS_INVALID_ARGUMENT` and
+/// leaves the settings as they were.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_settings_set_choice(
+    settings: *mut StrataSettings,
+    name: *const c_char,
+    value: *const c_char,
+) -> StrataStatus {
+    let s = match settings_mut(settings) {
+        Ok(s) => s,
+        Err(e) => return e,
+    };
+    let (Some(name), Some(value)) = (text(name), text(value)) else {
+        return fail(
+            StrataStatus::InvalidArgument,
+            "null or non-UTF-8 name or value",
+        );
+    };
+    let mut method = s.method.clone();
+    match set_choice(&mut method, name, value) {
+        Ok(()) => {
+            s.method = method;
+            StrataStatus::Ok
+        }
+        Err(message) => fail(StrataStatus::InvalidArgument, message),
+    }
+}
+
 /// Worker threads (0: all cores). The image does not depend on it.
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_settings_set_threads(
@@ -432,16 +518,63 @@ pub extern "C" fn strata_settings_set_threads(
     }
 }
 
-/// Called between rounds with the fraction of the budget done and the paths
-/// traced; return non-zero to stop the render (it then returns
-/// `STRATA_STATUS_CANCELLED` with the film of the work done).
-pub type StrataProgress =
-    Option<extern "C" fn(user: *mut c_void, fraction: f64, paths: u64) -> i32>;
+/// What a render reports while it runs (every member may be null/0). All
+/// callbacks are called between rounds, from the thread that called
+/// [`strata_render`].
+#[repr(C)]
+pub struct StrataObserver {
+    /// Passed to the callbacks unchanged.
+    pub user: *mut c_void,
+    /// Called after every round with the fraction of the budget done and
+    /// the paths traced; return non-zero to stop the render (it then returns
+    /// `STRATA_STATUS_CANCELLED` with the film of the work done).
+    pub progress: Option<extern "C" fn(user: *mut c_void, fraction: f64, paths: u64) -> i32>,
+    /// Called with the image so far, normalized as if the render stopped
+    /// now (`width · height · 3` doubles, valid during the call), after the
+    /// first round and then whenever `preview_every_seconds` have passed
+    /// since the last preview. Costs a copy of the film (for stratified
+    /// MCMC, a quick reconstruction).
+    pub preview: Option<extern "C" fn(user: *mut c_void, width: u32, height: u32, rgb: *const f64)>,
+    /// Seconds between previews (0: after every round).
+    pub preview_every_seconds: f64,
+}
 
+/// The engine's view of a [`StrataObserver`].
 struct CObserver {
-    progress: StrataProgress,
+    progress: Option<extern "C" fn(*mut c_void, f64, u64) -> i32>,
+    preview: Option<extern "C" fn(*mut c_void, u32, u32, *const f64)>,
+    every: Duration,
     user: usize,
-    stop: std::sync::atomic::AtomicBool,
+    stop: AtomicBool,
+    last_preview: Mutex<Option<Instant>>,
+}
+
+impl CObserver {
+    fn new(observer: *const StrataObserver) -> Result<Self, StrataStatus> {
+        let mut this = CObserver {
+            progress: None,
+            preview: None,
+            every: Duration::ZERO,
+            user: 0,
+            stop: AtomicBool::new(false),
+            last_preview: Mutex::new(None),
+        };
+        if !observer.is_null() {
+            // SAFETY: a non-null pointer to the caller's live observer.
+            let o = unsafe { &*observer };
+            this.every = Duration::try_from_secs_f64(o.preview_every_seconds).map_err(|_| {
+                fail(
+                    StrataStatus::InvalidArgument,
+                    format!(
+                        "preview_every_seconds must be finite and >= 0, got {}",
+                        o.preview_every_seconds
+                    ),
+                )
+            })?;
+            (this.progress, this.preview, this.user) = (o.progress, o.preview, o.user as usize);
+        }
+        Ok(this)
+    }
 }
 
 impl Observer for CObserver {
@@ -449,28 +582,89 @@ impl Observer for CObserver {
         if let Some(f) = self.progress
             && f(self.user as *mut c_void, p.fraction, p.samples) != 0
         {
-            self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            self.stop.store(true, Ordering::Relaxed);
+        }
+    }
+    fn wants_preview(&self) -> bool {
+        let last = *self.last_preview.lock().unwrap_or_else(|e| e.into_inner());
+        self.preview.is_some() && last.is_none_or(|t| t.elapsed() >= self.every)
+    }
+    fn preview(&self, film: &Film) {
+        if let Some(f) = self.preview {
+            *self.last_preview.lock().unwrap_or_else(|e| e.into_inner()) = Some(Instant::now());
+            let r = film.resolution();
+            f(
+                self.user as *mut c_void,
+                r.width,
+                r.height,
+                film.data().as_ptr(),
+            );
         }
     }
     fn should_stop(&self) -> bool {
-        self.stop.load(std::sync::atomic::Ordering::Relaxed)
+        self.stop.load(Ordering::Relaxed)
     }
 }
 
 /// A rendered film: linear RGB, `width · height · 3` doubles, row by row.
 pub struct StrataFilm {
     film: Film,
-    paths: u64,
+    stats: StrataStats,
 }
 
-/// Renders `oracle` with `settings`, reporting to `progress` (may be null),
+/// The counters of a render ([`strata_film_stats`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StrataStats {
+    /// Paths traced for the image (bootstraps and set-up not included).
+    pub paths: u64,
+    /// Paths traced by bootstraps and other set-up.
+    pub bootstrap_paths: u64,
+    /// Paths whose radiance was NaN, infinite or negative (not counted in
+    /// the image).
+    pub invalid_paths: u64,
+    /// The normalization `b`, the integral of the importance (NaN for
+    /// methods without one: mc, stratified).
+    pub normalization: f64,
+    /// Its relative standard error (NaN without one).
+    pub normalization_error: f64,
+    /// Metropolis-Hastings proposals, summed over chains (0 for mc).
+    pub proposals: u64,
+    /// Proposals accepted.
+    pub accepted: u64,
+    /// Large steps proposed.
+    pub large_steps: u64,
+    /// Mean acceptance probability.
+    pub acceptance_rate: f64,
+    /// 1 if the progress callback stopped the render, else 0.
+    pub cancelled: i32,
+}
+
+impl StrataStats {
+    fn new(output: &Output) -> Self {
+        let s = &output.stats;
+        StrataStats {
+            paths: s.samples,
+            bootstrap_paths: s.bootstrap_samples,
+            invalid_paths: s.invalid_samples,
+            normalization: s.normalization.unwrap_or(f64::NAN),
+            normalization_error: s.normalization_error.unwrap_or(f64::NAN),
+            proposals: s.chains.proposals,
+            accepted: s.chains.accepted,
+            large_steps: s.chains.large_steps,
+            acceptance_rate: s.chains.acceptance_rate(),
+            cancelled: output.cancelled as i32,
+        }
+    }
+}
+
+/// Renders `oracle` with `settings`, reporting to `observer` (may be null),
 /// into a new film at `*film` (free it with [`strata_film_free`]).
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_render(
     oracle: *const StrataOracle,
     settings: *const StrataSettings,
-    progress: StrataProgress,
-    progress_user: *mut c_void,
+    observer: *const StrataObserver,
     film: *mut *mut StrataFilm,
 ) -> StrataStatus {
     if oracle.is_null() || settings.is_null() || film.is_null() {
@@ -498,10 +692,9 @@ pub extern "C" fn strata_render(
         budget,
         method: settings.method.clone(),
     };
-    let observer = CObserver {
-        progress,
-        user: progress_user as usize,
-        stop: Default::default(),
+    let observer = match CObserver::new(observer) {
+        Ok(o) => o,
+        Err(e) => return e,
     };
     let threads = settings.threads;
     let rendered = catch_unwind(AssertUnwindSafe(|| -> Result<_, String> {
@@ -516,8 +709,8 @@ pub extern "C" fn strata_render(
         Ok(Ok(output)) => {
             let cancelled = output.cancelled;
             let out = Box::new(StrataFilm {
+                stats: StrataStats::new(&output),
                 film: output.film,
-                paths: output.stats.samples,
             });
             // SAFETY: checked non-null above.
             unsafe { *film = Box::into_raw(out) };
@@ -590,10 +783,20 @@ pub extern "C" fn strata_film_data(film: *const StrataFilm) -> *const f64 {
     film_ref(film).map_or(std::ptr::null(), |f| f.film.data().as_ptr())
 }
 
-/// Paths the render traced (bootstraps not included).
+/// The render's counters into `*stats`.
 #[unsafe(no_mangle)]
-pub extern "C" fn strata_film_paths(film: *const StrataFilm) -> u64 {
-    film_ref(film).map_or(0, |f| f.paths)
+pub extern "C" fn strata_film_stats(
+    film: *const StrataFilm,
+    stats: *mut StrataStats,
+) -> StrataStatus {
+    match film_ref(film) {
+        Some(f) if !stats.is_null() => {
+            // SAFETY: checked non-null; the caller passes room for the struct.
+            unsafe { *stats = f.stats };
+            StrataStatus::Ok
+        }
+        _ => fail(StrataStatus::InvalidArgument, "null film or stats pointer"),
+    }
 }
 
 /// Frees a film (null is ignored).

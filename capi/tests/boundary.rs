@@ -1,6 +1,6 @@
 //! The C API's boundary, called as C would: null pointers, bad values and
 //! failing renders are status codes with a message, never undefined
-//! behaviour; the progress callback can cancel.
+//! behaviour; the progress callback can cancel; previews and counters.
 
 use std::ffi::{CStr, c_void};
 use std::ptr::{null, null_mut};
@@ -69,15 +69,15 @@ fn bad_arguments_are_status_codes_with_a_message() {
     let mut film = null_mut();
     let o = oracle(uniform);
     assert_eq!(
-        strata_render(null(), settings, None, null_mut(), &mut film),
+        strata_render(null(), settings, null(), &mut film),
         StrataStatus::InvalidArgument
     );
     assert_eq!(
-        strata_render(&o, null(), None, null_mut(), &mut film),
+        strata_render(&o, null(), null(), &mut film),
         StrataStatus::InvalidArgument
     );
     assert_eq!(
-        strata_render(&o, settings, None, null_mut(), null_mut()),
+        strata_render(&o, settings, null(), null_mut()),
         StrataStatus::InvalidArgument
     );
     let no_trace = StrataOracle {
@@ -85,7 +85,7 @@ fn bad_arguments_are_status_codes_with_a_message() {
         ..oracle(uniform)
     };
     assert_eq!(
-        strata_render(&no_trace, settings, None, null_mut(), &mut film),
+        strata_render(&no_trace, settings, null(), &mut film),
         StrataStatus::InvalidArgument
     );
     let empty = StrataOracle {
@@ -93,13 +93,13 @@ fn bad_arguments_are_status_codes_with_a_message() {
         ..oracle(uniform)
     };
     assert_eq!(
-        strata_render(&empty, settings, None, null_mut(), &mut film),
+        strata_render(&empty, settings, null(), &mut film),
         StrataStatus::RenderFailed
     );
     assert!(film.is_null());
     // A black scene: MCMC has nothing to start from, and says so.
     assert_eq!(
-        strata_render(&oracle(black), settings, None, null_mut(), &mut film),
+        strata_render(&oracle(black), settings, null(), &mut film),
         StrataStatus::RenderFailed
     );
     assert!(
@@ -109,23 +109,46 @@ fn bad_arguments_are_status_codes_with_a_message() {
     );
     // Null films read as empty; freeing null is a no-op.
     assert_eq!(strata_film_width(null()), 0);
+    let mut stats = StrataStats::default();
+    assert_eq!(
+        strata_film_stats(null(), &mut stats),
+        StrataStatus::InvalidArgument
+    );
     assert!(strata_film_data(null()).is_null());
     strata_film_free(null_mut());
     strata_settings_free(null_mut());
     strata_settings_free(settings);
 }
 
+/// An observer with only a progress callback.
+fn progress_only(progress: extern "C" fn(*mut c_void, f64, u64) -> i32) -> StrataObserver {
+    StrataObserver {
+        user: null_mut(),
+        progress: Some(progress),
+        preview: None,
+        preview_every_seconds: 0.0,
+    }
+}
+
+fn stats(film: *const StrataFilm) -> StrataStats {
+    let mut stats = StrataStats::default();
+    assert_eq!(strata_film_stats(film, &mut stats), StrataStatus::Ok);
+    stats
+}
+
 #[test]
-fn a_render_gives_its_film_and_the_progress_callback_can_cancel() {
+fn a_render_gives_its_film_and_counters_and_the_progress_callback_can_cancel() {
     let settings = strata_settings_new(c"mc".as_ptr());
     strata_settings_set_samples_per_pixel(settings, 64);
     let mut film = null_mut();
     assert_eq!(
-        strata_render(&oracle(uniform), settings, None, null_mut(), &mut film),
+        strata_render(&oracle(uniform), settings, null(), &mut film),
         StrataStatus::Ok
     );
     assert_eq!((strata_film_width(film), strata_film_height(film)), (8, 6));
-    assert_eq!(strata_film_paths(film), 8 * 6 * 64);
+    let counted = stats(film);
+    assert_eq!((counted.paths, counted.cancelled), (8 * 6 * 64, 0));
+    assert!(counted.normalization.is_nan() && counted.proposals == 0);
     // SAFETY: width · height · 3 doubles, alive until the free below.
     let data = unsafe { std::slice::from_raw_parts(strata_film_data(film), 8 * 6 * 3) };
     let mean = data.iter().sum::<f64>() / data.len() as f64;
@@ -136,13 +159,86 @@ fn a_render_gives_its_film_and_the_progress_callback_can_cancel() {
     let status = strata_render(
         &oracle(uniform),
         settings,
-        Some(stop_at_once),
-        null_mut(),
+        &progress_only(stop_at_once),
         &mut film,
     );
     assert_eq!(status, StrataStatus::Cancelled);
-    assert!(!film.is_null() && strata_film_paths(film) < 8 * 6 * 64);
+    let counted = stats(film);
+    assert!(counted.paths < 8 * 6 * 64 && counted.cancelled == 1);
     strata_film_free(film);
+    strata_settings_free(settings);
+
+    // An MCMC method's counters: its normalization and its chains.
+    let settings = strata_settings_new(c"pssmlt".as_ptr());
+    let mut film = null_mut();
+    assert_eq!(
+        strata_render(&oracle(uniform), settings, null(), &mut film),
+        StrataStatus::Ok
+    );
+    let counted = stats(film);
+    assert_eq!(counted.proposals, counted.paths);
+    assert!(counted.accepted > 0 && counted.accepted <= counted.proposals);
+    assert!(counted.acceptance_rate > 0.0 && counted.acceptance_rate <= 1.0);
+    assert!(counted.bootstrap_paths > 0 && counted.large_steps > 0);
+    // The importance of a uniform number has mean 1/2.
+    assert!(
+        (counted.normalization - 0.5).abs() < 4.0 * 0.5 * counted.normalization_error,
+        "{counted:?}"
+    );
+    strata_film_free(film);
+    strata_settings_free(settings);
+}
+
+/// The previews a render showed: how many, and the last one's values.
+#[derive(Default)]
+struct Previews {
+    count: usize,
+    last: Vec<f64>,
+}
+
+extern "C" fn keep_preview(user: *mut c_void, width: u32, height: u32, rgb: *const f64) {
+    // SAFETY: `user` is the test's `Previews`; `rgb` holds width · height · 3
+    // doubles during the call.
+    let previews = unsafe { &mut *(user as *mut Previews) };
+    let n = width as usize * height as usize * 3;
+    previews.count += 1;
+    previews.last = unsafe { std::slice::from_raw_parts(rgb, n) }.to_vec();
+}
+
+#[test]
+fn previews_come_between_rounds_at_the_asked_pace() {
+    let settings = strata_settings_new(c"mc".as_ptr());
+    strata_settings_set_samples_per_pixel(settings, 256);
+    let render_with = |every: f64, previews: &mut Previews| {
+        let observer = StrataObserver {
+            user: previews as *mut Previews as *mut c_void,
+            progress: None,
+            preview: Some(keep_preview),
+            preview_every_seconds: every,
+        };
+        let mut film = null_mut();
+        let status = strata_render(&oracle(uniform), settings, &observer, &mut film);
+        (status, film)
+    };
+    // After every round: the last preview is the finished image.
+    let mut every_round = Previews::default();
+    let (status, film) = render_with(0.0, &mut every_round);
+    assert_eq!(status, StrataStatus::Ok);
+    // SAFETY: as above.
+    let data = unsafe { std::slice::from_raw_parts(strata_film_data(film), 8 * 6 * 3) };
+    assert!(every_round.count > 1, "{} previews", every_round.count);
+    assert_eq!(every_round.last, data);
+    strata_film_free(film);
+    // A pace longer than the render: only the first round's.
+    let mut rare = Previews::default();
+    let (status, film) = render_with(1e9, &mut rare);
+    assert_eq!((status, rare.count), (StrataStatus::Ok, 1));
+    strata_film_free(film);
+    // A pace that is not a duration is refused before any work.
+    let mut none = Previews::default();
+    let (status, film) = render_with(-1.0, &mut none);
+    assert_eq!((status, none.count), (StrataStatus::InvalidArgument, 0));
+    assert!(film.is_null() && last_error().contains("preview_every_seconds"));
     strata_settings_free(settings);
 }
 
@@ -215,7 +311,7 @@ fn methods_take_their_settings_by_name_and_refuse_bad_ones() {
     let mut film = null_mut();
     strata_settings_set_samples_per_pixel(settings, 16);
     assert_eq!(
-        strata_render(&oracle(uniform), settings, None, null_mut(), &mut film),
+        strata_render(&oracle(uniform), settings, null(), &mut film),
         StrataStatus::Ok
     );
     strata_film_free(film);
@@ -235,4 +331,87 @@ fn methods_take_their_settings_by_name_and_refuse_bad_ones() {
         StrataStatus::InvalidArgument
     );
     strata_settings_free(replica);
+}
+
+#[test]
+fn methods_take_their_choices_by_name_and_refuse_unknown_ones() {
+    let set = |settings, name: &std::ffi::CStr, value: &std::ffi::CStr| {
+        strata_settings_set_choice(settings, name.as_ptr(), value.as_ptr())
+    };
+    let replica = strata_settings_new(c"replica".as_ptr());
+    assert_eq!(
+        set(replica, c"exchange", c"non-reversible"),
+        StrataStatus::Ok
+    );
+    assert_eq!(set(replica, c"tempering", c"power"), StrataStatus::Ok);
+    assert_eq!(set(replica, c"small_step", c"gaussian"), StrataStatus::Ok);
+    assert_eq!(
+        set(replica, c"exchange", c"swap-all"),
+        StrataStatus::InvalidArgument
+    );
+    assert!(
+        last_error().contains("is-permutation") && last_error().contains("swap-all"),
+        "{}",
+        last_error()
+    );
+    assert_eq!(
+        set(replica, c"solver", c"log"),
+        StrataStatus::InvalidArgument
+    );
+    assert!(
+        last_error().contains("replica has no choice `solver`"),
+        "{}",
+        last_error()
+    );
+    assert_eq!(
+        strata_settings_set_choice(replica, null(), c"power".as_ptr()),
+        StrataStatus::InvalidArgument
+    );
+    assert_eq!(
+        strata_settings_set(replica, c"replicas".as_ptr(), 3.0),
+        StrataStatus::Ok
+    );
+    let mut film = null_mut();
+    strata_settings_set_samples_per_pixel(replica, 8);
+    assert_eq!(
+        strata_render(&oracle(uniform), replica, null(), &mut film),
+        StrataStatus::Ok
+    );
+    strata_film_free(film);
+    strata_settings_free(replica);
+
+    let stratified = strata_settings_new(c"stratified".as_ptr());
+    assert_eq!(set(stratified, c"solver", c"log"), StrataStatus::Ok);
+    assert_eq!(
+        strata_settings_set(stratified, c"tile_radius".as_ptr(), 1.0),
+        StrataStatus::Ok
+    );
+    // The weighted solver's alpha is not the log-domain solver's.
+    assert_eq!(
+        strata_settings_set(stratified, c"alpha".as_ptr(), 1.0),
+        StrataStatus::InvalidArgument
+    );
+    let mut film = null_mut();
+    strata_settings_set_samples_per_pixel(stratified, 8);
+    assert_eq!(
+        strata_render(&oracle(uniform), stratified, null(), &mut film),
+        StrataStatus::Ok
+    );
+    strata_film_free(film);
+    strata_settings_free(stratified);
+
+    let multistage = strata_settings_new(c"multistage".as_ptr());
+    assert_eq!(
+        strata_settings_set(multistage, c"noise_aware".as_ptr(), 1.0),
+        StrataStatus::Ok
+    );
+    assert_eq!(
+        strata_settings_set(multistage, c"noise_aware".as_ptr(), 0.5),
+        StrataStatus::InvalidArgument
+    );
+    assert_eq!(
+        set(multistage, c"small_step", c"adaptive"),
+        StrataStatus::Ok
+    );
+    strata_settings_free(multistage);
 }

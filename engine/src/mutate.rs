@@ -330,6 +330,30 @@ impl Default for SmallStep {
 }
 
 impl SmallStep {
+    /// The kernels' names, as [`name`](Self::name) gives them.
+    pub const NAMES: [&'static str; 3] = ["kelemen", "gaussian", "adaptive"];
+
+    /// A short name for tables, command lines and the C API.
+    pub fn name(&self) -> &'static str {
+        match self {
+            SmallStep::Kelemen(_) => "kelemen",
+            SmallStep::Gaussian(_) => "gaussian",
+            SmallStep::Adaptive(_) => "adaptive",
+        }
+    }
+
+    /// The kernel called `name` (one of [`NAMES`](Self::NAMES)) with its
+    /// default parameters.
+    pub fn from_name(name: &str) -> Option<SmallStep> {
+        [
+            SmallStep::Kelemen(Kelemen::DEFAULT),
+            SmallStep::Gaussian(Gaussian::DEFAULT),
+            SmallStep::Adaptive(Adaptive::DEFAULT),
+        ]
+        .into_iter()
+        .find(|k| k.name() == name)
+    }
+
     /// `P(lo <= d < hi)` for one unwrapped step's offset `d` (for the adaptive
     /// kernel, at its initial `θ`). Used to build exact transition matrices.
     pub fn offset_probability(&self, lo: f64, hi: f64) -> f64 {

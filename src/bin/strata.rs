@@ -26,9 +26,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use strata::embree::EmbreeIntersector;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
 use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Ladder, Tempering};
+use strata::engine::method::Solver;
 use strata::engine::metrics;
-use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
-use strata::engine::reconstruct::{LogSettings, WeightedSettings};
+use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
 use strata::engine::tiles::TileShape;
 use strata::engine::{
@@ -36,41 +36,6 @@ use strata::engine::{
     Settings, render,
 };
 use strata::native::{PathTracer, builtin, native_tracer};
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum SolverArg {
-    /// Weighted iterative solver (seed 001 eq. 13-16).
-    Weighted,
-    /// Log-domain solver (eq. 17-20).
-    Log,
-}
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum Move {
-    None,
-    Neighbor,
-    IsPermutation,
-    IsSwap,
-    OriginalEem,
-    FrequentEem,
-    Ees,
-    NonReversible,
-}
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum TemperingArg {
-    /// pi^(1/T), any oracle.
-    Power,
-    /// The oracle roughens (the path tracer's BSDFs at connecting vertices).
-    Oracle,
-}
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum Kernel {
-    Kelemen,
-    Gaussian,
-    Adaptive,
-}
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum Backend {
@@ -129,17 +94,18 @@ struct Args {
     #[arg(long, default_value_t = 256)]
     chains: u32,
     /// PSSMLT small-step kernel.
-    #[arg(long, value_enum, default_value = "kelemen")]
-    kernel: Kernel,
+    #[arg(long, default_value = "kelemen", value_parser = PossibleValuesParser::new(SmallStep::NAMES))]
+    kernel: String,
     /// PSSMLT large-step probability.
     #[arg(long, default_value_t = 0.3)]
     large_step: f64,
-    /// Replica exchange: the exchange move.
-    #[arg(long, value_enum, default_value = "is-permutation")]
-    exchange: Move,
-    /// Replica exchange: how chains are tempered.
-    #[arg(long, value_enum, default_value = "oracle")]
-    tempering: TemperingArg,
+    /// Replica exchange: the exchange move (seed 002 sec. 5.3; eem: equi-energy move, ees: equi-energy sampler).
+    #[arg(long, default_value = "is-permutation", value_parser = PossibleValuesParser::new(ExchangeKind::NAMES))]
+    exchange: String,
+    /// Replica exchange: how chains are tempered (power: pi^(1/T), any
+    /// oracle; oracle: the path tracer roughens its BSDFs).
+    #[arg(long, default_value = "oracle", value_parser = PossibleValuesParser::new(Tempering::NAMES))]
+    tempering: String,
     /// Replica exchange: chains per ensemble (temperatures 1..t-max, log-spaced).
     #[arg(long, default_value_t = 8)]
     replicas: usize,
@@ -158,9 +124,10 @@ struct Args {
     /// Stratified MCMC: local replica exchange every this many sweeps (0: never).
     #[arg(long, default_value_t = 1)]
     exchange_every: u32,
-    /// Stratified MCMC: the reconstruction.
-    #[arg(long, value_enum, default_value = "weighted")]
-    solver: SolverArg,
+    /// Stratified MCMC: the reconstruction (weighted: seed 001 eq. 13-16;
+    /// log: eq. 17-20).
+    #[arg(long, default_value = "weighted", value_parser = PossibleValuesParser::new(Solver::NAMES))]
+    solver: String,
     /// Stratified MCMC: pixels this many standard errors below their MC
     /// estimate take it (0: never; negative values are an error).
     #[arg(long, default_value_t = 3.0)]
@@ -303,34 +270,19 @@ fn method(args: &Args) -> AnyResult<Method> {
         Method::Pssmlt(s) => {
             s.chains = args.chains;
             s.mutation = MutationParams {
-                small_step: match args.kernel {
-                    Kernel::Kelemen => SmallStep::Kelemen(Kelemen::DEFAULT),
-                    Kernel::Gaussian => SmallStep::Gaussian(Gaussian::DEFAULT),
-                    Kernel::Adaptive => SmallStep::Adaptive(Adaptive::DEFAULT),
-                },
+                small_step: SmallStep::from_name(&args.kernel).ok_or("unknown kernel")?,
                 large_step_probability: args.large_step,
             };
         }
         Method::Replica(s) => {
             let mut ensemble = EnsembleSettings::geometric(args.replicas, args.t_max)?;
-            ensemble.tempering = match args.tempering {
-                TemperingArg::Power => Tempering::Power,
-                TemperingArg::Oracle => Tempering::Oracle,
-            };
+            ensemble.tempering =
+                Tempering::from_name(&args.tempering).ok_or("unknown tempering")?;
             ensemble.mutation.large_step_probability = args.large_step;
             s.ensemble = ensemble;
             s.ensembles = args.ensembles;
             s.ladder_tuning_sweeps = args.tune_ladder;
-            s.exchange = match args.exchange {
-                Move::None => ExchangeKind::None,
-                Move::Neighbor => ExchangeKind::NeighborSwap,
-                Move::IsPermutation => ExchangeKind::IsPermutation,
-                Move::IsSwap => ExchangeKind::IsSwap,
-                Move::OriginalEem => ExchangeKind::OriginalEquiEnergy { rings: 8 },
-                Move::FrequentEem => ExchangeKind::FrequentEquiEnergy { rings: 8 },
-                Move::Ees => ExchangeKind::thesis_equi_energy_sampler(1000),
-                Move::NonReversible => ExchangeKind::NonReversible,
-            };
+            s.exchange = ExchangeKind::from_name(&args.exchange).ok_or("unknown exchange move")?;
         }
         Method::Stratified(s) => {
             s.shape = match args.tile_radius {
@@ -342,12 +294,7 @@ fn method(args: &Args) -> AnyResult<Method> {
                 large_step_probability: args.large_step,
             };
             s.exchange_every = args.exchange_every;
-            s.solver = match args.solver {
-                SolverArg::Weighted => {
-                    strata::engine::method::Solver::Weighted(WeightedSettings::default())
-                }
-                SolverArg::Log => strata::engine::method::Solver::LogDomain(LogSettings::default()),
-            };
+            s.solver = Solver::from_name(&args.solver).ok_or("unknown solver")?;
             s.fallback_sigmas = (args.fallback_sigmas != 0.0).then_some(args.fallback_sigmas);
         }
         Method::Erpt(s) => {

@@ -82,7 +82,29 @@ impl ExchangeKind {
         }
     }
 
-    /// A short name for tables and command lines.
+    /// The moves' names, as [`name`](Self::name) gives them, in
+    /// [`all`](Self::all) order.
+    pub const NAMES: [&'static str; 8] = [
+        "none",
+        "neighbor",
+        "is-permutation",
+        "is-swap",
+        "original-eem",
+        "frequent-eem",
+        "ees",
+        "non-reversible",
+    ];
+
+    /// The move called `name` (one of [`NAMES`](Self::NAMES)) with the
+    /// thesis' settings ([`all`](Self::all); the equi-energy sampler records
+    /// after 1000 sweeps).
+    pub fn from_name(name: &str) -> Option<ExchangeKind> {
+        ExchangeKind::all(1000)
+            .into_iter()
+            .find(|k| k.name() == name)
+    }
+
+    /// A short name for tables, command lines and the C API.
     pub fn name(&self) -> &'static str {
         match self {
             ExchangeKind::None => "none",

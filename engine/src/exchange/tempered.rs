@@ -47,6 +47,24 @@ pub enum Tempering {
 }
 
 impl Tempering {
+    /// The temperings' names, as [`name`](Self::name) gives them.
+    pub const NAMES: [&'static str; 2] = ["power", "oracle"];
+
+    /// A short name for command lines and the C API.
+    pub fn name(self) -> &'static str {
+        match self {
+            Tempering::Power => "power",
+            Tempering::Oracle => "oracle",
+        }
+    }
+
+    /// The tempering called `name` (one of [`NAMES`](Self::NAMES)).
+    pub fn from_name(name: &str) -> Option<Tempering> {
+        [Tempering::Power, Tempering::Oracle]
+            .into_iter()
+            .find(|t| t.name() == name)
+    }
+
     /// Oracle traces per proposal on a ladder of `levels` temperatures.
     pub fn traces_per_proposal(self, levels: usize) -> u64 {
         match self {

@@ -94,6 +94,30 @@ impl Default for Solver {
     }
 }
 
+impl Solver {
+    /// The solvers' names, as [`name`](Self::name) gives them.
+    pub const NAMES: [&'static str; 2] = ["weighted", "log"];
+
+    /// A short name for command lines and the C API.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Solver::Weighted(_) => "weighted",
+            Solver::LogDomain(_) => "log",
+        }
+    }
+
+    /// The solver called `name` (one of [`NAMES`](Self::NAMES)) with its
+    /// default settings.
+    pub fn from_name(name: &str) -> Option<Solver> {
+        [
+            Solver::Weighted(WeightedSettings::default()),
+            Solver::LogDomain(LogSettings::default()),
+        ]
+        .into_iter()
+        .find(|s| s.name() == name)
+    }
+}
+
 /// Global-chain initialization of the tile chains (seed 001 sec. 3.3 and 4).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Initialization {

@@ -62,7 +62,7 @@ fn sweeps(c: &mut Criterion) {
             let id = BenchmarkId::new(format!("{tempering:?}"), kind.name());
             group.bench_function(id, |b| {
                 b.iter(|| {
-                    ensemble.sweep(&mixture, &Luminance, exchange.as_mut(), |_, r, w| {
+                    ensemble.sweep(&mixture, &Luminance, &mut exchange, |_, r, w| {
                         black_box((r, w));
                     })
                 })

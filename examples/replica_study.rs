@@ -160,7 +160,7 @@ fn run_move(
         if sweep == args.burn_in {
             change = changes(&ensemble);
         }
-        ensemble.sweep(m, &Luminance, exchange.as_mut(), |_, _, _| {});
+        ensemble.sweep(m, &Luminance, &mut exchange, |_, _, _| {});
         if sweep < args.burn_in {
             continue;
         }

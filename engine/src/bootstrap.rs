@@ -50,7 +50,7 @@ pub struct Started<S> {
     /// The chain, in the candidate's state, mutating on its own stream.
     pub chain: Chain<S>,
     /// Its accept/reject decisions.
-    pub decisions: rand_pcg::Pcg32,
+    pub decisions: crate::rng::Pcg32,
 }
 
 impl Bootstrap {

@@ -31,7 +31,8 @@
 //! unbiased even where `I = 0`. With `p = 0` the weights reduce to seed 004's
 //! Alg. 1 (`a·b/I(y)` and `(1 - a)·b/I(x)`).
 
-use rand_pcg::Pcg32;
+use crate::rng::Pcg32;
+use serde::{Deserialize, Serialize};
 
 use crate::mutate::SmallStep;
 use crate::oracle::{PathOracle, Radiance, Temperature};
@@ -40,7 +41,7 @@ use crate::sample::{MltSampler, Proposal, Replay};
 use crate::target::{Evaluated, Importance, evaluate};
 
 /// Counters of one chain (or of many, merged).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ChainStats {
     /// Proposals made.
     pub proposals: u64,
@@ -76,7 +77,7 @@ impl ChainStats {
 }
 
 /// Paths an evaluation traced, and how many of them were invalid.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Traced {
     /// Oracle traces.
     pub paths: u64,
@@ -138,7 +139,7 @@ pub trait Weights<S> {
 /// state it encodes. Its accept/reject decisions and counters are kept by
 /// the caller, so that states can be exchanged between chains (replica
 /// exchange) while each chain keeps its own.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Chain<S> {
     sampler: MltSampler,
     current: S,
@@ -317,7 +318,7 @@ where
 /// A running estimate of a normalization `b = ∫ π` from independent uniform
 /// samples of `π` (bootstrap candidates, large-step proposals): their mean
 /// (seed 002 eq. 3.12) and its standard error.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Normalization {
     samples: u64,
     sum: f64,
@@ -374,7 +375,7 @@ impl Normalization {
 
 /// Kelemen's weights (see the module docs) with normalization `b` and large
 /// step probability `p`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct KelemenWeights {
     /// `b`, the integral of the importance.
     pub normalization: f64,
@@ -431,7 +432,7 @@ pub fn splat_weights(
 /// chain of PSSMLT, of stratified MCMC's global chains and of seed 003's
 /// predictions. Its large-step proposals are uniform samples of the
 /// importance, summed for the normalization.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct PathChain<R> {
     chain: Chain<Evaluated<R>>,
     weights: KelemenWeights,

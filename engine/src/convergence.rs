@@ -29,7 +29,7 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
-use rand_pcg::Pcg32;
+use crate::rng::Pcg32;
 
 use crate::bootstrap::Bootstrap;
 use crate::chain::{Chain, KelemenWeights, PathChain, PathTarget};

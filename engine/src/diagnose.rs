@@ -348,7 +348,7 @@ mod tests {
     #[test]
     fn rhat_is_one_for_agreeing_chains_and_large_for_disagreeing_ones() {
         let mut rng = stream(8, Domain::User, 1);
-        let ar = |rng: &mut rand_pcg::Pcg32, shift: f64| -> Vec<f64> {
+        let ar = |rng: &mut crate::rng::Pcg32, shift: f64| -> Vec<f64> {
             let mut x = 0.0;
             (0..4000)
                 .map(|_| {

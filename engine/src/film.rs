@@ -2,13 +2,14 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 use crate::oracle::{Radiance, Resolution};
 
 /// A `width x height` image with `channels` f64 values per pixel, row-major,
 /// row 0 at the top.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Film {
     resolution: Resolution,
     channels: usize,

@@ -9,6 +9,7 @@
 //! catch up coordinates that were not read for a while.
 
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use rand_core::Rng;
 
@@ -17,7 +18,7 @@ use crate::rng::uniform_f64;
 
 /// Kelemen's exponential small step (Kelemen et al. 2002; seed 002 sec. 4.2.1):
 /// `d = ±s2 · exp(-ln(s2/s1) · ξ)`, so `|d|` is log-uniform in `[s1, s2]`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Kelemen {
     s1: f64,
     s2: f64,
@@ -108,7 +109,7 @@ fn exp_neg_f32(x: f32) -> f32 {
 
 /// Gaussian small step with standard deviation `sigma` (pbrt-v4's MLTSampler).
 /// `n` steps are exactly one step of standard deviation `sigma·sqrt(n)`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Gaussian {
     sigma: f64,
 }
@@ -166,7 +167,7 @@ pub fn unit_normals<R: Rng + ?Sized>(rng: &mut R) -> [f64; 2] {
 /// A batch of independent random offsets drawn ahead of use. Each offset is a
 /// short chain of dependent floating-point operations; drawing 32 at a time
 /// lets the processor overlap them instead of waiting on each.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct OffsetBatch {
     values: [f64; OffsetBatch::LEN],
     next: usize,
@@ -202,7 +203,7 @@ impl OffsetBatch {
 /// `P(|d| <= x) = x^θ`. `θ` is adapted toward the acceptance rate
 /// `target_acceptance` by eq. 4.10, `θ_{i+1} = θ_i + (A_i - A*) / i`, whose
 /// steps shrink as `1/i` (diminishing adaptation, eq. 4.9).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Adaptive {
     initial_theta: f64,
     target_acceptance: f64,
@@ -276,7 +277,7 @@ impl Adaptive {
 }
 
 /// The running state of an adaptive kernel.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AdaptiveState {
     theta: f64,
     small_steps: u64,
@@ -313,7 +314,7 @@ impl AdaptiveState {
 }
 
 /// Which small step a chain uses.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum SmallStep {
     /// Kelemen's exponential step.
     Kelemen(Kelemen),
@@ -369,7 +370,7 @@ impl SmallStep {
 }
 
 /// Everything that defines a chain's proposals.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MutationParams {
     /// The small-step kernel.
     pub small_step: SmallStep,
@@ -420,7 +421,7 @@ impl MutationParams {
 /// uniformly anyway), and when it reaches [`THETA_RECORD_LIMIT`] entries the
 /// sampler brings every coordinate up to date and clears it, which is exact
 /// and bounds memory when large steps are rare.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) enum Mutator {
     /// Offsets drawn in batches.
     Kelemen(Kelemen, OffsetBatch),
@@ -636,7 +637,7 @@ mod tests {
         let theta = 0.3;
         type Case<'a> = (
             &'a str,
-            alloc::boxed::Box<dyn Fn(&mut rand_pcg::Pcg32) -> f64 + 'a>,
+            alloc::boxed::Box<dyn Fn(&mut crate::rng::Pcg32) -> f64 + 'a>,
             alloc::boxed::Box<dyn Fn(f64) -> f64 + 'a>,
         );
         let cases: [Case; 3] = [

@@ -18,9 +18,10 @@
 //! engine: a renderer implements [`PathOracle`] and draws from a [`Sampler`].
 
 use core::fmt::Debug;
+use serde::{Deserialize, Serialize};
 
 /// Film size in pixels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct Resolution {
     /// Pixels per row.
     pub width: u32,
@@ -68,7 +69,7 @@ fn f32_below(v: f32) -> f32 {
 }
 
 /// A continuous position on the film, in pixels: `x` in `[0, width)`, `y` in `[0, height)`.
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Default, Serialize, Deserialize)]
 pub struct FilmPoint {
     /// Horizontal position in pixels.
     pub x: f32,
@@ -96,7 +97,7 @@ impl Default for Temperature {
 /// Bits an oracle may set on a path (which object it touched, which lobe it
 /// used...), so importance functions can weight paths without a second trace
 /// (seed 004 sec. 4, importance "shaders").
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct PathFlags(pub u32);
 
 impl PathFlags {
@@ -110,7 +111,7 @@ impl PathFlags {
 }
 
 /// One path's contribution as seen by the engine.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PathSample<R> {
     /// The path contribution f/p (radiance arriving at the film point).
     pub radiance: R,
@@ -165,7 +166,7 @@ impl Radiance for f32 {
 }
 
 /// Linear RGB radiance.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Rgb(pub [f32; 3]);
 
 impl Rgb {

@@ -67,7 +67,7 @@ enum Draw {
 }
 
 struct Recording {
-    rng: rand_pcg::Pcg32,
+    rng: crate::rng::Pcg32,
     log: Vec<Draw>,
 }
 

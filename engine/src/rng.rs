@@ -1,8 +1,72 @@
 //! Random streams: every chain, pass and candidate owns a PCG stream derived
 //! from `(seed, domain, index)`, so results never depend on scheduling.
 
-use rand_core::Rng;
-use rand_pcg::Pcg32;
+use core::convert::Infallible;
+
+use rand_core::{Rng, TryRng, utils};
+use serde::{Deserialize, Serialize};
+
+const PCG_MULTIPLIER: u64 = 6_364_136_223_846_793_005;
+
+/// PCG32 (O'Neill 2014: a 64-bit LCG with the XSH RR output function), the
+/// engine's random stream; the same numbers as `rand_pcg::Pcg32` (a test
+/// checks), with its state in the open so that a checkpoint can save it
+/// (`rand_pcg`'s serde support would pull `std` into the engine).
+#[derive(Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Pcg32 {
+    state: u64,
+    increment: u64,
+}
+
+impl Pcg32 {
+    /// The stream `stream` (any value; made odd) started at `state`.
+    pub fn new(state: u64, stream: u64) -> Self {
+        let increment = (stream << 1) | 1;
+        let mut pcg = Pcg32 {
+            state: state.wrapping_add(increment),
+            increment,
+        };
+        pcg.step();
+        pcg
+    }
+
+    #[inline]
+    fn step(&mut self) {
+        self.state = self
+            .state
+            .wrapping_mul(PCG_MULTIPLIER)
+            .wrapping_add(self.increment);
+    }
+}
+
+impl core::fmt::Debug for Pcg32 {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("Pcg32")
+    }
+}
+
+impl TryRng for Pcg32 {
+    type Error = Infallible;
+
+    #[inline]
+    fn try_next_u32(&mut self) -> Result<u32, Infallible> {
+        let state = self.state;
+        self.step();
+        let rotate = (state >> 59) as u32;
+        let shifted = (((state >> 18) ^ state) >> 27) as u32;
+        Ok(shifted.rotate_right(rotate))
+    }
+
+    #[inline]
+    fn try_next_u64(&mut self) -> Result<u64, Infallible> {
+        utils::next_u64_via_u32(self)
+    }
+
+    #[inline]
+    fn try_fill_bytes(&mut self, dest: &mut [u8]) -> Result<(), Infallible> {
+        utils::fill_bytes_via_next_word(dest, || self.try_next_u32())
+    }
+}
 
 /// Which part of the engine a stream belongs to; keeps streams of different
 /// roles independent even when their indices coincide.
@@ -67,6 +131,18 @@ pub fn uniform_f64<R: Rng + ?Sized>(rng: &mut R) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_stream_is_rand_pcg_s_pcg32() {
+        for (state, stream) in [(0, 0), (1, 2), (u64::MAX, 0x5bd1_e995), (42, u64::MAX)] {
+            let mut ours = Pcg32::new(state, stream);
+            let mut theirs = rand_pcg::Pcg32::new(state, stream);
+            for _ in 0..1000 {
+                assert_eq!(ours.next_u32(), theirs.next_u32());
+                assert_eq!(ours.next_u64(), theirs.next_u64());
+            }
+        }
+    }
 
     #[test]
     fn streams_differ_by_index_and_domain() {

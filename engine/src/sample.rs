@@ -12,8 +12,9 @@
 //! the recorded `θ` of each missed iteration for the adaptive kernel).
 
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
-use rand_pcg::Pcg32;
+use crate::rng::Pcg32;
 
 use crate::mutate::{Mutator, SmallStep};
 use crate::oracle::{FilmPoint, ORACLE_STREAMS, Resolution, Sampler};
@@ -24,7 +25,7 @@ pub const FILM_STREAM: usize = 0;
 const STREAMS: usize = ORACLE_STREAMS + 1;
 
 /// Independent uniform numbers: plain Monte Carlo.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct IndependentSampler {
     rng: Pcg32,
 }
@@ -44,7 +45,7 @@ impl Sampler for IndependentSampler {
 }
 
 /// One coordinate of the primary sample.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 struct Coordinate {
     value: f32,
     backup: f32,
@@ -69,7 +70,7 @@ pub struct SamplerStats {
 /// the oracle draws from and that must be accepted or rejected, and
 /// [`replay`](Self::replay), which reads the current state again (for
 /// coherent sampling or re-evaluation at another temperature).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct MltSampler {
     kernel: Mutator,
     rng: Pcg32,

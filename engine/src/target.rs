@@ -4,6 +4,7 @@
 //! large-step weights even regions where `I = 0` are covered by large steps.
 
 use crate::oracle::{FilmPoint, PathSample, Radiance};
+use serde::{Deserialize, Serialize};
 
 /// A target function over paths.
 pub trait Importance<R: Radiance>: Sync {
@@ -48,7 +49,7 @@ where
 }
 
 /// A traced path after validation: its sample (zeroed when invalid) and importance.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Evaluated<R> {
     /// Where on the film.
     pub film: FilmPoint,

@@ -8,12 +8,13 @@
 //! `s`; its pixels are `s + offset` for every offset that stays on the film.
 
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 use crate::oracle::{FilmPoint, Resolution};
 
 /// The shape of every tile.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub enum TileShape {
     /// The pixel and its 4 neighbours (seed 001's choice).
     #[default]

@@ -21,9 +21,10 @@ pub(crate) mod splat;
 use crate::chain::ChainStats;
 use crate::film::Film;
 use crate::oracle::Resolution;
+use serde::{Deserialize, Serialize};
 
 /// When a render stops.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Budget {
     /// A number of paths (oracle traces). Each method's docs say which
     /// traces count; the bootstrap never does.

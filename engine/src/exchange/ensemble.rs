@@ -4,9 +4,10 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
+use crate::rng::Pcg32;
 use rand_core::Rng;
-use rand_pcg::Pcg32;
 
 use super::tempered::{EnsembleWeights, Levels, Replica, TemperedPath, TemperedTarget, Tempering};
 use super::{Exchange, ExchangeStats, Ladder, Move, SweepRecorder};
@@ -19,7 +20,7 @@ use crate::rng::{self, Domain, uniform_f64};
 use crate::target::{Evaluated, Importance};
 
 /// What defines an ensemble.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EnsembleSettings {
     /// The chains' temperatures.
     pub ladder: Ladder,
@@ -92,7 +93,7 @@ impl EnsembleSettings {
 }
 
 /// `M` chains at the ladder's temperatures, stepped sweep by sweep.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Ensemble<R> {
     replicas: Vec<Replica<R>>,
     labels: Vec<usize>,

@@ -8,6 +8,7 @@
 
 use alloc::boxed::Box;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use super::{Exchange, Jump, Move, Tempered};
 use crate::error::Error;
@@ -15,7 +16,7 @@ use crate::error::Error;
 /// Ring boundaries `H_2 < ... < H_d`, evenly spaced on a log scale (seed 002
 /// sec. 5.3.4); ring 0 holds everything below `H_2` (zero included), ring
 /// `d - 1` everything from `H_d` up.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EnergyLevels {
     bounds: Vec<f64>,
 }
@@ -65,7 +66,7 @@ impl EnergyLevels {
 ///   `j`'s own target `π_j` (sec. 5.3.6, footnote 3); the swap keeps the count
 ///   of states in that ring, so the proposal probability `1/(M_i - 1)` is the
 ///   same both ways.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct EquiEnergy {
     /// One set of levels per chain (for the original move only chain 0's is used).
     levels: Vec<EnergyLevels>,
@@ -157,7 +158,7 @@ impl<S: Tempered + Clone> Move<S> for EquiEnergy {
 
 /// A bounded, uniform sample of the states a chain has held, kept sorted by
 /// the value of the next colder chain's target (the key of its rings).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 struct Reservoir<S> {
     /// Boxed so that keeping the order costs a move of pointers, not states.
     entries: Vec<(f64, Box<S>)>,
@@ -181,7 +182,7 @@ struct Reservoir<S> {
 /// its restriction to a ring is then a uniform sample of the chain's past
 /// states in that ring. Jumps replace small steps only, so large steps keep
 /// their rate and Kelemen's weights stay valid.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct EquiEnergySampler<S> {
     p_jump: f64,
     rings: usize,

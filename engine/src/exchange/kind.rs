@@ -1,20 +1,21 @@
 //! The catalogue of exchange moves an ensemble can run, built per ensemble
 //! from its bootstrap.
 
-use alloc::boxed::Box;
 use alloc::vec::Vec;
+
+use serde::{Deserialize, Serialize};
 
 use super::tempered::Replica;
 use super::{
-    EnergyLevels, EquiEnergy, EquiEnergySampler, IsPermutation, IsSwap, Move, NeighborSwap,
-    NoExchange, NonReversible,
+    EnergyLevels, EquiEnergy, EquiEnergySampler, Exchange, IsPermutation, IsSwap, Jump, Move,
+    NeighborSwap, NoExchange, NonReversible,
 };
 use crate::bootstrap::Bootstrap;
 use crate::error::Error;
 use crate::oracle::Radiance;
 
 /// Which exchange move an ensemble runs (a [`Move`] built per ensemble).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum ExchangeKind {
     /// Independent tempered chains (chain 0 is plain MH).
     None,
@@ -119,10 +120,7 @@ impl ExchangeKind {
     }
 
     /// Builds the move for an ensemble whose bootstrap is `bootstrap`.
-    pub fn build<R: Radiance + Send + Sync + 'static>(
-        &self,
-        bootstrap: &Bootstrap,
-    ) -> Result<Box<dyn Move<Replica<R>> + Send + Sync>, Error> {
+    pub fn build<R: Radiance>(&self, bootstrap: &Bootstrap) -> Result<ExchangeMove<R>, Error> {
         self.build_with(bootstrap.levels(), |rings| {
             (0..bootstrap.levels())
                 .map(|j| {
@@ -145,29 +143,80 @@ impl ExchangeKind {
 
     /// The move for `m` chains whose energy levels of `rings` rings are
     /// `energy_levels(rings)`.
-    fn build_with<R: Radiance + Send + Sync + 'static>(
+    fn build_with<R: Radiance>(
         &self,
         m: usize,
         energy_levels: impl Fn(usize) -> Result<Vec<EnergyLevels>, Error>,
-    ) -> Result<Box<dyn Move<Replica<R>> + Send + Sync>, Error> {
+    ) -> Result<ExchangeMove<R>, Error> {
         Ok(match *self {
-            ExchangeKind::None => Box::new(NoExchange),
-            ExchangeKind::NeighborSwap => Box::new(NeighborSwap),
-            ExchangeKind::IsPermutation => Box::new(IsPermutation::new(m)?),
-            ExchangeKind::IsSwap => Box::new(IsSwap::default()),
+            ExchangeKind::None => ExchangeMove::None(NoExchange),
+            ExchangeKind::NeighborSwap => ExchangeMove::NeighborSwap(NeighborSwap),
+            ExchangeKind::IsPermutation => ExchangeMove::IsPermutation(IsPermutation::new(m)?),
+            ExchangeKind::IsSwap => ExchangeMove::IsSwap(IsSwap::default()),
             ExchangeKind::OriginalEquiEnergy { rings } => {
-                Box::new(EquiEnergy::original(energy_levels(rings)?.remove(0)))
+                ExchangeMove::EquiEnergy(EquiEnergy::original(energy_levels(rings)?.remove(0)))
             }
             ExchangeKind::FrequentEquiEnergy { rings } => {
-                Box::new(EquiEnergy::frequent(energy_levels(rings)?))
+                ExchangeMove::EquiEnergy(EquiEnergy::frequent(energy_levels(rings)?))
             }
             ExchangeKind::EquiEnergySampler {
                 p_jump,
                 rings,
                 capacity,
                 burn_in,
-            } => Box::new(EquiEnergySampler::new(m, p_jump, rings, capacity, burn_in)?),
-            ExchangeKind::NonReversible => Box::new(NonReversible),
+            } => ExchangeMove::EquiEnergySampler(EquiEnergySampler::new(
+                m, p_jump, rings, capacity, burn_in,
+            )?),
+            ExchangeKind::NonReversible => ExchangeMove::NonReversible(NonReversible),
         })
+    }
+}
+
+/// A built exchange move with its state (the equi-energy sampler's records),
+/// one variant per [`ExchangeKind`]; a value, so that a checkpoint can save
+/// it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[allow(missing_docs)]
+pub enum ExchangeMove<R> {
+    None(NoExchange),
+    NeighborSwap(NeighborSwap),
+    IsPermutation(IsPermutation),
+    IsSwap(IsSwap),
+    EquiEnergy(EquiEnergy),
+    EquiEnergySampler(EquiEnergySampler<Replica<R>>),
+    NonReversible(NonReversible),
+}
+
+impl<R: Clone> ExchangeMove<R> {
+    /// The move behind the variant.
+    fn inner(&mut self) -> &mut dyn Move<Replica<R>> {
+        match self {
+            ExchangeMove::None(m) => m,
+            ExchangeMove::NeighborSwap(m) => m,
+            ExchangeMove::IsPermutation(m) => m,
+            ExchangeMove::IsSwap(m) => m,
+            ExchangeMove::EquiEnergy(m) => m,
+            ExchangeMove::EquiEnergySampler(m) => m,
+            ExchangeMove::NonReversible(m) => m,
+        }
+    }
+}
+
+impl<R: Clone> Move<Replica<R>> for ExchangeMove<R> {
+    fn before_mutation(&mut self, ex: &mut Exchange<'_, Replica<R>>, chain: usize) {
+        self.inner().before_mutation(ex, chain)
+    }
+    fn replace_small_step(
+        &mut self,
+        ex: &mut Exchange<'_, Replica<R>>,
+        chain: usize,
+    ) -> Option<Jump<Replica<R>>> {
+        self.inner().replace_small_step(ex, chain)
+    }
+    fn after_mutation(&mut self, ex: &mut Exchange<'_, Replica<R>>, chain: usize) {
+        self.inner().after_mutation(ex, chain)
+    }
+    fn after_sweep(&mut self, ex: &mut Exchange<'_, Replica<R>>) {
+        self.inner().after_sweep(ex)
     }
 }

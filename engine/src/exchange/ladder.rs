@@ -11,11 +11,12 @@
 //! communication barrier `Λ`.
 
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 
 /// The temperatures of an ensemble's chains, `1 = T_0 < T_1 < ... < T_{M-1}`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Ladder {
     temperatures: Vec<f64>,
 }

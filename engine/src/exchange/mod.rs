@@ -20,6 +20,7 @@
 //! product distribution invariant. `tests/exchange.rs` checks this exactly:
 //! a test [`Decisions`] enumerates every outcome of a move with its
 //! probability, on a small discrete product space.
+use serde::{Deserialize, Serialize};
 
 mod decide;
 mod ensemble;
@@ -34,7 +35,7 @@ mod tempered;
 pub use decide::Decisions;
 pub use ensemble::{Ensemble, EnsembleSettings};
 pub use equi_energy::{EnergyLevels, EquiEnergy, EquiEnergySampler};
-pub use kind::ExchangeKind;
+pub use kind::{ExchangeKind, ExchangeMove};
 pub use ladder::Ladder;
 pub use moves::{IsPermutation, IsSwap, NeighborSwap, NonReversible};
 pub use permutation::{MAX_PERMUTATION_CHAINS, PermutationSampler};
@@ -93,7 +94,7 @@ pub trait Move<S: Tempered + Clone> {
 
 /// No exchange: `M` independent tempered chains (plain Metropolis-Hastings
 /// when `M = 1`). The baseline of seed 002 Tables 5.1-5.2.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 pub struct NoExchange;
 
 impl<S: Tempered + Clone> Move<S> for NoExchange {}

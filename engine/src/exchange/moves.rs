@@ -4,6 +4,7 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use super::permutation::PermutationSampler;
 use super::{Exchange, Move, Tempered};
@@ -14,7 +15,7 @@ use crate::error::Error;
 /// with the usual acceptance `min(1, π_i(u_{i-1}) π_{i-1}(u_i) / (π_i(u_i)
 /// π_{i-1}(u_{i-1})))` (eq. 4.11). Chains mutate from the hottest down, so a
 /// state a hot chain just improved can travel down at once.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 pub struct NeighborSwap;
 
 impl<S: Tempered + Clone> Move<S> for NeighborSwap {
@@ -31,7 +32,7 @@ impl<S: Tempered + Clone> Move<S> for NeighborSwap {
 /// sweeps. States then move in one direction along the ladder until a swap is
 /// rejected, which makes round trips grow linearly, not diffusively, with the
 /// number of chains.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 pub struct NonReversible;
 
 impl<S: Tempered + Clone> Move<S> for NonReversible {
@@ -51,7 +52,7 @@ impl<S: Tempered + Clone> Move<S> for NonReversible {
 /// probability `Π π_i(u_{o(i)}) / b_O`, in `O(M 2^M)` (App. 5.C). Over the full
 /// set of permutations the acceptance eq. 5.8 is 1 (App. 5.B.1, eq. 5.19), so
 /// the drawn permutation is always applied; it may be the identity.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct IsPermutation {
     sampler: PermutationSampler,
     log_values: Vec<f64>,
@@ -91,7 +92,7 @@ impl<S: Tempered + Clone> Move<S> for IsPermutation {
 /// `p(i, j) ∝ π_i(u_j) π_j(u_i)` and swap with acceptance
 /// `min(1, Σ_k π_i(u_k) π_k(u_i) / Σ_k π_i(u'_k) π_k(u'_i))` (eq. 5.10, proved
 /// in App. 5.B.2), where `u'` are the states after the swap.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct IsSwap {
     weights: Vec<f64>,
 }

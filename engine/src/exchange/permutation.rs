@@ -27,6 +27,7 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use super::decide::Decisions;
 use crate::error::Error;
@@ -74,7 +75,7 @@ fn log_sum_exp(terms: impl Iterator<Item = f64> + Clone) -> f64 {
 }
 
 /// How the table holds `F_S`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 enum Table {
     /// `F_S` divided by its level's largest, over the scaled values.
     Linear,
@@ -83,7 +84,7 @@ enum Table {
 }
 
 /// The subset table of one ensemble size, reused from sweep to sweep.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct PermutationSampler {
     chains: usize,
     /// `F_S`, indexed by the bit set `S` of used states (see [`Table`]).

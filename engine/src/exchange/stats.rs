@@ -5,9 +5,10 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 /// Exchange counters of one or more ensembles with the same number of chains.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ExchangeStats {
     chains: usize,
     attempts: Vec<u64>,
@@ -183,7 +184,7 @@ impl ExchangeStats {
 }
 
 /// Which end a state last touched, for counting round trips.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 enum Heading {
     Unknown,
     /// Left the coldest chain, not yet at the hottest.
@@ -194,7 +195,7 @@ enum Heading {
 
 /// Per-sweep bookkeeping of an ensemble: where each state (label) was at the
 /// start of the sweep, and where it is heading.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) struct SweepRecorder {
     start: Vec<usize>,
     jumped: Vec<bool>,

@@ -25,6 +25,7 @@
 //! exchanges did in between; the untempered contribution `f(u)` is splatted.
 
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use super::Tempered;
 use crate::bootstrap::Bootstrap;
@@ -36,7 +37,7 @@ use crate::sample::{MltSampler, Proposal};
 use crate::target::{Evaluated, Importance, evaluate};
 
 /// How the chains' targets are tempered.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub enum Tempering {
     /// `π_i = I^(1/T_i)`, computed by the engine (any oracle).
     #[default]
@@ -76,7 +77,7 @@ impl Tempering {
 
 /// A path with the value of every chain's target at it: what an ensemble's
 /// state holds.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct TemperedPath<R> {
     /// Where on the film.
     pub film: FilmPoint,

@@ -23,6 +23,7 @@
 //! by `passes + m / B` stays an unbiased image (cluster sampling).
 
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
@@ -42,7 +43,7 @@ use crate::target::{Evaluated, Importance, evaluate};
 /// whole passes (at least one) at the expected cost of a pass; a pass has at
 /// least 16 start paths, so films of fewer pixels spend more than a budget
 /// smaller than that.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ErptSettings {
     /// Steps per chain `N` (100 in seed 001).
     pub chain_length: u32,

@@ -28,6 +28,7 @@ mod replica;
 mod stratified;
 
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 pub use erpt::ErptSettings;
 pub use multistage::{MultiStageSettings, Probed, Stage, stage_grids, tvi};
@@ -45,7 +46,7 @@ use crate::parallel;
 use crate::target::Importance;
 
 /// What to render and how.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Settings {
     /// Seed of every random stream.
     pub seed: u64,
@@ -74,7 +75,7 @@ impl Settings {
 }
 
 /// A rendering method with its settings.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Method {
     /// Independent path sampling (MC): the reference estimator.
     Mc,

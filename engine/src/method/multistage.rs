@@ -30,6 +30,7 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use core::sync::atomic::{AtomicU64, Ordering};
 
@@ -45,7 +46,7 @@ use crate::target::{FnImportance, Importance};
 
 /// Settings of multi-stage MLT. The budget is split among the stages in
 /// proportion to their grid size; each stage counts it like PSSMLT.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MultiStageSettings {
     /// Chains, mutations and bootstrap candidates of every stage.
     pub pssmlt: PssmltSettings,
@@ -77,7 +78,7 @@ impl MultiStageSettings {
 }
 
 /// One stage: its grid size and the paths it traced.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Stage {
     /// Regions per side of the importance grid.
     pub grid: u32,
@@ -165,7 +166,7 @@ impl RegionMeans {
 
 /// A radiance with one more channel: the squared deviation of the path's
 /// luminance from the current estimate of its pixel (noise-aware MLT).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Probed<R> {
     /// The path's radiance.
     pub radiance: R,

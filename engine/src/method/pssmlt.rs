@@ -13,10 +13,11 @@ use crate::mutate::MutationParams;
 use crate::oracle::PathOracle;
 use crate::parallel;
 use crate::target::Importance;
+use serde::{Deserialize, Serialize};
 
 /// Settings of PSSMLT. The budget counts the chains' paths, split evenly
 /// among them (rounded up); the bootstrap is not counted.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PssmltSettings {
     /// Number of independent chains (pbrt uses 1000; more chains explore more
     /// independently, fewer mix longer).

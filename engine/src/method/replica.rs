@@ -4,9 +4,9 @@
 //! [`exchange`](crate::exchange)). A unit of work is a sweep of every
 //! ensemble.
 
-use alloc::boxed::Box;
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
@@ -15,7 +15,7 @@ use crate::drive::splat::{RoundBuffers, Runs, SplatBands, Splatting, Worker};
 use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
 use crate::exchange::{
-    Ensemble, EnsembleSettings, ExchangeKind, ExchangeStats, Ladder, Move, Replica, Tempering,
+    Ensemble, EnsembleSettings, ExchangeKind, ExchangeMove, ExchangeStats, Ladder, Tempering,
 };
 use crate::oracle::PathOracle;
 use crate::parallel;
@@ -25,7 +25,7 @@ use crate::target::Importance;
 /// split evenly among them and rounded up to whole sweeps (a sweep costs `M`
 /// traces under power tempering, `M²` under oracle tempering); the bootstrap
 /// and the ladder tuning are not counted.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ReplicaSettings {
     /// Independent ensembles run in parallel.
     pub ensembles: u32,
@@ -119,7 +119,7 @@ where
         parallel::for_each(&mut work, |w| {
             for _ in 0..sweeps {
                 w.ensemble
-                    .sweep(oracle, importance, w.exchange.as_mut(), |_, _, _| {});
+                    .sweep(oracle, importance, &mut w.exchange, |_, _, _| {});
             }
         });
         tuned += sweeps;
@@ -163,7 +163,7 @@ struct EnsembleWork<'a, O: PathOracle, I: ?Sized> {
     oracle: &'a O,
     importance: &'a I,
     ensemble: Ensemble<O::Radiance>,
-    exchange: Box<dyn Move<Replica<O::Radiance>> + Send + Sync>,
+    exchange: ExchangeMove<O::Radiance>,
     buffers: RoundBuffers<O::Radiance>,
     /// The bootstrap's samples of every level's normalization (the same in
     /// every ensemble).
@@ -207,7 +207,7 @@ where
             self.ensemble.sweep(
                 self.oracle,
                 self.importance,
-                self.exchange.as_mut(),
+                &mut self.exchange,
                 |p, radiance, weight| buffers.splat(p, radiance, weight),
             );
             for r in self.ensemble.replicas() {

@@ -2,6 +2,7 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use super::check_shapes;
 use crate::error::Error;
@@ -9,7 +10,7 @@ use crate::parallel::map_indices;
 use crate::tiles::Tiles;
 
 /// Settings of the log-domain solver.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LogSettings {
     /// Weight of the log-domain MC regularization `α Σ (x_j - log Î(j))²`.
     pub alpha: f64,

@@ -4,6 +4,7 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use super::planes::{Planes, Stencil};
 use super::stencil::{Chunks, Linear};
@@ -13,7 +14,7 @@ use crate::parallel::{self, map_indices, threads};
 use crate::tiles::Tiles;
 
 /// Parameters of the weighted iterative solver (seed 001 sec. 3.2 and 4).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WeightedSettings {
     /// Weight `α` of the MC regularization (0.05).
     pub alpha: f64,

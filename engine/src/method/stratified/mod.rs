@@ -62,6 +62,7 @@ mod tile;
 
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use self::init::initialize;
 use self::local::{exchange_all, exchange_cost};
@@ -80,7 +81,7 @@ use crate::target::Importance;
 use crate::tiles::{TileShape, Tiles};
 
 /// How the tile normalizations are reconstructed.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Solver {
     /// The weighted iterative solver, eq. 13-16 (seed 001's choice).
     Weighted(WeightedSettings),
@@ -119,7 +120,7 @@ impl Solver {
 }
 
 /// Global-chain initialization of the tile chains (seed 001 sec. 3.3 and 4).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Initialization {
     /// Number of global chains (0 disables global initialization: tiles then
     /// start from uniform draws and borrowing only).
@@ -151,7 +152,7 @@ impl Default for Initialization {
 /// (initialization, tile steps and exchanges); a sample budget is turned
 /// into the nearest whole number of sweeps (at least one) at the cost of a
 /// sweep whose exchanges all trace.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StratifiedSettings {
     /// The tile shape (cross by default).
     pub shape: TileShape,
@@ -231,7 +232,7 @@ impl StratifiedSettings {
 }
 
 /// Counters of a stratified render.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct StratifiedStats {
     /// Sweeps: steps made by every tile chain (all the same).
     pub sweeps: u64,

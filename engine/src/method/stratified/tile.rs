@@ -7,8 +7,9 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
-use rand_pcg::Pcg32;
+use crate::rng::Pcg32;
 
 use crate::chain::{Chain, ChainStats, Target, Traced, Weights};
 use crate::mutate::MutationParams;
@@ -19,14 +20,14 @@ use crate::target::{Importance, evaluate};
 use crate::tiles::Tiles;
 
 /// One tile pixel's evaluation of a state.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 pub(super) struct Value<R> {
     pub radiance: R,
     pub importance: f64,
 }
 
 /// A tile chain's state: its jitter replayed in every tile pixel.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub(super) struct TileState<R> {
     /// The evaluation in every tile pixel (offset order; zero where the tile
     /// is clipped).
@@ -36,7 +37,7 @@ pub(super) struct TileState<R> {
 }
 
 /// How a tile got its first state with `T_s > 0`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub(super) enum Start {
     None,
     Global,
@@ -45,6 +46,7 @@ pub(super) enum Start {
 }
 
 /// A tile's chain and its accumulators.
+#[derive(Serialize, Deserialize)]
 pub(super) struct TileChain<R> {
     pub chain: Chain<TileState<R>>,
     pub decisions: Pcg32,

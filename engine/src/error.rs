@@ -46,6 +46,25 @@ pub enum Error {
         /// Its size.
         bytes: u64,
     },
+    /// Bytes that are not a checkpoint, or a damaged one (truncated,
+    /// corrupted, or contents that do not fit the render).
+    CheckpointCorrupted {
+        /// What is wrong.
+        reason: &'static str,
+    },
+    /// A checkpoint written in another format version.
+    CheckpointVersion {
+        /// Its version.
+        found: u32,
+        /// This engine's ([`FORMAT_VERSION`](crate::checkpoint::FORMAT_VERSION)).
+        expected: u32,
+    },
+    /// A checkpoint of another render: another method (or method settings),
+    /// seed, scene, film or engine version.
+    CheckpointMismatch {
+        /// What differs.
+        what: &'static str,
+    },
     /// Two films or images that must have the same shape do not.
     ShapeMismatch {
         /// Shape of the left operand (width, height, channels).
@@ -105,6 +124,18 @@ impl fmt::Display for Error {
             Error::AllocationFailed { what, bytes } => {
                 write!(f, "cannot allocate {bytes} bytes for the {what}")
             }
+            Error::CheckpointCorrupted { reason } => {
+                write!(f, "the checkpoint cannot be read: {reason}")
+            }
+            Error::CheckpointVersion { found, expected } => write!(
+                f,
+                "the checkpoint is of format version {found}, this engine reads version \
+                 {expected}: finish it with the strata that wrote it, or start again"
+            ),
+            Error::CheckpointMismatch { what } => write!(
+                f,
+                "the checkpoint is of another render: its {what} differs from this one's"
+            ),
             Error::ShapeMismatch { left, right } => {
                 write!(
                     f,

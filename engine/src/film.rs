@@ -45,6 +45,14 @@ impl Film {
         })
     }
 
+    /// Whether this film is `resolution` with `channels` channels, its values
+    /// all there (a film read back from a checkpoint is checked).
+    pub fn fits(&self, resolution: Resolution, channels: usize) -> bool {
+        self.resolution == resolution
+            && self.channels == channels
+            && self.data.len() == resolution.pixel_count() * channels
+    }
+
     /// A film over existing values (`resolution.pixel_count() * channels` of them).
     pub fn from_data(
         resolution: Resolution,

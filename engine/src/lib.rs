@@ -17,7 +17,7 @@
 //! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], [`purity`] | random streams; the small-step kernels whole (catch-up included); the lazily mutated primary sample; importance functions; accumulation buffers; the purity check |
 //! | one step | [`chain`] | the Metropolis-Hastings step with expected-values splatting, over any [`Target`](chain::Target) and [`Weights`](chain::Weights) |
 //! | set-up | [`bootstrap`] | start-up bias elimination: `b*` per level, importance-resampled chain starts |
-//! | one loop | [`drive`] | budgets, clock, observer, the round loop, the deterministic merge, statistics |
+//! | one loop | [`drive`], [`checkpoint`] | budgets, clock, observer, the round loop, the deterministic merge, statistics; the render's state saved between rounds and resumed |
 //! | methods | [`method`] | [`Settings`], [`Method`], [`Output`], [`render`]; MC, PSSMLT, replica exchange, stratified MCMC, ERPT, multi-stage MLT |
 //! | method parts | [`exchange`], [`tiles`], [`reconstruct`] | replica exchange's ensembles, ladders and every move of seed 002 ch. 5; stratified MCMC's tiles and the reconstruction of their normalizations (seed 001 sec. 3.2) |
 //! | diagnostics | [`metrics`], [`diagnose`], [`convergence`], [`analytic`] | error metrics; autocorrelation, ESS, R-hat; seed 003's predicted error; targets with known answers |
@@ -33,6 +33,7 @@ extern crate std;
 pub mod analytic;
 pub mod bootstrap;
 pub mod chain;
+pub mod checkpoint;
 pub mod convergence;
 pub mod diagnose;
 pub mod drive;
@@ -52,10 +53,11 @@ pub mod sample;
 pub mod target;
 pub mod tiles;
 
+pub use checkpoint::Checkpoint;
 pub use drive::{Budget, Observer, Progress, RenderStats, Silent};
 pub use error::Error;
 pub use film::Film;
-pub use method::{Extras, Method, Output, Settings, render};
+pub use method::{Extras, Method, Output, Settings, render, resume};
 pub use oracle::{
     FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb, Sampler,
     Temperature,

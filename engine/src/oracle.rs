@@ -18,6 +18,7 @@
 //! engine: a renderer implements [`PathOracle`] and draws from a [`Sampler`].
 
 use core::fmt::Debug;
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// Film size in pixels.
@@ -133,7 +134,9 @@ impl<R> PathSample<R> {
 ///
 /// Values must be finite and non-negative; the engine excludes (and counts)
 /// anything else instead of splatting it.
-pub trait Radiance: Copy + Default + Debug + PartialEq + Send + Sync + 'static {
+pub trait Radiance:
+    Copy + Default + Debug + PartialEq + Send + Sync + Serialize + DeserializeOwned + 'static
+{
     /// Number of channels stored in a [`Film`](crate::film::Film).
     const CHANNELS: usize;
     /// Channel `i` (`i < CHANNELS`).

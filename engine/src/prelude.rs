@@ -3,12 +3,13 @@
 //! with its settings and output, budgets and observers, and the importance
 //! functions.
 
+pub use crate::checkpoint::Checkpoint;
 pub use crate::drive::{Budget, Observer, Progress, RenderStats, Silent};
 pub use crate::error::Error;
 pub use crate::film::Film;
 pub use crate::method::{
     ErptSettings, Extras, Method, MultiStageSettings, Output, PssmltSettings, ReplicaSettings,
-    Settings, StratifiedSettings, render,
+    Settings, StratifiedSettings, render, resume,
 };
 pub use crate::oracle::{
     FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb, Sampler,

@@ -18,10 +18,14 @@
 
 pub(crate) mod splat;
 
+use alloc::vec::Vec;
+
+use serde::{Deserialize, Serialize};
+
 use crate::chain::ChainStats;
+use crate::checkpoint::{Checkpoint, Checkpoints, Position, append};
 use crate::film::Film;
 use crate::oracle::Resolution;
-use serde::{Deserialize, Serialize};
 
 /// When a render stops.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -73,6 +77,16 @@ pub trait Observer: Sync {
     fn should_stop(&self) -> bool {
         false
     }
+    /// Whether to make a checkpoint after this round (costs encoding the
+    /// render's whole state; see [`checkpoint`](crate::checkpoint)).
+    fn wants_checkpoint(&self) -> bool {
+        false
+    }
+    /// The render's state after this round, from which
+    /// [`resume`](crate::method::resume) continues.
+    fn checkpoint(&self, checkpoint: Checkpoint) {
+        let _ = checkpoint;
+    }
 }
 
 /// An observer that does nothing.
@@ -82,7 +96,7 @@ pub struct Silent;
 impl Observer for Silent {}
 
 /// Counters of a render.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct RenderStats {
     /// Paths traced for the image (bootstrap excluded).
     pub samples: u64,
@@ -129,24 +143,48 @@ const MAX_ROUND_SAMPLES: u64 = 1 << 21;
 /// A time budget grows rounds while they take less than this (seconds).
 const MIN_ROUND_SECONDS: f64 = 0.05;
 
-/// The round loop: runs `work` round after round until `budget` is spent
-/// (measured by `clock` for a time budget), or the observer stops it.
-pub(crate) fn drive(
-    work: &mut impl Rounds,
-    budget: Budget,
-    clock: &Clock,
-    observer: &dyn Observer,
+/// What the round loop needs from a render: its budget and clock, its
+/// observer, its checkpoints, and for a resumed render where its loop was.
+pub(crate) struct Loop<'a> {
+    pub budget: Budget,
+    pub clock: &'a Clock,
+    pub observer: &'a dyn Observer,
+    pub checkpoints: &'a dyn Checkpoints,
+    pub resumed: Option<Position>,
+}
+
+/// The round loop: runs `work` round after round until the budget is spent
+/// (measured by the clock for a time budget), or the observer stops it.
+/// After a round, if the observer wants one, a checkpoint holds the loop's
+/// position followed by what `save` writes (the method's state). A resumed
+/// loop continues from its position with the same rounds an uninterrupted
+/// one would run (for the same sample budget).
+pub(crate) fn drive<W: Rounds>(
+    work: &mut W,
+    at: Loop<'_>,
+    save: impl Fn(&W, &mut Vec<u8>),
 ) -> Driven {
+    let Loop {
+        budget,
+        clock,
+        observer,
+        checkpoints,
+        resumed,
+    } = at;
     let planned = match budget {
         Budget::Samples(n) => Some(work.planned_units(n).max(1)),
         #[cfg(feature = "std")]
         Budget::Time(_) => None,
     };
     let max_round = (MAX_ROUND_SAMPLES / work.unit_cost().max(1)).max(1);
-    let mut round = planned.map_or(1, |n| n.div_ceil(64).clamp(1, max_round));
-    let mut done = 0u64;
+    let first_round = planned.map_or(1, |n| n.div_ceil(64).clamp(1, max_round));
+    let mut round = resumed.map_or(first_round, |p| p.round.clamp(1, max_round));
+    let mut done = resumed.map_or(0, |p| p.done);
     let mut cancelled = false;
     loop {
+        if planned.is_some_and(|n| done >= n) {
+            break;
+        }
         if observer.should_stop() {
             cancelled = true;
             break;
@@ -163,11 +201,18 @@ pub(crate) fn drive(
         if observer.wants_preview() {
             observer.preview(&work.preview());
         }
-        if planned.map_or_else(|| clock.expired(), |n| done >= n) {
-            break;
-        }
         if planned.is_none() && round_clock.seconds() < MIN_ROUND_SECONDS {
             round = (round * 2).min(max_round);
+        }
+        if observer.wants_checkpoint() {
+            let position = Position { done, round };
+            observer.checkpoint(checkpoints.checkpoint(work.samples(), &mut |out| {
+                append(&position, out);
+                save(work, out);
+            }));
+        }
+        if planned.is_none() && clock.expired() {
+            break;
         }
     }
     Driven { cancelled }

@@ -9,7 +9,10 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
+use serde::Serialize;
+
 use super::Rounds;
+use crate::checkpoint;
 use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{FilmPoint, Radiance, Resolution};
@@ -81,6 +84,13 @@ pub(crate) trait Runs: Worker + Send + Sync {
     {
         let _ = workers;
     }
+}
+
+/// A worker whose state a checkpoint holds.
+pub(crate) trait Saves {
+    /// What is saved (read back as itself).
+    type State: Serialize;
+    fn state(&self) -> &Self::State;
 }
 
 /// Horizontal bands of the film.
@@ -173,6 +183,43 @@ impl<W: Runs> Splatting<W> {
 
     fn scale(&self) -> f64 {
         self.bands.resolution.pixel_count() as f64 / (self.units * self.work.len() as u64) as f64
+    }
+
+    /// Workers resumed from a checkpoint with the film, visits and units
+    /// they had (see [`save`](Self::save)); a film or visit count of another
+    /// size, or no worker, is an error.
+    pub fn resumed(
+        work: Vec<W>,
+        bands: SplatBands,
+        unit_samples: u64,
+        (film, visits, units): (Film, Vec<u64>, u64),
+    ) -> Result<Self, Error> {
+        let resolution = bands.resolution;
+        if work.is_empty()
+            || !film.fits(resolution, W::Radiance::CHANNELS)
+            || visits.len() != resolution.pixel_count()
+        {
+            return Err(checkpoint::does_not_fit());
+        }
+        Ok(Self {
+            work,
+            bands,
+            film,
+            visits,
+            units,
+            unit_samples,
+        })
+    }
+
+    /// Appends the film, the visits, the units done and every worker's
+    /// state (its buffers are empty between rounds) to a checkpoint; read
+    /// back as `((Film, Vec<u64>, u64), Vec<W::State>)`.
+    pub fn save(&self, out: &mut Vec<u8>)
+    where
+        W: Saves,
+    {
+        let states: Vec<&W::State> = self.work.iter().map(Saves::state).collect();
+        checkpoint::append(&((&self.film, &self.visits, self.units), states), out);
     }
 
     /// The normalized image and the states per pixel.

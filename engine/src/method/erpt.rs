@@ -27,13 +27,14 @@ use serde::{Deserialize, Serialize};
 
 use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
-use crate::chain::{Chain, ChainStats, PathTarget, Weights};
+use crate::chain::{Chain, ChainStats, Normalization, PathTarget, Traced, Weights};
+use crate::checkpoint;
 use crate::drive::splat::{RoundBuffers, SplatBands, Worker};
 use crate::drive::{RenderStats, Rounds, drive};
 use crate::error::Error;
 use crate::film::Film;
 use crate::mutate::{MutationParams, SmallStep};
-use crate::oracle::{PathOracle, Radiance, Temperature};
+use crate::oracle::{PathOracle, Radiance, Resolution, Temperature};
 use crate::parallel;
 use crate::rng::{self, Domain, uniform_f64};
 use crate::sample::MltSampler;
@@ -103,37 +104,96 @@ where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    let bootstrap = Bootstrap::run(
-        job.oracle,
-        job.importance,
-        settings.small_step,
-        job.seed,
-        settings.bootstrap_candidates,
-    )?;
     let resolution = job.resolution;
     let bands = SplatBands::new(resolution);
-    let mut run = Passes {
-        job,
-        settings,
-        energy: bootstrap.normalization()
-            / (settings.chain_length as f64 * settings.chains_per_path),
-        work: (0..TASKS).map(|_| Segment::new(bands)).collect(),
-        bands,
-        film: Film::try_new(resolution, O::Radiance::CHANNELS)?,
-        visits: alloc::vec![0; resolution.pixel_count()],
-        starts: resolution.pixel_count() * MIN_STARTS.div_ceil(resolution.pixel_count()),
-        passes: 0,
-        done: 0,
-        rotation: 0,
+    let scene = Scene {
+        oracle: job.oracle,
+        importance: job.importance,
+        seed: job.seed,
+        resolution,
     };
-    let driven = drive(&mut run, job.budget, &job.clock, job.observer);
+    let (saved, position) = match job.resumed::<Saved>()? {
+        Some((position, saved)) => {
+            let fits = saved.film.fits(resolution, O::Radiance::CHANNELS)
+                && saved.visits.len() == resolution.pixel_count()
+                && saved.totals.len() == TASKS
+                && saved.starts >= resolution.pixel_count()
+                && saved.rotation < saved.starts.div_ceil(BLOCK)
+                && saved.done < saved.starts.div_ceil(BLOCK);
+            if !fits {
+                return Err(checkpoint::does_not_fit());
+            }
+            (saved, Some(position))
+        }
+        None => {
+            let bootstrap = Bootstrap::run(
+                job.oracle,
+                job.importance,
+                settings.small_step,
+                job.seed,
+                settings.bootstrap_candidates,
+            )?;
+            let saved = Saved {
+                energy: bootstrap.normalization()
+                    / (settings.chain_length as f64 * settings.chains_per_path),
+                bootstrap: bootstrap.traced(),
+                b: bootstrap.normalization(),
+                normalization: bootstrap.estimate(0),
+                film: Film::try_new(resolution, O::Radiance::CHANNELS)?,
+                visits: alloc::vec![0; resolution.pixel_count()],
+                totals: alloc::vec![Totals::default(); TASKS],
+                starts: resolution.pixel_count() * MIN_STARTS.div_ceil(resolution.pixel_count()),
+                passes: 0,
+                done: 0,
+                rotation: 0,
+            };
+            (saved, None)
+        }
+    };
+    let mut run = Passes {
+        scene,
+        settings,
+        energy: saved.energy,
+        work: saved
+            .totals
+            .iter()
+            .map(|&totals| Segment::new(bands, totals))
+            .collect(),
+        bands,
+        film: saved.film,
+        visits: saved.visits,
+        starts: saved.starts,
+        passes: saved.passes,
+        done: saved.done,
+        rotation: saved.rotation,
+    };
+    let (bootstrap, b, normalization) = (saved.bootstrap, saved.b, saved.normalization);
+    let driven = drive(&mut run, job.round_loop(position), |run, out| {
+        let totals: Vec<Totals> = run.work.iter().map(|w| w.totals).collect();
+        checkpoint::append(
+            &(
+                run.energy,
+                bootstrap,
+                b,
+                normalization,
+                &run.film,
+                &run.visits,
+                totals,
+                run.starts,
+                run.passes,
+                run.done,
+                run.rotation,
+            ),
+            out,
+        )
+    });
     let scale = run.scale();
     let mut film = run.film;
     film.scale(scale);
     let mut stats = RenderStats {
-        bootstrap_samples: bootstrap.traced().paths,
-        normalization: Some(bootstrap.normalization()),
-        normalization_error: Some(bootstrap.estimate(0).relative_error()),
+        bootstrap_samples: bootstrap.paths,
+        normalization: Some(b),
+        normalization_error: Some(normalization.relative_error()),
         ..Default::default()
     };
     for w in &run.work {
@@ -141,7 +201,7 @@ where
         stats.chains.merge(&w.totals.chains);
         stats.invalid_samples += w.totals.invalid;
     }
-    stats.invalid_samples += bootstrap.traced().invalid;
+    stats.invalid_samples += bootstrap.invalid;
     Ok(Output {
         film,
         stats,
@@ -150,6 +210,40 @@ where
         extras: Extras::None,
     })
 }
+
+/// ERPT's state between rounds as a checkpoint holds it (the fields of
+/// [`Passes`] that are not the job's, the bootstrap's counters and estimate).
+#[derive(Deserialize)]
+struct Saved {
+    energy: f64,
+    bootstrap: Traced,
+    /// The bootstrap's `b*`, and the samples behind it.
+    b: f64,
+    normalization: Normalization,
+    film: Film,
+    visits: Vec<u64>,
+    totals: Vec<Totals>,
+    starts: usize,
+    passes: u64,
+    done: usize,
+    rotation: usize,
+}
+
+/// What ERPT's tasks read of the job (shared between threads).
+struct Scene<'a, O, I: ?Sized> {
+    oracle: &'a O,
+    importance: &'a I,
+    seed: u64,
+    resolution: Resolution,
+}
+
+impl<O, I: ?Sized> Clone for Scene<'_, O, I> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<O, I: ?Sized> Copy for Scene<'_, O, I> {}
 
 /// ERPT's weights (Cline et al. 2005): a chain deposits the energy `e_d` per
 /// step, coloured `f/I`, by expected values: `a e_d / I(y)` at the proposal,
@@ -190,7 +284,7 @@ const BLOCK: usize = TASKS * PIXELS_PER_TASK;
 const MIN_STARTS: usize = 16;
 
 /// Counters of a task's work.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 struct Totals {
     chains: ChainStats,
     traces: u64,
@@ -208,12 +302,12 @@ struct Segment<R> {
 }
 
 impl<R> Segment<R> {
-    fn new(bands: SplatBands) -> Self {
+    fn new(bands: SplatBands, totals: Totals) -> Self {
         Self {
             first: 0,
             pixels: 0,
             buffers: RoundBuffers::new(bands),
-            totals: Totals::default(),
+            totals,
         }
     }
 }
@@ -229,9 +323,9 @@ impl<R: Radiance> Worker for Segment<R> {
 }
 
 /// ERPT's state between rounds.
-struct Passes<'a, 'j, O: PathOracle, I: ?Sized> {
-    job: &'j Job<'a, O, I>,
-    settings: &'j ErptSettings,
+struct Passes<'a, O: PathOracle, I: ?Sized> {
+    scene: Scene<'a, O, I>,
+    settings: &'a ErptSettings,
     energy: f64,
     bands: SplatBands,
     work: Vec<Segment<O::Radiance>>,
@@ -247,7 +341,7 @@ struct Passes<'a, 'j, O: PathOracle, I: ?Sized> {
     rotation: usize,
 }
 
-impl<O, I> Passes<'_, '_, O, I>
+impl<O, I> Passes<'_, O, I>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
@@ -261,7 +355,7 @@ where
     /// `(passes + m / B) · starts / pixels`.
     fn scale(&self) -> f64 {
         let passes = self.passes as f64 + self.done as f64 / self.blocks() as f64;
-        let per_pixel = (self.starts / self.job.resolution.pixel_count()) as f64;
+        let per_pixel = (self.starts / self.scene.resolution.pixel_count()) as f64;
         if passes > 0.0 {
             1.0 / (passes * per_pixel)
         } else {
@@ -272,18 +366,18 @@ where
     /// The start paths of block `block` of the current pass, in tasks run in
     /// parallel and merged in order.
     fn run_block(&mut self, block: usize) {
-        let (pixels, starts) = (self.job.resolution.pixel_count(), self.starts);
+        let (pixels, starts) = (self.scene.resolution.pixel_count(), self.starts);
         let first = block * BLOCK;
         for (t, w) in self.work.iter_mut().enumerate() {
             w.first = (first + t * PIXELS_PER_TASK).min(starts);
             w.pixels = PIXELS_PER_TASK.min(starts - w.first);
         }
         let pass = self.passes * starts as u64;
-        let (job, settings, energy) = (self.job, self.settings, self.energy);
+        let (scene, settings, energy) = (self.scene, self.settings, self.energy);
         parallel::for_each(&mut self.work, |w| {
             for start in w.first..w.first + w.pixels {
                 let pixel = start % pixels;
-                redistribute(job, settings, energy, pass + start as u64, w, pixel);
+                redistribute(&scene, settings, energy, pass + start as u64, w, pixel);
             }
         });
         self.bands
@@ -291,7 +385,7 @@ where
     }
 }
 
-impl<O, I> Rounds for Passes<'_, '_, O, I>
+impl<O, I> Rounds for Passes<'_, O, I>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
@@ -310,7 +404,7 @@ where
         let blocks = self.blocks();
         for _ in 0..units {
             if self.done == 0 {
-                let mut order = rng::stream(self.job.seed, Domain::Pass, self.passes);
+                let mut order = rng::stream(self.scene.seed, Domain::Pass, self.passes);
                 self.rotation = (uniform_f64(&mut order) * blocks as f64) as usize % blocks;
             }
             self.run_block((self.rotation + self.done) % blocks);
@@ -334,7 +428,7 @@ where
 /// One MC path in pixel `pixel` (the `index`-th of the render) and the
 /// chains it starts.
 fn redistribute<O, I>(
-    job: &Job<'_, O, I>,
+    scene: &Scene<'_, O, I>,
     settings: &ErptSettings,
     energy: f64,
     index: u64,
@@ -344,8 +438,8 @@ fn redistribute<O, I>(
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    let (oracle, importance, seed) = (job.oracle, job.importance, job.seed);
-    let resolution = job.resolution;
+    let (oracle, importance, seed) = (scene.oracle, scene.importance, scene.seed);
+    let resolution = scene.resolution;
     let mut decisions = rng::stream(seed, Domain::Energy, index);
     let mut start = MltSampler::new(
         settings.small_step,

@@ -9,6 +9,7 @@
 use alloc::vec::Vec;
 
 use super::{Extras, Job, Output};
+use crate::checkpoint;
 use crate::drive::{Rounds, drive};
 use crate::error::Error;
 use crate::film::Film;
@@ -24,14 +25,26 @@ where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
+    let channels = O::Radiance::CHANNELS;
+    let (film, passes, invalid, position) = match job.resumed::<(Film, u64, u64)>()? {
+        Some((position, (film, passes, invalid))) => {
+            if !film.fits(job.resolution, channels) {
+                return Err(checkpoint::does_not_fit());
+            }
+            (film, passes, invalid, Some(position))
+        }
+        None => (Film::try_new(job.resolution, channels)?, 0, 0, None),
+    };
     let mut run = Passes {
         oracle: job.oracle,
         seed: job.seed,
-        film: Film::try_new(job.resolution, O::Radiance::CHANNELS)?,
-        passes: 0,
-        invalid: 0,
+        film,
+        passes,
+        invalid,
     };
-    let driven = drive(&mut run, job.budget, &job.clock, job.observer);
+    let driven = drive(&mut run, job.round_loop(position), |run, out| {
+        checkpoint::append(&(&run.film, run.passes, run.invalid), out)
+    });
     let pixels = job.resolution.pixel_count() as u64;
     let mut film = run.film;
     film.scale(1.0 / run.passes.max(1) as f64);

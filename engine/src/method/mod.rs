@@ -38,7 +38,10 @@ pub use stratified::{
     Initialization, Solver, StratifiedExtras, StratifiedSettings, StratifiedStats,
 };
 
-use crate::drive::{Budget, Clock, Observer, RenderStats};
+use serde::de::DeserializeOwned;
+
+use crate::checkpoint::{self, Checkpoint, Checkpointer, Checkpoints, Position};
+use crate::drive::{Budget, Clock, Loop, Observer, RenderStats};
 use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{PathOracle, Radiance, Resolution};
@@ -221,7 +224,7 @@ impl Extras {
 
 /// What every method renders: the oracle, its importance, the shared
 /// settings and the observer, with the film size checked and the clock
-/// started.
+/// started; where its checkpoints go, and the state it resumes from.
 pub(crate) struct Job<'a, O, I: ?Sized> {
     pub oracle: &'a O,
     pub importance: &'a I,
@@ -230,16 +233,83 @@ pub(crate) struct Job<'a, O, I: ?Sized> {
     pub observer: &'a dyn Observer,
     pub resolution: Resolution,
     pub clock: Clock,
+    pub checkpoints: &'a dyn Checkpoints,
+    /// The saved state of a resumed render: the round loop's position and
+    /// the method's state, in that order.
+    pub resume: Option<&'a [u8]>,
+}
+
+impl<O, I: ?Sized> Job<'_, O, I> {
+    /// The round loop of this job, at `resumed` (or at its start).
+    pub fn round_loop(&self, resumed: Option<Position>) -> Loop<'_> {
+        Loop {
+            budget: self.budget,
+            clock: &self.clock,
+            observer: self.observer,
+            checkpoints: self.checkpoints,
+            resumed,
+        }
+    }
+
+    /// For a resumed render, the loop's position and the method's saved
+    /// state `T`; a state that does not decode is an error.
+    pub fn resumed<T: DeserializeOwned>(&self) -> Result<Option<(Position, T)>, Error> {
+        let Some(bytes) = self.resume else {
+            return Ok(None);
+        };
+        let (position, rest) = checkpoint::take(bytes)?;
+        let (state, _) = checkpoint::take(rest)?;
+        Ok(Some((position, state)))
+    }
 }
 
 /// Renders `oracle` with `settings`, sampling in proportion to `importance`
 /// (MCMC methods; MC ignores it). Checks every setting and the oracle's
-/// resolution before any work; the observer is called between rounds.
+/// resolution before any work; the observer is called between rounds (and
+/// may take checkpoints: [`resume`] continues from one).
 pub fn render<O, I>(
     oracle: &O,
     importance: &I,
     settings: &Settings,
     observer: &dyn Observer,
+) -> Result<Output, Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    run(oracle, importance, settings, observer, None)
+}
+
+/// Continues the render saved in `checkpoint` (see
+/// [`checkpoint`](crate::checkpoint)). `settings` must have the checkpoint's
+/// method, method settings and seed ([`Checkpoint::settings`] gives them),
+/// and `oracle` must be the scene it was made with; otherwise
+/// `Error::CheckpointMismatch`. The budget may differ: the same sample budget
+/// gives the bytes the uninterrupted render would have given, a larger one
+/// continues further, and a time budget counts from now.
+pub fn resume<O, I>(
+    oracle: &O,
+    importance: &I,
+    settings: &Settings,
+    checkpoint: &Checkpoint,
+    observer: &dyn Observer,
+) -> Result<Output, Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    settings.validate()?;
+    let state = checkpoint.state_for(oracle, settings)?;
+    run(oracle, importance, settings, observer, Some(state))
+}
+
+/// A render, fresh or resumed from `resume`.
+fn run<O, I>(
+    oracle: &O,
+    importance: &I,
+    settings: &Settings,
+    observer: &dyn Observer,
+    resume: Option<&[u8]>,
 ) -> Result<Output, Error>
 where
     O: PathOracle,
@@ -257,6 +327,8 @@ where
         per_pixel.saturating_mul(resolution.pixel_count() as u64),
         "render's films and buffers (a bound for this method and film size)",
     )?;
+    let oracle_id = || checkpoint::oracle_id(oracle);
+    let checkpoints = Checkpointer::new(settings, O::Radiance::CHANNELS, &oracle_id);
     let job = Job {
         oracle,
         importance,
@@ -265,6 +337,8 @@ where
         observer,
         resolution,
         clock: Clock::start(settings.budget),
+        checkpoints: &checkpoints,
+        resume,
     };
     match &settings.method {
         Method::Mc => mc::render(&job),

@@ -36,6 +36,7 @@ use core::sync::atomic::{AtomicU64, Ordering};
 
 use super::pssmlt::{Pssmlt, PssmltSettings};
 use super::{Extras, Job, Output};
+use crate::checkpoint::{self, Checkpoint, Checkpoints};
 use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, drive};
 use crate::error::Error;
 use crate::film::Film;
@@ -346,18 +347,44 @@ where
     let weight_sum: u64 = grids.iter().map(|&k| k as u64).sum();
     let channels = O::Radiance::CHANNELS;
     let pixels = resolution.pixel_count();
-    // Sample-weighted sums of every stage's image and deviation channel.
-    let mut sum = Film::try_new(resolution, channels)?;
-    let mut deviation_sum = vec![0.0; pixels];
+    // The stages done: sample-weighted sums of their images and deviation
+    // channels, counters (or, resumed, as the checkpoint saved them).
+    let (mut done, resumed_stage) = match job.resume {
+        Some(bytes) => {
+            let (done, rest) = checkpoint::take::<StagesDone>(bytes)?;
+            let fits = done.sum.fits(resolution, channels)
+                && done.deviation_sum.len() == pixels
+                && done.visits.len() == pixels
+                && done.stages.len() < grids.len();
+            if !fits {
+                return Err(checkpoint::does_not_fit());
+            }
+            (done, Some(rest))
+        }
+        None => (
+            StagesDone {
+                sum: Film::try_new(resolution, channels)?,
+                deviation_sum: vec![0.0; pixels],
+                stats: RenderStats::default(),
+                visits: vec![0u64; pixels],
+                stages: Vec::with_capacity(grids.len()),
+                weight_done: 0,
+            },
+            None,
+        ),
+    };
+    // The estimate so far, and its luminance and deviation per pixel.
     let mut estimate = Film::new(resolution, channels);
     let mut luminance = vec![0.0; pixels];
     let mut variance = vec![0.0; pixels];
-    let mut stats = RenderStats::default();
-    let mut visits = vec![0u64; pixels];
-    let mut stages = Vec::with_capacity(grids.len());
+    if !done.stages.is_empty() {
+        done.estimate(&mut estimate, &mut luminance, &mut variance);
+    }
     let mut cancelled = false;
-    let mut weight_done = 0u64;
-    for (s, &k) in grids.iter().enumerate() {
+    let first = done.stages.len();
+    for (s, &k) in grids.iter().enumerate().skip(first) {
+        let weight_done = done.weight_done;
+        let stats = done.stats;
         let budget = match job.budget {
             Budget::Samples(total) => Budget::Samples((total * k as u64 / weight_sum).max(1)),
             #[cfg(feature = "std")]
@@ -395,9 +422,13 @@ where
             oracle: job.oracle,
             estimate: &luminance,
         };
+        let stage_checkpoints = StageCheckpoints {
+            outer: job.checkpoints,
+            done: &done,
+        };
         let observer = StageObserver {
             outer: job.observer,
-            sum: &sum,
+            sum: &done.sum,
             samples: stats.samples,
             stage_samples: AtomicU64::new(0),
             fraction: weight_done as f64 / weight_sum as f64,
@@ -411,40 +442,15 @@ where
             observer: &observer,
             resolution,
             clock: Clock::start(budget),
+            checkpoints: &stage_checkpoints,
+            resume: resumed_stage.filter(|_| s == first),
         };
-        let mut run = Pssmlt::start(&settings.pssmlt, &stage_job)?;
-        let driven = drive(&mut run.chains, budget, &stage_job.clock, &observer);
+        let (mut run, position) = Pssmlt::start(&settings.pssmlt, &stage_job)?;
+        let saver = run.saver();
+        let driven = drive(&mut run.chains, stage_job.round_loop(position), saver);
         let out = run.finish(driven);
-        // Each stage's film is its mean image; weight it by its samples.
-        let n = out.stats.samples as f64;
-        for (i, dev) in deviation_sum.iter_mut().enumerate() {
-            let px = &out.film.data()[i * (channels + 1)..(i + 1) * (channels + 1)];
-            let target = &mut sum.data_mut()[i * channels..(i + 1) * channels];
-            for (t, v) in target.iter_mut().zip(px) {
-                *t += n * v;
-            }
-            *dev += n * px[channels];
-        }
-        visits
-            .iter_mut()
-            .zip(&out.visits)
-            .for_each(|(a, b)| *a += b);
-        stats.samples += out.stats.samples;
-        stats.bootstrap_samples += out.stats.bootstrap_samples;
-        stats.invalid_samples += out.stats.invalid_samples;
-        stats.chains.merge(&out.stats.chains);
-        stages.push(Stage {
-            grid: k,
-            samples: out.stats.samples,
-            normalization: out.stats.normalization.unwrap_or(0.0),
-        });
-        weight_done += k as u64;
-        let inverse = 1.0 / stats.samples.max(1) as f64;
-        estimate = sum.scaled(inverse);
-        for i in 0..pixels {
-            luminance[i] = estimate.luminance(i);
-            variance[i] = deviation_sum[i] * inverse;
-        }
+        done.add(&out, k);
+        done.estimate(&mut estimate, &mut luminance, &mut variance);
         if out.cancelled {
             cancelled = true;
             break;
@@ -452,11 +458,85 @@ where
     }
     Ok(Output {
         film: estimate,
-        stats,
+        stats: done.stats,
         cancelled,
-        visits,
-        extras: Extras::MultiStage(stages),
+        visits: done.visits,
+        extras: Extras::MultiStage(done.stages),
     })
+}
+
+/// The stages done of a multi-stage render: what the next stages and the
+/// image are made of, and what a checkpoint holds before the current stage's
+/// state.
+#[derive(Serialize, Deserialize)]
+struct StagesDone {
+    /// Sample-weighted sums of the stages' images and deviation channels.
+    sum: Film,
+    deviation_sum: Vec<f64>,
+    stats: RenderStats,
+    visits: Vec<u64>,
+    stages: Vec<Stage>,
+    /// The stages' grid sizes summed (their share of the budget).
+    weight_done: u64,
+}
+
+impl StagesDone {
+    /// Adds the stage of grid `k` that rendered `out`.
+    fn add(&mut self, out: &Output, k: u32) {
+        let channels = self.sum.channels();
+        // Each stage's film is its mean image; weight it by its samples.
+        let n = out.stats.samples as f64;
+        for (i, dev) in self.deviation_sum.iter_mut().enumerate() {
+            let px = &out.film.data()[i * (channels + 1)..(i + 1) * (channels + 1)];
+            let target = &mut self.sum.data_mut()[i * channels..(i + 1) * channels];
+            for (t, v) in target.iter_mut().zip(px) {
+                *t += n * v;
+            }
+            *dev += n * px[channels];
+        }
+        self.visits
+            .iter_mut()
+            .zip(&out.visits)
+            .for_each(|(a, b)| *a += b);
+        let stats = &mut self.stats;
+        stats.samples += out.stats.samples;
+        stats.bootstrap_samples += out.stats.bootstrap_samples;
+        stats.invalid_samples += out.stats.invalid_samples;
+        stats.chains.merge(&out.stats.chains);
+        self.stages.push(Stage {
+            grid: k,
+            samples: out.stats.samples,
+            normalization: out.stats.normalization.unwrap_or(0.0),
+        });
+        self.weight_done += k as u64;
+    }
+
+    /// The image of the stages done, and its luminance and deviation per
+    /// pixel.
+    fn estimate(&self, estimate: &mut Film, luminance: &mut [f64], variance: &mut [f64]) {
+        let inverse = 1.0 / self.stats.samples.max(1) as f64;
+        *estimate = self.sum.scaled(inverse);
+        for (i, (l, v)) in luminance.iter_mut().zip(variance.iter_mut()).enumerate() {
+            *l = estimate.luminance(i);
+            *v = self.deviation_sum[i] * inverse;
+        }
+    }
+}
+
+/// A stage's checkpoints: the stages done, then the stage's own state.
+struct StageCheckpoints<'a> {
+    outer: &'a dyn Checkpoints,
+    done: &'a StagesDone,
+}
+
+impl Checkpoints for StageCheckpoints<'_> {
+    fn checkpoint(&self, samples: u64, write: &mut dyn FnMut(&mut Vec<u8>)) -> Checkpoint {
+        let total = self.done.stats.samples + samples;
+        self.outer.checkpoint(total, &mut |out| {
+            checkpoint::append(self.done, out);
+            write(out);
+        })
+    }
 }
 
 /// The observer of one stage, as the render's observer sees it: progress
@@ -507,6 +587,12 @@ impl Observer for StageObserver<'_> {
     }
     fn should_stop(&self) -> bool {
         self.outer.should_stop()
+    }
+    fn wants_checkpoint(&self) -> bool {
+        self.outer.wants_checkpoint()
+    }
+    fn checkpoint(&self, checkpoint: Checkpoint) {
+        self.outer.checkpoint(checkpoint)
     }
 }
 

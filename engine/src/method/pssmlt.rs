@@ -5,10 +5,14 @@
 
 use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
-use crate::chain::{Normalization, PathChain};
-use crate::drive::splat::{RoundBuffers, Runs, SplatBands, Splatting, Worker};
+use alloc::vec::Vec;
+
+use crate::chain::{Normalization, PathChain, Traced};
+use crate::checkpoint::{self, Position};
+use crate::drive::splat::{RoundBuffers, Runs, Saves, SplatBands, Splatting, Worker};
 use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
+use crate::film::Film;
 use crate::mutate::MutationParams;
 use crate::oracle::PathOracle;
 use crate::parallel;
@@ -57,26 +61,61 @@ where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    let mut run = Pssmlt::start(settings, job)?;
-    let driven = drive(&mut run.chains, job.budget, &job.clock, job.observer);
+    let (mut run, position) = Pssmlt::start(settings, job)?;
+    let saver = run.saver();
+    let driven = drive(&mut run.chains, job.round_loop(position), saver);
     Ok(run.finish(driven))
 }
 
-/// PSSMLT's state: its bootstrap, and its chains with their film.
+/// PSSMLT's state: its bootstrap's counters and estimate, and its chains
+/// with their film.
 pub(crate) struct Pssmlt<'a, O: PathOracle, I: ?Sized> {
-    bootstrap: Bootstrap,
+    bootstrap: Traced,
+    prior: Normalization,
     /// The chains, driven by the round loop.
     pub chains: Splatting<ChainWork<'a, O, I>>,
 }
+
+/// What a checkpoint holds of PSSMLT, in [`Pssmlt::save`]'s order.
+type Saved<R> = (
+    Traced,
+    Normalization,
+    ((Film, Vec<u64>, u64), Vec<PathChain<R>>),
+);
 
 impl<'a, O, I> Pssmlt<'a, O, I>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    /// The bootstrap, and the chains started from it.
-    pub(crate) fn start(settings: &PssmltSettings, job: &Job<'a, O, I>) -> Result<Self, Error> {
+    /// The bootstrap and the chains started from it, or for a resumed job
+    /// the chains as they were, with the round loop's position.
+    pub(crate) fn start(
+        settings: &PssmltSettings,
+        job: &Job<'a, O, I>,
+    ) -> Result<(Self, Option<Position>), Error> {
         let (oracle, importance) = (job.oracle, job.importance);
+        let bands = SplatBands::new(job.resolution);
+        let work = |chain, prior| ChainWork {
+            oracle,
+            importance,
+            chain,
+            buffers: RoundBuffers::new(bands),
+            prior,
+        };
+        if let Some((position, saved)) = job.resumed::<Saved<O::Radiance>>()? {
+            let (bootstrap, prior, (splatted, chains)) = saved;
+            if chains.len() != settings.chains as usize {
+                return Err(checkpoint::does_not_fit());
+            }
+            let chains = chains.into_iter().map(|c| work(c, prior)).collect();
+            let run = Self {
+                bootstrap,
+                prior,
+                chains: Splatting::resumed(chains, bands, 1, splatted)?,
+            };
+            return Ok((run, Some(position)));
+        }
         let bootstrap = Bootstrap::run(
             oracle,
             importance,
@@ -84,21 +123,33 @@ where
             job.seed,
             settings.bootstrap_candidates,
         )?;
-        let bands = SplatBands::new(job.resolution);
         let p_large = settings.mutation.large_step_probability;
         let prior = bootstrap.estimate(0);
-        let start = |i: usize| ChainWork {
-            oracle,
-            importance,
-            chain: bootstrap.start_path_chain(oracle, importance, i as u64, p_large),
-            buffers: RoundBuffers::new(bands),
+        let start = |i: usize| {
+            work(
+                bootstrap.start_path_chain(oracle, importance, i as u64, p_large),
+                prior,
+            )
+        };
+        let chains = parallel::map_indices(settings.chains as usize, start);
+        let run = Self {
+            chains: Splatting::new(chains, bands, 1)?,
+            bootstrap: bootstrap.traced(),
             prior,
         };
-        let work = parallel::map_indices(settings.chains as usize, start);
-        Ok(Self {
-            chains: Splatting::new(work, bands, 1)?,
-            bootstrap,
-        })
+        Ok((run, None))
+    }
+
+    /// What appends the state, given the chains, to a checkpoint (read back
+    /// as [`Saved`]).
+    pub(crate) fn saver(
+        &self,
+    ) -> impl Fn(&Splatting<ChainWork<'a, O, I>>, &mut Vec<u8>) + use<'a, O, I> {
+        let (bootstrap, prior) = (self.bootstrap, self.prior);
+        move |chains, out| {
+            checkpoint::append(&(bootstrap, prior), out);
+            chains.save(out);
+        }
     }
 
     /// The normalized image and the counters.
@@ -108,7 +159,7 @@ where
         let normalization = ChainWork::pooled(&work);
         let mut stats = RenderStats {
             samples,
-            bootstrap_samples: self.bootstrap.traced().paths,
+            bootstrap_samples: self.bootstrap.paths,
             normalization: Some(normalization.value()),
             normalization_error: Some(normalization.relative_error()),
             ..Default::default()
@@ -116,7 +167,7 @@ where
         for w in &work {
             stats.chains.merge(w.chain.stats());
         }
-        stats.invalid_samples = stats.chains.invalid + self.bootstrap.traced().invalid;
+        stats.invalid_samples = stats.chains.invalid + self.bootstrap.invalid;
         Output {
             film,
             stats,
@@ -146,6 +197,13 @@ impl<O: PathOracle, I: ?Sized> ChainWork<'_, O, I> {
             pooled.merge(w.chain.large_steps());
         }
         pooled
+    }
+}
+
+impl<O: PathOracle, I: ?Sized> Saves for ChainWork<'_, O, I> {
+    type State = PathChain<O::Radiance>;
+    fn state(&self) -> &Self::State {
+        &self.chain
     }
 }
 

@@ -11,12 +11,15 @@ use serde::{Deserialize, Serialize};
 use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
 use crate::chain::{ChainStats, Normalization};
-use crate::drive::splat::{RoundBuffers, Runs, SplatBands, Splatting, Worker};
+
+use crate::checkpoint;
+use crate::drive::splat::{RoundBuffers, Runs, Saves, SplatBands, Splatting, Worker};
 use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
 use crate::exchange::{
     Ensemble, EnsembleSettings, ExchangeKind, ExchangeMove, ExchangeStats, Ladder, Tempering,
 };
+use crate::film::Film;
 use crate::oracle::PathOracle;
 use crate::parallel;
 use crate::target::Importance;
@@ -82,6 +85,32 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let (oracle, importance) = (job.oracle, job.importance);
+    let bands = SplatBands::new(job.resolution);
+    let traces_per_sweep =
+        settings.ensemble.ladder.len() as u64 * settings.ensemble.traces_per_proposal();
+    let work = |state, prior| EnsembleWork {
+        oracle,
+        importance,
+        state,
+        buffers: RoundBuffers::new(bands),
+        prior,
+    };
+    if let Some((position, saved)) = job.resumed::<Saved<O::Radiance>>()? {
+        let (set_up, ladder, priors, splatted, states) = saved;
+        if states.len() != settings.ensembles as usize
+            || ladder.len() != settings.ensemble.ladder.len()
+        {
+            return Err(checkpoint::does_not_fit());
+        }
+        let work = states
+            .into_iter()
+            .map(|state| work(state, priors.clone()))
+            .collect();
+        let mut ensembles = Splatting::resumed(work, bands, traces_per_sweep, splatted)?;
+        let saver = saver(set_up, &ladder, &priors);
+        let driven = drive(&mut ensembles, job.round_loop(Some(position)), saver);
+        return Ok(finish(ensembles, driven, ladder, set_up));
+    }
     let mut ensemble = settings.ensemble.clone();
     let mut bootstrap = ensemble.bootstrap(oracle, importance, job.seed)?;
     // Under the oracle's tempering the levels may all be one target (an
@@ -94,22 +123,20 @@ where
             candidates: bootstrap.candidates(),
         });
     }
-    let mut set_up = bootstrap.traced().paths;
-    let bands = SplatBands::new(job.resolution);
+    let mut set_up = SetUp {
+        traced: bootstrap.traced().paths,
+        invalid: bootstrap.traced().invalid,
+    };
     let start = |i: usize, bootstrap: &Bootstrap| -> Result<EnsembleWork<'_, O, I>, Error> {
-        Ok(EnsembleWork {
-            oracle,
-            importance,
+        let state = EnsembleState {
             ensemble: Ensemble::start(oracle, importance, &ensemble, bootstrap, i as u64),
             exchange: settings.exchange.build(bootstrap)?,
-            buffers: RoundBuffers::new(bands),
-            prior: priors(bootstrap),
-        })
+        };
+        Ok(work(state, priors(bootstrap)))
     };
     let mut work = (0..settings.ensembles as usize)
         .map(|i| start(i, &bootstrap))
         .collect::<Result<Vec<_>, Error>>()?;
-    let traces_per_sweep = ensemble.ladder.len() as u64 * ensemble.traces_per_proposal();
 
     // Ladder tuning: rounds of 16, 32, ... sweeps, not splatted.
     let mut tuned = 0;
@@ -118,37 +145,70 @@ where
         let sweeps = round_length.min(settings.ladder_tuning_sweeps - tuned);
         parallel::for_each(&mut work, |w| {
             for _ in 0..sweeps {
-                w.ensemble
-                    .sweep(oracle, importance, &mut w.exchange, |_, _, _| {});
+                let EnsembleState { ensemble, exchange } = &mut w.state;
+                ensemble.sweep(oracle, importance, exchange, |_, _, _| {});
             }
         });
         tuned += sweeps;
         round_length *= 2;
-        set_up += sweeps * traces_per_sweep * work.len() as u64;
+        set_up.traced += sweeps * traces_per_sweep * work.len() as u64;
         let mut merged = ExchangeStats::default();
         for w in &work {
-            merged.merge(w.ensemble.stats());
+            merged.merge(w.state.ensemble.stats());
         }
         ensemble.ladder = ensemble.ladder.equalized(&merged.neighbor_rejection())?;
         bootstrap = ensemble.bootstrap(oracle, importance, job.seed)?;
-        set_up += bootstrap.traced().paths;
+        set_up.traced += bootstrap.traced().paths;
+        set_up.invalid = bootstrap.traced().invalid;
         for w in work.iter_mut() {
-            w.ensemble
+            w.state
+                .ensemble
                 .set_ladder(oracle, importance, &ensemble.ladder, &bootstrap);
-            w.exchange = settings.exchange.build(&bootstrap)?;
+            w.state.exchange = settings.exchange.build(&bootstrap)?;
             w.prior = priors(&bootstrap);
         }
     }
 
     let mut ensembles = Splatting::new(work, bands, traces_per_sweep)?;
-    let driven = drive(&mut ensembles, job.budget, &job.clock, job.observer);
-    Ok(finish(
-        ensembles,
-        driven,
-        ensemble.ladder,
-        &bootstrap,
-        set_up,
-    ))
+    let saver = saver(set_up, &ensemble.ladder, &priors(&bootstrap));
+    let driven = drive(&mut ensembles, job.round_loop(None), saver);
+    Ok(finish(ensembles, driven, ensemble.ladder, set_up))
+}
+
+/// Paths traced before the render (bootstraps and ladder tuning), and the
+/// invalid ones of the last bootstrap.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+struct SetUp {
+    traced: u64,
+    invalid: u64,
+}
+
+/// What a checkpoint holds of replica exchange: the set-up's counters, the
+/// ladder, every level's bootstrap estimate, the film, and the ensembles.
+type Saved<R> = (
+    SetUp,
+    Ladder,
+    Vec<Normalization>,
+    (Film, Vec<u64>, u64),
+    Vec<EnsembleState<R>>,
+);
+
+/// What appends replica exchange's state, given the ensembles, to a
+/// checkpoint (read back as [`Saved`]).
+fn saver<'a, O, I>(
+    set_up: SetUp,
+    ladder: &Ladder,
+    priors: &[Normalization],
+) -> impl Fn(&Splatting<EnsembleWork<'a, O, I>>, &mut Vec<u8>) + use<'a, O, I>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let (ladder, priors) = (ladder.clone(), priors.to_vec());
+    move |ensembles, out| {
+        checkpoint::append(&(set_up, &ladder, &priors), out);
+        ensembles.save(out);
+    }
 }
 
 /// The bootstrap's samples of every level's normalization.
@@ -158,12 +218,19 @@ fn priors(bootstrap: &Bootstrap) -> Vec<Normalization> {
         .collect()
 }
 
+/// An ensemble and its exchange move: what a checkpoint holds of an
+/// [`EnsembleWork`].
+#[derive(Serialize, Deserialize)]
+struct EnsembleState<R> {
+    ensemble: Ensemble<R>,
+    exchange: ExchangeMove<R>,
+}
+
 /// An ensemble, its exchange move and what it produced in the current round.
 struct EnsembleWork<'a, O: PathOracle, I: ?Sized> {
     oracle: &'a O,
     importance: &'a I,
-    ensemble: Ensemble<O::Radiance>,
-    exchange: ExchangeMove<O::Radiance>,
+    state: EnsembleState<O::Radiance>,
     buffers: RoundBuffers<O::Radiance>,
     /// The bootstrap's samples of every level's normalization (the same in
     /// every ensemble).
@@ -176,11 +243,18 @@ impl<O: PathOracle, I: ?Sized> EnsembleWork<'_, O, I> {
     fn pooled(work: &[Self]) -> Vec<Normalization> {
         let mut pooled = work.first().map(|w| w.prior.clone()).unwrap_or_default();
         for w in work {
-            for (level, sums) in pooled.iter_mut().zip(w.ensemble.large_steps()) {
+            for (level, sums) in pooled.iter_mut().zip(w.state.ensemble.large_steps()) {
                 level.merge(sums);
             }
         }
         pooled
+    }
+}
+
+impl<O: PathOracle, I: ?Sized> Saves for EnsembleWork<'_, O, I> {
+    type State = EnsembleState<O::Radiance>;
+    fn state(&self) -> &Self::State {
+        &self.state
     }
 }
 
@@ -204,13 +278,14 @@ where
     fn run(&mut self, sweeps: u64) {
         for _ in 0..sweeps {
             let buffers = &mut self.buffers;
-            self.ensemble.sweep(
+            let EnsembleState { ensemble, exchange } = &mut self.state;
+            ensemble.sweep(
                 self.oracle,
                 self.importance,
-                &mut self.exchange,
+                exchange,
                 |p, radiance, weight| buffers.splat(p, radiance, weight),
             );
-            for r in self.ensemble.replicas() {
+            for r in self.state.ensemble.replicas() {
                 self.buffers.visit(r.state().film);
             }
         }
@@ -225,7 +300,7 @@ where
             .map(Normalization::value)
             .collect();
         for w in work {
-            w.ensemble.set_normalizations(&b);
+            w.state.ensemble.set_normalizations(&b);
         }
     }
 }
@@ -235,8 +310,7 @@ fn finish<O, I>(
     ensembles: Splatting<EnsembleWork<'_, O, I>>,
     driven: Driven,
     ladder: Ladder,
-    bootstrap: &Bootstrap,
-    set_up: u64,
+    set_up: SetUp,
 ) -> Output
 where
     O: PathOracle,
@@ -249,19 +323,19 @@ where
     let mut levels = vec![ChainStats::default(); ladder.len()];
     let mut stats = RenderStats {
         samples,
-        bootstrap_samples: set_up,
+        bootstrap_samples: set_up.traced,
         normalization: Some(normalization.value()),
         normalization_error: Some(normalization.relative_error()),
         ..Default::default()
     };
     for w in &work {
-        exchange.merge(w.ensemble.stats());
-        for (level, s) in levels.iter_mut().zip(w.ensemble.chain_stats()) {
+        exchange.merge(w.state.ensemble.stats());
+        for (level, s) in levels.iter_mut().zip(w.state.ensemble.chain_stats()) {
             level.merge(s);
             stats.chains.merge(s);
         }
     }
-    stats.invalid_samples = stats.chains.invalid + bootstrap.traced().invalid;
+    stats.invalid_samples = stats.chains.invalid + set_up.invalid;
     Output {
         film,
         stats,

@@ -70,6 +70,7 @@ use self::regularizer::{LargeSteps, anchor_total, fall_back};
 use self::tile::{Context, Start, TileChain};
 use super::{Extras, Job, Output};
 use crate::chain::{ChainStats, Traced};
+use crate::checkpoint;
 use crate::drive::{Budget, Driven, RenderStats, Rounds, drive};
 use crate::error::{Error, check_probability};
 use crate::film::Film;
@@ -303,6 +304,31 @@ where
     };
     let n = tiles.count();
     let offsets = tiles.offsets().len();
+    if let Some((position, saved)) = job.resumed::<Saved<O::Radiance>>()? {
+        let (chains, stats, exchange_rounds, invalid, bootstrap_traces) = saved;
+        let per_tile = offsets * O::Radiance::CHANNELS;
+        let fits = chains.len() == n
+            && chains.iter().all(|c| {
+                c.unscaled.len() == per_tile
+                    && c.uniform.len() == per_tile
+                    && c.uniform_squares.len() == offsets
+            });
+        if !fits {
+            return Err(checkpoint::does_not_fit());
+        }
+        let mut sweeps = Sweeps {
+            ctx: &ctx,
+            settings,
+            chains,
+            stats,
+            exchange_rounds,
+            invalid,
+        };
+        let driven = drive(&mut sweeps, job.round_loop(Some(position)), |s, out| {
+            s.save(bootstrap_traces, out)
+        });
+        return sweeps.finish(driven, bootstrap_traces);
+    }
     let mut chains: Vec<TileChain<O::Radiance>> = (0..n)
         .map(|s| TileChain::new(job.seed, s, n, offsets, &settings.mutation))
         .collect();
@@ -342,9 +368,16 @@ where
         exchange_rounds: 0,
         invalid: initialized.invalid,
     };
-    let driven = drive(&mut sweeps, job.budget, &job.clock, job.observer);
+    let driven = drive(&mut sweeps, job.round_loop(None), |s, out| {
+        s.save(initialized.bootstrap, out)
+    });
     sweeps.finish(driven, initialized.bootstrap)
 }
+
+/// What a checkpoint holds of stratified MCMC: the tile chains, the
+/// counters, the exchange rounds, the invalid traces outside the chains and
+/// the bootstrap's traces ([`Sweeps::save`]'s order).
+type Saved<R> = (Vec<TileChain<R>>, StratifiedStats, u64, u64, u64);
 
 /// Stratified MCMC's state between rounds: the tile chains and their counters.
 struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
@@ -363,6 +396,18 @@ where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
+    /// Appends the state to a checkpoint (read back as [`Saved`]).
+    fn save(&self, bootstrap_traces: u64, out: &mut Vec<u8>) {
+        let saved = (
+            &self.chains,
+            self.stats,
+            self.exchange_rounds,
+            self.invalid,
+            bootstrap_traces,
+        );
+        checkpoint::append(&saved, out);
+    }
+
     /// The reconstruction, the fallback and the counters.
     fn finish(mut self, driven: Driven, bootstrap_traces: u64) -> Result<Output, Error> {
         let tiles = self.ctx.tiles;

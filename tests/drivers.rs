@@ -11,8 +11,7 @@ use std::time::{Duration, Instant};
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Tempering};
 use strata::engine::method::{
-    ErptSettings, Initialization, MultiStageSettings, PssmltSettings, ReplicaSettings,
-    StratifiedSettings,
+    ErptSettings, MultiStageSettings, PssmltSettings, ReplicaSettings, StratifiedSettings,
 };
 use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
@@ -22,49 +21,7 @@ use strata::engine::{
 };
 
 mod threads;
-use threads::{bits, in_pool};
-
-/// Every method, with settings small enough for 16x16 films.
-fn methods() -> Vec<Method> {
-    let pssmlt = PssmltSettings {
-        chains: 37,
-        bootstrap_candidates: 5_000,
-        ..Default::default()
-    };
-    let mut ensemble = EnsembleSettings::geometric(4, 100.0).unwrap();
-    ensemble.bootstrap_candidates = 2_000;
-    vec![
-        Method::Mc,
-        Method::Pssmlt(pssmlt),
-        Method::Replica(ReplicaSettings {
-            ensembles: 4,
-            ensemble,
-            exchange: ExchangeKind::IsPermutation,
-            ladder_tuning_sweeps: 0,
-        }),
-        Method::Stratified(StratifiedSettings {
-            initialization: Initialization {
-                bootstrap_candidates: 2_000,
-                ..Default::default()
-            },
-            ..Default::default()
-        }),
-        Method::Erpt(ErptSettings {
-            chain_length: 20,
-            bootstrap_candidates: 5_000,
-            ..Default::default()
-        }),
-        Method::MultiStage(MultiStageSettings {
-            pssmlt: PssmltSettings {
-                chains: 16,
-                bootstrap_candidates: 2_048,
-                ..Default::default()
-            },
-            linear_stages: 4,
-            noise_aware: true,
-        }),
-    ]
-}
+use threads::{bits, in_pool, small_methods as methods};
 
 fn settings(seed: u64, samples: u64, method: &Method) -> Settings {
     Settings {

@@ -1,0 +1,218 @@
+//! Checkpoints and resume: a render stopped after any round, checkpointed
+//! and resumed to the same budget gives the bytes of the render that was
+//! never stopped, for every method, at 1 and 2 threads; a time-budgeted
+//! render resumes with a new budget; damaged checkpoints and checkpoints of
+//! another render are typed errors.
+
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::Duration;
+
+use strata::engine::analytic::ProceduralImage;
+use strata::engine::target::MaxChannel;
+use strata::engine::{
+    Budget, Checkpoint, Error, FilmPoint, FnOracle, Method, Observer, Output, PathSample, Progress,
+    Resolution, Rgb, Sampler, Settings, Silent, Temperature, render, resume,
+};
+
+mod threads;
+use threads::{bits, in_pool, small_methods};
+
+/// Stops a render after `round` rounds, keeping the checkpoint made then
+/// and the paths traced by then.
+struct StopAt {
+    round: u32,
+    rounds: AtomicU32,
+    saved: Mutex<Option<(Checkpoint, u64)>>,
+    samples: Mutex<u64>,
+}
+
+impl StopAt {
+    fn new(round: u32) -> Self {
+        Self {
+            round,
+            rounds: AtomicU32::new(0),
+            saved: Mutex::new(None),
+            samples: Mutex::new(0),
+        }
+    }
+
+    fn checkpoint(self) -> (Checkpoint, u64) {
+        self.saved
+            .into_inner()
+            .unwrap()
+            .expect("a checkpoint was made")
+    }
+}
+
+impl Observer for StopAt {
+    fn progress(&self, p: &Progress) {
+        self.rounds.fetch_add(1, Ordering::Relaxed);
+        *self.samples.lock().unwrap() = p.samples;
+    }
+    fn wants_checkpoint(&self) -> bool {
+        self.rounds.load(Ordering::Relaxed) == self.round
+    }
+    fn checkpoint(&self, checkpoint: Checkpoint) {
+        let samples = *self.samples.lock().unwrap();
+        *self.saved.lock().unwrap() = Some((checkpoint, samples));
+    }
+    fn should_stop(&self) -> bool {
+        self.saved.lock().unwrap().is_some()
+    }
+}
+
+fn image() -> ProceduralImage {
+    ProceduralImage::showcase(Resolution::new(48, 32))
+}
+
+fn settings(method: &Method) -> Settings {
+    Settings {
+        seed: 11,
+        budget: Budget::Samples(120_000),
+        method: method.clone(),
+    }
+}
+
+/// The render stopped after `round` rounds, written to bytes, read back and
+/// resumed, on `threads` threads.
+fn stopped_and_resumed(method: &Method, round: u32, threads: usize) -> (Output, u64) {
+    let (image, settings) = (image(), settings(method));
+    in_pool(threads, || {
+        let stop = StopAt::new(round);
+        let stopped = render(&image, &MaxChannel, &settings, &stop).unwrap();
+        assert!(stopped.cancelled, "{}: stopped", method.name());
+        let (checkpoint, samples) = stop.checkpoint();
+        assert_eq!(checkpoint.samples().unwrap(), samples);
+        assert_eq!(checkpoint.settings().unwrap(), settings);
+        let read = Checkpoint::from_bytes(checkpoint.as_bytes().to_vec()).unwrap();
+        let resumed = resume(&image, &MaxChannel, &settings, &read, &Silent).unwrap();
+        (resumed, samples)
+    })
+}
+
+#[test]
+fn a_resumed_render_gives_the_bytes_of_the_uninterrupted_one() {
+    for method in small_methods() {
+        let name = method.name();
+        let count = StopAt::new(0);
+        let whole = render(&image(), &MaxChannel, &settings(&method), &count).unwrap();
+        let rounds = count.rounds.load(Ordering::Relaxed);
+        let total = *count.samples.lock().unwrap();
+        assert!(rounds >= 4, "{name}: {rounds} rounds");
+        // After the first round, in the middle (for multi-stage MLT, in a
+        // later stage: each of its stages has its own rounds) and before the
+        // last.
+        for round in [1, rounds / 2, rounds - 1] {
+            for threads in [1, 2] {
+                let (resumed, stopped_at) = stopped_and_resumed(&method, round, threads);
+                let at = format!("{name}, stopped after round {round}, {threads} threads");
+                assert!(stopped_at < total, "{at}: stopped before the end");
+                assert!(!resumed.cancelled, "{at}");
+                assert_eq!(bits(&resumed.film), bits(&whole.film), "{at}: film");
+                assert_eq!(resumed.stats, whole.stats, "{at}: statistics");
+                assert_eq!(resumed.visits, whole.visits, "{at}: visits");
+                assert_eq!(
+                    format!("{:?}", resumed.extras),
+                    format!("{:?}", whole.extras),
+                    "{at}: extras"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_render_resumes_with_a_new_budget() {
+    let image = image();
+    // A larger sample budget continues the render further.
+    let mut longer = settings(&small_methods()[1]);
+    let stop = StopAt::new(5);
+    render(&image, &MaxChannel, &longer, &stop).unwrap();
+    let (checkpoint, _) = stop.checkpoint();
+    longer.budget = Budget::Samples(240_000);
+    let longer = resume(&image, &MaxChannel, &longer, &checkpoint, &Silent).unwrap();
+    assert!(longer.stats.samples >= 240_000, "{}", longer.stats.samples);
+    // A time budget counts from the resume.
+    for method in [small_methods()[1].clone(), small_methods()[3].clone()] {
+        let mut settings = settings(&method);
+        settings.budget = Budget::Time(Duration::from_millis(300));
+        let stop = StopAt::new(3);
+        render(&image, &MaxChannel, &settings, &stop).unwrap();
+        let (checkpoint, samples) = stop.checkpoint();
+        settings.budget = Budget::Time(Duration::from_millis(200));
+        let resumed = resume(&image, &MaxChannel, &settings, &checkpoint, &Silent).unwrap();
+        assert!(!resumed.cancelled);
+        assert!(
+            resumed.stats.samples > samples,
+            "{}: {} paths after resuming at {samples}",
+            method.name(),
+            resumed.stats.samples
+        );
+    }
+}
+
+#[test]
+fn damaged_checkpoints_and_checkpoints_of_another_render_are_typed_errors() {
+    let image = image();
+    let method = small_methods()[1].clone();
+    let settings = settings(&method);
+    let stop = StopAt::new(2);
+    render(&image, &MaxChannel, &settings, &stop).unwrap();
+    let (checkpoint, _) = stop.checkpoint();
+    let bytes = checkpoint.as_bytes().to_vec();
+
+    let corrupted = |bytes: Vec<u8>| match Checkpoint::from_bytes(bytes) {
+        Err(Error::CheckpointCorrupted { reason }) => reason,
+        other => panic!("expected a corrupted checkpoint, got {other:?}"),
+    };
+    assert!(corrupted(b"not a checkpoint".to_vec()).contains("not a strata checkpoint"));
+    assert!(corrupted(Vec::new()).contains("not a strata checkpoint"));
+    for cut in [20, bytes.len() / 2, bytes.len() - 1] {
+        assert!(
+            corrupted(bytes[..cut].to_vec()).contains("checksum"),
+            "cut at {cut}"
+        );
+    }
+    for at in [12, bytes.len() / 3, bytes.len() - 5] {
+        let mut flipped = bytes.clone();
+        flipped[at] ^= 0x10;
+        assert!(corrupted(flipped).contains("checksum"), "flipped at {at}");
+    }
+    let mut other_version = bytes.clone();
+    other_version[8] = other_version[8].wrapping_add(1);
+    assert!(matches!(
+        Checkpoint::from_bytes(other_version),
+        Err(Error::CheckpointVersion { expected: 1, .. })
+    ));
+
+    let mismatch =
+        |oracle: &dyn Fn(&Settings) -> Result<Output, Error>, settings: &Settings| match oracle(
+            settings,
+        ) {
+            Err(Error::CheckpointMismatch { what }) => what,
+            other => panic!("expected a mismatch, got {:?}", other.map(|o| o.stats)),
+        };
+    let same_scene = |s: &Settings| resume(&image, &MaxChannel, s, &checkpoint, &Silent);
+    let mut other = settings.clone();
+    other.seed += 1;
+    assert_eq!(mismatch(&same_scene, &other), "seed");
+    for method in small_methods() {
+        if method != settings.method {
+            let other = Settings {
+                method,
+                ..settings.clone()
+            };
+            assert_eq!(mismatch(&same_scene, &other), "method or its settings");
+        }
+    }
+    let larger = ProceduralImage::showcase(Resolution::new(49, 32));
+    let resized = |s: &Settings| resume(&larger, &MaxChannel, s, &checkpoint, &Silent);
+    assert_eq!(mismatch(&resized, &settings), "film resolution");
+    let grey = FnOracle::new(
+        Resolution::new(48, 32),
+        |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| PathSample::new(Rgb([s.next_1d(); 3])),
+    );
+    let other_scene = |s: &Settings| resume(&grey, &MaxChannel, s, &checkpoint, &Silent);
+    assert!(mismatch(&other_scene, &settings).starts_with("scene"));
+}

@@ -53,3 +53,89 @@ fn render_writes_png_and_exr_and_exit_codes_say_how_it_went() {
     assert_eq!(bad.status.code(), Some(2));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Waits until `path` exists (at most 60 s).
+fn wait_for(path: &std::path::Path) {
+    let start = std::time::Instant::now();
+    while !path.exists() {
+        assert!(
+            start.elapsed().as_secs() < 60,
+            "{} never appeared",
+            path.display()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
+#[test]
+fn ctrl_c_saves_a_checkpoint_and_resume_finishes_the_same_image() {
+    let dir = std::env::temp_dir().join(format!("strata-cli-resume-{}", std::process::id()));
+    let path = |name: &str| dir.join(name).to_str().unwrap().to_owned();
+    let render = [
+        "render",
+        "procedural",
+        "--method",
+        "stratified",
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--spp",
+        "3000",
+    ];
+    let with = |extra: &[&str]| -> Vec<String> {
+        render.iter().chain(extra).map(|s| s.to_string()).collect()
+    };
+    let whole = strata(
+        &with(&["--out", &path("whole")])
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    assert_eq!(whole.status.code(), Some(0));
+
+    // A checkpoint after every round; Ctrl-C as soon as the first is there.
+    let args = with(&["--out", &path("run"), "--checkpoint-every", "0"]);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(&args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for(&dir.join("run.ckpt"));
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let stopped = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&stopped.stderr);
+    assert_eq!(stopped.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("--resume"), "{stderr}");
+    assert!(dir.join("run.png").is_file() && dir.join("run.exr").is_file());
+
+    // Another method cannot continue it; the same command can.
+    let mut other = with(&["--out", &path("run"), "--resume", &path("run.ckpt")]);
+    other[3] = "pssmlt".into();
+    let refused = strata(&other.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("another render"),
+        "{}",
+        String::from_utf8_lossy(&refused.stderr)
+    );
+    let resume = with(&["--out", &path("run"), "--resume", &path("run.ckpt")]);
+    let resumed = strata(&resume.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(
+        resumed.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    let read = |name: &str| std::fs::read(dir.join(name)).unwrap();
+    assert!(
+        read("run.exr") == read("whole.exr"),
+        "the resumed image differs"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -10,14 +10,23 @@
 //! strata render ../shared/scenes/veach-ajar/scene.pbrt --method stratified --time 30
 //! ```
 //!
+//! Long renders in steps: `--checkpoint-every SECONDS` saves the render's
+//! state to `--checkpoint FILE` (default `OUT.ckpt`); Ctrl-C stops after the
+//! current round, writes the checkpoint and the image so far and exits with
+//! 130; the same command with `--resume FILE` continues (with the same
+//! `--spp`, the image is the one an uninterrupted render gives, bit for bit).
+//! `--preview-every SECONDS` rewrites the PNG and EXR while rendering.
+//!
 //! Scenes: the path tracer's built-ins (`cornell`, `door`, `envplane`,
 //! `caustic`), a pbrt-v3 file (`path/to/scene.pbrt`), or the engine's analytic
 //! oracles `procedural` (an RGB image with closed-form pixel values) and
 //! `mixture` (a 4-D Gaussian mixture), for which the program also prints the
 //! error against the exact image.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use clap::builder::PossibleValuesParser;
@@ -32,8 +41,8 @@ use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
 use strata::engine::tiles::TileShape;
 use strata::engine::{
-    Budget, Error, Extras, Film, Method, Observer, Output, PathOracle, Progress, Resolution,
-    Settings, render,
+    Budget, Checkpoint, Error, Extras, Film, Method, Observer, Output, PathOracle, Progress,
+    Resolution, Settings, render, resume,
 };
 use strata::native::{PathTracer, builtin, native_tracer};
 
@@ -144,24 +153,168 @@ struct Args {
     /// Output path without extension: writes OUT.png and OUT.exr.
     #[arg(long, default_value = "out/render")]
     out: PathBuf,
+    /// Rewrite OUT.png and OUT.exr with the image so far every this many
+    /// seconds (each file written whole, then renamed over the old one).
+    #[arg(long, value_name = "SECONDS")]
+    preview_every: Option<f64>,
+    /// Where checkpoints go (default: OUT.ckpt). One is always written when
+    /// Ctrl-C stops the render.
+    #[arg(long, value_name = "FILE")]
+    checkpoint: Option<PathBuf>,
+    /// Save a checkpoint every this many seconds, and at the end (a later
+    /// --resume with a larger --spp or a new --time continues it).
+    #[arg(long, value_name = "SECONDS")]
+    checkpoint_every: Option<f64>,
+    /// Continue the render saved in FILE (run the command that started it,
+    /// with --resume; --spp or --time may change).
+    #[arg(long, value_name = "FILE")]
+    resume: Option<PathBuf>,
 }
 
 type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
-/// Draws the render's progress on the terminal.
-struct Bar(ProgressBar);
+/// Set by Ctrl-C: the render stops after its current round.
+static STOP: AtomicBool = AtomicBool::new(false);
 
-impl Observer for Bar {
-    fn progress(&self, p: &Progress) {
-        self.0.set_position((p.fraction * 1000.0) as u64);
-        self.0.set_message(format!("{} paths", p.samples));
+/// Something to do at most every `every`.
+struct Every {
+    every: Duration,
+    last: Mutex<Instant>,
+}
+
+impl Every {
+    fn new(seconds: Option<f64>) -> AnyResult<Option<Self>> {
+        seconds
+            .map(|s| {
+                Ok(Every {
+                    every: Duration::try_from_secs_f64(s)
+                        .map_err(|_| format!("a number of seconds >= 0, got {s}"))?,
+                    last: Mutex::new(Instant::now()),
+                })
+            })
+            .transpose()
     }
+
+    /// Whether it is due (and if so, starts the next wait).
+    fn due(&self) -> bool {
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        let due = last.elapsed() >= self.every;
+        if due {
+            *last = Instant::now();
+        }
+        due
+    }
+}
+
+/// Watches the render: draws its progress, writes previews and checkpoints,
+/// and stops it on Ctrl-C.
+struct Watch<'a> {
+    bar: ProgressBar,
+    args: &'a Args,
+    previews: Option<Every>,
+    checkpoints: Option<Every>,
+    /// Where the checkpoint goes, and whether one was written.
+    checkpoint: PathBuf,
+    saved: AtomicBool,
+    /// The budget is spent: with --checkpoint-every, the last round is
+    /// saved too (a later --resume with a larger budget continues it).
+    spent: AtomicBool,
+}
+
+impl Watch<'_> {
+    /// Reports a failed write without stopping the render.
+    fn warn(&self, what: &str, error: impl std::fmt::Display) {
+        self.bar
+            .println(format!("warning: cannot write the {what}: {error}"));
+    }
+}
+
+impl Observer for Watch<'_> {
+    fn progress(&self, p: &Progress) {
+        self.spent.store(p.fraction >= 1.0, Ordering::Relaxed);
+        self.bar.set_position((p.fraction * 1000.0) as u64);
+        let stopping = if STOP.load(Ordering::Relaxed) {
+            " (stopping: Ctrl-C)"
+        } else {
+            ""
+        };
+        self.bar
+            .set_message(format!("{} paths{stopping}", p.samples));
+    }
+    fn wants_preview(&self) -> bool {
+        self.previews.as_ref().is_some_and(Every::due)
+    }
+    fn preview(&self, film: &Film) {
+        if let Err(e) = write(film, self.args, true) {
+            self.warn("preview", e);
+        }
+    }
+    fn should_stop(&self) -> bool {
+        STOP.load(Ordering::Relaxed)
+    }
+    fn wants_checkpoint(&self) -> bool {
+        STOP.load(Ordering::Relaxed)
+            || self.checkpoints.as_ref().is_some_and(|c| {
+                // `due` first: it restarts the wait.
+                c.due() || self.spent.load(Ordering::Relaxed)
+            })
+    }
+    fn checkpoint(&self, checkpoint: Checkpoint) {
+        match replace(&self.checkpoint, |path| {
+            std::fs::write(path, checkpoint.as_bytes())
+        }) {
+            Ok(()) => self.saved.store(true, Ordering::Relaxed),
+            Err(e) => self.warn("checkpoint", e),
+        }
+    }
+}
+
+/// Writes `path` whole under a temporary name, then renames it over `path`
+/// (a viewer or a crash never sees half a file).
+fn replace<E: std::error::Error + Send + Sync + 'static>(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), E>,
+) -> AnyResult<()> {
+    let mut partial = path.as_os_str().to_owned();
+    partial.push(".partial");
+    let partial = PathBuf::from(partial);
+    write(&partial)?;
+    std::fs::rename(&partial, path)?;
+    Ok(())
+}
+
+/// How a render ended.
+enum Ended {
+    Finished,
+    /// Ctrl-C stopped it; the checkpoint was written if `true`.
+    Stopped(bool),
 }
 
 fn main() -> ExitCode {
     let Command::Render(args) = Cli::parse().command;
+    // The first Ctrl-C stops after the current round; a second one at once.
+    let handler = ctrlc::set_handler(|| {
+        if STOP.swap(true, Ordering::Relaxed) {
+            std::process::exit(130);
+        }
+    });
+    if let Err(e) = handler {
+        eprintln!("note: Ctrl-C will not save a checkpoint ({e})");
+    }
     match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(Ended::Finished) => ExitCode::SUCCESS,
+        Ok(Ended::Stopped(saved)) => {
+            let checkpoint = checkpoint_path(&args);
+            if saved {
+                eprintln!(
+                    "stopped; the checkpoint is in {0}: run the same command with --resume {0} to continue",
+                    checkpoint.display()
+                );
+            } else {
+                eprintln!("stopped before the first round: no checkpoint");
+            }
+            ExitCode::from(130)
+        }
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::FAILURE
@@ -173,7 +326,14 @@ fn main() -> ExitCode {
 /// took 7 s for a 0.03 s job).
 const THREADS_PER_CORE: usize = 4;
 
-fn run(args: &Args) -> AnyResult<()> {
+/// Where checkpoints go.
+fn checkpoint_path(args: &Args) -> PathBuf {
+    args.checkpoint
+        .clone()
+        .unwrap_or_else(|| args.out.with_extension("ckpt"))
+}
+
+fn run(args: &Args) -> AnyResult<Ended> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut threads = args.threads;
     if threads > THREADS_PER_CORE * cores {
@@ -187,7 +347,7 @@ fn run(args: &Args) -> AnyResult<()> {
         .num_threads(threads)
         .build()?;
     let resolution = Resolution::new(args.width.unwrap_or(256), args.height.unwrap_or(256));
-    let (output, reference) = pool.install(|| -> AnyResult<_> {
+    let (rendered, reference) = pool.install(|| -> AnyResult<_> {
         Ok(match args.scene.as_str() {
             "procedural" => {
                 let image = ProceduralImage::showcase(resolution);
@@ -233,7 +393,8 @@ fn run(args: &Args) -> AnyResult<()> {
             }
         })
     })?;
-    write(&output.film, args)?;
+    let (output, ended) = rendered;
+    write(&output.film, args, false)?;
     let s = &output.stats;
     println!(
         "paths: {} (+{} bootstrap), invalid: {}",
@@ -258,7 +419,7 @@ fn run(args: &Args) -> AnyResult<()> {
             e.mape, e.rel_mse, e.l1, e.l2
         );
     }
-    Ok(())
+    Ok(ended)
 }
 
 /// The method named by `--method`, with the options that concern it.
@@ -310,7 +471,7 @@ fn method(args: &Args) -> AnyResult<Method> {
     Ok(method)
 }
 
-fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<Output> {
+fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, Ended)> {
     let resolution = oracle.resolution();
     let budget = match args.time {
         Some(t) => Budget::Time(Duration::try_from_secs_f64(t)?),
@@ -321,12 +482,45 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<Output> {
         budget,
         method: method(args)?,
     };
+    let resumed = match &args.resume {
+        Some(path) => {
+            let bytes = std::fs::read(path)
+                .map_err(|e| format!("cannot read the checkpoint {}: {e}", path.display()))?;
+            let checkpoint =
+                Checkpoint::from_bytes(bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+            // The method's settings as the render started (after any
+            // fallback below), if it is the method asked for.
+            let saved = checkpoint.settings()?;
+            if saved.method.name() == settings.method.name() {
+                settings.method = saved.method;
+            }
+            println!(
+                "resuming {} after {} paths",
+                path.display(),
+                checkpoint.samples()?
+            );
+            Some(checkpoint)
+        }
+        None => None,
+    };
     let bar = ProgressBar::new(1000).with_style(ProgressStyle::with_template(
         "{spinner} [{elapsed_precise}] {wide_bar} {percent:>3}% {msg}",
     )?);
-    let observer = Bar(bar.clone());
+    let observer = Watch {
+        bar: bar.clone(),
+        args,
+        previews: Every::new(args.preview_every)?,
+        checkpoints: Every::new(args.checkpoint_every)?,
+        checkpoint: checkpoint_path(args),
+        saved: AtomicBool::new(false),
+        spent: AtomicBool::new(false),
+    };
     let start = Instant::now();
-    let output = match render(oracle, &MaxChannel, &settings, &observer) {
+    let run = |settings: &Settings| match &resumed {
+        Some(checkpoint) => resume(oracle, &MaxChannel, settings, checkpoint, &observer),
+        None => render(oracle, &MaxChannel, settings, &observer),
+    };
+    let output = match run(&settings) {
         // The oracle's tempering changes nothing here (an all-diffuse scene):
         // power tempering always does.
         Err(e @ Error::LevelsIndistinguishable { .. }) => {
@@ -334,7 +528,7 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<Output> {
             if let Method::Replica(s) = &mut settings.method {
                 s.ensemble.tempering = Tempering::Power;
             }
-            render(oracle, &MaxChannel, &settings, &observer)?
+            run(&settings)?
         }
         other => other?,
     };
@@ -346,7 +540,12 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<Output> {
         start.elapsed().as_secs_f64()
     );
     report_extras(&output.extras);
-    Ok(output)
+    let ended = if output.cancelled {
+        Ended::Stopped(observer.saved.load(Ordering::Relaxed))
+    } else {
+        Ended::Finished
+    };
+    Ok((output, ended))
 }
 
 /// What the method says beyond the image.
@@ -402,14 +601,20 @@ fn report_extras(extras: &Extras) {
     }
 }
 
-fn write(film: &Film, args: &Args) -> AnyResult<()> {
+/// Writes OUT.png and OUT.exr (each whole, then renamed over the old one);
+/// says so unless it is a `preview`.
+fn write(film: &Film, args: &Args, preview: bool) -> AnyResult<()> {
     if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
     }
     let png = args.out.with_extension("png");
     let exr = args.out.with_extension("exr");
-    strata::io::write_png(film, args.exposure, &png)?;
-    strata::io::write_exr(film, &exr)?;
-    println!("wrote {} and {}", png.display(), exr.display());
+    replace(&png, |path| {
+        strata::io::write_png(film, args.exposure, path)
+    })?;
+    replace(&exr, |path| strata::io::write_exr(film, path))?;
+    if !preview {
+        println!("wrote {} and {}", png.display(), exr.display());
+    }
     Ok(())
 }

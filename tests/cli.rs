@@ -96,7 +96,7 @@ fn ctrl_c_saves_a_checkpoint_and_resume_finishes_the_same_image() {
 
     // A checkpoint after every round; Ctrl-C as soon as the first is there.
     let args = with(&["--out", &path("run"), "--checkpoint-every", "0"]);
-    let mut child = Command::new(env!("CARGO_BIN_EXE_strata"))
+    let child = Command::new(env!("CARGO_BIN_EXE_strata"))
         .args(&args)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())

@@ -1,14 +1,17 @@
 //! Renders every method on a few scenes at a fixed seed and sample budget and
 //! writes, per render, the film's f64 values (`.f64`, little-endian), its EXR
-//! (`.exr`) and its statistics (`.stats`). `scripts/image-hashes.sh` runs it at
-//! 1 and 2 threads and compares the files' SHA-256 with the recorded ones, so
-//! a refactoring can show that no method computes anything different.
+//! (`.exr`), its statistics (`.stats`) and the checkpoint after its first
+//! round (`.ckpt`). `scripts/image-hashes.sh` runs it at 1 and 2 threads and
+//! compares the files' SHA-256 with the recorded ones, so a refactoring can
+//! show that no method computes anything different (and that a change to what
+//! a checkpoint holds is seen: it must bump `checkpoint::FORMAT_VERSION`).
 //!
 //! ```text
 //! cargo run --release --example fingerprint -- --threads 2 --out out/fingerprints/2
 //! ```
 
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 use clap::Parser;
 use strata::engine::analytic::ProceduralImage;
@@ -20,7 +23,8 @@ use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallS
 use strata::engine::reconstruct::LogSettings;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
-    Budget, Error, Method, Output, PathOracle, RenderStats, Resolution, Settings, Silent, render,
+    Budget, Checkpoint, Error, Method, Observer, Output, PathOracle, RenderStats, Resolution,
+    Settings, Silent, render,
 };
 use strata::native::{builtin, native_tracer};
 
@@ -59,8 +63,10 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
             budget: Budget::samples_per_pixel(SPP, wide.resolution),
             method: erpt,
         };
-        let out = render(&wide, &MaxChannel, &settings, &Silent)?;
+        let first = FirstCheckpoint::default();
+        let out = render(&wide, &MaxChannel, &settings, &first)?;
         write(&args.out, "procedural-64x48", "erpt", &out);
+        first.write(&args.out, "procedural-64x48", "erpt");
         for name in ["cornell", "caustic"] {
             let scene = builtin::by_name(name, RESOLUTION).expect("a built-in scene");
             render_all(name, &native_tracer(scene), &args.out)?;
@@ -78,8 +84,12 @@ fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), 
             budget,
             method,
         };
-        match render(oracle, &MaxChannel, &settings, &Silent) {
-            Ok(output) => write(out, scene, name, &output),
+        let first = FirstCheckpoint::default();
+        match render(oracle, &MaxChannel, &settings, &first) {
+            Ok(output) => {
+                write(out, scene, name, &output);
+                first.write(out, scene, name);
+            }
             // The oracle's tempering changes nothing on this scene: the
             // refusal is part of the fingerprint, then power tempering runs
             // the same move.
@@ -175,6 +185,27 @@ fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), 
         run(name, Method::MultiStage(multistage))?;
     }
     Ok(())
+}
+
+/// Keeps the checkpoint after the first round (the render goes on).
+#[derive(Default)]
+struct FirstCheckpoint(Mutex<Option<Checkpoint>>);
+
+impl Observer for FirstCheckpoint {
+    fn wants_checkpoint(&self) -> bool {
+        self.0.lock().unwrap().is_none()
+    }
+    fn checkpoint(&self, checkpoint: Checkpoint) {
+        *self.0.lock().unwrap() = Some(checkpoint);
+    }
+}
+
+impl FirstCheckpoint {
+    fn write(self, out: &Path, scene: &str, method: &str) {
+        let checkpoint = self.0.into_inner().unwrap().expect("a first round");
+        let path = out.join(format!("{scene}-{method}.ckpt"));
+        std::fs::write(path, checkpoint.as_bytes()).expect("writable output directory");
+    }
 }
 
 fn write(out: &Path, scene: &str, method: &str, output: &Output) {

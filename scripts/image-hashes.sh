@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The image-hash check: renders every method on a few scenes at a fixed seed and
 # sample budget (examples/fingerprint.rs) at 1 and 2 threads, and compares the
-# SHA-256 of every film, EXR and statistics file with the recorded ones in
-# scripts/image-hashes.sha256. Run it before and after any change that must not
-# change what a method computes.
+# SHA-256 of every film, EXR, statistics and first-round checkpoint file with
+# the recorded ones in scripts/image-hashes.sha256. Run it before and after any
+# change that must not change what a method computes. A change to a checkpoint
+# alone changes what a checkpoint holds: bump checkpoint::FORMAT_VERSION.
 #
 #   scripts/image-hashes.sh            check (exit 1 on any difference)
 #   scripts/image-hashes.sh --record   record the current hashes

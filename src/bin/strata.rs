@@ -260,10 +260,21 @@ impl Observer for Watch<'_> {
             })
     }
     fn checkpoint(&self, checkpoint: Checkpoint) {
+        let start = Instant::now();
         match replace(&self.checkpoint, |path| {
             std::fs::write(path, checkpoint.as_bytes())
         }) {
-            Ok(()) => self.saved.store(true, Ordering::Relaxed),
+            Ok(()) => {
+                self.saved.store(true, Ordering::Relaxed);
+                self.bar.suspend(|| {
+                    eprintln!(
+                        "checkpoint: {} ({:.1} MB, written in {:.2} s)",
+                        self.checkpoint.display(),
+                        checkpoint.as_bytes().len() as f64 / 1e6,
+                        start.elapsed().as_secs_f64()
+                    )
+                });
+            }
             Err(e) => self.warn("checkpoint", e),
         }
     }

@@ -281,7 +281,7 @@ where
 }
 
 /// Continues the render saved in `checkpoint` (see
-/// [`checkpoint`](crate::checkpoint)). `settings` must have the checkpoint's
+/// [`checkpoint`]). `settings` must have the checkpoint's
 /// method, method settings and seed ([`Checkpoint::settings`] gives them),
 /// and `oracle` must be the scene it was made with; otherwise
 /// `Error::CheckpointMismatch`. The budget may differ: the same sample budget

@@ -94,8 +94,16 @@ fn ctrl_c_saves_a_checkpoint_and_resume_finishes_the_same_image() {
     );
     assert_eq!(whole.status.code(), Some(0));
 
-    // A checkpoint after every round; Ctrl-C as soon as the first is there.
-    let args = with(&["--out", &path("run"), "--checkpoint-every", "0"]);
+    // A preview and a checkpoint after every round; Ctrl-C as soon as the
+    // first checkpoint is there (the preview comes first).
+    let args = with(&[
+        "--out",
+        &path("run"),
+        "--checkpoint-every",
+        "0",
+        "--preview-every",
+        "0",
+    ]);
     let child = Command::new(env!("CARGO_BIN_EXE_strata"))
         .args(&args)
         .stdout(std::process::Stdio::null())
@@ -103,6 +111,7 @@ fn ctrl_c_saves_a_checkpoint_and_resume_finishes_the_same_image() {
         .spawn()
         .unwrap();
     wait_for(&dir.join("run.ckpt"));
+    assert!(dir.join("run.png").is_file() && dir.join("run.exr").is_file());
     let killed = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
@@ -112,7 +121,6 @@ fn ctrl_c_saves_a_checkpoint_and_resume_finishes_the_same_image() {
     let stderr = String::from_utf8_lossy(&stopped.stderr);
     assert_eq!(stopped.status.code(), Some(130), "{stderr}");
     assert!(stderr.contains("--resume"), "{stderr}");
-    assert!(dir.join("run.png").is_file() && dir.join("run.exr").is_file());
 
     // Another method cannot continue it; the same command can.
     let mut other = with(&["--out", &path("run"), "--resume", &path("run.ckpt")]);

@@ -29,8 +29,8 @@
 //! ```
 
 use std::cell::Cell;
-use std::hint::black_box;
 use std::fmt::Write as _;
+use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -246,7 +246,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let start = Instant::now();
         two.install(|| render(&tracer, &MaxChannel, &probe, &Silent))?;
         let spp = ((args.seconds / start.elapsed().as_secs_f64() * 4.0) as u64).max(4);
-        println!("{name} {}x{}: {spp} paths per pixel", size.width, size.height);
+        println!(
+            "{name} {}x{}: {spp} paths per pixel",
+            size.width, size.height
+        );
         let run = |pool: &rayon::ThreadPool, method: &Method| {
             let settings = Settings {
                 seed: 1,
@@ -267,7 +270,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
                 let (t1, t2) = (median(t1), median(t2));
                 let m = method.name();
-                println!("{m}: 1 thread {t1:.2} s, 2 threads {t2:.2} s, speed-up {:.3}", t1 / t2);
+                println!(
+                    "{m}: 1 thread {t1:.2} s, 2 threads {t2:.2} s, speed-up {:.3}",
+                    t1 / t2
+                );
                 writeln!(csv, "{name},{m},{spp},{t1:.3},{t2:.3},{:.4}", t1 / t2)?;
             }
             continue;

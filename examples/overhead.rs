@@ -25,7 +25,7 @@ use std::hint::black_box;
 
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::method::PssmltSettings;
-use strata::engine::mutate::{Gaussian, Kelemen, MutationParams, OffsetBatch, SmallStep};
+use strata::engine::mutate::{BATCH_LEN, Gaussian, Kelemen, MutationParams, SmallStep};
 use strata::engine::rng::{self, Domain, uniform_f32};
 use strata::engine::sample::IndependentSampler;
 use strata::engine::target::MaxChannel;
@@ -124,7 +124,7 @@ fn coordinates_per_path<O: PathOracle>(oracle: &O, paths: u64) -> f64 {
 }
 
 /// Median ns of one Kelemen offset beyond one uniform draw, both drawn into
-/// batches of [`OffsetBatch::LEN`] as the sampler draws its offsets (the
+/// batches of [`BATCH_LEN`] as the sampler draws its offsets (the
 /// cheapest way this engine knows).
 fn offset_cost(repeats: usize) -> f64 {
     const BATCHES: usize = 1 << 17;
@@ -132,22 +132,20 @@ fn offset_cost(repeats: usize) -> f64 {
     let mut extra = Vec::new();
     for _ in 0..repeats {
         let mut pcg = rng::stream(5, Domain::User, 0);
-        let mut batch = [0.0f64; OffsetBatch::LEN];
+        let mut batch = [0.0f32; BATCH_LEN];
         let t = Instant::now();
         for _ in 0..BATCHES {
-            batch
-                .iter_mut()
-                .for_each(|v| *v = uniform_f32(&mut pcg) as f64);
+            batch.iter_mut().for_each(|v| *v = uniform_f32(&mut pcg));
             black_box(&mut batch);
         }
         let uniform = t.elapsed().as_secs_f64();
         let t = Instant::now();
         for _ in 0..BATCHES {
-            batch.iter_mut().for_each(|v| *v = kelemen.offset(&mut pcg));
+            kelemen.fill(&mut pcg, &mut batch);
             black_box(&mut batch);
         }
         let offsets = t.elapsed().as_secs_f64();
-        extra.push((offsets - uniform) * 1e9 / (BATCHES * OffsetBatch::LEN) as f64);
+        extra.push((offsets - uniform) * 1e9 / (BATCHES * BATCH_LEN) as f64);
     }
     median(extra)
 }

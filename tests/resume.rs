@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
 use strata::engine::analytic::ProceduralImage;
+use strata::engine::checkpoint::FORMAT_VERSION;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Checkpoint, Error, FilmPoint, FnOracle, Method, Observer, Output, PathSample, Progress,
@@ -183,7 +184,10 @@ fn damaged_checkpoints_and_checkpoints_of_another_render_are_typed_errors() {
     other_version[8] = other_version[8].wrapping_add(1);
     assert!(matches!(
         Checkpoint::from_bytes(other_version),
-        Err(Error::CheckpointVersion { expected: 1, .. })
+        Err(Error::CheckpointVersion {
+            expected: FORMAT_VERSION,
+            ..
+        })
     ));
 
     let mismatch =

@@ -66,11 +66,29 @@ impl Kelemen {
     /// One offset.
     #[inline]
     pub fn offset<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
-        // One 32-bit draw: the top bit is the sign, the low 31 bits are ξ.
-        let bits = rng.next_u32();
-        let xi = (bits & 0x7fff_ffff) as f32 * (1.0 / 2_147_483_648.0);
-        let d = (self.s2 as f32 * exp_neg_f32(self.log_ratio as f32 * xi)) as f64;
-        if bits >> 31 == 0 { d } else { -d }
+        self.offset_of_bits(rng.next_u32()) as f64
+    }
+
+    /// `values.len()` offsets, the same as as many calls of
+    /// [`offset`](Self::offset): the random words are drawn first, then turned
+    /// into offsets in a loop without a dependency between iterations, which
+    /// the compiler turns into vector instructions.
+    #[inline]
+    pub fn fill<R: Rng + ?Sized>(&self, rng: &mut R, values: &mut [f32; BATCH_LEN]) {
+        let mut bits = [0u32; BATCH_LEN];
+        bits.iter_mut().for_each(|b| *b = rng.next_u32());
+        for (value, &bits) in values.iter_mut().zip(&bits) {
+            *value = self.offset_of_bits(bits);
+        }
+    }
+
+    /// The offset of one 32-bit draw: the top bit is the sign, the low 31
+    /// bits are ξ.
+    #[inline]
+    fn offset_of_bits(&self, bits: u32) -> f32 {
+        let xi = (bits & 0x7fff_ffff) as i32 as f32 * (1.0 / 2_147_483_648.0);
+        let d = self.s2 as f32 * exp_neg_f32(self.log_ratio as f32 * xi);
+        f32::from_bits(d.to_bits() ^ (bits & 0x8000_0000))
     }
 
     /// `P(|d| <= x)` for one step.
@@ -98,7 +116,8 @@ impl Kelemen {
 fn exp_neg_f32(x: f32) -> f32 {
     use core::f32::consts::{FRAC_1_SQRT_2, LN_2, LOG2_E};
     let y = x * LOG2_E;
-    let n = y as u32;
+    // `y` lies in [0, 2^31): the signed conversion is exact and vectorizes.
+    let n = y as i32 as u32;
     let t = (0.5 - (y - n as f32)) * LN_2;
     let t2 = t * t;
     let low = (1.0 + t) + t2 * (1.0 / 2.0 + t * (1.0 / 6.0));
@@ -164,32 +183,34 @@ pub fn unit_normals<R: Rng + ?Sized>(rng: &mut R) -> [f64; 2] {
     [r * cos, r * sin]
 }
 
-/// A batch of independent random offsets drawn ahead of use. Each offset is a
-/// short chain of dependent floating-point operations; drawing 32 at a time
-/// lets the processor overlap them instead of waiting on each.
+/// Offsets per [`OffsetBatch`].
+pub const BATCH_LEN: usize = 32;
+
+/// A batch of independent random offsets drawn ahead of use (`f32` for
+/// Kelemen's, `f64` for unit normals). Each offset is a short chain of
+/// dependent floating-point operations; drawing 32 at a time lets the
+/// processor overlap them (and Kelemen's to use vector instructions) instead
+/// of waiting on each.
 #[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct OffsetBatch {
-    values: [f64; OffsetBatch::LEN],
+pub struct OffsetBatch<T = f64> {
+    values: [T; BATCH_LEN],
     next: usize,
 }
 
-impl Default for OffsetBatch {
+impl<T: Copy + Default> Default for OffsetBatch<T> {
     fn default() -> Self {
         Self {
-            values: [0.0; Self::LEN],
-            next: Self::LEN,
+            values: [T::default(); BATCH_LEN],
+            next: BATCH_LEN,
         }
     }
 }
 
-impl OffsetBatch {
-    /// Offsets per batch.
-    pub const LEN: usize = 32;
-
+impl<T: Copy> OffsetBatch<T> {
     /// The next value, refilling the batch with `fill` when it is spent.
     #[inline]
-    pub fn next(&mut self, fill: impl FnOnce(&mut [f64; Self::LEN])) -> f64 {
-        if self.next == Self::LEN {
+    pub fn next(&mut self, fill: impl FnOnce(&mut [T; BATCH_LEN])) -> T {
+        if self.next == BATCH_LEN {
             fill(&mut self.values);
             self.next = 0;
         }
@@ -424,7 +445,7 @@ impl MutationParams {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) enum Mutator {
     /// Offsets drawn in batches.
-    Kelemen(Kelemen, OffsetBatch),
+    Kelemen(Kelemen, OffsetBatch<f32>),
     /// Unit normals drawn in batches, scaled by `sigma·sqrt(steps)`.
     Gaussian(Gaussian, OffsetBatch),
     /// Eq. 6.8 with `θ` adapted by eq. 4.10.
@@ -537,7 +558,7 @@ impl Mutator {
                 normal * g.scale_of_steps(steps)
             }
             Mutator::Kelemen(k, batch) => (0..steps)
-                .map(|_| batch.next(|values| values.iter_mut().for_each(|v| *v = k.offset(rng))))
+                .map(|_| batch.next(|values| k.fill(rng, values)) as f64)
                 .sum(),
             Mutator::Adaptive {
                 state,

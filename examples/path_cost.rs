@@ -57,6 +57,12 @@ struct Args {
     /// Measure the speed-up of 2 threads over 1 instead.
     #[arg(long)]
     speedup: bool,
+    /// Only these methods (by name, comma-separated; MC is always measured).
+    #[arg(long, value_delimiter = ',')]
+    methods: Vec<String>,
+    /// Only these scenes (`cornell-box`, `veach-ajar`; comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    scenes: Vec<String>,
     /// CSV output.
     #[arg(long, default_value = "out/bench/path_cost.csv")]
     out: PathBuf,
@@ -223,10 +229,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "scene,method,spp,ns_per_path,ratio,path_ns,sampler_ns,rest_ns,numbers_per_path,bootstrap_share\n",
         );
     }
+    let methods: Vec<Method> = methods()
+        .into_iter()
+        .filter(|m| {
+            args.methods.is_empty()
+                || *m == Method::Mc
+                || args.methods.iter().any(|name| name == m.name())
+        })
+        .collect();
     for (name, size) in [
         ("cornell-box", Resolution::new(128, 128)),
         ("veach-ajar", Resolution::new(320, 180)),
     ] {
+        if !(args.scenes.is_empty() || args.scenes.iter().any(|s| s == name)) {
+            continue;
+        }
         let mut scene = pbrt::load_shared(name)?.scene;
         scene.camera.resolution = size;
         let tracer = native_tracer(scene);
@@ -262,11 +279,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         };
         if args.speedup {
             let one = pool(1)?;
-            for method in methods() {
+            for method in &methods {
                 let (mut t1, mut t2) = (Vec::new(), Vec::new());
                 for _ in 0..args.repeats {
-                    t1.push(run(&one, &method)?.0);
-                    t2.push(run(&two, &method)?.0);
+                    t1.push(run(&one, method)?.0);
+                    t2.push(run(&two, method)?.0);
                 }
                 let (t1, t2) = (median(t1), median(t2));
                 let m = method.name();
@@ -279,10 +296,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             continue;
         }
         let mut mc_ns = None;
-        for method in methods() {
+        for method in &methods {
             let mut ns = Vec::new();
             for _ in 0..args.repeats {
-                let (seconds, out) = run(&two, &method)?;
+                let (seconds, out) = run(&two, method)?;
                 ns.push(seconds * 2e9 / traced(&out) as f64);
             }
             let ns = median(ns);

@@ -26,7 +26,7 @@ use strata::native::{builtin, native_tracer};
 use std::sync::atomic::{AtomicU32, Ordering};
 
 mod common;
-use common::{RUNS, check, renders, run};
+use common::{RUNS, binned, check, renders, run};
 mod threads;
 use threads::{bits, in_pool};
 
@@ -244,7 +244,10 @@ impl Observer for StopAfter {
 /// An ERPT pass stopped after 2 of its 3 blocks (a time budget or a cancel
 /// inside a pass) is still an unbiased image: the blocks run in a random
 /// rotation, so each is in the 2 with probability 2/3, and the film is
-/// divided by 2/3 of a pass.
+/// divided by 2/3 of a pass. Checked on 4×4 squares of pixels: a pixel of
+/// the dark half gets its value from rare chains, and 32 renders of single
+/// pixels underestimate their spread (z up to 10 on some seed sets, for the
+/// full pass too), while a wrong scale shows in every square.
 #[test]
 fn erpt_passes_cut_short_stay_unbiased() {
     let image = ProceduralImage::showcase(Resolution::new(64, 48));
@@ -268,8 +271,9 @@ fn erpt_passes_cut_short_stay_unbiased() {
             assert!(out.cancelled);
             out.film
         })
+        .map(|film| binned(&film, 4))
         .collect();
-    check("erpt, 2 of 3 blocks", &runs, &image.reference());
+    check("erpt, 2 of 3 blocks", &runs, &binned(&image.reference(), 4));
 }
 
 /// Black everywhere, or NaN on the right half and `1 + u` elsewhere.

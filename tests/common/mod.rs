@@ -14,7 +14,9 @@
 use std::ops::Range;
 
 use strata::engine::target::{Importance, MaxChannel};
-use strata::engine::{Budget, Film, Method, Output, PathOracle, Settings, Silent, render};
+use strata::engine::{
+    Budget, Film, Method, Output, PathOracle, Resolution, Settings, Silent, render,
+};
 
 pub const RUNS: u64 = 32;
 const Z_PIXEL: f64 = 6.5;
@@ -93,4 +95,23 @@ pub fn renders<O: PathOracle, I: Importance<O::Radiance>>(
             render(oracle, importance, &settings, &Silent).unwrap().film
         })
         .collect()
+}
+
+/// `film` averaged over `k`×`k` squares of pixels (width and height must be
+/// multiples of `k`): the same means, with lighter tails, for estimators that
+/// deposit rare large values in single pixels (ERPT's chains in dark areas).
+pub fn binned(film: &Film, k: u32) -> Film {
+    let (res, channels) = (film.resolution(), film.channels());
+    assert!(res.width % k == 0 && res.height % k == 0);
+    let coarse = Resolution::new(res.width / k, res.height / k);
+    let mut data = vec![0.0; coarse.pixel_count() * channels];
+    for y in 0..res.height {
+        for x in 0..res.width {
+            let to = ((y / k) * coarse.width + x / k) as usize * channels;
+            for (c, v) in film.pixel(x, y).iter().enumerate() {
+                data[to + c] += v / (k * k) as f64;
+            }
+        }
+    }
+    Film::from_data(coarse, channels, data).unwrap()
 }

@@ -15,14 +15,22 @@
 //! importance, so a path starts `r` chains on average. The importance must
 //! be positive wherever the radiance is (paths with `I = 0` start nothing).
 //!
-//! A unit of work is a block of 1024 consecutive start pixels (16 tasks of
-//! 64, merged in task order). A pass visits its blocks in a rotation drawn
+//! A unit of work is a block of 1024 consecutive start pixels, run in two
+//! parallel phases: 16 tasks of 64 trace the start paths and draw how many
+//! chains each starts; then the block's chains, numbered in start order, are
+//! split into 16 tasks of nearly equal counts (merged in task order). Each
+//! chain has its own mutation and decision streams, so the many chains of
+//! one bright start path (a path through veach-ajar's door gap starts dozens)
+//! spread over the threads, and no thread waits on another's long start
+//! path; what a chain computes depends on neither the thread count nor the
+//! split. A pass visits its blocks in a rotation drawn
 //! per pass, so the blocks done when a time budget or the observer stops the
 //! render inside a pass are a uniform sample of the pass's blocks: each block
 //! is in it with probability `m / B` (`m` done of `B`), and the film divided
 //! by `passes + m / B` stays an unbiased image (cluster sampling).
 
 use alloc::vec::Vec;
+use core::ops::Range;
 use serde::{Deserialize, Serialize};
 
 use super::{Extras, Job, Output};
@@ -166,6 +174,8 @@ where
         passes: saved.passes,
         done: saved.done,
         rotation: saved.rotation,
+        block_starts: Vec::new(),
+        chain_ends: Vec::new(),
     };
     let (bootstrap, b, normalization) = (saved.bootstrap, saved.b, saved.normalization);
     let driven = drive(&mut run, job.round_loop(position), |run, out| {
@@ -291,11 +301,25 @@ struct Totals {
     invalid: u64,
 }
 
-/// A task: a run of start pixels and what it produced.
+/// A start path that starts chains: its primary sample, its evaluation, the
+/// index of the render's MC path it is, and how many chains it starts.
+struct Start<R> {
+    index: u64,
+    sampler: MltSampler,
+    first: Evaluated<R>,
+    chains: u64,
+}
+
+/// A task: a run of start pixels (first phase), then a run of the block's
+/// chains (second phase), and what they produced.
 struct Segment<R> {
     /// The first start path and the number of start paths of the current run.
     first: usize,
     pixels: usize,
+    /// The start paths of the run that start chains.
+    starts: Vec<Start<R>>,
+    /// The block's chains this task runs, numbered in start order.
+    chains: Range<u64>,
     buffers: RoundBuffers<R>,
     /// Counters over every run so far.
     totals: Totals,
@@ -306,6 +330,8 @@ impl<R> Segment<R> {
         Self {
             first: 0,
             pixels: 0,
+            starts: Vec::new(),
+            chains: 0..0,
             buffers: RoundBuffers::new(bands),
             totals,
         }
@@ -339,6 +365,10 @@ struct Passes<'a, O: PathOracle, I: ?Sized> {
     /// Blocks done of the current pass, and the block it started at.
     done: usize,
     rotation: usize,
+    /// The current block's start paths that start chains, in start order, and
+    /// the running count of their chains (scratch of [`run_block`](Self::run_block)).
+    block_starts: Vec<Start<O::Radiance>>,
+    chain_ends: Vec<u64>,
 }
 
 impl<O, I> Passes<'_, O, I>
@@ -363,8 +393,8 @@ where
         }
     }
 
-    /// The start paths of block `block` of the current pass, in tasks run in
-    /// parallel and merged in order.
+    /// The start paths of block `block` of the current pass, then the chains
+    /// they start, each phase in tasks run in parallel; merged in task order.
     fn run_block(&mut self, block: usize) {
         let (pixels, starts) = (self.scene.resolution.pixel_count(), self.starts);
         let first = block * BLOCK;
@@ -377,7 +407,40 @@ where
         parallel::for_each(&mut self.work, |w| {
             for start in w.first..w.first + w.pixels {
                 let pixel = start % pixels;
-                redistribute(&scene, settings, energy, pass + start as u64, w, pixel);
+                if let Some(start) =
+                    trace_start(&scene, settings, energy, pass + start as u64, w, pixel)
+                {
+                    w.starts.push(start);
+                }
+            }
+        });
+
+        self.block_starts.clear();
+        self.chain_ends.clear();
+        let mut chains = 0;
+        for w in &mut self.work {
+            for start in w.starts.drain(..) {
+                chains += start.chains;
+                self.chain_ends.push(chains);
+                self.block_starts.push(start);
+            }
+        }
+        let tasks = self.work.len() as u64;
+        for (t, w) in (0..).zip(&mut self.work) {
+            w.chains = chains * t / tasks..chains * (t + 1) / tasks;
+        }
+        let (block_starts, chain_ends) = (&self.block_starts, &self.chain_ends);
+        parallel::for_each(&mut self.work, |w| {
+            let mut chain = w.chains.start;
+            let mut s = chain_ends.partition_point(|&end| end <= chain);
+            while chain < w.chains.end {
+                let start = &block_starts[s];
+                let number = chain - (chain_ends[s] - start.chains);
+                redistribute(&scene, settings, energy, start, number, w);
+                chain += 1;
+                if chain == chain_ends[s] {
+                    s += 1;
+                }
             }
         });
         self.bands
@@ -425,62 +488,81 @@ where
     }
 }
 
-/// One MC path in pixel `pixel` (the `index`-th of the render) and the
-/// chains it starts.
-fn redistribute<O, I>(
+/// One MC path in pixel `pixel` (the `index`-th of the render), and the
+/// number of chains it starts if any.
+fn trace_start<O, I>(
     scene: &Scene<'_, O, I>,
     settings: &ErptSettings,
     energy: f64,
     index: u64,
     w: &mut Segment<O::Radiance>,
     pixel: usize,
-) where
+) -> Option<Start<O::Radiance>>
+where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
     let (oracle, importance, seed) = (scene.oracle, scene.importance, scene.seed);
     let resolution = scene.resolution;
-    let mut decisions = rng::stream(seed, Domain::Energy, index);
-    let mut start = MltSampler::new(
+    let mut sampler = MltSampler::new(
         settings.small_step,
         rng::stream(seed, Domain::Independent, index),
     );
-    let mut proposal = start.propose(true);
+    let mut proposal = sampler.propose(true);
     let film = proposal.film_point_in_pixel(resolution, pixel);
     let traced = oracle.trace(film, &mut proposal, Temperature::ONE);
     proposal.accept(1.0);
     let first = evaluate(importance, traced, film);
     w.totals.traces += 1;
     w.totals.invalid += first.invalid as u64;
-    let length = settings.chain_length as u64;
-    let expected = first.importance / (length as f64 * energy);
-    let chains = libm::floor(expected + uniform_f64(&mut decisions));
-    if chains < 1.0 {
-        return;
-    }
-    let target = PathTarget { oracle, importance };
+    let expected = first.importance / (settings.chain_length as f64 * energy);
+    let mut decision = rng::stream(seed, Domain::Energy, index);
+    let chains = libm::floor(expected + uniform_f64(&mut decision));
+    // Finite (the importance is); capped so that a block's count fits in
+    // `u64` (a path starting 2^32 chains takes days anyway).
+    (chains >= 1.0).then(|| Start {
+        index,
+        sampler,
+        first,
+        chains: chains.min(u32::MAX as f64) as u64,
+    })
+}
+
+/// Chain `number` of `start`: `N` small steps from the start path, with the
+/// chain's own mutation and decision streams.
+fn redistribute<O, I>(
+    scene: &Scene<'_, O, I>,
+    settings: &ErptSettings,
+    energy: f64,
+    start: &Start<O::Radiance>,
+    number: u64,
+    w: &mut Segment<O::Radiance>,
+) where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let target = PathTarget {
+        oracle: scene.oracle,
+        importance: scene.importance,
+    };
     let weights = EnergyWeights { energy };
-    for c in 0..chains as u64 {
-        let mut sampler = start.clone();
-        sampler.reseed(rng::stream(
-            seed ^ c.wrapping_add(1).wrapping_mul(0x9e37_79b9_7f4a_7c15),
-            Domain::Energy,
-            index,
-        ));
-        let mut chain = Chain::new(sampler, first);
-        for _ in 0..length {
-            let buffers = &mut w.buffers;
-            let outcome = chain.step(
-                &target,
-                &weights,
-                false,
-                &mut decisions,
-                &mut w.totals.chains,
-                |path, weight| buffers.splat(path.film, path.sample.radiance, weight),
-            );
-            w.buffers.visit(chain.state().film);
-            w.totals.traces += 1;
-            w.totals.invalid += outcome.traced.invalid;
-        }
+    let chain_seed = scene.seed ^ number.wrapping_add(1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    let mut sampler = start.sampler.clone();
+    sampler.reseed(rng::stream(chain_seed, Domain::Energy, start.index));
+    let mut decisions = rng::stream(chain_seed ^ 0x5bd1_e995, Domain::Energy, start.index);
+    let mut chain = Chain::new(sampler, start.first);
+    for _ in 0..settings.chain_length {
+        let buffers = &mut w.buffers;
+        let outcome = chain.step(
+            &target,
+            &weights,
+            false,
+            &mut decisions,
+            &mut w.totals.chains,
+            |path, weight| buffers.splat(path.film, path.sample.radiance, weight),
+        );
+        w.buffers.visit(chain.state().film);
+        w.totals.traces += 1;
+        w.totals.invalid += outcome.traced.invalid;
     }
 }

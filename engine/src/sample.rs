@@ -79,7 +79,11 @@ pub struct MltSampler {
     last_large_step: u64,
     large_step: bool,
     streams: [Vec<Coordinate>; STREAMS],
-    touched: Vec<(u8, u32)>,
+    /// The coordinates the open proposal has mutated: the first
+    /// `touched[s]` of each stream `s` (a proposal reads every stream in
+    /// order from its start, so what it read of a stream is a prefix).
+    #[serde(skip)]
+    touched: [u32; STREAMS],
     replayed_steps: u64,
 }
 
@@ -94,7 +98,7 @@ impl MltSampler {
             last_large_step: 0,
             large_step: true,
             streams: Default::default(),
-            touched: Vec::new(),
+            touched: [0; STREAMS],
             replayed_steps: 0,
         }
     }
@@ -157,7 +161,7 @@ impl MltSampler {
         }
         self.iteration += 1;
         self.large_step = large;
-        self.touched.clear();
+        self.touched = [0; STREAMS];
         if !large {
             self.kernel.open_small_step();
         }
@@ -183,10 +187,11 @@ impl MltSampler {
                 self.last_large_step = self.iteration;
             }
         } else {
-            for &(s, i) in &self.touched {
-                let c = &mut self.streams[s as usize][i as usize];
-                c.value = c.backup;
-                c.modified = c.backup_modified;
+            for (stream, &touched) in self.streams.iter_mut().zip(&self.touched) {
+                for c in &mut stream[..touched as usize] {
+                    c.value = c.backup;
+                    c.modified = c.backup_modified;
+                }
             }
             self.iteration -= 1;
         }
@@ -223,7 +228,7 @@ impl MltSampler {
             }
             c.backup = c.value;
             c.backup_modified = c.modified;
-            self.touched.push((stream as u8, index as u32));
+            self.touched[stream] = index as u32 + 1;
             if self.large_step {
                 c.value = uniform_f32(&mut self.rng);
             } else {

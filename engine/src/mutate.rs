@@ -115,9 +115,16 @@ impl Kelemen {
 #[inline]
 fn exp_neg_f32(x: f32) -> f32 {
     use core::f32::consts::{FRAC_1_SQRT_2, LN_2, LOG2_E};
-    let y = x * LOG2_E;
-    // `y` lies in [0, 2^31): the signed conversion is exact and vectorizes.
-    let n = y as i32 as u32;
+    // `y` lies in [0, 2^30] after the bounds (which change nothing for the
+    // `x` of a valid kernel, and turn a NaN into 0), so truncating it to an
+    // integer is exact without the saturating checks of `as`, which the
+    // compiler cannot vectorize.
+    // Not `clamp`, which keeps a NaN.
+    #[allow(clippy::manual_clamp)]
+    let y = (x * LOG2_E).max(0.0).min(1_073_741_824.0);
+    // SAFETY: `y` is finite and within the range of i32 (see above).
+    #[allow(unsafe_code)]
+    let n = unsafe { y.to_int_unchecked::<i32>() } as u32;
     let t = (0.5 - (y - n as f32)) * LN_2;
     let t2 = t * t;
     let low = (1.0 + t) + t2 * (1.0 / 2.0 + t * (1.0 / 6.0));
@@ -211,11 +218,27 @@ impl<T: Copy> OffsetBatch<T> {
     #[inline]
     pub fn next(&mut self, fill: impl FnOnce(&mut [T; BATCH_LEN])) -> T {
         if self.next == BATCH_LEN {
-            fill(&mut self.values);
-            self.next = 0;
+            self.refill(fill);
         }
         self.next += 1;
         self.values[self.next - 1]
+    }
+
+    /// The next value if the batch holds one (no refill).
+    #[inline(always)]
+    pub fn drawn(&mut self) -> Option<T> {
+        let value = self.values.get(self.next).copied();
+        self.next += value.is_some() as usize;
+        value
+    }
+
+    /// Once in [`BATCH_LEN`] draws: kept out of line so that the draws
+    /// between refills stay a load and an increment.
+    #[cold]
+    #[inline(never)]
+    fn refill(&mut self, fill: impl FnOnce(&mut [T; BATCH_LEN])) {
+        fill(&mut self.values);
+        self.next = 0;
     }
 }
 
@@ -539,7 +562,10 @@ impl Mutator {
         }
     }
 
-    /// `value` moved by the small steps of iterations `from + 1 ..= to`.
+    /// `value` moved by the small steps of iterations `from + 1 ..= to`
+    /// (`from < to`). Kelemen's kernel, the default and the one on every
+    /// path read, is kept inline; the others are out of line.
+    #[inline(always)]
     pub(crate) fn advance<R: Rng + ?Sized>(
         &mut self,
         value: f32,
@@ -547,19 +573,47 @@ impl Mutator {
         to: u64,
         rng: &mut R,
     ) -> f32 {
-        let steps = to - from;
+        let Mutator::Kelemen(k, batch) = self else {
+            return self.advance_other(value, from, to, rng);
+        };
+        // The offsets are added in order, as a sum from zero would add them.
+        let mut offset = batch.next(|values| k.fill(rng, values)) as f64;
+        for _ in from + 1..to {
+            offset += batch.next(|values| k.fill(rng, values)) as f64;
+        }
+        wrap_unit(value as f64 + offset)
+    }
+
+    /// The next offset of Kelemen's kernel if one is drawn already (the
+    /// offset [`advance`](Self::advance) would add for one step), else
+    /// `None`: a read that needs no call.
+    #[inline(always)]
+    pub(crate) fn drawn_kelemen_offset(&mut self) -> Option<f32> {
+        match self {
+            Mutator::Kelemen(_, batch) => batch.drawn(),
+            _ => None,
+        }
+    }
+
+    /// [`advance`](Self::advance) for the Gaussian and adaptive kernels.
+    #[inline(never)]
+    fn advance_other<R: Rng + ?Sized>(
+        &mut self,
+        value: f32,
+        from: u64,
+        to: u64,
+        rng: &mut R,
+    ) -> f32 {
         let offset = match self {
+            Mutator::Kelemen(..) => unreachable!("advance keeps Kelemen's kernel inline"),
             Mutator::Gaussian(g, batch) => {
                 let normal = batch.next(|values| {
                     for pair in values.chunks_exact_mut(2) {
                         pair.copy_from_slice(&unit_normals(rng));
                     }
                 });
-                normal * g.scale_of_steps(steps)
+                normal * g.scale_of_steps(to - from)
             }
-            Mutator::Kelemen(k, batch) => (0..steps)
-                .map(|_| batch.next(|values| k.fill(rng, values)) as f64)
-                .sum(),
             Mutator::Adaptive {
                 state,
                 record,
@@ -587,13 +641,28 @@ impl Mutator {
 /// is 0.0: the two are the same point of the circle.
 #[inline]
 pub fn wrap_unit(v: f64) -> f32 {
-    // v - floor(v) for |v| < 2^63, without a libm call.
-    let mut w = v - v as i64 as f64;
+    // A value in [0, 1) moved by one step's offset lies in [-1, 2), where
+    // adding or subtracting 1 is exact: the same bits as the general case,
+    // without its conversions to and from an integer on the reader's path.
+    let mut w = v;
     if w < 0.0 {
         w += 1.0;
     }
+    if w >= 1.0 {
+        w -= 1.0;
+    }
+    if !(0.0..1.0).contains(&w) {
+        w = wrap_far(v);
+    }
     let w = w as f32;
     if w < 1.0 { w } else { 0.0 }
+}
+
+/// `v - floor(v)` for `|v| < 2^63`, without a libm call (a NaN stays NaN).
+#[cold]
+fn wrap_far(v: f64) -> f64 {
+    let w = v - v as i64 as f64;
+    if w < 0.0 { w + 1.0 } else { w }
 }
 
 #[cfg(test)]
@@ -643,6 +712,32 @@ mod tests {
         assert_eq!(wrap_unit(-1e-12), 0.0);
         assert!(wrap_unit(-1e-6) < 1.0 && wrap_unit(-1e-6) > 0.99);
         assert_eq!(wrap_unit(2.25), 0.25);
+    }
+
+    /// The near cases of `wrap_unit` give the bits of the general formula.
+    #[test]
+    fn wrapping_near_the_interval_is_the_general_formula() {
+        let general = |v: f64| {
+            let w = wrap_far(v) as f32;
+            if w < 1.0 { w } else { 0.0 }
+        };
+        let mut rng = stream(9, Domain::User, 0);
+        let edges = [
+            -2.0,
+            -1.0,
+            -1e-300,
+            -0.0,
+            0.0,
+            1.0 - 1e-17,
+            1.0,
+            2.0 - 1e-16,
+            2.0,
+        ];
+        let draws = (0..100_000).map(|_| 6.0 * uniform_f64(&mut rng) - 3.0);
+        for v in edges.into_iter().chain(draws) {
+            assert_eq!(wrap_unit(v).to_bits(), general(v).to_bits(), "{v}");
+        }
+        assert_eq!(wrap_unit(f64::NAN), 0.0);
     }
 
     /// Each kernel's sampler agrees with its stated distribution (the exact
@@ -715,6 +810,12 @@ mod tests {
                 "e^-{x}: {fast} vs {exact}"
             );
         }
+        // Out of its range it stays defined: no input reaches the unchecked
+        // conversion out of range.
+        assert_eq!(exp_neg_f32(f32::NAN), exp_neg_f32(0.0));
+        assert_eq!(exp_neg_f32(-1.0), exp_neg_f32(0.0));
+        assert!(exp_neg_f32(f32::INFINITY) >= 0.0);
+        assert!(exp_neg_f32(1e30) < 1e-37);
     }
 
     #[test]

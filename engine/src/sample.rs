@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::rng::Pcg32;
 
-use crate::mutate::{Mutator, SmallStep};
+use crate::mutate::{Mutator, SmallStep, wrap_unit};
 use crate::oracle::{FilmPoint, ORACLE_STREAMS, Resolution, Sampler};
 use crate::rng::uniform_f32;
 
@@ -201,7 +201,41 @@ impl MltSampler {
 
     /// The coordinate `index` of `stream`, mutated for the open proposal
     /// (`proposing`) or brought up to date with the current state.
+    ///
+    /// Inline, without a call: the two cases of most reads, a coordinate
+    /// read again in the same iteration and a small step of a coordinate
+    /// that was up to date with the last iteration, while Kelemen's kernel
+    /// has an offset drawn; [`read_any`](Self::read_any) does everything
+    /// (these cases too, with the same effects).
+    #[inline(always)]
     fn read(&mut self, stream: usize, index: usize, proposing: bool) -> f32 {
+        let iteration = self.iteration;
+        if let Some(c) = self.streams[stream].get_mut(index) {
+            // Within a proposal the last large step is at most `iteration - 1`,
+            // so neither case below has missed one.
+            if c.modified == iteration {
+                return c.value;
+            }
+            if proposing
+                && !self.large_step
+                && c.modified + 1 == iteration
+                && let Some(offset) = self.kernel.drawn_kelemen_offset()
+            {
+                c.backup = c.value;
+                c.backup_modified = c.modified;
+                c.value = wrap_unit(c.value as f64 + offset as f64);
+                c.modified = iteration;
+                self.touched[stream] = index as u32 + 1;
+                return c.value;
+            }
+        }
+        self.read_any(stream, index, proposing)
+    }
+
+    /// [`read`](Self::read) in every case: a new coordinate, one that missed
+    /// a large step, a large step, catching up a replayed coordinate.
+    #[inline(never)]
+    fn read_any(&mut self, stream: usize, index: usize, proposing: bool) -> f32 {
         let coordinates = &mut self.streams[stream];
         if index == coordinates.len() {
             // A coordinate never read before: uniform, as every unread

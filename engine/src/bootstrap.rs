@@ -18,7 +18,7 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
-use crate::chain::{Chain, KelemenWeights, Normalization, PathChain, PathTarget, Traced};
+use crate::chain::{Chain, KelemenWeights, Normalization, PathChain, PathTarget, Target, Traced};
 use crate::error::Error;
 use crate::mutate::SmallStep;
 use crate::oracle::PathOracle;
@@ -107,13 +107,23 @@ impl Bootstrap {
         }
         let target = PathTarget { oracle, importance };
         let mut values = vec![0.0; candidates as usize * levels];
-        let traced = parallel::sum_chunks(&mut values, levels, |k, values| {
-            let stream = rng::stream(seed, Domain::Candidate, k as u64);
-            let (mut chain, mut traced) = Chain::start(&target, small_step, stream);
-            let path = *chain.state();
-            traced += row(chain.sampler_mut(), &path, values);
-            traced
-        });
+        // One primary sample per task, restarted for every candidate.
+        let sampler = || {
+            let placeholder = rng::stream(seed, Domain::Candidate, u64::MAX);
+            (
+                MltSampler::new(small_step, placeholder),
+                Evaluated::default(),
+            )
+        };
+        let traced =
+            parallel::sum_chunks_init(&mut values, levels, sampler, |scratch, k, values| {
+                let (sampler, path) = scratch;
+                sampler.restart(rng::stream(seed, Domain::Candidate, k as u64));
+                let mut proposal = sampler.propose(true);
+                let traced = target.evaluate(&mut proposal, path);
+                proposal.accept(1.0);
+                traced + row(sampler, path, values)
+            });
 
         let mut cumulative = vec![Vec::with_capacity(candidates as usize); levels];
         let mut ranges = vec![(f64::INFINITY, 0.0f64); levels];

@@ -499,6 +499,15 @@ impl Mutator {
         }
     }
 
+    /// The kernel it applies (for the adaptive kernel, with its initial `θ`).
+    pub(crate) fn small_step(&self) -> SmallStep {
+        match self {
+            Mutator::Kelemen(k, _) => SmallStep::Kelemen(*k),
+            Mutator::Gaussian(g, _) => SmallStep::Gaussian(*g),
+            Mutator::Adaptive { kernel, .. } => SmallStep::Adaptive(*kernel),
+        }
+    }
+
     /// The adaptive kernel's current `θ`.
     pub(crate) fn adaptive_theta(&self) -> Option<f64> {
         match self {

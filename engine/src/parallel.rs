@@ -97,6 +97,32 @@ pub(crate) fn sum_chunks<T: Send, C: Default + Add<Output = C> + Send>(
         .fold(C::default(), |a, (i, c)| a + f(i, c))
 }
 
+/// Like [`sum_chunks`], with scratch made by `init` once per task.
+pub(crate) fn sum_chunks_init<T: Send, S, C: Default + Add<Output = C> + Send>(
+    values: &mut [T],
+    chunk: usize,
+    init: impl Fn() -> S + Sync + Send,
+    f: impl Fn(&mut S, usize, &mut [T]) -> C + Sync + Send,
+) -> C {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        values
+            .par_chunks_mut(chunk)
+            .enumerate()
+            .map_init(init, |s, (i, c)| f(s, i, c))
+            .reduce(C::default, |a, b| a + b)
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        let mut scratch = init();
+        values
+            .chunks_mut(chunk)
+            .enumerate()
+            .fold(C::default(), |a, (i, c)| a + f(&mut scratch, i, c))
+    }
+}
+
 /// `f(item)` for every item, collected in item order.
 pub(crate) fn map_each<T: Send, U: Send>(
     items: &mut [T],

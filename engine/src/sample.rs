@@ -103,6 +103,18 @@ impl MltSampler {
         }
     }
 
+    /// Starts over as [`new`](Self::new) would with the same kernel and
+    /// `rng`, keeping the memory of its coordinates (a bootstrap draws
+    /// thousands of candidates, each a fresh primary sample).
+    pub fn restart(&mut self, rng: Pcg32) {
+        let streams = core::mem::take(&mut self.streams);
+        *self = Self {
+            streams,
+            ..Self::new(self.kernel.small_step(), rng)
+        };
+        self.streams.iter_mut().for_each(Vec::clear);
+    }
+
     /// Replaces the random stream used for future mutations. A chain started
     /// from a bootstrap candidate replays the candidate's stream, then switches
     /// to its own so two chains starting from the same candidate diverge.
@@ -494,6 +506,32 @@ mod tests {
             p.accept(1.0);
             let mut r = s.replay();
             assert_eq!(read_n(&mut r, 6), moved, "{k:?}: accept must keep");
+        }
+    }
+
+    /// A restarted sampler draws what a new one on the same stream draws.
+    #[test]
+    fn a_restarted_sampler_is_a_new_one() {
+        for k in kernels() {
+            let run = |s: &mut MltSampler| {
+                let mut drawn = Vec::new();
+                for i in 0..50 {
+                    let mut p = s.propose(i % 7 == 0);
+                    drawn.extend(read_n(&mut p, 3 + i % 5));
+                    if i % 3 == 0 {
+                        p.reject(0.2)
+                    } else {
+                        p.accept(0.8)
+                    }
+                }
+                drawn
+            };
+            let mut used = MltSampler::new(k, stream(8, Domain::User, 0));
+            run(&mut used);
+            used.restart(stream(8, Domain::User, 1));
+            let mut new = MltSampler::new(k, stream(8, Domain::User, 1));
+            assert_eq!(run(&mut used), run(&mut new), "{k:?}");
+            assert_eq!(used.stats(), new.stats());
         }
     }
 

@@ -648,7 +648,7 @@ impl Mutator {
 
 /// `v` wrapped onto `[0, 1)` and rounded to f32. A value that rounds up to 1.0
 /// is 0.0: the two are the same point of the circle.
-#[inline]
+#[inline(always)]
 pub fn wrap_unit(v: f64) -> f32 {
     // A value in [0, 1) moved by one step's offset lies in [-1, 2), where
     // adding or subtracting 1 is exact: the same bits as the general case,
@@ -668,7 +668,8 @@ pub fn wrap_unit(v: f64) -> f32 {
 }
 
 /// `v - floor(v)` for `|v| < 2^63`, without a libm call (a NaN stays NaN).
-#[cold]
+/// Rarely needed, but inline: a call would make every read save registers.
+#[inline(always)]
 fn wrap_far(v: f64) -> f64 {
     let w = v - v as i64 as f64;
     if w < 0.0 { w + 1.0 } else { w }

@@ -214,31 +214,37 @@ impl MltSampler {
     /// The coordinate `index` of `stream`, mutated for the open proposal
     /// (`proposing`) or brought up to date with the current state.
     ///
-    /// Inline, without a call: the two cases of most reads, a coordinate
-    /// read again in the same iteration and a small step of a coordinate
-    /// that was up to date with the last iteration, while Kelemen's kernel
-    /// has an offset drawn; [`read_any`](Self::read_any) does everything
-    /// (these cases too, with the same effects).
+    /// Inline, without a call: the cases of most reads, a coordinate read
+    /// again in the same iteration, and a proposal's coordinate that has not
+    /// missed a large step moved by a large step or, while Kelemen's kernel
+    /// has an offset drawn, by one small step;
+    /// [`read_any`](Self::read_any) does everything (these cases too, with
+    /// the same effects).
     #[inline(always)]
     fn read(&mut self, stream: usize, index: usize, proposing: bool) -> f32 {
         let iteration = self.iteration;
         if let Some(c) = self.streams[stream].get_mut(index) {
-            // Within a proposal the last large step is at most `iteration - 1`,
-            // so neither case below has missed one.
             if c.modified == iteration {
                 return c.value;
             }
-            if proposing
-                && !self.large_step
-                && c.modified + 1 == iteration
-                && let Some(offset) = self.kernel.drawn_kelemen_offset()
-            {
-                c.backup = c.value;
-                c.backup_modified = c.modified;
-                c.value = wrap_unit(c.value as f64 + offset as f64);
-                c.modified = iteration;
-                self.touched[stream] = index as u32 + 1;
-                return c.value;
+            if proposing && c.modified >= self.last_large_step {
+                let moved = if self.large_step {
+                    Some(uniform_f32(&mut self.rng))
+                } else if c.modified + 1 == iteration {
+                    self.kernel
+                        .drawn_kelemen_offset()
+                        .map(|offset| wrap_unit(c.value as f64 + offset as f64))
+                } else {
+                    None
+                };
+                if let Some(value) = moved {
+                    c.backup = c.value;
+                    c.backup_modified = c.modified;
+                    c.value = value;
+                    c.modified = iteration;
+                    self.touched[stream] = index as u32 + 1;
+                    return value;
+                }
             }
         }
         self.read_any(stream, index, proposing)

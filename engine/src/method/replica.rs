@@ -127,15 +127,16 @@ where
         traced: bootstrap.traced().paths,
         invalid: bootstrap.traced().invalid,
     };
-    let start = |i: usize, bootstrap: &Bootstrap| -> Result<EnsembleWork<'_, O, I>, Error> {
+    let prior = priors(&bootstrap);
+    let start = |i: usize| -> Result<EnsembleWork<'_, O, I>, Error> {
         let state = EnsembleState {
-            ensemble: Ensemble::start(oracle, importance, &ensemble, bootstrap, i as u64),
-            exchange: settings.exchange.build(bootstrap)?,
+            ensemble: Ensemble::start(oracle, importance, &ensemble, &bootstrap, i as u64),
+            exchange: settings.exchange.build(&bootstrap)?,
         };
-        Ok(work(state, priors(bootstrap)))
+        Ok(work(state, prior.clone()))
     };
     let mut work = (0..settings.ensembles as usize)
-        .map(|i| start(i, &bootstrap))
+        .map(start)
         .collect::<Result<Vec<_>, Error>>()?;
 
     // Ladder tuning: rounds of 16, 32, ... sweeps, not splatted.
@@ -160,12 +161,13 @@ where
         bootstrap = ensemble.bootstrap(oracle, importance, job.seed)?;
         set_up.traced += bootstrap.traced().paths;
         set_up.invalid = bootstrap.traced().invalid;
+        let prior = priors(&bootstrap);
         for w in work.iter_mut() {
             w.state
                 .ensemble
                 .set_ladder(oracle, importance, &ensemble.ladder, &bootstrap);
             w.state.exchange = settings.exchange.build(&bootstrap)?;
-            w.prior = priors(&bootstrap);
+            w.prior = prior.clone();
         }
     }
 

@@ -418,26 +418,36 @@ fn permutations_are_drawn_with_the_probabilities_of_eq_5_7() {
             });
             let max = brute.values().copied().fold(f64::NEG_INFINITY, f64::max);
             let total: f64 = brute.values().map(|l| (l - max).exp()).sum();
-            let mut sampler = PermutationSampler::new(m).unwrap();
-            sampler.normalize(&v);
-            let exact = Enumerator::all(|e| {
-                let mut o = vec![0; m];
-                assert!(sampler.sample(e, &mut o));
-                o
-            });
-            let mut covered = 0.0;
-            for (o, p) in exact {
-                let want = (brute[&o] - max).exp() / total;
+            // From logarithms, and (where the values are f64 numbers) from
+            // the values themselves.
+            let values: Vec<f64> = v.iter().map(|l| l.exp()).collect();
+            let from_values = spread == 1.0;
+            for use_values in [false, true].into_iter().filter(|&u| !u || from_values) {
+                let mut sampler = PermutationSampler::new(m).unwrap();
+                if use_values {
+                    sampler.normalize_values(&values);
+                } else {
+                    sampler.normalize(&v);
+                }
+                let exact = Enumerator::all(|e| {
+                    let mut o = vec![0; m];
+                    assert!(sampler.sample(e, &mut o));
+                    o
+                });
+                let mut covered = 0.0;
+                for (o, p) in exact {
+                    let want = (brute[&o] - max).exp() / total;
+                    assert!(
+                        (p - want).abs() < 1e-12,
+                        "spread {spread}, M = {m}, values {use_values}, {o:?}: {p} vs {want}"
+                    );
+                    covered += want;
+                }
                 assert!(
-                    (p - want).abs() < 1e-12,
-                    "spread {spread}, M = {m}, {o:?}: {p} vs {want}"
+                    (covered - 1.0).abs() < 1e-12,
+                    "spread {spread}, M = {m}: {covered}"
                 );
-                covered += want;
             }
-            assert!(
-                (covered - 1.0).abs() < 1e-12,
-                "spread {spread}, M = {m}: {covered}"
-            );
         }
     }
 }

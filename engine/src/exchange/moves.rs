@@ -55,7 +55,7 @@ impl<S: Tempered + Clone> Move<S> for NonReversible {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct IsPermutation {
     sampler: PermutationSampler,
-    log_values: Vec<f64>,
+    values: Vec<f64>,
     permutation: Vec<usize>,
 }
 
@@ -65,7 +65,7 @@ impl IsPermutation {
     pub fn new(chains: usize) -> Result<Self, Error> {
         Ok(Self {
             sampler: PermutationSampler::new(chains)?,
-            log_values: vec![0.0; chains * chains],
+            values: vec![0.0; chains * chains],
             permutation: vec![0; chains],
         })
     }
@@ -77,10 +77,10 @@ impl<S: Tempered + Clone> Move<S> for IsPermutation {
         debug_assert_eq!(m, self.sampler.chains());
         for i in 0..m {
             for k in 0..m {
-                self.log_values[i * m + k] = libm::log(ex.value(i, k));
+                self.values[i * m + k] = ex.value(i, k);
             }
         }
-        self.sampler.normalize(&self.log_values);
+        self.sampler.normalize_values(&self.values);
         if self.sampler.sample(ex.decisions(), &mut self.permutation) {
             ex.permute(&self.permutation);
         }

@@ -65,6 +65,81 @@ fn scale_rows_and_columns(log_values: &[f64], chains: usize, scaled: &mut [f64])
     log_scale
 }
 
+/// How [`scale_values`] went.
+enum Scaled {
+    /// Every row and column has largest entry 1.
+    Linear,
+    /// Some row or column is all zero: `b_O = 0`.
+    Zero,
+    /// A positive entry would have underflowed: the log path is needed.
+    Lost,
+}
+
+/// `values` scaled so that every row, then every column, has largest entry
+/// 1 (the scaling of [`scale_rows_and_columns`], by division), the factors
+/// taken out multiplied into `product`.
+fn scale_values(
+    values: &[f64],
+    chains: usize,
+    scaled: &mut [f64],
+    product: &mut LogProduct,
+) -> Scaled {
+    scaled.copy_from_slice(values);
+    // Whether a positive entry fell below the normal range.
+    let mut lost = false;
+    let mut divide = |v: &mut f64, max: f64| {
+        let positive = *v > 0.0;
+        *v /= max;
+        lost |= positive && *v < f64::MIN_POSITIVE;
+    };
+    for row in scaled.chunks_exact_mut(chains) {
+        let max = row.iter().copied().fold(0.0, f64::max);
+        if max == 0.0 {
+            return Scaled::Zero;
+        }
+        row.iter_mut().for_each(|v| divide(v, max));
+        product.times(max);
+    }
+    for k in 0..chains {
+        let max = (0..chains)
+            .map(|i| scaled[i * chains + k])
+            .fold(0.0, f64::max);
+        if max == 0.0 {
+            // All zero, unless the row scaling made it so.
+            return if lost { Scaled::Lost } else { Scaled::Zero };
+        }
+        (0..chains).for_each(|i| divide(&mut scaled[i * chains + k], max));
+        product.times(max);
+    }
+    if lost { Scaled::Lost } else { Scaled::Linear }
+}
+
+/// A product of positive factors kept as a mantissa and a power of two, so
+/// that its logarithm costs one `log` whatever its range.
+struct LogProduct {
+    mantissa: f64,
+    exponent: i64,
+}
+
+impl LogProduct {
+    fn new() -> Self {
+        Self {
+            mantissa: 1.0,
+            exponent: 0,
+        }
+    }
+
+    fn times(&mut self, factor: f64) {
+        let (mantissa, exponent) = libm::frexp(self.mantissa * factor);
+        self.mantissa = mantissa;
+        self.exponent += exponent as i64;
+    }
+
+    fn ln(&self) -> f64 {
+        libm::log(self.mantissa) + self.exponent as f64 * core::f64::consts::LN_2
+    }
+}
+
 /// `ln Σ exp(t)` over the terms, `-∞` for none.
 fn log_sum_exp(terms: impl Iterator<Item = f64> + Clone) -> f64 {
     let max = terms.clone().fold(f64::NEG_INFINITY, f64::max);
@@ -136,20 +211,58 @@ impl PermutationSampler {
         let m = self.chains;
         debug_assert_eq!(log_values.len(), m * m);
         self.log_values.copy_from_slice(log_values);
-        let scale = scale_rows_and_columns(log_values, m, &mut self.scaled);
-        self.log_normalization = match self.fill_linear() {
-            Some(log_f) => scale + log_f,
+        self.normalize_stored_logs()
+    }
+
+    /// [`normalize`](Self::normalize) of `self.log_values`.
+    fn normalize_stored_logs(&mut self) -> f64 {
+        let scale = scale_rows_and_columns(&self.log_values, self.chains, &mut self.scaled);
+        let mut log_f = 0.0;
+        self.log_normalization = match self.fill_linear(|largest| log_f += libm::log(largest)) {
+            Some(true) => scale + log_f,
+            Some(false) => f64::NEG_INFINITY,
             None => self.fill_log(),
         };
         self.log_normalization
     }
 
-    /// The level-scaled table; `None` if a product underflowed.
-    fn fill_linear(&mut self) -> Option<f64> {
+    /// [`normalize`](Self::normalize) from the values themselves,
+    /// `values[i * M + k] = π_i(u_k)` (finite, `>= 0`): rows and columns are
+    /// scaled by division and the table filled without a single logarithm
+    /// but the one of `ln b_O`; only where the scaling would lose a positive
+    /// entry or a product underflows are the logarithms taken and the log
+    /// path followed. The same table up to rounding.
+    pub fn normalize_values(&mut self, values: &[f64]) -> f64 {
+        let m = self.chains;
+        debug_assert_eq!(values.len(), m * m);
+        let mut product = LogProduct::new();
+        self.log_normalization = match scale_values(values, m, &mut self.scaled, &mut product) {
+            Scaled::Zero => f64::NEG_INFINITY,
+            Scaled::Linear => match self.fill_linear(|largest| product.times(largest)) {
+                Some(true) => product.ln(),
+                Some(false) => f64::NEG_INFINITY,
+                None => return self.normalize_logs_of(values),
+            },
+            Scaled::Lost => return self.normalize_logs_of(values),
+        };
+        self.log_normalization
+    }
+
+    /// [`normalize`](Self::normalize) of the logarithms of `values`.
+    fn normalize_logs_of(&mut self, values: &[f64]) -> f64 {
+        for (l, &v) in self.log_values.iter_mut().zip(values) {
+            *l = libm::log(v);
+        }
+        self.normalize_stored_logs()
+    }
+
+    /// The level-scaled table, calling `level_scale` with the largest entry
+    /// of each level (the factor it divides out); `None` if a product
+    /// underflowed, `Some(false)` if every permutation has probability zero.
+    fn fill_linear(&mut self, mut level_scale: impl FnMut(f64)) -> Option<bool> {
         let m = self.chains;
         let full = (1usize << m) - 1;
         self.table = Table::Linear;
-        let mut log_f = 0.0;
         self.factor[full] = 1.0;
         for level in (0..m).rev() {
             let row = &self.scaled[level * m..(level + 1) * m];
@@ -174,15 +287,15 @@ impl PermutationSampler {
                 return None;
             }
             if largest == 0.0 {
-                return Some(f64::NEG_INFINITY);
+                return Some(false);
             }
             let inverse = 1.0 / largest;
             for &set in &self.by_level[level] {
                 self.factor[set as usize] *= inverse;
             }
-            log_f += libm::log(largest);
+            level_scale(largest);
         }
-        Some(log_f)
+        Some(true)
     }
 
     /// The table of `ln F_S` by log-sum-exp; returns `ln b_O`.
@@ -375,6 +488,63 @@ mod tests {
             (log_b - slow).abs() < 1e-9 * slow.abs(),
             "{log_b} vs {slow}"
         );
+    }
+
+    /// From the values themselves: the same `ln b_O`, the same draws, no
+    /// logarithm table.
+    #[test]
+    fn values_give_the_table_of_their_logarithms() {
+        for m in 1..=7 {
+            let logs = random_log_values(m, 60 + m as u64);
+            let values: Vec<f64> = logs.iter().map(|&l| libm::exp(l)).collect();
+            let mut from_logs = PermutationSampler::new(m).unwrap();
+            let mut from_values = PermutationSampler::new(m).unwrap();
+            let (a, b) = (
+                from_logs.normalize(&logs),
+                from_values.normalize_values(&values),
+            );
+            assert!(
+                (a - b).abs() < 1e-12 * a.abs().max(1.0),
+                "M={m}: {a} vs {b}"
+            );
+            assert_eq!(from_values.table, Table::Linear);
+            let (mut r1, mut r2) = (stream(2, Domain::User, 9), stream(2, Domain::User, 9));
+            let (mut o1, mut o2) = (vec![0; m], vec![0; m]);
+            for _ in 0..200 {
+                assert!(from_logs.sample(&mut r1, &mut o1));
+                assert!(from_values.sample(&mut r2, &mut o2));
+                assert_eq!(o1, o2, "M={m}");
+            }
+        }
+    }
+
+    /// An entry that scaling would flush to zero sends the values down the
+    /// log path, which keeps it.
+    #[test]
+    fn values_whose_scaling_would_lose_an_entry_take_the_log_path() {
+        // The identity has probability zero (π_1(u_1) = 0); the swap's
+        // π_0(u_1) = 1e-300 is 1e-500 of its row's largest, zero if divided.
+        let values = [1e200, 1e-300, 1.0, 0.0];
+        let mut s = PermutationSampler::new(2).unwrap();
+        let log_b = s.normalize_values(&values);
+        let exact = libm::log(1e-300);
+        assert!(
+            (log_b - exact).abs() < 1e-9 * exact.abs(),
+            "{log_b} vs {exact}"
+        );
+        let mut o = vec![0; 2];
+        assert!(s.sample(&mut stream(4, Domain::User, 4), &mut o));
+        assert_eq!(o, [1, 0]);
+    }
+
+    #[test]
+    fn values_with_a_zero_row_or_column_sample_nothing() {
+        for values in [[0.0, 0.0, 1.0, 2.0], [0.0, 3.0, 0.0, 2.0]] {
+            let mut s = PermutationSampler::new(2).unwrap();
+            assert_eq!(s.normalize_values(&values), f64::NEG_INFINITY);
+            let mut o = vec![7; 2];
+            assert!(!s.sample(&mut stream(1, Domain::User, 1), &mut o));
+        }
     }
 
     #[test]

@@ -297,7 +297,6 @@ impl<R: Radiance> Ensemble<R> {
             exchange.before_mutation(&mut ex!(), c);
             let large = uniform_f64(&mut self.decisions[c]) < self.large_step_probability;
             if !large {
-                let before = self.replicas[c].state().clone();
                 if let Some(jump) = exchange.replace_small_step(&mut ex!(), c) {
                     let weights = self.weights();
                     let a = jump.acceptance;
@@ -306,7 +305,11 @@ impl<R: Radiance> Ensemble<R> {
                     if w > 0.0 {
                         splat(proposed.film, proposed.radiance, w);
                     }
-                    let w = weights.weight(1.0 - a, &before);
+                    let before = match &jump.replaced {
+                        Some(replaced) => replaced.state(),
+                        None => self.replicas[c].state(),
+                    };
+                    let w = weights.weight(1.0 - a, before);
                     if w > 0.0 {
                         splat(before.film, before.radiance, w);
                     }

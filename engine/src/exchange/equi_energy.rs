@@ -286,13 +286,12 @@ impl<S: Tempered + Clone> Move<S> for EquiEnergySampler<S> {
         let acceptance = if den > 0.0 { (num / den).min(1.0) } else { 1.0 };
         let accepted = ex.decisions().accept(acceptance);
         ex.record_jump(chain, accepted);
-        if accepted {
-            ex.replace(chain, proposal.clone());
-        }
+        let replaced = accepted.then(|| ex.replace(chain, proposal.clone()));
         Some(Jump {
             proposal,
             acceptance,
             accepted,
+            replaced,
         })
     }
 

@@ -63,6 +63,8 @@ pub struct Jump<S> {
     pub acceptance: f64,
     /// Whether it became the chain's state.
     pub accepted: bool,
+    /// The chain's state before the jump, if the jump replaced it.
+    pub replaced: Option<S>,
 }
 
 /// One exchange move. A sweep mutates every chain once, hottest first; a move
@@ -233,12 +235,13 @@ impl<'a, S: Tempered> Exchange<'a, S> {
         }
     }
 
-    /// Gives chain `chain` a new state (an equi-energy jump to a past state).
-    pub fn replace(&mut self, chain: usize, state: S) {
-        self.states[chain] = state;
+    /// Gives chain `chain` a new state (an equi-energy jump to a past state)
+    /// and returns the one it had.
+    pub fn replace(&mut self, chain: usize, state: S) -> S {
         if let Some(r) = self.recorder.as_deref_mut() {
             r.jumped(chain);
         }
+        core::mem::replace(&mut self.states[chain], state)
     }
 
     /// Counts an equi-energy jump proposed to `chain`.

@@ -5,9 +5,11 @@
 //! with power tempering) on the pbrt Cornell box and on veach-ajar:
 //!
 //! * **cost per path**: wall time × threads / every path the render traced
-//!   (bootstrap and set-up included, so serial phases count), median of
-//!   `--repeats` renders interleaved method by method, and its ratio to MC's
-//!   in the same run;
+//!   (bootstrap and set-up included, so serial phases count), and its ratio
+//!   to MC's: each of `--repeats` repeats renders MC, the first method, MC,
+//!   the second, ..., MC, a method's ratio is to the mean of the two MC
+//!   renders beside it (the machine's speed drifts), and the figures are
+//!   medians over the repeats;
 //! * **the split**: the same render with a metered oracle. Each path is
 //!   traced twice: first as the render traces it, recording the numbers it
 //!   reads (each drawn by the method's sampler: for MCMC methods a lazily
@@ -295,14 +297,35 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             continue;
         }
-        let mut mc_ns = None;
-        for method in &methods {
-            let mut ns = Vec::new();
-            for _ in 0..args.repeats {
-                let (seconds, out) = run(&two, method)?;
-                ns.push(seconds * 2e9 / traced(&out) as f64);
+        // Each repeat renders MC, the first method, MC, the second, ..., MC:
+        // a method's ratio is to the mean of the MC renders just before and
+        // after it (the machine's speed drifts between renders), and the
+        // reported figures are medians over the repeats.
+        let ns_per_path = |method: &Method| -> Result<f64, strata::engine::Error> {
+            let (seconds, out) = run(&two, method)?;
+            Ok(seconds * 2e9 / traced(&out) as f64)
+        };
+        let others: Vec<&Method> = methods.iter().filter(|m| **m != Method::Mc).collect();
+        let mut mc_runs = Vec::new();
+        let mut ratios = vec![Vec::new(); others.len()];
+        let mut method_ns = vec![Vec::new(); others.len()];
+        for _ in 0..args.repeats {
+            let mut before = ns_per_path(&Method::Mc)?;
+            mc_runs.push(before);
+            for (i, method) in others.iter().enumerate() {
+                let ns = ns_per_path(method)?;
+                let after = ns_per_path(&Method::Mc)?;
+                mc_runs.push(after);
+                method_ns[i].push(ns);
+                ratios[i].push(ns / (0.5 * (before + after)));
+                before = after;
             }
-            let ns = median(ns);
+        }
+        for method in &methods {
+            let (ns, ratio) = match others.iter().position(|m| *m == method) {
+                Some(i) => (median(method_ns[i].clone()), median(ratios[i].clone())),
+                None => (median(mc_runs.clone()), 1.0),
+            };
             // The split, from one metered render.
             let settings = Settings {
                 seed: 1,
@@ -320,7 +343,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let rest_ns = (wall - m.first as f64 - m.second as f64) / paths;
             let per_path = m.numbers as f64 / paths;
             let bootstrap = out.stats.bootstrap_samples as f64 / traced(&out) as f64;
-            let ratio = ns / *mc_ns.get_or_insert(ns);
             let name_m = method.name();
             println!(
                 "{name_m}: {ns:.0} ns/path (x{ratio:.2} MC); split: path {path_ns:.0} + sampler {sampler_ns:.0} + rest {rest_ns:.0} ns, {per_path:.1} numbers/path, bootstrap {:.1} % of paths",

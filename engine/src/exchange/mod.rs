@@ -219,18 +219,20 @@ impl<'a, S: Tempered> Exchange<'a, S> {
                 self.stats.record_accept(i, k);
             }
         }
-        // Follow each cycle s -> o(s) -> o(o(s)) ... with swaps.
-        let mut done = alloc::vec![false; o.len()];
+        // Follow each cycle s -> o(s) -> o(o(s)) ... with swaps, from its
+        // smallest member (the order a left-to-right scan meets the cycles).
         for start in 0..o.len() {
-            if done[start] {
+            let mut at = o[start];
+            while at > start {
+                at = o[at];
+            }
+            if at < start {
                 continue;
             }
-            done[start] = true;
             let mut at = start;
             while o[at] != start {
                 self.swap(at, o[at]);
                 at = o[at];
-                done[at] = true;
             }
         }
     }
@@ -247,5 +249,44 @@ impl<'a, S: Tempered> Exchange<'a, S> {
     /// Counts an equi-energy jump proposed to `chain`.
     pub fn record_jump(&mut self, chain: usize, accepted: bool) {
         self.stats.record_jump(chain, accepted);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::{Domain, stream};
+    use alloc::vec::Vec;
+
+    #[derive(Clone, Debug, PartialEq)]
+    struct Named(usize);
+
+    impl Tempered for Named {
+        fn value(&self, _: usize) -> f64 {
+            1.0
+        }
+    }
+
+    /// Chain `i` gets the state of chain `o[i]`, whatever the cycles of `o`.
+    #[test]
+    fn permute_applies_every_cycle() {
+        let orders: [&[usize]; 5] = [
+            &[0, 1, 2, 3, 4],
+            &[1, 0, 3, 4, 2],
+            &[0, 2, 1, 4, 3],
+            &[4, 0, 1, 2, 3],
+            &[2, 3, 0, 1, 4],
+        ];
+        for o in orders {
+            let m = o.len();
+            let mut states: Vec<Named> = (0..m).map(Named).collect();
+            let mut labels: Vec<usize> = (0..m).collect();
+            let mut stats = ExchangeStats::new(m);
+            let mut rng = stream(1, Domain::User, 0);
+            Exchange::new(&mut states, &mut labels, &mut stats, &mut rng, 0).permute(o);
+            let expected: Vec<Named> = o.iter().map(|&k| Named(k)).collect();
+            assert_eq!(states, expected, "{o:?}");
+            assert_eq!(labels, o, "{o:?}");
+        }
     }
 }

@@ -232,13 +232,11 @@ impl SweepRecorder {
         stats: &mut ExchangeStats,
     ) {
         let m = labels.len();
-        // Where each label started: start[chain] = label.
-        let mut origin = vec![0usize; m];
-        for (chain, &label) in self.start.iter().enumerate() {
-            origin[label] = chain;
-        }
         for (chain, &label) in labels.iter().enumerate() {
-            stats.transitions[origin[label] * m + chain] += 1;
+            // Where the label started (`start[chain] = label`; a search, as
+            // ensembles are small, instead of an inverse built every sweep).
+            let origin = self.start.iter().position(|&l| l == label).unwrap_or(chain);
+            stats.transitions[origin * m + chain] += 1;
             if self.start[chain] != label || self.jumped[chain] {
                 stats.changed[chain] += 1;
             }

@@ -296,36 +296,34 @@ impl<R: Radiance> Ensemble<R> {
         for c in (0..m).rev() {
             exchange.before_mutation(&mut ex!(), c);
             let large = uniform_f64(&mut self.decisions[c]) < self.large_step_probability;
-            if !large {
-                if let Some(jump) = exchange.replace_small_step(&mut ex!(), c) {
-                    let weights = self.weights();
-                    let a = jump.acceptance;
-                    let proposed = jump.proposal.state();
-                    let w = weights.weight(a, proposed);
-                    if w > 0.0 {
-                        splat(proposed.film, proposed.radiance, w);
-                    }
-                    let before = match &jump.replaced {
-                        Some(replaced) => replaced.state(),
-                        None => self.replicas[c].state(),
-                    };
-                    let w = weights.weight(1.0 - a, before);
-                    if w > 0.0 {
-                        splat(before.film, before.radiance, w);
-                    }
-                    if jump.accepted {
-                        // The past state's random stream belongs to its chain:
-                        // continue on a fresh one.
-                        let fresh = self.decisions[c].next_u64();
-                        self.replicas[c].sampler_mut().reseed(rng::stream(
-                            fresh,
-                            Domain::Exchange,
-                            c as u64,
-                        ));
-                    }
-                    exchange.after_mutation(&mut ex!(), c);
-                    continue;
+            if !large && let Some(jump) = exchange.replace_small_step(&mut ex!(), c) {
+                let weights = self.weights();
+                let a = jump.acceptance;
+                let proposed = jump.proposal.state();
+                let w = weights.weight(a, proposed);
+                if w > 0.0 {
+                    splat(proposed.film, proposed.radiance, w);
                 }
+                let before = match &jump.replaced {
+                    Some(replaced) => replaced.state(),
+                    None => self.replicas[c].state(),
+                };
+                let w = weights.weight(1.0 - a, before);
+                if w > 0.0 {
+                    splat(before.film, before.radiance, w);
+                }
+                if jump.accepted {
+                    // The past state's random stream belongs to its chain:
+                    // continue on a fresh one.
+                    let fresh = self.decisions[c].next_u64();
+                    self.replicas[c].sampler_mut().reseed(rng::stream(
+                        fresh,
+                        Domain::Exchange,
+                        c as u64,
+                    ));
+                }
+                exchange.after_mutation(&mut ex!(), c);
+                continue;
             }
             let target = TemperedTarget {
                 oracle,

@@ -593,14 +593,15 @@ impl Mutator {
         wrap_unit(value as f64 + offset)
     }
 
-    /// The next offset of Kelemen's kernel if one is drawn already (the
-    /// offset [`advance`](Self::advance) would add for one step), else
+    /// The offset [`advance`](Self::advance) would add for one step, if it
+    /// is drawn already (Kelemen's and the Gaussian kernel's batches), else
     /// `None`: a read that needs no call.
     #[inline(always)]
-    pub(crate) fn drawn_kelemen_offset(&mut self) -> Option<f32> {
+    pub(crate) fn drawn_offset(&mut self) -> Option<f64> {
         match self {
-            Mutator::Kelemen(_, batch) => batch.drawn(),
-            _ => None,
+            Mutator::Kelemen(_, batch) => batch.drawn().map(f64::from),
+            Mutator::Gaussian(g, batch) => batch.drawn().map(|normal| normal * g.scale_of_steps(1)),
+            Mutator::Adaptive { .. } => None,
         }
     }
 

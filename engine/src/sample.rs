@@ -216,8 +216,8 @@ impl MltSampler {
     ///
     /// Inline, without a call: the cases of most reads, a coordinate read
     /// again in the same iteration, and a proposal's coordinate that has not
-    /// missed a large step moved by a large step or, while Kelemen's kernel
-    /// has an offset drawn, by one small step;
+    /// missed a large step moved by a large step or, while the kernel has an
+    /// offset drawn (Kelemen's, Gaussian), by one small step;
     /// [`read_any`](Self::read_any) does everything (these cases too, with
     /// the same effects).
     #[inline(always)]
@@ -232,8 +232,8 @@ impl MltSampler {
                     Some(uniform_f32(&mut self.rng))
                 } else if c.modified + 1 == iteration {
                     self.kernel
-                        .drawn_kelemen_offset()
-                        .map(|offset| wrap_unit(c.value as f64 + offset as f64))
+                        .drawn_offset()
+                        .map(|offset| wrap_unit(c.value as f64 + offset))
                 } else {
                     None
                 };

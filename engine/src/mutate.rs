@@ -573,7 +573,7 @@ impl Mutator {
 
     /// `value` moved by the small steps of iterations `from + 1 ..= to`
     /// (`from < to`). Kelemen's kernel, the default and the one on every
-    /// path read, is kept inline; the others are out of line.
+    /// path read, is kept inline; the others' sums are out of line.
     #[inline(always)]
     pub(crate) fn advance<R: Rng + ?Sized>(
         &mut self,
@@ -582,14 +582,23 @@ impl Mutator {
         to: u64,
         rng: &mut R,
     ) -> f32 {
-        let Mutator::Kelemen(k, batch) = self else {
-            return self.advance_other(value, from, to, rng);
+        let offset = match self {
+            Mutator::Kelemen(k, batch) => {
+                // The offsets are added in order, as a sum from zero would add them.
+                let mut offset = batch.next(|values| k.fill(rng, values)) as f64;
+                for _ in from + 1..to {
+                    offset += batch.next(|values| k.fill(rng, values)) as f64;
+                }
+                offset
+            }
+            Mutator::Gaussian(g, batch) => gaussian_offset(g, batch, to - from, rng),
+            Mutator::Adaptive {
+                state,
+                record,
+                record_start,
+                ..
+            } => adaptive_offset(state, record, *record_start, from, to, rng),
         };
-        // The offsets are added in order, as a sum from zero would add them.
-        let mut offset = batch.next(|values| k.fill(rng, values)) as f64;
-        for _ in from + 1..to {
-            offset += batch.next(|values| k.fill(rng, values)) as f64;
-        }
         wrap_unit(value as f64 + offset)
     }
 
@@ -604,47 +613,49 @@ impl Mutator {
             Mutator::Adaptive { .. } => None,
         }
     }
+}
 
-    /// [`advance`](Self::advance) for the Gaussian and adaptive kernels.
-    #[inline(never)]
-    fn advance_other<R: Rng + ?Sized>(
-        &mut self,
-        value: f32,
-        from: u64,
-        to: u64,
-        rng: &mut R,
-    ) -> f32 {
-        let offset = match self {
-            Mutator::Kelemen(..) => unreachable!("advance keeps Kelemen's kernel inline"),
-            Mutator::Gaussian(g, batch) => {
-                let normal = batch.next(|values| {
-                    for pair in values.chunks_exact_mut(2) {
-                        pair.copy_from_slice(&unit_normals(rng));
-                    }
-                });
-                normal * g.scale_of_steps(to - from)
-            }
-            Mutator::Adaptive {
-                state,
-                record,
-                record_start,
-                ..
-            } => (from + 1..=to)
-                .map(|iteration| {
-                    let recorded = iteration
-                        .checked_sub(*record_start)
-                        .and_then(|i| record.get(i as usize));
-                    debug_assert!(
-                        recorded.is_some(),
-                        "theta of iteration {iteration} was not recorded"
-                    );
-                    let theta = recorded.map_or(state.theta(), |&t| t as f64);
-                    Adaptive::offset(theta, rng)
-                })
-                .sum(),
-        };
-        wrap_unit(value as f64 + offset)
-    }
+/// The Gaussian kernel's offset for `steps` steps: one normal from `batch`
+/// scaled by `σ√steps` (exact).
+#[inline(never)]
+fn gaussian_offset<R: Rng + ?Sized>(
+    g: &Gaussian,
+    batch: &mut OffsetBatch,
+    steps: u64,
+    rng: &mut R,
+) -> f64 {
+    let normal = batch.next(|values| {
+        for pair in values.chunks_exact_mut(2) {
+            pair.copy_from_slice(&unit_normals(rng));
+        }
+    });
+    normal * g.scale_of_steps(steps)
+}
+
+/// The adaptive kernel's offset for the small steps of iterations
+/// `from + 1 ..= to`, each with the `θ` recorded for it.
+#[inline(never)]
+fn adaptive_offset<R: Rng + ?Sized>(
+    state: &AdaptiveState,
+    record: &[f32],
+    record_start: u64,
+    from: u64,
+    to: u64,
+    rng: &mut R,
+) -> f64 {
+    (from + 1..=to)
+        .map(|iteration| {
+            let recorded = iteration
+                .checked_sub(record_start)
+                .and_then(|i| record.get(i as usize));
+            debug_assert!(
+                recorded.is_some(),
+                "theta of iteration {iteration} was not recorded"
+            );
+            let theta = recorded.map_or(state.theta(), |&t| t as f64);
+            Adaptive::offset(theta, rng)
+        })
+        .sum()
 }
 
 /// `v` wrapped onto `[0, 1)` and rounded to f32. A value that rounds up to 1.0

@@ -127,7 +127,7 @@ where
         traced: bootstrap.traced().paths,
         invalid: bootstrap.traced().invalid,
     };
-    let prior = priors(&bootstrap);
+    let mut prior = priors(&bootstrap);
     let start = |i: usize| -> Result<EnsembleWork<'_, O, I>, Error> {
         let state = EnsembleState {
             ensemble: Ensemble::start(oracle, importance, &ensemble, &bootstrap, i as u64),
@@ -161,7 +161,7 @@ where
         bootstrap = ensemble.bootstrap(oracle, importance, job.seed)?;
         set_up.traced += bootstrap.traced().paths;
         set_up.invalid = bootstrap.traced().invalid;
-        let prior = priors(&bootstrap);
+        prior = priors(&bootstrap);
         for w in work.iter_mut() {
             w.state
                 .ensemble
@@ -172,7 +172,7 @@ where
     }
 
     let mut ensembles = Splatting::new(work, bands, traces_per_sweep)?;
-    let saver = saver(set_up, &ensemble.ladder, &priors(&bootstrap));
+    let saver = saver(set_up, &ensemble.ladder, &prior);
     let driven = drive(&mut ensembles, job.round_loop(None), saver);
     Ok(finish(ensembles, driven, ensemble.ladder, set_up))
 }

@@ -1,16 +1,15 @@
 //! Engine overhead: PSSMLT vs MC cost per path on the same oracle, measured
 //! in one run, interleaved (MC, PSSMLT, MC, PSSMLT, ...) so machine noise
 //! hits both; reports the ratio of medians for the procedural oracle and for
-//! the native path tracer on the Cornell box, with Kelemen's small step
-//! (exact catch-up replays every missed step) and the Gaussian one (catch-up
-//! in one draw), and writes them to a JSON file.
+//! the native path tracer on the Cornell box, with Kelemen's small step and
+//! the Gaussian one, and writes them to a JSON file.
 //!
 //! It also bounds from below what a primary-sample-space Metropolis step
 //! with this engine's Kelemen offsets could cost on the procedural oracle:
 //! MC's own cost per path plus, for the small steps, one offset per
 //! coordinate the path reads in place of MC's uniform draw. Nothing else (the
-//! second splat of expected values, the acceptance draw, backups, catch-up,
-//! the bootstrap) is counted, so any implementation with these offsets costs
+//! second splat of expected values, the acceptance draw, backups, forgotten
+//! coordinates redrawn, the bootstrap) is counted, so any implementation with these offsets costs
 //! more.
 //!
 //! ```text
@@ -192,7 +191,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The floor of a Metropolis step on the procedural oracle (Kelemen,
     // large steps 0.3): MC's path, plus, per small step, one offset per
     // coordinate beyond MC's uniform draw. Nothing else (the second splat,
-    // the acceptance draw, backups, catch-up, the bootstrap) is counted.
+    // the acceptance draw, backups, forgotten coordinates, the bootstrap) is counted.
     let coordinates = coordinates_per_path(&procedural, 1 << 20);
     let offset = pool.install(|| offset_cost(args.repeats));
     let mc = rows[0].1.0;

@@ -598,17 +598,19 @@ fn replica_exchange_images_match_closed_form_pixels() {
 #[test]
 fn oracle_tempering_images_match_a_gaussian_mixture() {
     // The mixture flattens with T (covariances scaled), so every chain's
-    // target differs and the MIS weights of eq. 5.13 matter.
+    // target differs and the MIS weights of eq. 5.13 matter. 512 paths per
+    // pixel: at 128 the far tails of the mixture (pixels of 1e-11 to 1e-3 of
+    // the image mean) are visited too rarely in a run for a mean of 32 runs
+    // to be near normal, and neighbour swaps failed there at most seed
+    // ranges. The equi-energy sampler is not here: its finite-time bias (a
+    // few percent at these budgets, docs/RESULTS.md) shows at 512 paths.
     let mixture = GaussianMixture::random(6, 3, (0.03, 0.12), Resolution::new(12, 12), 4);
     let reference = mixture.reference(1.0);
-    for kind in [
-        ExchangeKind::NeighborSwap,
-        ExchangeKind::thesis_equi_energy_sampler(50),
-    ] {
+    for kind in [ExchangeKind::NeighborSwap, ExchangeKind::IsSwap] {
         let mut replica = replica_settings(kind);
         replica.ensemble.tempering = Tempering::Oracle;
         let method = Method::Replica(replica);
-        let runs = common::renders(&mixture, &Luminance, &method, 128, 0..common::RUNS);
+        let runs = common::renders(&mixture, &Luminance, &method, 512, 0..common::RUNS);
         common::check(kind.name(), &runs, &reference);
     }
 }

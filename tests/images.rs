@@ -3,7 +3,7 @@
 
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
 use strata::engine::method::PssmltSettings;
-use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
+use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
 use strata::engine::target::{Luminance, MaxChannel};
 use strata::engine::{
     Budget, FilmPoint, FnOracle, Method, PathOracle, PathSample, Resolution, Sampler, Settings,
@@ -102,4 +102,48 @@ fn pssmlt_brightness_error_falls_below_the_bootstraps() {
         (mean - 1.0).abs() < 4.0 * sd / n.sqrt(),
         "mean {mean}, sd {sd}"
     );
+}
+
+/// A target whose paths read a number of coordinates that depends on the
+/// values read (a Russian roulette): the case where the lazy sampler forgets
+/// what the current state did not read (`sample` module docs). A path
+/// continues past depth `k` with probability `q` (up to depth 6), each
+/// depth multiplies its throughput by `2v` (mean 1) and adds it, so pixel
+/// `x` integrates to `(1 + x/8) Σ_{k<=6} q^k` at the pixel's centre `x`.
+/// Checked for every small-step kernel.
+#[test]
+fn pssmlt_matches_a_target_whose_paths_vary_in_length() {
+    let q = 0.7f32;
+    let resolution = Resolution::new(8, 4);
+    let oracle = FnOracle::new(
+        resolution,
+        move |film: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+            let (mut throughput, mut sum) = (1.0f32, 1.0f32);
+            for _ in 0..6 {
+                if s.next_1d() >= q {
+                    break;
+                }
+                throughput *= 2.0 * s.next_1d();
+                sum += throughput;
+            }
+            PathSample::new((1.0 + film.x / 8.0) * sum)
+        },
+    );
+    let depths: f64 = (0..=6).map(|k| (q as f64).powi(k)).sum();
+    let data = (0..resolution.pixel_count())
+        .map(|i| (1.0 + ((i as u32 % resolution.width) as f64 + 0.5) / 8.0) * depths)
+        .collect();
+    let reference = strata::engine::Film::from_data(resolution, 1, data).unwrap();
+    for small_step in [
+        SmallStep::Kelemen(Kelemen::DEFAULT),
+        SmallStep::Gaussian(Gaussian::DEFAULT),
+        SmallStep::Adaptive(Adaptive::DEFAULT),
+    ] {
+        let method = pssmlt(MutationParams {
+            small_step,
+            large_step_probability: 0.3,
+        });
+        let runs = renders(&oracle, &Luminance, &method, 512, 0..RUNS);
+        check(small_step.name(), &runs, &reference);
+    }
 }

@@ -14,7 +14,7 @@
 //! | layer | module | owns |
 //! |---|---|---|
 //! | contract | [`oracle`] | what a renderer implements: [`PathOracle`], [`Sampler`], [`Radiance`], [`PathSample`]; [`FnOracle`] |
-//! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], [`purity`] | random streams; the small-step kernels whole (catch-up included); the lazily mutated primary sample; importance functions; accumulation buffers; the purity check |
+//! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], [`purity`] | random streams; the small-step kernels whole; the lazily mutated primary sample; importance functions; accumulation buffers; the purity check |
 //! | one step | [`chain`] | the Metropolis-Hastings step with expected-values splatting, over any [`Target`](chain::Target) and [`Weights`](chain::Weights) |
 //! | set-up | [`bootstrap`] | start-up bias elimination: `b*` per level, importance-resampled chain starts |
 //! | one loop | [`drive`], [`checkpoint`] | budgets, clock, observer, the round loop, the deterministic merge, statistics; the render's state saved between rounds and resumed |

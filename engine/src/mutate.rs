@@ -4,11 +4,8 @@
 //! independent offset `d`, symmetric about zero, and wraps the result onto
 //! `[0, 1)`: the proposal is symmetric (`q(u -> v) = q(v -> u)`), so it cancels
 //! in the Metropolis-Hastings acceptance (eq. 3.2). A large step replaces the
-//! whole vector by a uniform one (also symmetric). Offsets of several steps
-//! compose by addition on the circle, which is what the lazy sampler uses to
-//! catch up coordinates that were not read for a while.
+//! whole vector by a uniform one (also symmetric).
 
-use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
 use rand_core::Rng;
@@ -134,7 +131,6 @@ fn exp_neg_f32(x: f32) -> f32 {
 }
 
 /// Gaussian small step with standard deviation `sigma` (pbrt-v4's MLTSampler).
-/// `n` steps are exactly one step of standard deviation `sigma·sqrt(n)`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Gaussian {
     sigma: f64,
@@ -157,16 +153,10 @@ impl Gaussian {
         self.sigma
     }
 
-    /// The sum of `n` steps' offsets, drawn exactly.
+    /// One offset.
     #[inline]
-    pub fn offset_of_steps<R: Rng + ?Sized>(&self, n: u64, rng: &mut R) -> f64 {
-        unit_normals(rng)[0] * self.scale_of_steps(n)
-    }
-
-    /// Standard deviation of the sum of `n` steps, `sigma·sqrt(n)`.
-    #[inline]
-    pub fn scale_of_steps(&self, n: u64) -> f64 {
-        self.sigma * libm::sqrt(n as f64)
+    pub fn offset<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        unit_normals(rng)[0] * self.sigma
     }
 
     /// `P(|d| <= x)` for one step.
@@ -455,35 +445,22 @@ impl MutationParams {
     }
 }
 
-/// A small-step kernel with its running state, applied lazily (seed 002 sec.
-/// 4.2.1; pbrt-v4's `MLTSampler`): [`advance`](Self::advance) moves a
-/// coordinate by every small step it missed since it was last up to date.
-/// The Gaussian kernel catches up exactly in one draw of standard deviation
-/// `σ√n`; Kelemen's replays the `n` offsets; the adaptive kernel replays them
-/// with the `θ` recorded for each of those iterations. That record starts
-/// over at every accepted large step (older coordinates are redrawn
-/// uniformly anyway), and when it reaches [`THETA_RECORD_LIMIT`] entries the
-/// sampler brings every coordinate up to date and clears it, which is exact
-/// and bounds memory when large steps are rare.
+/// A small-step kernel with its running state (the adaptive kernel's `θ`),
+/// applied by the lazy sampler one coordinate at a time: a small step moves
+/// each coordinate the current state read by one offset (the others are
+/// forgotten; see the `sample` module).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) enum Mutator {
     /// Offsets drawn in batches.
     Kelemen(Kelemen, OffsetBatch<f32>),
-    /// Unit normals drawn in batches, scaled by `sigma·sqrt(steps)`.
+    /// Unit normals drawn in batches, scaled by `sigma`.
     Gaussian(Gaussian, OffsetBatch),
     /// Eq. 6.8 with `θ` adapted by eq. 4.10.
     Adaptive {
         kernel: Adaptive,
         state: AdaptiveState,
-        /// `θ` of each accepted small-step iteration from `record_start` on.
-        record: Vec<f32>,
-        record_start: u64,
     },
 }
-
-/// Past this many recorded `θ`s, every coordinate is brought up to date and
-/// the record is cleared (see [`Mutator`]).
-pub(crate) const THETA_RECORD_LIMIT: usize = 4096;
 
 impl Mutator {
     pub(crate) fn new(step: SmallStep) -> Self {
@@ -493,8 +470,6 @@ impl Mutator {
             SmallStep::Adaptive(a) => Mutator::Adaptive {
                 kernel: a,
                 state: AdaptiveState::new(&a),
-                record: Vec::new(),
-                record_start: 1,
             },
         }
     }
@@ -516,146 +491,55 @@ impl Mutator {
         }
     }
 
-    /// Whether the `θ` record is full: every coordinate must be brought up to
-    /// date (then [`clear_record`](Self::clear_record)) before the next proposal.
-    pub(crate) fn record_full(&self) -> bool {
-        matches!(self, Mutator::Adaptive { record, .. } if record.len() >= THETA_RECORD_LIMIT)
-    }
-
-    /// Whether the record grew past its limit (never, if the sampler obeys
-    /// [`record_full`](Self::record_full)).
-    #[cfg(test)]
-    pub(crate) fn record_overflowed(&self) -> bool {
-        matches!(self, Mutator::Adaptive { record, .. } if record.len() > THETA_RECORD_LIMIT)
-    }
-
-    /// Starts the record over after iteration `iteration`: no coordinate
-    /// needs an older `θ`.
-    pub(crate) fn clear_record(&mut self, iteration: u64) {
-        if let Mutator::Adaptive {
-            record,
-            record_start,
-            ..
-        } = self
-        {
-            record.clear();
-            *record_start = iteration + 1;
-        }
-    }
-
-    /// A small-step proposal opens: its `θ` is recorded.
-    pub(crate) fn open_small_step(&mut self) {
-        if let Mutator::Adaptive { state, record, .. } = self {
-            record.push(state.theta() as f32);
-        }
-    }
-
-    /// The open proposal was accepted or rejected with probability
-    /// `acceptance`; `iteration` is the sampler's accepted iterations after it.
-    pub(crate) fn close(&mut self, large: bool, accepted: bool, acceptance: f64, iteration: u64) {
-        if large {
-            if accepted {
-                self.clear_record(iteration);
-            }
-        } else if let Mutator::Adaptive {
-            kernel,
-            state,
-            record,
-            ..
-        } = self
-        {
-            if !accepted {
-                record.pop();
-            }
+    /// A small step was accepted or rejected with probability `acceptance`
+    /// (the adaptive kernel's `θ` follows it, eq. 4.10).
+    pub(crate) fn close_small_step(&mut self, acceptance: f64) {
+        if let Mutator::Adaptive { kernel, state } = self {
             state.update(kernel, acceptance);
         }
     }
 
-    /// `value` moved by the small steps of iterations `from + 1 ..= to`
-    /// (`from < to`). Kelemen's kernel, the default and the one on every
-    /// path read, is kept inline; the others' sums are out of line.
+    /// `value` moved by one small step. Kelemen's kernel, the default and
+    /// the one on every path read, is kept inline; the others are out of
+    /// line.
     #[inline(always)]
-    pub(crate) fn advance<R: Rng + ?Sized>(
-        &mut self,
-        value: f32,
-        from: u64,
-        to: u64,
-        rng: &mut R,
-    ) -> f32 {
+    pub(crate) fn step<R: Rng + ?Sized>(&mut self, value: f32, rng: &mut R) -> f32 {
         let offset = match self {
-            Mutator::Kelemen(k, batch) => {
-                // The offsets are added in order, as a sum from zero would add them.
-                let mut offset = batch.next(|values| k.fill(rng, values)) as f64;
-                for _ in from + 1..to {
-                    offset += batch.next(|values| k.fill(rng, values)) as f64;
-                }
-                offset
-            }
-            Mutator::Gaussian(g, batch) => gaussian_offset(g, batch, to - from, rng),
-            Mutator::Adaptive {
-                state,
-                record,
-                record_start,
-                ..
-            } => adaptive_offset(state, record, *record_start, from, to, rng),
+            Mutator::Kelemen(k, batch) => batch.next(|values| k.fill(rng, values)) as f64,
+            Mutator::Gaussian(g, batch) => gaussian_offset(g, batch, rng),
+            Mutator::Adaptive { state, .. } => adaptive_offset(state, rng),
         };
         wrap_unit(value as f64 + offset)
     }
 
-    /// The offset [`advance`](Self::advance) would add for one step, if it
-    /// is drawn already (Kelemen's and the Gaussian kernel's batches), else
-    /// `None`: a read that needs no call.
+    /// The offset [`step`](Self::step) would add, if it is drawn already
+    /// (Kelemen's and the Gaussian kernel's batches), else `None`: a read
+    /// that needs no call.
     #[inline(always)]
     pub(crate) fn drawn_offset(&mut self) -> Option<f64> {
         match self {
             Mutator::Kelemen(_, batch) => batch.drawn().map(f64::from),
-            Mutator::Gaussian(g, batch) => batch.drawn().map(|normal| normal * g.scale_of_steps(1)),
+            Mutator::Gaussian(g, batch) => batch.drawn().map(|normal| normal * g.sigma),
             Mutator::Adaptive { .. } => None,
         }
     }
 }
 
-/// The Gaussian kernel's offset for `steps` steps: one normal from `batch`
-/// scaled by `σ√steps` (exact).
+/// The Gaussian kernel's offset: one normal from `batch` scaled by `σ`.
 #[inline(never)]
-fn gaussian_offset<R: Rng + ?Sized>(
-    g: &Gaussian,
-    batch: &mut OffsetBatch,
-    steps: u64,
-    rng: &mut R,
-) -> f64 {
+fn gaussian_offset<R: Rng + ?Sized>(g: &Gaussian, batch: &mut OffsetBatch, rng: &mut R) -> f64 {
     let normal = batch.next(|values| {
         for pair in values.chunks_exact_mut(2) {
             pair.copy_from_slice(&unit_normals(rng));
         }
     });
-    normal * g.scale_of_steps(steps)
+    normal * g.sigma
 }
 
-/// The adaptive kernel's offset for the small steps of iterations
-/// `from + 1 ..= to`, each with the `θ` recorded for it.
+/// The adaptive kernel's offset at its current `θ`.
 #[inline(never)]
-fn adaptive_offset<R: Rng + ?Sized>(
-    state: &AdaptiveState,
-    record: &[f32],
-    record_start: u64,
-    from: u64,
-    to: u64,
-    rng: &mut R,
-) -> f64 {
-    (from + 1..=to)
-        .map(|iteration| {
-            let recorded = iteration
-                .checked_sub(record_start)
-                .and_then(|i| record.get(i as usize));
-            debug_assert!(
-                recorded.is_some(),
-                "theta of iteration {iteration} was not recorded"
-            );
-            let theta = recorded.map_or(state.theta(), |&t| t as f64);
-            Adaptive::offset(theta, rng)
-        })
-        .sum()
+fn adaptive_offset<R: Rng + ?Sized>(state: &AdaptiveState, rng: &mut R) -> f64 {
+    Adaptive::offset(state.theta(), rng)
 }
 
 /// `v` wrapped onto `[0, 1)` and rounded to f32. A value that rounds up to 1.0
@@ -786,7 +670,7 @@ mod tests {
             ),
             (
                 "gaussian",
-                alloc::boxed::Box::new(|r| gaussian.offset_of_steps(1, r)),
+                alloc::boxed::Box::new(|r| gaussian.offset(r)),
                 alloc::boxed::Box::new(|x| gaussian.abs_cdf(x)),
             ),
             (
@@ -838,24 +722,6 @@ mod tests {
         assert_eq!(exp_neg_f32(-1.0), exp_neg_f32(0.0));
         assert!(exp_neg_f32(f32::INFINITY) >= 0.0);
         assert!(exp_neg_f32(1e30) < 1e-37);
-    }
-
-    #[test]
-    fn gaussian_steps_compose_exactly() {
-        // Var of n steps = n sigma^2.
-        let g = Gaussian::new(0.02).unwrap();
-        let mut rng = stream(4, Domain::User, 0);
-        let n = 50_000;
-        let var = (0..n)
-            .map(|_| g.offset_of_steps(9, &mut rng).powi(2))
-            .sum::<f64>()
-            / n as f64;
-        let expected = 9.0 * 0.02f64 * 0.02;
-        // Sample variance of a normal: relative sd sqrt(2/n) ~ 0.6 %; allow 5 sd.
-        assert!(
-            (var / expected - 1.0).abs() < 5.0 * libm::sqrt(2.0 / n as f64),
-            "var {var} vs {expected}"
-        );
     }
 
     #[test]

@@ -194,7 +194,9 @@ impl MltSampler {
         }
     }
 
-    /// Reads the current state again without mutating it.
+    /// Reads the current state again without mutating it. A coordinate the
+    /// state did not read (forgotten, or never drawn) is drawn uniformly and
+    /// kept as part of the state from then on.
     pub fn replay(&mut self) -> Replay<'_> {
         Replay {
             cursor: Cursor::new(),

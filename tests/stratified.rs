@@ -472,7 +472,7 @@ fn image_mean_z<O: PathOracle>(
 /// regularizer takes only the large steps the coin chose, whose choice does
 /// not depend on what they find. With the dark tiles' forced steps counted
 /// too, the sampling stopped at the first light found: the sparse light's
-/// image came out 5 % bright at 20-32 spp (z 8.7 over these 48 renders).
+/// image came out 5 % bright at 20-32 spp (z 8.5 over these 48 renders).
 #[test]
 fn tiles_that_start_dark_do_not_brighten_the_image() {
     let z = image_mean_z(

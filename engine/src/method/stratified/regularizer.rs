@@ -2,9 +2,11 @@
 //! eq. 11, and two uses of it that are ours, not seed 001's: the fallback
 //! to it and the image's total.
 //!
-//! Every large step of a tile chain is an independent uniform sample of each
-//! tile pixel; pooled over the tiles holding a pixel they give an unbiased
-//! estimate of it. Tile chains that start far from a rare bright path (a
+//! Every large step a tile chain's coin chose (probability `p`, drawn at
+//! every step, also while the tile is dark and makes only large steps) is an
+//! independent uniform sample of each tile pixel; which steps they are does
+//! not depend on what they find, so pooled over the tiles holding a pixel
+//! they give an unbiased estimate of it. Tile chains that start far from a rare bright path (a
 //! caustic, a glint) carry start-up bias in their within-tile ratios, and
 //! the reconstruction, which treats such tiles as outliers, then dims the
 //! brightest pixels (seed 001 sec. 5 and Fig. 9 report the same loss):

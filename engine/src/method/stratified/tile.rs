@@ -2,8 +2,8 @@
 //! primary sample whose film coordinates are a jitter inside a pixel,
 //! replayed in every pixel of the tile (coherent sampling); its target is the
 //! largest importance of those evaluations; its steps splat into the tile's
-//! unscaled estimates `G_s(k)`, and its large steps also into the Monte
-//! Carlo regularizer.
+//! unscaled estimates `G_s(k)`, and the large steps its coin chose also into
+//! the Monte Carlo regularizer.
 
 use alloc::vec;
 use alloc::vec::Vec;
@@ -52,11 +52,12 @@ pub(super) struct TileChain<R> {
     pub decisions: Pcg32,
     /// `N G_s(k)` per offset and channel.
     pub unscaled: Vec<f64>,
-    /// Sum of the large steps' radiance per offset and channel.
+    /// Sum of the coin-chosen large steps' radiance per offset and channel.
     pub uniform: Vec<f64>,
-    /// Sum of the squared channel mean of the large steps' radiance per
-    /// offset (the regularizer's variance).
+    /// Sum of the squared channel mean of the coin-chosen large steps'
+    /// radiance per offset (the regularizer's variance).
     pub uniform_squares: Vec<f64>,
+    /// Coin-chosen large steps: the regularizer's samples.
     pub large_steps: u64,
     /// Plain MC paths traced at the tile's centre pixel for the regularizer
     /// ([`StratifiedSettings::regularizer_paths`](super::StratifiedSettings)),
@@ -245,8 +246,8 @@ impl<R: Radiance> TileChain<R> {
         // are the regularizer's samples: which steps those are then does not
         // depend on what the tile found, and their mean is unbiased. (Counting
         // the dark tile's forced steps too stopped the sampling at the first
-        // light found, and made a light 30 % of paths reach 5 % bright at
-        // 20-32 spp.)
+        // light found: a light that 30 % of paths reach came out 5 % bright
+        // at 20-32 spp.)
         let chosen = uniform_f64(&mut self.decisions) < ctx.p_large;
         let large = dark || chosen;
         let unscaled = &mut self.unscaled;

@@ -483,14 +483,6 @@ impl Mutator {
         }
     }
 
-    /// The adaptive kernel's current `θ`.
-    pub(crate) fn adaptive_theta(&self) -> Option<f64> {
-        match self {
-            Mutator::Adaptive { state, .. } => Some(state.theta()),
-            _ => None,
-        }
-    }
-
     /// A small step was accepted or rejected with probability `acceptance`
     /// (the adaptive kernel's `θ` follows it, eq. 4.10).
     pub(crate) fn close_small_step(&mut self, acceptance: f64) {

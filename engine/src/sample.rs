@@ -63,25 +63,24 @@ impl Sampler for IndependentSampler {
     }
 }
 
-/// One coordinate of the primary sample.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
-struct Coordinate {
-    value: f32,
-    backup: f32,
-    /// The iteration whose state read this value (the proposal's, while a
-    /// proposal is open); a value of an older iteration, or [`FORGOTTEN`],
-    /// is not part of the current state.
-    modified: u64,
-    backup_modified: u64,
+/// One stream of the primary sample: what the current state read of it, and
+/// what the open proposal has read. A trace reads a stream from its start,
+/// one number after the other, so what a state read of a stream is a prefix;
+/// everything beyond it is forgotten.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+struct Stream {
+    /// The values the current state read, in the order read.
+    state: Vec<f32>,
+    /// The values the open proposal has read so far (the state's moved by
+    /// one small step, or fresh ones); the state itself if it is accepted.
+    #[serde(skip)]
+    proposal: Vec<f32>,
 }
-
-/// The `modified` of a coordinate that no iteration has read.
-const FORGOTTEN: u64 = u64::MAX;
 
 /// Counters of one sampler.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SamplerStats {
-    /// Coordinates currently held, over all streams.
+    /// Coordinates the current state holds, over all streams.
     pub coordinates: usize,
 }
 
@@ -95,15 +94,8 @@ pub struct SamplerStats {
 pub struct MltSampler {
     kernel: Mutator,
     rng: Pcg32,
-    /// Accepted iterations so far, plus one while a proposal is open.
-    iteration: u64,
     large_step: bool,
-    streams: [Vec<Coordinate>; STREAMS],
-    /// The coordinates the open proposal has mutated: the first
-    /// `touched[s]` of each stream `s` (a proposal reads every stream in
-    /// order from its start, so what it read of a stream is a prefix).
-    #[serde(skip)]
-    touched: [u32; STREAMS],
+    streams: [Stream; STREAMS],
 }
 
 impl MltSampler {
@@ -113,10 +105,8 @@ impl MltSampler {
         Self {
             kernel: Mutator::new(small_step),
             rng,
-            iteration: 0,
             large_step: true,
             streams: Default::default(),
-            touched: [0; STREAMS],
         }
     }
 
@@ -129,7 +119,10 @@ impl MltSampler {
             streams,
             ..Self::new(self.kernel.small_step(), rng)
         };
-        self.streams.iter_mut().for_each(Vec::clear);
+        for stream in &mut self.streams {
+            stream.state.clear();
+            stream.proposal.clear();
+        }
     }
 
     /// Replaces the random stream used for future mutations. A chain started
@@ -139,20 +132,10 @@ impl MltSampler {
         self.rng = rng;
     }
 
-    /// Accepted iterations so far.
-    pub fn iteration(&self) -> u64 {
-        self.iteration
-    }
-
-    /// The current `θ` of the adaptive kernel.
-    pub fn adaptive_theta(&self) -> Option<f64> {
-        self.kernel.adaptive_theta()
-    }
-
     /// Counters.
     pub fn stats(&self) -> SamplerStats {
         SamplerStats {
-            coordinates: self.streams.iter().map(Vec::len).sum(),
+            coordinates: self.streams.iter().map(|s| s.state.len()).sum(),
         }
     }
 
@@ -168,25 +151,19 @@ impl MltSampler {
     /// (each in `[0, 1)`), e.g. to re-express a film position as a jitter
     /// within a pixel. Outside a proposal only.
     pub fn set_film(&mut self, u: [f32; 2]) {
-        for index in self.streams[FILM_STREAM].len()..2 {
-            self.read(FILM_STREAM, index, false);
+        for index in 0..2 {
+            self.read_state(FILM_STREAM, index);
         }
-        for (index, value) in u.into_iter().enumerate() {
-            self.streams[FILM_STREAM][index] = Coordinate {
-                value,
-                backup: value,
-                modified: self.iteration,
-                backup_modified: self.iteration,
-            };
-        }
+        self.streams[FILM_STREAM].state[..2].copy_from_slice(&u);
     }
 
     /// Opens a proposal: a large step (fresh uniform sample) if `large`, a
     /// small step otherwise.
     pub fn propose(&mut self, large: bool) -> Proposal<'_> {
-        self.iteration += 1;
         self.large_step = large;
-        self.touched = [0; STREAMS];
+        for stream in &mut self.streams {
+            stream.proposal.clear();
+        }
         Proposal {
             cursor: Cursor::new(),
             sampler: self,
@@ -204,15 +181,13 @@ impl MltSampler {
         }
     }
 
+    /// Closes the open proposal: an accepted one becomes the state, and
+    /// what the state read beyond it is forgotten with the rest.
     fn finish(&mut self, accept: bool, acceptance: f64) {
-        if !accept {
-            for (stream, &touched) in self.streams.iter_mut().zip(&self.touched) {
-                for c in &mut stream[..touched as usize] {
-                    c.value = c.backup;
-                    c.modified = c.backup_modified;
-                }
+        if accept {
+            for stream in &mut self.streams {
+                core::mem::swap(&mut stream.state, &mut stream.proposal);
             }
-            self.iteration -= 1;
         }
         if !self.large_step {
             self.kernel.close_small_step(acceptance);
@@ -220,82 +195,50 @@ impl MltSampler {
         self.large_step = false;
     }
 
-    /// The coordinate `index` of `stream`, mutated for the open proposal
-    /// (`proposing`) or as the current state has it.
+    /// The coordinate `index` of `stream` for the open proposal: the value
+    /// it read already, or the next one (`index` is what it has read of the
+    /// stream): a fresh uniform number for a large step or a forgotten
+    /// coordinate, else the state's moved by one small step.
     ///
-    /// Inline, without a call: the cases of most reads, a coordinate read
-    /// again in the same iteration, and a proposal's coordinate of the
-    /// current state moved by a large step or, while the kernel has an offset
-    /// drawn (Kelemen's, Gaussian), by a small step;
-    /// [`read_any`](Self::read_any) does everything (these cases too, with
-    /// the same effects).
+    /// Inline, without a call, unless the kernel has to draw offsets (a
+    /// batch refill, the adaptive kernel).
     #[inline(always)]
-    fn read(&mut self, stream: usize, index: usize, proposing: bool) -> f32 {
-        let iteration = self.iteration;
-        if let Some(c) = self.streams[stream].get_mut(index) {
-            if c.modified == iteration {
-                return c.value;
-            }
-            // While a proposal is open, the current state's iteration is `iteration - 1`.
-            if proposing && c.modified.wrapping_add(1) == iteration {
-                let moved = if self.large_step {
-                    Some(uniform_f32(&mut self.rng))
-                } else {
-                    self.kernel
-                        .drawn_offset()
-                        .map(|offset| wrap_unit(c.value as f64 + offset))
-                };
-                if let Some(value) = moved {
-                    c.backup = c.value;
-                    c.backup_modified = c.modified;
-                    c.value = value;
-                    c.modified = iteration;
-                    self.touched[stream] = index as u32 + 1;
-                    return value;
-                }
-            }
+    fn read_proposal(&mut self, stream: usize, index: usize) -> f32 {
+        let Stream { state, proposal } = &mut self.streams[stream];
+        if let Some(&value) = proposal.get(index) {
+            return value;
         }
-        self.read_any(stream, index, proposing)
-    }
-
-    /// [`read`](Self::read) in every case: a coordinate never read, a
-    /// forgotten one (drawn uniformly), a small step that draws its offset.
-    #[inline(never)]
-    fn read_any(&mut self, stream: usize, index: usize, proposing: bool) -> f32 {
-        let iteration = self.iteration;
-        let coordinates = &mut self.streams[stream];
-        if index == coordinates.len() {
-            coordinates.push(Coordinate {
-                value: 0.0,
-                backup: 0.0,
-                modified: FORGOTTEN,
-                backup_modified: FORGOTTEN,
-            });
-        }
-        let mut c = coordinates[index];
-        if c.modified == iteration {
-            return c.value;
-        }
-        let of_current_state = c.modified == iteration - proposing as u64;
-        let value = if proposing && of_current_state && !self.large_step {
-            self.kernel.step(c.value, &mut self.rng)
-        } else {
-            uniform_f32(&mut self.rng)
+        debug_assert_eq!(index, proposal.len(), "a stream is read from its start");
+        let value = match state.get(index) {
+            Some(&current) if !self.large_step => match self.kernel.drawn_offset() {
+                Some(offset) => wrap_unit(current as f64 + offset),
+                None => step_out_of_line(&mut self.kernel, current, &mut self.rng),
+            },
+            _ => uniform_f32(&mut self.rng),
         };
-        if proposing {
-            c.backup = c.value;
-            c.backup_modified = c.modified;
-            self.touched[stream] = index as u32 + 1;
-        } else {
-            // Drawn for the current state: part of it from now on.
-            c.backup = value;
-            c.backup_modified = iteration;
-        }
-        c.value = value;
-        c.modified = iteration;
-        self.streams[stream][index] = c;
+        proposal.push(value);
         value
     }
+
+    /// The coordinate `index` of `stream` as the current state has it; one
+    /// it did not read is drawn uniformly and becomes part of it.
+    #[inline(always)]
+    fn read_state(&mut self, stream: usize, index: usize) -> f32 {
+        let state = &mut self.streams[stream].state;
+        if let Some(&value) = state.get(index) {
+            return value;
+        }
+        debug_assert_eq!(index, state.len(), "a stream is read from its start");
+        let value = uniform_f32(&mut self.rng);
+        state.push(value);
+        value
+    }
+}
+
+/// `value` moved by one small step that draws its offset.
+#[inline(never)]
+fn step_out_of_line(kernel: &mut Mutator, value: f32, rng: &mut Pcg32) -> f32 {
+    kernel.step(value, rng)
 }
 
 /// The largest f32 below 1.
@@ -351,8 +294,8 @@ impl Proposal<'_> {
     /// coordinates); leaves the cursor at the start of oracle stream 0.
     pub fn film_point(&mut self, resolution: Resolution) -> FilmPoint {
         let u = [
-            self.sampler.read(FILM_STREAM, 0, true),
-            self.sampler.read(FILM_STREAM, 1, true),
+            self.sampler.read_proposal(FILM_STREAM, 0),
+            self.sampler.read_proposal(FILM_STREAM, 1),
         ];
         self.cursor.oracle_stream(0);
         resolution.film_point(u)
@@ -369,10 +312,10 @@ impl Proposal<'_> {
         let size = [resolution.width, resolution.height];
         let mut u = [0.0f32; 2];
         for (i, u) in u.iter_mut().enumerate() {
-            let jitter = self.sampler.read(FILM_STREAM, i, true);
+            let jitter = self.sampler.read_proposal(FILM_STREAM, i);
             let value = ((cell[i] as f64 + jitter as f64) / size[i] as f64) as f32;
             *u = value.min(f32_below_one());
-            self.sampler.streams[FILM_STREAM][i].value = *u;
+            self.sampler.streams[FILM_STREAM].proposal[i] = *u;
         }
         self.cursor.oracle_stream(0);
         resolution.film_point(u)
@@ -397,8 +340,7 @@ impl Proposal<'_> {
         self.sampler.finish(true, acceptance);
     }
 
-    /// Restores the previous state, in time proportional to the number of
-    /// coordinates this proposal touched.
+    /// Keeps the previous state (the proposal's values are dropped).
     pub fn reject(mut self, acceptance: f64) {
         self.finished = true;
         self.sampler.finish(false, acceptance);
@@ -417,7 +359,7 @@ impl Sampler for Proposal<'_> {
     #[inline]
     fn next_1d(&mut self) -> f32 {
         let (s, i) = self.cursor.advance();
-        self.sampler.read(s, i, true)
+        self.sampler.read_proposal(s, i)
     }
     fn start_stream(&mut self, stream: u8) {
         self.cursor.oracle_stream(stream);
@@ -436,8 +378,8 @@ impl Replay<'_> {
     /// of oracle stream 0.
     pub fn film_point(&mut self, resolution: Resolution) -> FilmPoint {
         let u = [
-            self.sampler.read(FILM_STREAM, 0, false),
-            self.sampler.read(FILM_STREAM, 1, false),
+            self.sampler.read_state(FILM_STREAM, 0),
+            self.sampler.read_state(FILM_STREAM, 1),
         ];
         self.cursor.oracle_stream(0);
         resolution.film_point(u)
@@ -453,7 +395,7 @@ impl Sampler for Replay<'_> {
     #[inline]
     fn next_1d(&mut self) -> f32 {
         let (s, i) = self.cursor.advance();
-        self.sampler.read(s, i, false)
+        self.sampler.read_state(s, i)
     }
     fn start_stream(&mut self, stream: u8) {
         self.cursor.oracle_stream(stream);

@@ -135,7 +135,7 @@ pub trait Weights<S> {
     fn weights(&self, acceptance: f64, large_step: bool, current: &S, proposed: &S) -> [f64; 2];
 }
 
-/// A Markov chain over primary samples: the lazily mutated sample and the
+/// A Markov chain over primary samples: the mutated primary sample and the
 /// state it encodes. Its accept/reject decisions and counters are kept by
 /// the caller, so that states can be exchanged between chains (replica
 /// exchange) while each chain keeps its own.

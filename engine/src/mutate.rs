@@ -204,22 +204,16 @@ impl<T: Copy + Default> Default for OffsetBatch<T> {
 }
 
 impl<T: Copy> OffsetBatch<T> {
-    /// The next value, refilling the batch with `fill` when it is spent.
+    /// The next `n` values or, if fewer are left, those (at least one),
+    /// refilling the batch with `fill` when it is spent.
     #[inline]
-    pub fn next(&mut self, fill: impl FnOnce(&mut [T; BATCH_LEN])) -> T {
+    pub fn take(&mut self, n: usize, fill: impl FnOnce(&mut [T; BATCH_LEN])) -> &[T] {
         if self.next == BATCH_LEN {
             self.refill(fill);
         }
-        self.next += 1;
-        self.values[self.next - 1]
-    }
-
-    /// The next value if the batch holds one (no refill).
-    #[inline(always)]
-    pub fn drawn(&mut self) -> Option<T> {
-        let value = self.values.get(self.next).copied();
-        self.next += value.is_some() as usize;
-        value
+        let start = self.next;
+        self.next = (start + n).min(BATCH_LEN);
+        &self.values[start..self.next]
     }
 
     /// Once in [`BATCH_LEN`] draws: kept out of line so that the draws
@@ -445,10 +439,9 @@ impl MutationParams {
     }
 }
 
-/// A small-step kernel with its running state (the adaptive kernel's `θ`),
-/// applied by the lazy sampler one coordinate at a time: a small step moves
-/// each coordinate the current state read by one offset (the others are
-/// forgotten; see the `sample` module).
+/// A small-step kernel with its running state (the adaptive kernel's `θ`): a
+/// small step moves each coordinate the current state read by one offset
+/// (the others are forgotten; see the `sample` module).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) enum Mutator {
     /// Offsets drawn in batches.
@@ -491,47 +484,67 @@ impl Mutator {
         }
     }
 
-    /// `value` moved by one small step. Kelemen's kernel, the default and
-    /// the one on every path read, is kept inline; the others are out of
-    /// line.
-    #[inline(always)]
-    pub(crate) fn step<R: Rng + ?Sized>(&mut self, value: f32, rng: &mut R) -> f32 {
-        let offset = match self {
-            Mutator::Kelemen(k, batch) => batch.next(|values| k.fill(rng, values)) as f64,
-            Mutator::Gaussian(g, batch) => gaussian_offset(g, batch, rng),
-            Mutator::Adaptive { state, .. } => adaptive_offset(state, rng),
-        };
-        wrap_unit(value as f64 + offset)
-    }
-
-    /// The offset [`step`](Self::step) would add, if it is drawn already
-    /// (Kelemen's and the Gaussian kernel's batches), else `None`: a read
-    /// that needs no call.
-    #[inline(always)]
-    pub(crate) fn drawn_offset(&mut self) -> Option<f64> {
+    /// Every value of `values` moved by one small step, in order. The
+    /// offsets come in batches, and each batch moves its stretch of values
+    /// in one loop the compiler turns into vector instructions.
+    pub(crate) fn step_all<R: Rng + ?Sized>(&mut self, values: &mut [f32], rng: &mut R) {
         match self {
-            Mutator::Kelemen(_, batch) => batch.drawn().map(f64::from),
-            Mutator::Gaussian(g, batch) => batch.drawn().map(|normal| normal * g.sigma),
-            Mutator::Adaptive { .. } => None,
+            Mutator::Kelemen(k, batch) => shift_all(
+                values,
+                batch,
+                |b| k.fill(rng, b),
+                |v, offset| wrap_near(v as f64 + offset as f64),
+            ),
+            Mutator::Gaussian(g, batch) => {
+                let sigma = g.sigma;
+                let fill = |b: &mut [f64; BATCH_LEN]| {
+                    for pair in b.chunks_exact_mut(2) {
+                        pair.copy_from_slice(&unit_normals(rng));
+                    }
+                };
+                shift_all(values, batch, fill, |v, normal| {
+                    wrap_unit(v as f64 + normal * sigma)
+                })
+            }
+            Mutator::Adaptive { state, .. } => {
+                for v in values {
+                    *v = wrap_unit(*v as f64 + Adaptive::offset(state.theta(), rng));
+                }
+            }
         }
     }
 }
 
-/// The Gaussian kernel's offset: one normal from `batch` scaled by `σ`.
-#[inline(never)]
-fn gaussian_offset<R: Rng + ?Sized>(g: &Gaussian, batch: &mut OffsetBatch, rng: &mut R) -> f64 {
-    let normal = batch.next(|values| {
-        for pair in values.chunks_exact_mut(2) {
-            pair.copy_from_slice(&unit_normals(rng));
+/// Each of `values` moved by `step(value, b)` with the next value `b` of the
+/// batch.
+#[inline(always)]
+fn shift_all<T: Copy>(
+    values: &mut [f32],
+    batch: &mut OffsetBatch<T>,
+    mut fill: impl FnMut(&mut [T; BATCH_LEN]),
+    step: impl Fn(f32, T) -> f32,
+) {
+    let mut rest = values;
+    while !rest.is_empty() {
+        let drawn = batch.take(rest.len(), &mut fill);
+        let (now, later) = rest.split_at_mut(drawn.len());
+        for (v, &b) in now.iter_mut().zip(drawn) {
+            *v = step(*v, b);
         }
-    });
-    normal * g.sigma
+        rest = later;
+    }
 }
 
-/// The adaptive kernel's offset at its current `θ`.
-#[inline(never)]
-fn adaptive_offset<R: Rng + ?Sized>(state: &AdaptiveState, rng: &mut R) -> f64 {
-    Adaptive::offset(state.theta(), rng)
+/// [`wrap_unit`] for `v` in `[-1, 2)` (a value of `[0, 1)` moved by at most
+/// 1, as Kelemen's offsets are): its two adjustments and its rounding to
+/// f32, without the fallback for values further out, so that a loop of them
+/// runs in vector instructions.
+#[inline(always)]
+fn wrap_near(v: f64) -> f32 {
+    let w = if v < 0.0 { v + 1.0 } else { v };
+    let w = if w >= 1.0 { w - 1.0 } else { w };
+    let w = w as f32;
+    if w < 1.0 { w } else { 0.0 }
 }
 
 /// `v` wrapped onto `[0, 1)` and rounded to f32. A value that rounds up to 1.0
@@ -636,6 +649,11 @@ mod tests {
             assert_eq!(wrap_unit(v).to_bits(), general(v).to_bits(), "{v}");
         }
         assert_eq!(wrap_unit(f64::NAN), 0.0);
+        // Kelemen's wrap, for values moved by at most 1, agrees too.
+        let near = (0..100_000).map(|_| 3.0 * uniform_f64(&mut rng) - 1.0);
+        for v in edges[1..edges.len() - 1].iter().copied().chain(near) {
+            assert_eq!(wrap_near(v).to_bits(), general(v).to_bits(), "{v}");
+        }
     }
 
     /// Each kernel's sampler agrees with its stated distribution (the exact

@@ -1,5 +1,5 @@
 //! Primary sample space: the samplers behind the oracle's [`Sampler`]: the
-//! independent sampler of plain Monte Carlo, and the lazily mutated
+//! independent sampler of plain Monte Carlo, and the mutated
 //! [`MltSampler`] of primary sample space MLT (seed 002 sec. 4.2.1; the design
 //! follows pbrt-v4's `MLTSampler`).
 //!
@@ -7,8 +7,8 @@
 //! streams: stream [`FILM_STREAM`] holds the film position the engine chooses,
 //! the oracle's streams hold everything the oracle draws.
 //!
-//! Coordinates are mutated lazily, when read, and the ones the current state
-//! did not read are forgotten. Under the target `π(u) ∝ C*(u)` (seed 002 eq.
+//! Only the coordinates the current state read are kept; the others are
+//! forgotten. Under the target `π(u) ∝ C*(u)` (seed 002 eq.
 //! 4.2-4.3) the path depends only on the coordinates its trace read, and
 //! which ones it reads is decided by the values read before them, so given
 //! those the unread coordinates are independent and uniform. Redrawing them
@@ -18,13 +18,14 @@
 //! = G(v → u) = 1`. The chain applies `G` after every iteration, then the
 //! small step (seed 002 sec. 4.2.1) to what the state read: each
 //! coordinate is either one the current state read, which a small step moves
-//! by one offset, or a forgotten one, drawn uniformly when it is next read.
-//! Both kernels leave `π` invariant, and so does their composition.
+//! by one offset (all of them at once, when the proposal opens), or a
+//! forgotten one, drawn uniformly when it is read. Both kernels leave `π`
+//! invariant, and so does their composition.
 //!
 //! Kelemen et al. (2002) and pbrt-v4's `MLTSampler` instead keep every
 //! coordinate and catch it up on the small steps it missed, replaying them one
-//! by one: an exact lazy form of eager mutation, but the replays cost more than
-//! the reads themselves (on the Cornell box, ~700 instructions per path, 9 % of
+//! by one when it is read: an exact lazy form of eager mutation, but the
+//! replays cost more than the reads themselves (on the Cornell box, ~700 instructions per path, 9 % of
 //! an MC path; docs/BENCHMARKS.md). A coordinate that comes back after missed
 //! iterations is then a fresh uniform number rather than its old value moved
 //! by the sum of those steps; the equal-time comparison of docs/RESULTS.md
@@ -35,7 +36,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::rng::Pcg32;
 
-use crate::mutate::{Mutator, SmallStep, wrap_unit};
+use crate::mutate::{Mutator, SmallStep};
 use crate::oracle::{FilmPoint, ORACLE_STREAMS, Resolution, Sampler};
 use crate::rng::uniform_f32;
 
@@ -84,7 +85,7 @@ pub struct SamplerStats {
     pub coordinates: usize,
 }
 
-/// The lazily mutated primary sample of one Markov chain.
+/// The mutated primary sample of one Markov chain.
 ///
 /// Use it through [`propose`](Self::propose), which returns a [`Proposal`]
 /// the oracle draws from and that must be accepted or rejected, and
@@ -96,6 +97,10 @@ pub struct MltSampler {
     rng: Pcg32,
     large_step: bool,
     streams: [Stream; STREAMS],
+    /// How much of each stream the open proposal has read (the rest of its
+    /// values were moved, or drawn, but not read).
+    #[serde(skip)]
+    read: [u32; STREAMS],
 }
 
 impl MltSampler {
@@ -107,6 +112,7 @@ impl MltSampler {
             rng,
             large_step: true,
             streams: Default::default(),
+            read: [0; STREAMS],
         }
     }
 
@@ -158,11 +164,18 @@ impl MltSampler {
     }
 
     /// Opens a proposal: a large step (fresh uniform sample) if `large`, a
-    /// small step otherwise.
+    /// small step otherwise. A small step moves every coordinate of the
+    /// current state at once; what the proposal reads beyond them is drawn
+    /// uniformly as it reads it.
     pub fn propose(&mut self, large: bool) -> Proposal<'_> {
         self.large_step = large;
+        self.read = [0; STREAMS];
         for stream in &mut self.streams {
             stream.proposal.clear();
+            if !large {
+                stream.proposal.extend_from_slice(&stream.state);
+                self.kernel.step_all(&mut stream.proposal, &mut self.rng);
+            }
         }
         Proposal {
             cursor: Cursor::new(),
@@ -181,11 +194,13 @@ impl MltSampler {
         }
     }
 
-    /// Closes the open proposal: an accepted one becomes the state, and
-    /// what the state read beyond it is forgotten with the rest.
+    /// Closes the open proposal: an accepted one becomes the state (what it
+    /// read of each stream), and what the state read beyond it is
+    /// forgotten with the rest.
     fn finish(&mut self, accept: bool, acceptance: f64) {
         if accept {
-            for stream in &mut self.streams {
+            for (stream, &read) in self.streams.iter_mut().zip(&self.read) {
+                stream.proposal.truncate(read as usize);
                 core::mem::swap(&mut stream.state, &mut stream.proposal);
             }
         }
@@ -196,28 +211,26 @@ impl MltSampler {
     }
 
     /// The coordinate `index` of `stream` for the open proposal: the value
-    /// it read already, or the next one (`index` is what it has read of the
-    /// stream): a fresh uniform number for a large step or a forgotten
-    /// coordinate, else the state's moved by one small step.
-    ///
-    /// Inline, without a call, unless the kernel has to draw offsets (a
-    /// batch refill, the adaptive kernel).
+    /// it holds already (moved by the small step, or read before), or a
+    /// fresh uniform number (`index` is then how much of the stream it
+    /// holds).
     #[inline(always)]
     fn read_proposal(&mut self, stream: usize, index: usize) -> f32 {
-        let Stream { state, proposal } = &mut self.streams[stream];
+        let proposal = &mut self.streams[stream].proposal;
         if let Some(&value) = proposal.get(index) {
             return value;
         }
         debug_assert_eq!(index, proposal.len(), "a stream is read from its start");
-        let value = match state.get(index) {
-            Some(&current) if !self.large_step => match self.kernel.drawn_offset() {
-                Some(offset) => wrap_unit(current as f64 + offset),
-                None => step_out_of_line(&mut self.kernel, current, &mut self.rng),
-            },
-            _ => uniform_f32(&mut self.rng),
-        };
+        let value = uniform_f32(&mut self.rng);
         proposal.push(value);
         value
+    }
+
+    /// Records that the open proposal has read the first `count` numbers of
+    /// `stream`.
+    fn mark_read(&mut self, stream: usize, count: usize) {
+        let read = &mut self.read[stream];
+        *read = (*read).max(count as u32);
     }
 
     /// The coordinate `index` of `stream` as the current state has it; one
@@ -233,12 +246,6 @@ impl MltSampler {
         state.push(value);
         value
     }
-}
-
-/// `value` moved by one small step that draws its offset.
-#[inline(never)]
-fn step_out_of_line(kernel: &mut Mutator, value: f32, rng: &mut Pcg32) -> f32 {
-    kernel.step(value, rng)
 }
 
 /// The largest f32 below 1.
@@ -297,7 +304,8 @@ impl Proposal<'_> {
             self.sampler.read_proposal(FILM_STREAM, 0),
             self.sampler.read_proposal(FILM_STREAM, 1),
         ];
-        self.cursor.oracle_stream(0);
+        self.sampler.mark_read(FILM_STREAM, 2);
+        self.start_stream(0);
         resolution.film_point(u)
     }
 
@@ -317,7 +325,8 @@ impl Proposal<'_> {
             *u = value.min(f32_below_one());
             self.sampler.streams[FILM_STREAM].proposal[i] = *u;
         }
-        self.cursor.oracle_stream(0);
+        self.sampler.mark_read(FILM_STREAM, 2);
+        self.start_stream(0);
         resolution.film_point(u)
     }
 
@@ -325,7 +334,7 @@ impl Proposal<'_> {
     /// (e.g. at another temperature): numbers read again are the same, numbers
     /// read for the first time are mutated as usual.
     pub fn restart(&mut self) {
-        self.cursor.oracle_stream(0);
+        self.start_stream(0);
     }
 
     /// Whether this is a large step.
@@ -337,6 +346,8 @@ impl Proposal<'_> {
     /// acceptance probability, used by the adaptive kernel.
     pub fn accept(mut self, acceptance: f64) {
         self.finished = true;
+        self.sampler
+            .mark_read(self.cursor.stream, self.cursor.index);
         self.sampler.finish(true, acceptance);
     }
 
@@ -362,6 +373,8 @@ impl Sampler for Proposal<'_> {
         self.sampler.read_proposal(s, i)
     }
     fn start_stream(&mut self, stream: u8) {
+        self.sampler
+            .mark_read(self.cursor.stream, self.cursor.index);
         self.cursor.oracle_stream(stream);
     }
 }

@@ -8,7 +8,7 @@
 //! with this engine's Kelemen offsets could cost on the procedural oracle:
 //! MC's own cost per path plus, for the small steps, one offset per
 //! coordinate the path reads in place of MC's uniform draw. Nothing else (the
-//! second splat of expected values, the acceptance draw, backups, forgotten
+//! second splat of expected values, the acceptance draw, forgotten
 //! coordinates redrawn, the bootstrap) is counted, so any implementation with these offsets costs
 //! more.
 //!
@@ -191,7 +191,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The floor of a Metropolis step on the procedural oracle (Kelemen,
     // large steps 0.3): MC's path, plus, per small step, one offset per
     // coordinate beyond MC's uniform draw. Nothing else (the second splat,
-    // the acceptance draw, backups, forgotten coordinates, the bootstrap) is counted.
+    // the acceptance draw, forgotten coordinates, the bootstrap) is counted.
     let coordinates = coordinates_per_path(&procedural, 1 << 20);
     let offset = pool.install(|| offset_cost(args.repeats));
     let mc = rows[0].1.0;

@@ -12,13 +12,14 @@
 //!   medians over the repeats;
 //! * **the split**: the same render with a metered oracle. Each path is
 //!   traced twice: first as the render traces it, recording the numbers it
-//!   reads (each drawn by the method's sampler: for MCMC methods a lazily
-//!   mutated coordinate, or a forgotten one drawn afresh), then again from
+//!   reads (each drawn by the method's sampler: for MCMC methods a
+//!   coordinate the proposal moved, or a forgotten one drawn afresh), then again from
 //!   that tape, at the cost of an array read per number. The second trace's
 //!   time is the **path's own cost** (longer or shorter paths, other memory
 //!   traffic; the second trace finds the path's data in cache, for every
 //!   method alike); the first minus the second is the **sampler's** cost
-//!   (drawing and mutating the numbers); wall × threads minus the
+//!   (drawing and reading the numbers; a small step's moves, made when the
+//!   proposal opens, fall in the rest); wall × threads minus the
 //!   first is the **rest of the engine** (proposals, acceptance, splatting,
 //!   merging, set-up, and the second trace's bookkeeping, which is subtracted:
 //!   its measured time is removed from the wall time).

@@ -212,18 +212,10 @@ impl MltSampler {
 
     /// The coordinate `index` of `stream` for the open proposal: the value
     /// it holds already (moved by the small step, or read before), or a
-    /// fresh uniform number (`index` is then how much of the stream it
-    /// holds).
+    /// fresh uniform number.
     #[inline(always)]
     fn read_proposal(&mut self, stream: usize, index: usize) -> f32 {
-        let proposal = &mut self.streams[stream].proposal;
-        if let Some(&value) = proposal.get(index) {
-            return value;
-        }
-        debug_assert_eq!(index, proposal.len(), "a stream is read from its start");
-        let value = uniform_f32(&mut self.rng);
-        proposal.push(value);
-        value
+        value_or_draw(&mut self.streams[stream].proposal, index, &mut self.rng)
     }
 
     /// Records that the open proposal has read the first `count` numbers of
@@ -237,15 +229,21 @@ impl MltSampler {
     /// it did not read is drawn uniformly and becomes part of it.
     #[inline(always)]
     fn read_state(&mut self, stream: usize, index: usize) -> f32 {
-        let state = &mut self.streams[stream].state;
-        if let Some(&value) = state.get(index) {
-            return value;
-        }
-        debug_assert_eq!(index, state.len(), "a stream is read from its start");
-        let value = uniform_f32(&mut self.rng);
-        state.push(value);
-        value
+        value_or_draw(&mut self.streams[stream].state, index, &mut self.rng)
     }
+}
+
+/// `values[index]`, or, past their end (`index` is then `values.len()`: a
+/// stream is read from its start), a uniform number appended to them.
+#[inline(always)]
+fn value_or_draw(values: &mut Vec<f32>, index: usize, rng: &mut Pcg32) -> f32 {
+    if let Some(&value) = values.get(index) {
+        return value;
+    }
+    debug_assert_eq!(index, values.len(), "a stream is read from its start");
+    let value = uniform_f32(rng);
+    values.push(value);
+    value
 }
 
 /// The largest f32 below 1.

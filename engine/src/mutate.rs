@@ -74,9 +74,33 @@ impl Kelemen {
     pub fn fill<R: Rng + ?Sized>(&self, rng: &mut R, values: &mut [f32; BATCH_LEN]) {
         let mut bits = [0u32; BATCH_LEN];
         bits.iter_mut().for_each(|b| *b = rng.next_u32());
-        for (value, &bits) in values.iter_mut().zip(&bits) {
+        #[cfg(all(feature = "std", target_arch = "x86_64"))]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, the only requirement of `offsets_avx2`.
+            #[allow(unsafe_code)]
+            unsafe {
+                return self.offsets_avx2(&bits, values);
+            }
+        }
+        self.offsets(&bits, values);
+    }
+
+    /// The offsets of 32 random words, for the target's baseline
+    /// instruction set (inlined into [`offsets_avx2`](Self::offsets_avx2),
+    /// which compiles it with twice as wide vectors: the same operations,
+    /// so the same bits).
+    #[inline(always)]
+    fn offsets(&self, bits: &[u32; BATCH_LEN], values: &mut [f32; BATCH_LEN]) {
+        for (value, &bits) in values.iter_mut().zip(bits) {
             *value = self.offset_of_bits(bits);
         }
+    }
+
+    /// [`offsets`](Self::offsets) compiled for AVX2.
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    #[target_feature(enable = "avx2")]
+    fn offsets_avx2(&self, bits: &[u32; BATCH_LEN], values: &mut [f32; BATCH_LEN]) {
+        self.offsets(bits, values);
     }
 
     /// The offset of one 32-bit draw: the top bit is the sign, the low 31
@@ -489,12 +513,7 @@ impl Mutator {
     /// in one loop the compiler turns into vector instructions.
     pub(crate) fn step_all<R: Rng + ?Sized>(&mut self, values: &mut [f32], rng: &mut R) {
         match self {
-            Mutator::Kelemen(k, batch) => shift_all(
-                values,
-                batch,
-                |b| k.fill(rng, b),
-                |v, offset| wrap_near(v as f64 + offset as f64),
-            ),
+            Mutator::Kelemen(k, batch) => shift_all(values, batch, |b| k.fill(rng, b), shift_near),
             Mutator::Gaussian(g, batch) => {
                 let sigma = g.sigma;
                 let fill = |b: &mut [f64; BATCH_LEN]| {
@@ -502,8 +521,10 @@ impl Mutator {
                         pair.copy_from_slice(&unit_normals(rng));
                     }
                 };
-                shift_all(values, batch, fill, |v, normal| {
-                    wrap_unit(v as f64 + normal * sigma)
+                shift_all(values, batch, fill, |values, normals| {
+                    for (v, &normal) in values.iter_mut().zip(normals) {
+                        *v = wrap_unit(*v as f64 + normal * sigma);
+                    }
                 })
             }
             Mutator::Adaptive { state, .. } => {
@@ -515,24 +536,53 @@ impl Mutator {
     }
 }
 
-/// Each of `values` moved by `step(value, b)` with the next value `b` of the
-/// batch.
+/// `values` moved by `shift(stretch, drawn)`, a stretch at a time, each
+/// with as many values of the batch as it is long.
 #[inline(always)]
 fn shift_all<T: Copy>(
     values: &mut [f32],
     batch: &mut OffsetBatch<T>,
     mut fill: impl FnMut(&mut [T; BATCH_LEN]),
-    step: impl Fn(f32, T) -> f32,
+    shift: impl Fn(&mut [f32], &[T]),
 ) {
     let mut rest = values;
     while !rest.is_empty() {
         let drawn = batch.take(rest.len(), &mut fill);
         let (now, later) = rest.split_at_mut(drawn.len());
-        for (v, &b) in now.iter_mut().zip(drawn) {
-            *v = step(*v, b);
-        }
+        shift(now, drawn);
         rest = later;
     }
+}
+
+/// Each of `values` moved by its Kelemen offset (`|offset| <= 0.5`), wrapped
+/// by [`wrap_near`].
+#[inline]
+fn shift_near(values: &mut [f32], offsets: &[f32]) {
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, the only requirement of `shift_near_avx2`.
+        #[allow(unsafe_code)]
+        unsafe {
+            return shift_near_avx2(values, offsets);
+        }
+    }
+    shift_near_portable(values, offsets);
+}
+
+/// [`shift_near`] for the target's baseline instruction set (inlined into
+/// the AVX2 version: the same operations on wider vectors, the same bits).
+#[inline(always)]
+fn shift_near_portable(values: &mut [f32], offsets: &[f32]) {
+    for (v, &offset) in values.iter_mut().zip(offsets) {
+        *v = wrap_near(*v as f64 + offset as f64);
+    }
+}
+
+/// [`shift_near`] compiled for AVX2.
+#[cfg(all(feature = "std", target_arch = "x86_64"))]
+#[target_feature(enable = "avx2")]
+fn shift_near_avx2(values: &mut [f32], offsets: &[f32]) {
+    shift_near_portable(values, offsets);
 }
 
 /// [`wrap_unit`] for `v` in `[-1, 2)` (a value of `[0, 1)` moved by at most
@@ -580,6 +630,45 @@ fn wrap_far(v: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::rng::{Domain, stream};
+
+    /// The AVX2 builds of the offsets and of the shift give the baseline
+    /// builds' bits (images must not depend on the CPU).
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    #[test]
+    fn avx2_offsets_and_shifts_are_the_baselines_bits() {
+        if !std::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut rng = stream(12, Domain::User, 0);
+        for k in [
+            Kelemen::DEFAULT,
+            Kelemen::SEED_001,
+            Kelemen::new(1e-7, 0.5).unwrap(),
+        ] {
+            for _ in 0..2000 {
+                let mut bits = [0u32; BATCH_LEN];
+                bits.iter_mut().for_each(|b| *b = rng.next_u32());
+                let (mut wide, mut narrow) = ([0f32; BATCH_LEN], [0f32; BATCH_LEN]);
+                // SAFETY: AVX2 is present (checked above).
+                #[allow(unsafe_code)]
+                unsafe {
+                    k.offsets_avx2(&bits, &mut wide)
+                };
+                k.offsets(&bits, &mut narrow);
+                assert_eq!(wide.map(f32::to_bits), narrow.map(f32::to_bits));
+                let values: alloc::vec::Vec<f32> =
+                    (0..29).map(|_| uniform_f64(&mut rng) as f32).collect();
+                let (mut wide_values, mut narrow_values) = (values.clone(), values);
+                // SAFETY: as above.
+                #[allow(unsafe_code)]
+                unsafe {
+                    shift_near_avx2(&mut wide_values, &wide[..29])
+                };
+                shift_near_portable(&mut narrow_values, &narrow[..29]);
+                assert_eq!(wide_values, narrow_values);
+            }
+        }
+    }
 
     #[test]
     fn invalid_parameters_are_typed_errors() {

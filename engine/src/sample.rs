@@ -172,7 +172,9 @@ impl MltSampler {
         self.read = [0; STREAMS];
         for stream in &mut self.streams {
             stream.proposal.clear();
-            if !large {
+            // Most oracles read few of the streams: an empty one has
+            // nothing to move (and `step_all` would draw nothing for it).
+            if !large && !stream.state.is_empty() {
                 stream.proposal.extend_from_slice(&stream.state);
                 self.kernel.step_all(&mut stream.proposal, &mut self.rng);
             }

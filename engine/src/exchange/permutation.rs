@@ -93,7 +93,7 @@ fn scale_values(
         lost |= positive && *v < f64::MIN_POSITIVE;
     };
     for row in scaled.chunks_exact_mut(chains) {
-        let max = row.iter().copied().fold(0.0, f64::max);
+        let max = row.iter().copied().fold(0.0, larger);
         if max == 0.0 {
             return Scaled::Zero;
         }
@@ -103,7 +103,7 @@ fn scale_values(
     for k in 0..chains {
         let max = (0..chains)
             .map(|i| scaled[i * chains + k])
-            .fold(0.0, f64::max);
+            .fold(0.0, larger);
         if max == 0.0 {
             // All zero, unless the row scaling made it so.
             return if lost { Scaled::Lost } else { Scaled::Zero };
@@ -112,6 +112,20 @@ fn scale_values(
         product.times(max);
     }
     if lost { Scaled::Lost } else { Scaled::Linear }
+}
+
+/// The larger of `a` and `v`, as `f64::max` for `a` not NaN, in plain
+/// comparisons.
+#[inline(always)]
+fn larger(a: f64, v: f64) -> f64 {
+    if v > a { v } else { a }
+}
+
+/// The smaller of `smallest` and `v` if `v` is positive, else `smallest`
+/// (plain comparisons: the table holds no NaN).
+#[inline(always)]
+fn smallest_positive(smallest: f64, v: f64) -> f64 {
+    if v > 0.0 && v < smallest { v } else { smallest }
 }
 
 /// A product of positive factors kept as a mantissa and a power of two, so
@@ -129,10 +143,19 @@ impl LogProduct {
         }
     }
 
+    /// Multiplies in `factor` (positive and finite): a plain product while
+    /// it stays a normal number, otherwise both split by `frexp` first.
+    #[inline]
     fn times(&mut self, factor: f64) {
-        let (mantissa, exponent) = libm::frexp(self.mantissa * factor);
-        self.mantissa = mantissa;
-        self.exponent += exponent as i64;
+        let product = self.mantissa * factor;
+        if product.is_normal() {
+            self.mantissa = product;
+            return;
+        }
+        let (mantissa, exponent) = libm::frexp(self.mantissa);
+        let (factor, factor_exponent) = libm::frexp(factor);
+        self.mantissa = mantissa * factor;
+        self.exponent += exponent as i64 + factor_exponent as i64;
     }
 
     fn ln(&self) -> f64 {
@@ -264,10 +287,11 @@ impl PermutationSampler {
         let full = (1usize << m) - 1;
         self.table = Table::Linear;
         self.factor[full] = 1.0;
+        // The smallest positive factor of the level above (the full set's 1).
+        let mut smallest_above = 1.0f64;
         for level in (0..m).rev() {
             let row = &self.scaled[level * m..(level + 1) * m];
             let mut largest = 0.0f64;
-            let mut underflow = false;
             for &set in &self.by_level[level] {
                 let set = set as usize;
                 let mut f = 0.0;
@@ -275,27 +299,49 @@ impl PermutationSampler {
                 while free != 0 {
                     let k = free.trailing_zeros() as usize;
                     free &= free - 1;
-                    let (v, next) = (row[k], self.factor[set | (1 << k)]);
-                    let term = v * next;
-                    underflow |= term < f64::MIN_POSITIVE && v > 0.0 && next > 0.0;
-                    f += term;
+                    f += row[k] * self.factor[set | (1 << k)];
                 }
                 self.factor[set] = f;
-                largest = largest.max(f);
+                // Sums of finite products, never NaN: a plain comparison.
+                largest = if f > largest { f } else { largest };
             }
-            if underflow {
+            // Every term of this level with two positive factors is at least
+            // the product of the smallest ones: only if that underflows can
+            // a term have, and only then are the terms checked one by one.
+            let smallest_entry = row
+                .iter()
+                .fold(f64::INFINITY, |a, &v| smallest_positive(a, v));
+            if smallest_entry * smallest_above < f64::MIN_POSITIVE && self.level_underflows(level) {
                 return None;
             }
             if largest == 0.0 {
                 return Some(false);
             }
             let inverse = 1.0 / largest;
+            smallest_above = f64::INFINITY;
             for &set in &self.by_level[level] {
-                self.factor[set as usize] *= inverse;
+                let f = &mut self.factor[set as usize];
+                *f *= inverse;
+                smallest_above = smallest_positive(smallest_above, *f);
             }
             level_scale(largest);
         }
         Some(true)
+    }
+
+    /// Whether a term `v · F_{S ∪ {k}}` of `level` with two positive factors
+    /// underflowed in [`fill_linear`](Self::fill_linear) (the level above
+    /// already scaled).
+    fn level_underflows(&self, level: usize) -> bool {
+        let m = self.chains;
+        let row = &self.scaled[level * m..(level + 1) * m];
+        self.by_level[level].iter().any(|&set| {
+            let set = set as usize;
+            (0..m).filter(|k| set & (1 << k) == 0).any(|k| {
+                let (v, next) = (row[k], self.factor[set | (1 << k)]);
+                v > 0.0 && next > 0.0 && v * next < f64::MIN_POSITIVE
+            })
+        })
     }
 
     /// The table of `ln F_S` by log-sum-exp; returns `ln b_O`.
@@ -544,6 +590,26 @@ mod tests {
             assert_eq!(s.normalize_values(&values), f64::NEG_INFINITY);
             let mut o = vec![7; 2];
             assert!(!s.sample(&mut stream(1, Domain::User, 1), &mut o));
+        }
+    }
+
+    /// The product's logarithm is the sum of the factors' when the plain
+    /// product would overflow or underflow many times over.
+    #[test]
+    fn a_log_product_spans_any_range() {
+        let factors = [
+            1e300, 1e300, 3.0, 1e-310, 1e-300, 1e-300, 1e-300, 7e307, 5e-324,
+        ];
+        let mut product = LogProduct::new();
+        let mut exact = 0.0;
+        for (i, &f) in factors.iter().cycle().take(90).enumerate() {
+            product.times(f);
+            exact += libm::log(f);
+            let ln = product.ln();
+            assert!(
+                (ln - exact).abs() < 1e-12 * exact.abs().max(1.0),
+                "{i}: {ln} vs {exact}"
+            );
         }
     }
 

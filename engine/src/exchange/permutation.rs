@@ -306,8 +306,9 @@ impl PermutationSampler {
                 largest = if f > largest { f } else { largest };
             }
             // Every term of this level with two positive factors is at least
-            // the product of the smallest ones: only if that underflows can
-            // a term have, and only then are the terms checked one by one.
+            // the product of the smallest ones: only if that product
+            // underflows can a term underflow, and only then are the terms
+            // checked one by one.
             let smallest_entry = row
                 .iter()
                 .fold(f64::INFINITY, |a, &v| smallest_positive(a, v));

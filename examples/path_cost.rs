@@ -38,7 +38,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Parser;
-use strata::engine::exchange::{EnsembleSettings, Tempering};
+use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Tempering};
 use strata::engine::method::{ErptSettings, ReplicaSettings, StratifiedSettings};
 use strata::engine::target::MaxChannel;
 use strata::engine::{
@@ -66,6 +66,11 @@ struct Args {
     /// Only these scenes (`cornell-box`, `veach-ajar`; comma-separated).
     #[arg(long, value_delimiter = ',')]
     scenes: Vec<String>,
+    /// Replica exchange's move (`none`, `neighbor`, `is-permutation`, ...;
+    /// the library's default, `is-permutation`, unless given): `none` gives
+    /// the floor of the tempered chains without any exchange.
+    #[arg(long, default_value = "is-permutation")]
+    exchange: String,
     /// CSV output.
     #[arg(long, default_value = "out/bench/path_cost.csv")]
     out: PathBuf,
@@ -201,8 +206,9 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// The methods of the issue, with the settings the renders use.
-fn methods() -> Vec<Method> {
+/// The methods of the issue, with the settings the renders use; replica
+/// exchange with the move `exchange`.
+fn methods(exchange: ExchangeKind) -> Vec<Method> {
     let mut ensemble = EnsembleSettings::geometric(4, 100.0).expect("a valid ladder");
     ensemble.tempering = Tempering::Power;
     vec![
@@ -212,6 +218,7 @@ fn methods() -> Vec<Method> {
         Method::Erpt(ErptSettings::default()),
         Method::Replica(ReplicaSettings {
             ensemble,
+            exchange,
             ..Default::default()
         }),
     ]
@@ -232,7 +239,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "scene,method,spp,ns_per_path,ratio,path_ns,sampler_ns,rest_ns,numbers_per_path,bootstrap_share\n",
         );
     }
-    let methods: Vec<Method> = methods()
+    let exchange = ExchangeKind::from_name(&args.exchange).ok_or_else(|| {
+        format!(
+            "unknown exchange move {:?} (one of {})",
+            args.exchange,
+            ExchangeKind::NAMES.join(", ")
+        )
+    })?;
+    let methods: Vec<Method> = methods(exchange)
         .into_iter()
         .filter(|m| {
             args.methods.is_empty()

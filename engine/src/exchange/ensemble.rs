@@ -2,6 +2,7 @@
 //! chains at the ladder's temperatures, swept from the hottest down with an
 //! exchange move's hooks around every mutation.
 
+use alloc::boxed::Box;
 use alloc::vec;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
@@ -153,7 +154,7 @@ impl<R: Radiance> Ensemble<R> {
                     }
                 },
             );
-            replicas.push(started.chain);
+            replicas.push(Box::new(started.chain));
             decisions.push(started.decisions);
         }
         Self {

@@ -16,14 +16,17 @@
 //! probability `π_{|S|}(u_k) F_{S ∪ {k}} / F_S`.
 //!
 //! Numerics: products of `M` target values over- or underflow long before `M`
-//! becomes large, so the values arrive as logarithms. Every row, then every
-//! column, is scaled by its largest entry (each permutation uses every row
-//! and every column once, so this multiplies all permutations alike), and
-//! every level of the table is scaled by its largest entry (this multiplies
-//! all choices of one level alike). The table is then filled with plain
-//! multiply-adds. If a product still underflows (entries spread over more
-//! than ~300 orders of magnitude), the table is filled again in log space
-//! (log-sum-exp), which is exact but an order of magnitude slower.
+//! becomes large. Values whose every product of `M` stays far inside the
+//! normal range (positive values between `2^(-1000/M)` and `2^(930/M)`,
+//! which a rendering's tempered importances are) fill the table as they
+//! are. Otherwise every row, then every column, is scaled by its largest
+//! entry (each permutation uses every row and every column once, so this
+//! multiplies all permutations alike), and every level of the table is
+//! scaled by its largest entry (this multiplies all choices of one level
+//! alike); the table is then filled with plain multiply-adds. If a product
+//! still underflows (entries spread over more than ~300 orders of
+//! magnitude), the table is filled again in log space (log-sum-exp), which
+//! is exact but an order of magnitude slower.
 
 use alloc::vec;
 use alloc::vec::Vec;
@@ -63,6 +66,27 @@ fn scale_rows_and_columns(log_values: &[f64], chains: usize, scaled: &mut [f64])
         *v = libm::exp(*v);
     }
     log_scale
+}
+
+/// Whether every positive value lies between `2^(-1000/M)` and `2^(930/M)`
+/// (`M = chains`), so that every term of the table (a product of at most
+/// `M` values, at least `2^-1000`) and every sum (at most `M!` such
+/// products, below `2^62 · 2^930`) is a normal number with a margin far
+/// wider than rounding can use: the values need no scaling.
+fn in_plain_range(values: &[f64], chains: usize) -> bool {
+    let (mut smallest, mut largest) = (f64::INFINITY, 0.0f64);
+    for &v in values {
+        smallest = smallest_positive(smallest, v);
+        largest = larger(largest, v);
+    }
+    if largest == 0.0 {
+        return true;
+    }
+    // The power of two at or below a positive finite value (-1023 for a
+    // subnormal one, which the test then rejects).
+    let exponent = |v: f64| ((v.to_bits() >> 52) as i64) - 1023;
+    let m = chains as i64;
+    exponent(smallest) * m >= -1000 && (exponent(largest) + 1) * m <= 930
 }
 
 /// How [`scale_values`] went.
@@ -175,7 +199,8 @@ fn log_sum_exp(terms: impl Iterator<Item = f64> + Clone) -> f64 {
 /// How the table holds `F_S`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 enum Table {
-    /// `F_S` divided by its level's largest, over the scaled values.
+    /// `F_S` up to a factor per level, over the values up to a factor per
+    /// row and per column (as they are, or scaled).
     Linear,
     /// `ln F_S` over the raw log values.
     Log,
@@ -250,14 +275,30 @@ impl PermutationSampler {
     }
 
     /// [`normalize`](Self::normalize) from the values themselves,
-    /// `values[i * M + k] = π_i(u_k)` (finite, `>= 0`): rows and columns are
-    /// scaled by division and the table filled without a single logarithm
-    /// but the one of `ln b_O`; only where the scaling would lose a positive
-    /// entry or a product underflows are the logarithms taken and the log
-    /// path followed. The same table up to rounding.
+    /// `values[i * M + k] = π_i(u_k)` (finite, `>= 0`), without a single
+    /// logarithm but the one of `ln b_O`: values in the plain range fill the
+    /// table as they are; others are scaled by division first; only where
+    /// the scaling would lose a positive entry or a product underflows are
+    /// the logarithms taken and the log path followed. The same table up to
+    /// rounding.
     pub fn normalize_values(&mut self, values: &[f64]) -> f64 {
         let m = self.chains;
         debug_assert_eq!(values.len(), m * m);
+        if in_plain_range(values, m) {
+            self.scaled.copy_from_slice(values);
+            self.table = Table::Linear;
+            self.factor[(1 << m) - 1] = 1.0;
+            for level in (0..m).rev() {
+                self.fill_level(level);
+            }
+            let b = self.factor[0];
+            self.log_normalization = if b > 0.0 {
+                libm::log(b)
+            } else {
+                f64::NEG_INFINITY
+            };
+            return self.log_normalization;
+        }
         let mut product = LogProduct::new();
         self.log_normalization = match scale_values(values, m, &mut self.scaled, &mut product) {
             Scaled::Zero => f64::NEG_INFINITY,
@@ -290,21 +331,8 @@ impl PermutationSampler {
         // The smallest positive factor of the level above (the full set's 1).
         let mut smallest_above = 1.0f64;
         for level in (0..m).rev() {
+            let largest = self.fill_level(level);
             let row = &self.scaled[level * m..(level + 1) * m];
-            let mut largest = 0.0f64;
-            for &set in &self.by_level[level] {
-                let set = set as usize;
-                let mut f = 0.0;
-                let mut free = full & !set;
-                while free != 0 {
-                    let k = free.trailing_zeros() as usize;
-                    free &= free - 1;
-                    f += row[k] * self.factor[set | (1 << k)];
-                }
-                self.factor[set] = f;
-                // Sums of finite products, never NaN: a plain comparison.
-                largest = if f > largest { f } else { largest };
-            }
             // Every term of this level with two positive factors is at least
             // the product of the smallest ones: only if that product
             // underflows can a term underflow, and only then are the terms
@@ -328,6 +356,30 @@ impl PermutationSampler {
             level_scale(largest);
         }
         Some(true)
+    }
+
+    /// `F_S = Σ_{k ∉ S} v_k F_{S ∪ {k}}` for every set `S` of `level` states
+    /// (`v` the level's row of `scaled`, the level above filled); returns
+    /// the level's largest.
+    fn fill_level(&mut self, level: usize) -> f64 {
+        let m = self.chains;
+        let full = (1usize << m) - 1;
+        let row = &self.scaled[level * m..(level + 1) * m];
+        let mut largest = 0.0f64;
+        for &set in &self.by_level[level] {
+            let set = set as usize;
+            let mut f = 0.0;
+            let mut free = full & !set;
+            while free != 0 {
+                let k = free.trailing_zeros() as usize;
+                free &= free - 1;
+                f += row[k] * self.factor[set | (1 << k)];
+            }
+            self.factor[set] = f;
+            // Sums of finite products, never NaN: a plain comparison.
+            largest = larger(largest, f);
+        }
+        largest
     }
 
     /// Whether a term `v · F_{S ∪ {k}}` of `level` with two positive factors
@@ -562,6 +614,48 @@ mod tests {
                 assert!(from_values.sample(&mut r2, &mut o2));
                 assert_eq!(o1, o2, "M={m}");
             }
+        }
+    }
+
+    /// Values in the plain range fill the table unscaled, and give the
+    /// enumeration's `ln b_O`.
+    #[test]
+    fn values_in_the_plain_range_fill_the_table_as_they_are() {
+        for m in 1..=7 {
+            let logs = random_log_values(m, 80 + m as u64);
+            let values: Vec<f64> = logs.iter().map(|&l| libm::exp(l)).collect();
+            assert!(in_plain_range(&values, m));
+            let mut s = PermutationSampler::new(m).unwrap();
+            let log_b = s.normalize_values(&values);
+            assert_eq!(s.scaled, values, "M={m}: scaled");
+            let slow = log_normalization_by_enumeration(&logs, m);
+            assert!(
+                (log_b - slow).abs() < 1e-12 * slow.abs().max(1.0),
+                "M={m}: {log_b} vs {slow}"
+            );
+        }
+    }
+
+    /// Values whose products of `M` leave the normal range are scaled:
+    /// `b_O = 4! v^4` for four chains whose values are all `v`.
+    #[test]
+    fn values_beyond_the_plain_range_are_scaled() {
+        // 1e-70 is 2^-232.5, 1e60 2^199.3; 1e-80 and 1e70 are beyond.
+        for (v, plain) in [
+            (1e-70f64, true),
+            (1e60, true),
+            (1e-80, false),
+            (1e70, false),
+        ] {
+            let values = [v; 16];
+            assert_eq!(in_plain_range(&values, 4), plain, "{v}");
+            let mut s = PermutationSampler::new(4).unwrap();
+            let log_b = s.normalize_values(&values);
+            let exact = libm::log(24.0) + 4.0 * libm::log(v);
+            assert!(
+                (log_b - exact).abs() < 1e-9 * exact.abs(),
+                "{v}: {log_b} vs {exact}"
+            );
         }
     }
 

@@ -24,6 +24,7 @@
 //! sweep (every chain steps once) then estimates the image once, whatever the
 //! exchanges did in between; the untempered contribution `f(u)` is splatted.
 
+use alloc::boxed::Box;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
@@ -89,8 +90,8 @@ pub struct TemperedPath<R> {
 
 /// One state of an ensemble: a primary sample and its tempered path. When
 /// chains exchange states, the sampler (with its random stream) travels with
-/// the state.
-pub type Replica<R> = Chain<TemperedPath<R>>;
+/// the state; boxed, so that an exchange moves a pointer, not the state.
+pub type Replica<R> = Box<Chain<TemperedPath<R>>>;
 
 impl<R> Tempered for Replica<R> {
     #[inline]

@@ -274,7 +274,7 @@ impl<R: Radiance> Ensemble<R> {
         &mut self,
         oracle: &O,
         importance: &I,
-        exchange: &mut dyn Move<Replica<R>>,
+        exchange: &mut (impl Move<Replica<R>> + ?Sized),
         mut splat: impl FnMut(FilmPoint, R, f64),
     ) where
         O: PathOracle<Radiance = R>,

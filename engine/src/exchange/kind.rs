@@ -187,36 +187,37 @@ pub enum ExchangeMove<R> {
     NonReversible(NonReversible),
 }
 
-impl<R: Clone> ExchangeMove<R> {
-    /// The move behind the variant.
-    fn inner(&mut self) -> &mut dyn Move<Replica<R>> {
-        match self {
-            ExchangeMove::None(m) => m,
-            ExchangeMove::NeighborSwap(m) => m,
-            ExchangeMove::IsPermutation(m) => m,
-            ExchangeMove::IsSwap(m) => m,
-            ExchangeMove::EquiEnergy(m) => m,
-            ExchangeMove::EquiEnergySampler(m) => m,
-            ExchangeMove::NonReversible(m) => m,
+/// Calls `$call` on the move behind the variant, bound to `$m` (a match, so
+/// that each move's own hooks, no-ops included, inline).
+macro_rules! each_move {
+    ($self:expr, $m:ident => $call:expr) => {
+        match $self {
+            ExchangeMove::None($m) => $call,
+            ExchangeMove::NeighborSwap($m) => $call,
+            ExchangeMove::IsPermutation($m) => $call,
+            ExchangeMove::IsSwap($m) => $call,
+            ExchangeMove::EquiEnergy($m) => $call,
+            ExchangeMove::EquiEnergySampler($m) => $call,
+            ExchangeMove::NonReversible($m) => $call,
         }
-    }
+    };
 }
 
 impl<R: Clone> Move<Replica<R>> for ExchangeMove<R> {
     fn before_mutation(&mut self, ex: &mut Exchange<'_, Replica<R>>, chain: usize) {
-        self.inner().before_mutation(ex, chain)
+        each_move!(self, m => m.before_mutation(ex, chain))
     }
     fn replace_small_step(
         &mut self,
         ex: &mut Exchange<'_, Replica<R>>,
         chain: usize,
     ) -> Option<Jump<Replica<R>>> {
-        self.inner().replace_small_step(ex, chain)
+        each_move!(self, m => m.replace_small_step(ex, chain))
     }
     fn after_mutation(&mut self, ex: &mut Exchange<'_, Replica<R>>, chain: usize) {
-        self.inner().after_mutation(ex, chain)
+        each_move!(self, m => m.after_mutation(ex, chain))
     }
     fn after_sweep(&mut self, ex: &mut Exchange<'_, Replica<R>>) {
-        self.inner().after_sweep(ex)
+        each_move!(self, m => m.after_sweep(ex))
     }
 }

@@ -323,6 +323,7 @@ where
             stats,
             exchange_rounds,
             invalid,
+            sweep_cost: sweep_cost(&tiles, settings),
         };
         let driven = drive(&mut sweeps, job.round_loop(Some(position)), |s, out| {
             s.save(bootstrap_traces, out)
@@ -367,6 +368,7 @@ where
         },
         exchange_rounds: 0,
         invalid: initialized.invalid,
+        sweep_cost: sweep_cost(&tiles, settings),
     };
     let driven = drive(&mut sweeps, job.round_loop(None), |s, out| {
         s.save(initialized.bootstrap, out)
@@ -389,6 +391,8 @@ struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
     /// Invalid traces outside the tile chains' counters (initialization,
     /// exchanges).
     invalid: u64,
+    /// [`sweep_cost`], computed once (it visits every tile's pairs).
+    sweep_cost: f64,
 }
 
 impl<O, I> Sweeps<'_, '_, O, I>
@@ -471,22 +475,21 @@ where
             }),
         })
     }
+}
 
-    /// Paths a sweep traces if every tile steps (a sweep's local exchanges
-    /// counted at their mean cost).
-    fn sweep_cost(&self) -> f64 {
-        let tiles = self.ctx.tiles;
-        let step_cost: u64 = (0..tiles.count())
-            .map(|s| tiles.pixels(s).count() as u64)
-            .sum();
-        let exchange = if self.settings.exchange_every > 0 {
-            exchange_cost(tiles) / self.settings.exchange_every as f64
-        } else {
-            0.0
-        };
-        let regularizer = self.settings.regularizer_paths as u64 * tiles.count() as u64;
-        (step_cost + regularizer) as f64 + exchange
-    }
+/// Paths a sweep traces if every tile steps (a sweep's local exchanges
+/// counted at their mean cost).
+fn sweep_cost(tiles: &Tiles, settings: &StratifiedSettings) -> f64 {
+    let step_cost: u64 = (0..tiles.count())
+        .map(|s| tiles.pixels(s).count() as u64)
+        .sum();
+    let exchange = if settings.exchange_every > 0 {
+        exchange_cost(tiles) / settings.exchange_every as f64
+    } else {
+        0.0
+    };
+    let regularizer = settings.regularizer_paths as u64 * tiles.count() as u64;
+    (step_cost + regularizer) as f64 + exchange
 }
 
 impl<O, I> Rounds for Sweeps<'_, '_, O, I>
@@ -495,12 +498,12 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     fn unit_cost(&self) -> u64 {
-        libm::ceil(self.sweep_cost()) as u64
+        libm::ceil(self.sweep_cost) as u64
     }
 
     fn planned_units(&self, samples: u64) -> u64 {
         let remaining = samples.saturating_sub(self.stats.initialization_samples);
-        let sweeps = remaining as f64 / self.sweep_cost();
+        let sweeps = remaining as f64 / self.sweep_cost;
         (libm::round(sweeps) as u64).max(1)
     }
 

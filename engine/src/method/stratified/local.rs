@@ -164,7 +164,8 @@ where
 }
 
 /// Paths traced by one exchange round, averaged over the four pairings, if
-/// every pair were initialized.
+/// every pair were initialized (rows counted in parallel: whole counts, so
+/// the sum is exact in any order).
 pub(super) fn exchange_cost(tiles: &Tiles) -> f64 {
     let r = tiles.resolution();
     let (w, h) = (r.width as usize, r.height as usize);
@@ -175,12 +176,12 @@ pub(super) fn exchange_cost(tiles: &Tiles) -> f64 {
                 .filter(|&(_, q)| tiles.offset_of(from, q).is_none())
                 .count()
         };
-        (new(s, t) + new(t, s)) as f64
+        (new(s, t) + new(t, s)) as u64
     };
-    let mut total = 0.0;
-    for round in 0..4 {
-        let (horizontal, parity) = pairing(round);
-        for y in 0..h {
+    let row = |y: usize| -> u64 {
+        let mut total = 0;
+        for round in 0..4 {
+            let (horizontal, parity) = pairing(round);
             for x in 0..w {
                 let s = y * w + x;
                 if horizontal && x % 2 == parity && x + 1 < w {
@@ -191,6 +192,8 @@ pub(super) fn exchange_cost(tiles: &Tiles) -> f64 {
                 }
             }
         }
-    }
-    total / 4.0
+        total
+    };
+    let total: u64 = parallel::map_indices(h, row).into_iter().sum();
+    total as f64 / 4.0
 }

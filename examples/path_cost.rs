@@ -224,6 +224,15 @@ fn methods(exchange: ExchangeKind) -> Vec<Method> {
     ]
 }
 
+/// A method's name in the output; replica exchange's carries its move
+/// (`replica:is-permutation`, `replica:none`, ...).
+fn label(method: &Method) -> String {
+    match method {
+        Method::Replica(r) => format!("replica:{}", r.exchange.name()),
+        m => m.name().to_string(),
+    }
+}
+
 /// Every path a render traced.
 fn traced(out: &Output) -> u64 {
     out.stats.samples + out.stats.bootstrap_samples
@@ -303,7 +312,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     t2.push(run(&two, method)?.0);
                 }
                 let (t1, t2) = (median(t1), median(t2));
-                let m = method.name();
+                let m = label(method);
                 println!(
                     "{m}: 1 thread {t1:.2} s, 2 threads {t2:.2} s, speed-up {:.3}",
                     t1 / t2
@@ -358,7 +367,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let rest_ns = (wall - m.first as f64 - m.second as f64) / paths;
             let per_path = m.numbers as f64 / paths;
             let bootstrap = out.stats.bootstrap_samples as f64 / traced(&out) as f64;
-            let name_m = method.name();
+            let name_m = label(method);
             println!(
                 "{name_m}: {ns:.0} ns/path (x{ratio:.2} MC); split: path {path_ns:.0} + sampler {sampler_ns:.0} + rest {rest_ns:.0} ns, {per_path:.1} numbers/path, bootstrap {:.1} % of paths",
                 100.0 * bootstrap

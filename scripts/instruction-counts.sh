@@ -7,37 +7,63 @@
 # Each method renders the pbrt Cornell box at 128x128 with 16 paths per pixel
 # on 1 thread (seed 0); the count covers the whole process (scene loading,
 # bootstrap, set-up, reconstruction) and is divided by every path traced,
-# bootstrap included, as `strata render` reports them. Writes
-# out/bench/instructions.csv; needs valgrind (apt-get install valgrind).
+# bootstrap included, as `strata render` reports them. With --step, each
+# method renders at 16 and at 48 paths per pixel instead, and the count is
+# the difference divided by the 32 x 128² paths between them: a chain step
+# alone, without the fixed costs. Replica exchange runs as issue 19 measures
+# it (power tempering, 4 chains to T = 100) unless REPLICA_ARGS gives other
+# `strata render` options (e.g. "--tempering power --replicas 8 --t-max 2500
+# --exchange none"). Writes out/bench/instructions.csv (or
+# instructions-step.csv); needs valgrind (apt-get install valgrind).
 #
-#   scripts/instruction-counts.sh            every method
-#   scripts/instruction-counts.sh pssmlt     MC and the methods named
+#   scripts/instruction-counts.sh                 every method
+#   scripts/instruction-counts.sh pssmlt          MC and the methods named
+#   scripts/instruction-counts.sh --step replica  a chain step of each
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 command -v valgrind >/dev/null || { echo "valgrind is not installed" >&2; exit 2; }
 scene="${STRATA_SCENES:-../shared/scenes}/cornell-box/scene.pbrt"
+step=false
+if [ "${1:-}" = --step ]; then
+  step=true
+  shift
+fi
 methods=("${@:-pssmlt stratified erpt replica}")
 read -r -a methods <<<"${methods[*]}"
+read -r -a replica_args <<<"${REPLICA_ARGS:---tempering power --replicas 4 --t-max 100}"
 
 cargo build --release --bin strata
 out=out/bench
 mkdir -p "$out/instructions"
-csv="$out/instructions.csv"
+if $step; then csv="$out/instructions-step.csv"; else csv="$out/instructions.csv"; fi
 echo "method,instructions,paths,instructions_per_path,ratio" >"$csv"
 
-mc_per_path=""
-for method in mc "${methods[@]}"; do
-  extra=()
-  # Replica exchange as issue 19 measures it: power tempering, 4 chains to T = 100.
-  [ "$method" = replica ] && extra=(--tempering power --replicas 4 --t-max 100)
-  log="$out/instructions/$method.log"
+# Prints "instructions paths" of one render of `$1` at `$2` paths per pixel.
+count() {
+  local method=$1 spp=$2 extra=()
+  [ "$method" = replica ] && extra=("${replica_args[@]}")
+  local log="$out/instructions/$method-$spp.log"
   valgrind --tool=callgrind --callgrind-out-file=/dev/null \
     target/release/strata render "$scene" --method "$method" "${extra[@]}" \
-    --width 128 --height 128 --spp 16 --threads 1 --out "$out/instructions/$method" >"$log" 2>&1
+    --width 128 --height 128 --spp "$spp" --threads 1 --out "$out/instructions/$method" >"$log" 2>&1
+  local instructions paths
   instructions=$(sed -n 's/.*I *refs: *//p' "$log" | tr -d ,)
   # "paths: N (+B bootstrap)": every path traced.
   paths=$(sed -n 's/^paths: \([0-9]*\) (+\([0-9]*\) bootstrap).*/\1 \2/p' "$log" | awk '{print $1 + $2}')
+  echo "$instructions $paths"
+}
+
+mc_per_path=""
+for method in mc "${methods[@]}"; do
+  if $step; then
+    read -r low _ < <(count "$method" 16)
+    read -r high _ < <(count "$method" 48)
+    instructions=$((high - low))
+    paths=$((32 * 128 * 128))
+  else
+    read -r instructions paths < <(count "$method" 16)
+  fi
   per_path=$(awk -v i="$instructions" -v p="$paths" 'BEGIN {printf "%.0f", i / p}')
   mc_per_path=${mc_per_path:-$per_path}
   ratio=$(awk -v a="$per_path" -v b="$mc_per_path" 'BEGIN {printf "%.3f", a / b}')

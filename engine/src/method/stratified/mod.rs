@@ -304,6 +304,7 @@ where
     };
     let n = tiles.count();
     let offsets = tiles.offsets().len();
+    let sweep_cost = sweep_cost(&tiles, settings);
     if let Some((position, saved)) = job.resumed::<Saved<O::Radiance>>()? {
         let (chains, stats, exchange_rounds, invalid, bootstrap_traces) = saved;
         let per_tile = offsets * O::Radiance::CHANNELS;
@@ -323,7 +324,7 @@ where
             stats,
             exchange_rounds,
             invalid,
-            sweep_cost: sweep_cost(&tiles, settings),
+            sweep_cost,
         };
         let driven = drive(&mut sweeps, job.round_loop(Some(position)), |s, out| {
             s.save(bootstrap_traces, out)
@@ -368,7 +369,7 @@ where
         },
         exchange_rounds: 0,
         invalid: initialized.invalid,
-        sweep_cost: sweep_cost(&tiles, settings),
+        sweep_cost,
     };
     let driven = drive(&mut sweeps, job.round_loop(None), |s, out| {
         s.save(initialized.bootstrap, out)

@@ -15,6 +15,12 @@
 //! 5.27) then picks, level by level, the state `k` of chain `|S|` with
 //! probability `π_{|S|}(u_k) F_{S ∪ {k}} / F_S`.
 //!
+//! Small ensembles (at most [`LISTED_CHAINS`] chains) whose values are in
+//! the plain range (below) skip the table: their `M!` products are listed
+//! and one weighted choice among them draws `o` (the naive sampler of sec.
+//! 5.3.2, cheaper than the table's `M 2^(M-1)` multiply-adds and `M`
+//! choices while `M!` stays this small).
+//!
 //! Numerics: products of `M` target values over- or underflow long before `M`
 //! becomes large. Values whose every product of `M` stays far inside the
 //! normal range (positive values between `2^(-1000/M)` and `2^(930/M)`,
@@ -38,6 +44,11 @@ use crate::error::Error;
 /// The most chains [`PermutationSampler`] accepts: its table holds `2^M`
 /// numbers (8 MiB at 20).
 pub const MAX_PERMUTATION_CHAINS: usize = 20;
+
+/// The largest ensemble whose permutations are drawn from the list of all
+/// `M!` products (24 at 4 chains; at 5, 120 products of 5 cost more than
+/// the table's 80 multiply-adds).
+const LISTED_CHAINS: usize = 4;
 
 /// `log_values` scaled so that every row, then every column, has largest
 /// entry 1, exponentiated into `scaled`; returns the log of the factor taken
@@ -74,19 +85,22 @@ fn scale_rows_and_columns(log_values: &[f64], chains: usize, scaled: &mut [f64])
 /// products, below `2^62 · 2^930`) is a normal number with a margin far
 /// wider than rounding can use: the values need no scaling.
 fn in_plain_range(values: &[f64], chains: usize) -> bool {
-    let (mut smallest, mut largest) = (f64::INFINITY, 0.0f64);
+    // Positive finite values order as their bits do; zeros (and a sign bit,
+    // which no value has) are left out of the smallest by wrapping to the top.
+    let (mut smallest, mut largest) = (u64::MAX, 0u64);
     for &v in values {
-        smallest = smallest_positive(smallest, v);
-        largest = larger(largest, v);
+        let bits = v.to_bits();
+        smallest = smallest.min(bits.wrapping_sub(1));
+        largest = largest.max(bits);
     }
-    if largest == 0.0 {
+    if largest == 0 {
         return true;
     }
     // The power of two at or below a positive finite value (-1023 for a
     // subnormal one, which the test then rejects).
-    let exponent = |v: f64| ((v.to_bits() >> 52) as i64) - 1023;
+    let exponent = |bits: u64| ((bits >> 52) as i64) - 1023;
     let m = chains as i64;
-    exponent(smallest) * m >= -1000 && (exponent(largest) + 1) * m <= 930
+    exponent(smallest + 1) * m >= -1000 && (exponent(largest) + 1) * m <= 930
 }
 
 /// How [`scale_values`] went.
@@ -204,6 +218,9 @@ enum Table {
     Linear,
     /// `ln F_S` over the raw log values.
     Log,
+    /// No table: the product of every listed permutation, over the values
+    /// as they are.
+    Listed,
 }
 
 /// The subset table of one ensemble size, reused from sweep to sweep.
@@ -219,6 +236,11 @@ pub struct PermutationSampler {
     log_values: Vec<f64>,
     log_normalization: f64,
     weights: Vec<f64>,
+    /// Ensembles of at most [`LISTED_CHAINS`]: every permutation `o`, as the
+    /// indices `i M + o(i)` of its values, `M` per permutation.
+    listed: Vec<u8>,
+    /// The product of each listed permutation's values (see [`Table::Listed`]).
+    products: Vec<f64>,
 }
 
 impl PermutationSampler {
@@ -236,6 +258,12 @@ impl PermutationSampler {
         for set in 0..1u32 << chains {
             by_level[set.count_ones() as usize].push(set);
         }
+        let mut listed = Vec::new();
+        if chains <= LISTED_CHAINS {
+            for_each_permutation(chains, |o| {
+                listed.extend(o.iter().enumerate().map(|(i, &k)| (i * chains + k) as u8));
+            });
+        }
         Ok(Self {
             chains,
             factor: vec![0.0; 1 << chains],
@@ -245,6 +273,8 @@ impl PermutationSampler {
             log_values: vec![0.0; chains * chains],
             log_normalization: f64::NEG_INFINITY,
             weights: vec![0.0; chains],
+            products: vec![0.0; listed.len() / chains],
+            listed,
         })
     }
 
@@ -276,22 +306,21 @@ impl PermutationSampler {
 
     /// [`normalize`](Self::normalize) from the values themselves,
     /// `values[i * M + k] = π_i(u_k)` (finite, `>= 0`), without a single
-    /// logarithm but the one of `ln b_O`: values in the plain range fill the
-    /// table as they are; others are scaled by division first; only where
-    /// the scaling would lose a positive entry or a product underflows are
-    /// the logarithms taken and the log path followed. The same table up to
-    /// rounding.
+    /// logarithm but the one of `ln b_O`: values in the plain range are
+    /// listed (small ensembles) or fill the table as they are; others are
+    /// scaled by division first; only where the scaling would lose a
+    /// positive entry or a product underflows are the logarithms taken and
+    /// the log path followed. The same `b_O` up to rounding.
     pub fn normalize_values(&mut self, values: &[f64]) -> f64 {
         let m = self.chains;
         debug_assert_eq!(values.len(), m * m);
         if in_plain_range(values, m) {
             self.scaled.copy_from_slice(values);
-            self.table = Table::Linear;
-            self.factor[(1 << m) - 1] = 1.0;
-            for level in (0..m).rev() {
-                self.fill_level(level);
-            }
-            let b = self.factor[0];
+            let b = if m <= LISTED_CHAINS {
+                self.fill_listed(values)
+            } else {
+                self.fill_plain()
+            };
             self.log_normalization = if b > 0.0 {
                 libm::log(b)
             } else {
@@ -310,6 +339,33 @@ impl PermutationSampler {
             Scaled::Lost => return self.normalize_logs_of(values),
         };
         self.log_normalization
+    }
+
+    /// The product of every listed permutation's values; returns their sum,
+    /// `b_O`.
+    fn fill_listed(&mut self, values: &[f64]) -> f64 {
+        self.table = Table::Listed;
+        let mut padded = [0.0; LISTED_CHAINS * LISTED_CHAINS];
+        padded[..values.len()].copy_from_slice(values);
+        let values = &padded;
+        let (listed, products) = (&self.listed, &mut self.products);
+        match self.chains {
+            1 => list_products::<1>(values, listed, products),
+            2 => list_products::<2>(values, listed, products),
+            3 => list_products::<3>(values, listed, products),
+            _ => list_products::<LISTED_CHAINS>(values, listed, products),
+        }
+    }
+
+    /// The table over the values as they are; returns `b_O`.
+    fn fill_plain(&mut self) -> f64 {
+        let m = self.chains;
+        self.table = Table::Linear;
+        self.factor[(1 << m) - 1] = 1.0;
+        for level in (0..m).rev() {
+            self.fill_level(level);
+        }
+        self.factor[0]
     }
 
     /// [`normalize`](Self::normalize) of the logarithms of `values`.
@@ -424,6 +480,16 @@ impl PermutationSampler {
         if self.log_normalization == f64::NEG_INFINITY {
             return false;
         }
+        if self.table == Table::Listed {
+            let Some(p) = decisions.choose(&self.products) else {
+                return false;
+            };
+            let o = &self.listed[p * m..(p + 1) * m];
+            for (i, (chosen, &at)) in out.iter_mut().zip(o).enumerate() {
+                *chosen = at as usize - i * m;
+            }
+            return true;
+        }
         let mut set = 0usize;
         for (level, chosen) in out.iter_mut().enumerate().take(m) {
             let here = self.factor[set];
@@ -447,6 +513,28 @@ impl PermutationSampler {
     }
 }
 
+/// `products[p] = Π_i values[listed[p M + i]]` for every listed permutation
+/// `p` of `M` chains (`values` the `M x M` values, then zeros); returns their sum (one loop of `M` per permutation,
+/// unrolled for each `M`).
+fn list_products<const M: usize>(
+    values: &[f64; LISTED_CHAINS * LISTED_CHAINS],
+    listed: &[u8],
+    products: &mut [f64],
+) -> f64 {
+    let (listed, _) = listed.as_chunks::<M>();
+    let mut b = 0.0;
+    for (product, o) in products.iter_mut().zip(listed) {
+        // Every index is below M²: the remainder (a mask) only spares the
+        // bounds checks.
+        *product = o
+            .iter()
+            .map(|&at| values[at as usize % values.len()])
+            .product();
+        b += *product;
+    }
+    b
+}
+
 /// `ln b_O` by enumerating all `M!` permutations (with the same row and
 /// column scaling, products of `M` scaled values each):
 /// the reference the subset recursion is tested and benchmarked against.
@@ -466,7 +554,6 @@ pub fn log_normalization_by_enumeration(log_values: &[f64], chains: usize) -> f6
 }
 
 /// Calls `f` with every permutation of `0..n` (Heap's algorithm).
-#[cfg(any(test, feature = "test-hooks"))]
 pub fn for_each_permutation(n: usize, mut f: impl FnMut(&[usize])) {
     let mut o: Vec<usize> = (0..n).collect();
     let mut c = vec![0usize; n];
@@ -590,10 +677,10 @@ mod tests {
     }
 
     /// From the values themselves: the same `ln b_O`, the same draws, no
-    /// logarithm table.
+    /// logarithm table (ensembles too large to be listed).
     #[test]
     fn values_give_the_table_of_their_logarithms() {
-        for m in 1..=7 {
+        for m in LISTED_CHAINS + 1..=7 {
             let logs = random_log_values(m, 60 + m as u64);
             let values: Vec<f64> = logs.iter().map(|&l| libm::exp(l)).collect();
             let mut from_logs = PermutationSampler::new(m).unwrap();
@@ -633,6 +720,63 @@ mod tests {
                 (log_b - slow).abs() < 1e-12 * slow.abs().max(1.0),
                 "M={m}: {log_b} vs {slow}"
             );
+        }
+    }
+
+    /// Small ensembles list their permutations: the product of each is its
+    /// share of `b_O` (eq. 5.7), the sum the enumeration's `b_O`, and a draw
+    /// gives the permutation its choice picks.
+    #[test]
+    fn small_ensembles_draw_from_the_listed_products() {
+        for m in 1..=LISTED_CHAINS {
+            let logs = random_log_values(m, 90 + m as u64);
+            let values: Vec<f64> = logs.iter().map(|&l| libm::exp(l)).collect();
+            let mut s = PermutationSampler::new(m).unwrap();
+            let log_b = s.normalize_values(&values);
+            assert_eq!(s.table, Table::Listed, "M={m}");
+            let slow = log_normalization_by_enumeration(&logs, m);
+            assert!(
+                (log_b - slow).abs() < 1e-12 * slow.abs().max(1.0),
+                "M={m}: {log_b} vs {slow}"
+            );
+            let mut expected = Vec::new();
+            for_each_permutation(m, |o| {
+                let product: f64 = o
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &k)| values[i * m + k])
+                    .product();
+                expected.push((o.to_vec(), product));
+            });
+            assert_eq!(s.products.len(), expected.len(), "M={m}");
+            for (p, (o, product)) in expected.iter().enumerate() {
+                assert!(
+                    (s.products[p] - product).abs() <= 1e-15 * product,
+                    "M={m} {o:?}"
+                );
+                // A choice that picks `p` alone draws `o`.
+                let mut only_p = PickOne(p);
+                let mut drawn = vec![usize::MAX; m];
+                assert!(s.sample(&mut only_p, &mut drawn));
+                assert_eq!(&drawn, o, "M={m}");
+            }
+        }
+        // Five chains fill the table.
+        let values = vec![0.5; 25];
+        let mut s = PermutationSampler::new(5).unwrap();
+        s.normalize_values(&values);
+        assert_eq!(s.table, Table::Linear);
+    }
+
+    /// Decisions that always choose index `self.0`.
+    struct PickOne(usize);
+
+    impl Decisions for PickOne {
+        fn choose(&mut self, weights: &[f64]) -> Option<usize> {
+            (self.0 < weights.len()).then_some(self.0)
+        }
+        fn accept(&mut self, _: f64) -> bool {
+            unreachable!("permutations are always accepted")
         }
     }
 

@@ -315,10 +315,10 @@ impl PermutationSampler {
         let m = self.chains;
         debug_assert_eq!(values.len(), m * m);
         if in_plain_range(values, m) {
-            self.scaled.copy_from_slice(values);
             let b = if m <= LISTED_CHAINS {
                 self.fill_listed(values)
             } else {
+                self.scaled.copy_from_slice(values);
                 self.fill_plain()
             };
             self.log_normalization = if b > 0.0 {
@@ -357,7 +357,7 @@ impl PermutationSampler {
         }
     }
 
-    /// The table over the values as they are; returns `b_O`.
+    /// The table over the values as they are (in `scaled`); returns `b_O`.
     fn fill_plain(&mut self) -> f64 {
         let m = self.chains;
         self.table = Table::Linear;
@@ -514,8 +514,8 @@ impl PermutationSampler {
 }
 
 /// `products[p] = Π_i values[listed[p M + i]]` for every listed permutation
-/// `p` of `M` chains (`values` the `M x M` values, then zeros); returns their sum (one loop of `M` per permutation,
-/// unrolled for each `M`).
+/// `p` of `M` chains (`values`: the `M x M` values, then zeros); returns
+/// their sum. One loop of `M` per permutation, unrolled for each `M`.
 fn list_products<const M: usize>(
     values: &[f64; LISTED_CHAINS * LISTED_CHAINS],
     listed: &[u8],
@@ -704,11 +704,11 @@ mod tests {
         }
     }
 
-    /// Values in the plain range fill the table unscaled, and give the
-    /// enumeration's `ln b_O`.
+    /// Values in the plain range fill the table unscaled (ensembles too
+    /// large to be listed), and give the enumeration's `ln b_O`.
     #[test]
     fn values_in_the_plain_range_fill_the_table_as_they_are() {
-        for m in 1..=7 {
+        for m in LISTED_CHAINS + 1..=7 {
             let logs = random_log_values(m, 80 + m as u64);
             let values: Vec<f64> = logs.iter().map(|&l| libm::exp(l)).collect();
             assert!(in_plain_range(&values, m));

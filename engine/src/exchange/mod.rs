@@ -8,7 +8,7 @@
 //! | [`Move`] | one exchange move; [`NeighborSwap`], [`IsPermutation`], [`IsSwap`], [`EquiEnergy`] (original and frequent), [`EquiEnergySampler`], [`NonReversible`] |
 //! | [`Exchange`] | what a move sees and does: the values `π_i(u_j)`, swaps, permutations |
 //! | [`Decisions`] | the random choices of a move (a PCG stream, or a test's enumerator) |
-//! | [`PermutationSampler`] | eq. 5.7 sampled in `O(M 2^M)` (App. 5.C) |
+//! | [`PermutationSampler`] | eq. 5.7 sampled in `O(M 2^M)` (App. 5.C), or from the `M!` listed products for at most 4 chains |
 //! | [`Ensemble`] | `M` chains over an oracle, swept with a move's hooks |
 //! | [`Tempering`], [`TemperedPath`] | power or oracle tempering; a state valued at every temperature, MIS weights (eq. 5.13) |
 //! | [`ExchangeKind`] | the catalogue of moves, built per ensemble from its bootstrap |

@@ -49,8 +49,9 @@ impl<S: Tempered + Clone> Move<S> for NonReversible {
 
 /// Importance-sampled permutations (seed 002 sec. 5.3.2, eq. 5.7-5.8): after
 /// all chains mutate, draw a permutation of the states from all `M!` with
-/// probability `Π π_i(u_{o(i)}) / b_O`, in `O(M 2^M)` (App. 5.C). Over the full
-/// set of permutations the acceptance eq. 5.8 is 1 (App. 5.B.1, eq. 5.19), so
+/// probability `Π π_i(u_{o(i)}) / b_O`, in `O(M 2^M)` (App. 5.C; from the
+/// listed `M!` products for at most 4 chains, see [`PermutationSampler`]).
+/// Over the full set of permutations the acceptance eq. 5.8 is 1 (App. 5.B.1, eq. 5.19), so
 /// the drawn permutation is always applied; it may be the identity.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct IsPermutation {

@@ -18,7 +18,7 @@
 //! cargo run --release --example compare -- --scene envplane --time 10
 //! ```
 //!
-//! Scenes: the built-ins (`cornell`, `door`, `envplane`, `caustic`) or a
+//! Scenes: the built-ins (`cornell`, `door`, `envplane`, `caustic`, `saturated`) or a
 //! directory of `$STRATA_SCENES` (default `../shared/scenes`): `cornell-box`,
 //! `veach-ajar`. The plot needs a TrueType font (`--font`, default DejaVu Sans).
 
@@ -326,8 +326,8 @@ fn reference_error(reference: &Film, check: &Film) -> ImageErrors {
 }
 
 /// The method called `name` as seed 001 sec. 4 compares it: Kelemen small
-/// steps from 1/1024 to 1/32, large steps 0.3; replica exchange with 4
-/// chains up to T = 100.
+/// steps from 1/1024 to 1/32, large steps 0.3 (stratified MCMC: its own
+/// default, 0.8); replica exchange with 4 chains up to T = 100.
 fn compared(name: &str, args: &Args) -> AnyResult<Method> {
     let mutation = MutationParams {
         small_step: SmallStep::Kelemen(Kelemen::SEED_001),
@@ -339,7 +339,7 @@ fn compared(name: &str, args: &Args) -> AnyResult<Method> {
         Method::Pssmlt(s) => s.mutation = mutation,
         Method::Erpt(s) => s.small_step = mutation.small_step,
         Method::Stratified(s) => {
-            s.mutation = mutation;
+            s.mutation.small_step = mutation.small_step;
             if let Some(k) = args.regularizer_paths {
                 s.regularizer_paths = k;
             }

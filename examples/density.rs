@@ -23,7 +23,7 @@ use strata::native::{builtin, native_tracer};
 #[derive(Parser, Debug)]
 #[command(about = "Sample densities of PSSMLT, multi-stage, noise-aware MLT and stratified MCMC")]
 struct Args {
-    /// `procedural` (exact image known) or a built-in scene (cornell, door, envplane, caustic).
+    /// `procedural` (exact image known) or a built-in scene (cornell, door, envplane, caustic, saturated).
     #[arg(long, default_value = "procedural")]
     scene: String,
     /// Paths per pixel.

@@ -155,19 +155,15 @@ fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), 
         };
         run(name, Method::Replica(replica))?;
     }
-    let seed_001 = MutationParams {
-        small_step: SmallStep::Kelemen(Kelemen::SEED_001),
-        large_step_probability: 0.3,
-    };
     for (name, solver) in [
         ("stratified", Solver::default()),
         ("stratified-log", Solver::LogDomain(LogSettings::default())),
     ] {
-        let stratified = StratifiedSettings {
-            mutation: seed_001,
+        let mut stratified = StratifiedSettings {
             solver,
             ..Default::default()
         };
+        stratified.mutation.small_step = SmallStep::Kelemen(Kelemen::SEED_001);
         run(name, Method::Stratified(stratified))?;
     }
     let erpt = ErptSettings {

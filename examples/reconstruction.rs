@@ -1,9 +1,11 @@
 //! Where stratified MCMC's error comes from (seed 001 sec. 3.2): renders a
 //! scene once, then rebuilds the image from the same unscaled estimates
 //! `G_s(j)` with different tile normalizations `b_s`, and compares each
-//! with a reference (a cached `compare` reference, say):
+//! with a reference (a cached `compare` reference, say); every variant, as
+//! the render, reconstructs each channel on its own:
 //!
-//! * the render as it comes out (weighted solver, eq. 13-16, and fallback);
+//! * the render as it comes out (weighted solver, eq. 13-16, known pixels,
+//!   fallback, total anchored);
 //! * the regularizer alone, the Monte Carlo estimate of the large steps;
 //! * `b_s = Î_s / Ḡ_s`, the solver's starting point;
 //! * the weighted solver at other values of `α`;
@@ -14,7 +16,8 @@
 //!   any reconstruction of these `G` (slightly optimistic: one fitted value
 //!   per tile also absorbs a little of the noise of `G`).
 //!
-//! Writes the table as CSV.
+//! Writes the table as CSV (seed 001's metrics on luminance, and the MSE
+//! per pixel and channel).
 //!
 //! ```text
 //! cargo run --release --example compare -- --scene veach-ajar --width 160 --height 90 --methods mc --time 1
@@ -54,6 +57,9 @@ struct Args {
     /// Render time, seconds.
     #[arg(long, default_value_t = 30.0)]
     time: f64,
+    /// Paths per pixel instead of `--time`.
+    #[arg(long)]
+    spp: Option<u64>,
     /// Seed.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -63,14 +69,6 @@ struct Args {
     /// Output CSV.
     #[arg(long, default_value = "out/reconstruction.csv")]
     out: PathBuf,
-}
-
-/// The mean over 3 channels of each pixel or estimate.
-fn grey(values: &[f64]) -> Vec<f64> {
-    values
-        .chunks(3)
-        .map(|v| v.iter().sum::<f64>() / 3.0)
-        .collect()
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
@@ -95,95 +93,113 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     if reference.resolution() != r {
         return Err("the reference's resolution differs from the render's".into());
     }
-    // Seed 001 sec. 4: Kelemen 1/1024..1/32, large steps 0.3, as `compare`.
+    // Seed 001 sec. 4's small steps (Kelemen 1/1024..1/32), as `compare`.
     let stratified = StratifiedSettings {
         mutation: MutationParams {
             small_step: SmallStep::Kelemen(Kelemen::SEED_001),
-            large_step_probability: 0.3,
+            ..StratifiedSettings::default().mutation
         },
         ..Default::default()
     };
     let settings = Settings {
         seed: args.seed,
-        budget: Budget::Time(Duration::from_secs_f64(args.time)),
+        budget: match args.spp {
+            Some(spp) => Budget::samples_per_pixel(spp, r),
+            None => Budget::Time(Duration::from_secs_f64(args.time)),
+        },
         method: Method::Stratified(stratified),
     };
     let rendered = render(&tracer, &MaxChannel, &settings, &Silent)?;
     let out = rendered.extras.stratified().ok_or("stratified extras")?;
     println!(
-        "{}: {}x{}, {} s, {} sweeps",
-        args.scene, r.width, r.height, args.time, out.counters.sweeps
+        "{}: {}x{}, {} sweeps",
+        args.scene, r.width, r.height, out.counters.sweeps
     );
 
+    // Every variant reconstructs each channel on its own, as the render does.
     let tiles = Tiles::new(r, TileShape::Cross)?;
     let offsets = tiles.offsets().len();
-    let g = &out.unscaled;
-    let (g_grey, mc, truth) = (
-        grey(g),
-        grey(out.regularizer.data()),
-        grey(reference.data()),
-    );
-    let image = |b: &[f64]| {
-        Film::from_data(r, 3, reconstruct::image(&tiles, g, b, 3)).expect("one value per pixel")
+    let channel = |values: &[f64], c: usize| -> Vec<f64> {
+        values.iter().skip(c).step_by(3).copied().collect()
     };
-    let solve = |alpha: f64, regularizer: &[f64]| {
-        let w = WeightedSettings {
-            alpha,
-            ..Default::default()
-        };
-        reconstruct::weighted(&tiles, &g_grey, regularizer, &w, None).map(|b| image(&b))
-    };
-    let fitted: Vec<f64> = (0..tiles.count())
-        .map(|s| {
-            let (mut num, mut den) = (0.0, 0.0);
-            for (o, p) in tiles.pixels(s) {
-                let gs = g_grey[s * offsets + o];
-                num += gs * truth[p];
-                den += gs * gs;
+    let per_channel = |b_of: &dyn Fn(&[f64], &[f64], &[f64]) -> Result<Vec<f64>, strata::engine::Error>| {
+        let mut data = vec![0.0; tiles.count() * 3];
+        for c in 0..3 {
+            let g = channel(&out.unscaled, c);
+            let b = b_of(&g, &channel(out.regularizer.data(), c), &channel(reference.data(), c))?;
+            for (j, v) in reconstruct::image(&tiles, &g, &b, 1).into_iter().enumerate() {
+                data[j * 3 + c] = v;
             }
-            if den > 0.0 { num / den } else { 0.0 }
+        }
+        Film::from_data(r, 3, data)
+    };
+    let solve = |alpha: f64, with_reference: bool| {
+        per_channel(&|g, mc, truth| {
+            let w = WeightedSettings {
+                alpha,
+                ..Default::default()
+            };
+            reconstruct::weighted(&tiles, g, if with_reference { truth } else { mc }, &w, None)
         })
-        .collect();
+    };
+    let fitted = per_channel(&|g, _, truth| {
+        Ok((0..tiles.count())
+            .map(|s| {
+                let (mut num, mut den) = (0.0, 0.0);
+                for (o, p) in tiles.pixels(s) {
+                    let gs = g[s * offsets + o];
+                    num += gs * truth[p];
+                    den += gs * gs;
+                }
+                if den > 0.0 { num / den } else { 0.0 }
+            })
+            .collect())
+    })?;
 
     let mut rows: Vec<(String, Film)> = vec![
-        (
-            "render (solver alpha 0.05, fallback)".into(),
-            rendered.film.clone(),
-        ),
+        ("render (as it comes out)".into(), rendered.film.clone()),
         (
             "regularizer alone (MC of the large steps)".into(),
             out.regularizer.clone(),
         ),
         (
             "b = regularizer tile mean / G tile mean (solver start)".into(),
-            image(&reconstruct::initial_normalizations(&tiles, &g_grey, &mc)),
+            per_channel(&|g, mc, _| Ok(reconstruct::initial_normalizations(&tiles, g, mc)))?,
         ),
     ];
-    for alpha in [0.01, 0.2, 1.0] {
-        rows.push((format!("solver alpha {alpha}"), solve(alpha, &mc)?));
+    for alpha in [0.05, 0.2, 1.0, 5.0] {
+        rows.push((format!("solver alpha {alpha}"), solve(alpha, false)?));
     }
     for alpha in [0.05, 1.0, 5.0] {
         rows.push((
             format!("solver alpha {alpha}, the reference as regularizer"),
-            solve(alpha, &truth)?,
+            solve(alpha, true)?,
         ));
     }
-    rows.push(("b fitted to the reference per tile".into(), image(&fitted)));
+    rows.push(("b fitted to the reference per tile".into(), fitted));
 
     if let Some(dir) = args.out.parent() {
         std::fs::create_dir_all(dir)?;
     }
     let mut csv = std::fs::File::create(&args.out)?;
-    writeln!(csv, "variant,mape,rel_mse,l1,l2")?;
+    writeln!(csv, "variant,mape,rel_mse,l1,l2,mse")?;
     for (name, film) in &rows {
         let e: ImageErrors = metrics::compare(film, &reference)?;
+        // Per pixel and channel: the colour errors that luminance hides.
+        let mse = film
+            .data()
+            .iter()
+            .zip(reference.data())
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            / film.data().len() as f64;
         println!(
-            "{name:>58}: MAPE {:.4}  relMSE {:.4}  L1 {:.4}  L2 {:.4}",
+            "{name:>58}: MAPE {:.4}  relMSE {:.4}  L1 {:.4}  L2 {:.4}  MSE {mse:.3e}",
             e.mape, e.rel_mse, e.l1, e.l2
         );
         writeln!(
             csv,
-            "{name},{:.6},{:.6},{:.6},{:.6}",
+            "{name},{:.6},{:.6},{:.6},{:.6},{mse:.6e}",
             e.mape, e.rel_mse, e.l1, e.l2
         )?;
     }

@@ -1,5 +1,5 @@
 //! Procedural scenes for fast tests, no data files: `cornell`, `door`,
-//! `envplane` and `caustic`.
+//! `envplane`, `caustic` and `saturated`.
 
 use glam::{Mat4, Vec2, Vec3};
 use strata_engine::Resolution;
@@ -8,7 +8,7 @@ use crate::material::{ConductorFresnel, Material, Texture};
 use crate::scene::{Camera, Mesh, Scene};
 
 /// Names of the built-in scenes.
-pub const NAMES: [&str; 4] = ["cornell", "door", "envplane", "caustic"];
+pub const NAMES: [&str; 5] = ["cornell", "door", "envplane", "caustic", "saturated"];
 
 /// The built-in scene called `name`, at `resolution`.
 pub fn by_name(name: &str, resolution: Resolution) -> Option<Scene> {
@@ -17,6 +17,7 @@ pub fn by_name(name: &str, resolution: Resolution) -> Option<Scene> {
         "door" => Some(door(resolution)),
         "envplane" => Some(envplane(resolution)),
         "caustic" => Some(caustic(resolution)),
+        "saturated" => Some(saturated(resolution)),
         _ => None,
     }
 }
@@ -443,6 +444,56 @@ pub fn caustic(resolution: Resolution) -> Scene {
         v(0.9, 2.5, 1.0),
     );
     s.add_mesh(&light, black, Some(v(400.0, 380.0, 340.0)));
+    s.max_depth = 16;
+    s
+}
+
+/// The Cornell box's room with fully saturated walls (left red, right blue:
+/// each reflects one channel only), a mirror sphere and a glass sphere under
+/// a large light: every channel lights a region of its own, and the glass
+/// adds caustics. A scene where an estimator that gets one channel's share
+/// wrong shows it (issue 35).
+pub fn saturated(resolution: Resolution) -> Scene {
+    let camera = Camera::look_at(
+        Vec3::new(0.0, 1.0, 6.8),
+        Vec3::new(0.0, 1.0, 0.0),
+        Vec3::Y,
+        19.5,
+        resolution,
+    );
+    let mut s = Scene::new(camera);
+    let white = diffuse(&mut s, Vec3::splat(0.75));
+    let red = diffuse(&mut s, Vec3::new(0.8, 0.0, 0.0));
+    let blue = diffuse(&mut s, Vec3::new(0.0, 0.0, 0.8));
+    let black = diffuse(&mut s, Vec3::ZERO);
+    let glass = s.add_material(Material::Dielectric {
+        eta: 1.5,
+        alpha: 0.0,
+    });
+    let mirror = s.add_material(Material::Conductor {
+        fresnel: ConductorFresnel::Constant(Vec3::splat(0.95)),
+        alpha: 0.0,
+    });
+    let v = Vec3::new;
+    let walls = [
+        (v(-1., 0., -1.), v(-1., 0., 1.), v(1., 0., 1.), v(1., 0., -1.), white), // floor
+        (v(1., 2., 1.), v(-1., 2., 1.), v(-1., 2., -1.), v(1., 2., -1.), white), // ceiling
+        (v(-1., 0., -1.), v(1., 0., -1.), v(1., 2., -1.), v(-1., 2., -1.), white), // back
+        (v(1., 0., -1.), v(1., 0., 1.), v(1., 2., 1.), v(1., 2., -1.), blue), // right
+        (v(-1., 0., 1.), v(-1., 0., -1.), v(-1., 2., -1.), v(-1., 2., 1.), red), // left
+    ];
+    for (a, b, c, d, material) in walls {
+        s.add_mesh(&quad(a, b, c, d), material, None);
+    }
+    s.add_mesh(&sphere(v(-0.45, 0.4, -0.35), 0.4, 24, 48), mirror, None);
+    s.add_mesh(&sphere(v(0.45, 0.35, 0.3), 0.35, 24, 48), glass, None);
+    let light = quad(
+        v(-0.5, 1.98, -0.5),
+        v(0.5, 1.98, -0.5),
+        v(0.5, 1.98, 0.5),
+        v(-0.5, 1.98, 0.5),
+    );
+    s.add_mesh(&light, black, Some(Vec3::splat(4.0)));
     s.max_depth = 16;
     s
 }

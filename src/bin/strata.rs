@@ -37,7 +37,7 @@ use strata::engine::analytic::{GaussianMixture, ProceduralImage};
 use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Ladder, Tempering};
 use strata::engine::method::Solver;
 use strata::engine::metrics;
-use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
+use strata::engine::mutate::{Kelemen, SmallStep};
 use strata::engine::target::MaxChannel;
 use strata::engine::tiles::TileShape;
 use strata::engine::{
@@ -72,7 +72,7 @@ enum Command {
 /// What `strata render` takes.
 #[derive(clap::Args, Debug)]
 struct Args {
-    /// Scene: cornell, door, envplane, caustic, procedural, mixture, or a .pbrt file.
+    /// Scene: cornell, door, envplane, caustic, saturated, procedural, mixture, or a .pbrt file.
     #[arg(default_value = "cornell")]
     scene: String,
     /// Estimator: mc, pssmlt, replica, stratified, erpt or multistage.
@@ -105,9 +105,10 @@ struct Args {
     /// PSSMLT small-step kernel.
     #[arg(long, default_value = "kelemen", value_parser = PossibleValuesParser::new(SmallStep::NAMES))]
     kernel: String,
-    /// PSSMLT large-step probability.
-    #[arg(long, default_value_t = 0.3)]
-    large_step: f64,
+    /// Large-step probability of the MCMC methods (default: each method's
+    /// own, 0.3, and 0.8 for stratified MCMC).
+    #[arg(long)]
+    large_step: Option<f64>,
     /// Replica exchange: the exchange move (seed 002 sec. 5.3; eem: equi-energy move, ees: equi-energy sampler).
     #[arg(long, default_value = "is-permutation", value_parser = PossibleValuesParser::new(ExchangeKind::NAMES))]
     exchange: String,
@@ -441,16 +442,18 @@ fn method(args: &Args) -> AnyResult<Method> {
         Method::Mc => {}
         Method::Pssmlt(s) => {
             s.chains = args.chains;
-            s.mutation = MutationParams {
-                small_step: SmallStep::from_name(&args.kernel).ok_or("unknown kernel")?,
-                large_step_probability: args.large_step,
-            };
+            s.mutation.small_step = SmallStep::from_name(&args.kernel).ok_or("unknown kernel")?;
+            if let Some(p) = args.large_step {
+                s.mutation.large_step_probability = p;
+            }
         }
         Method::Replica(s) => {
             let mut ensemble = EnsembleSettings::geometric(args.replicas, args.t_max)?;
             ensemble.tempering =
                 Tempering::from_name(&args.tempering).ok_or("unknown tempering")?;
-            ensemble.mutation.large_step_probability = args.large_step;
+            if let Some(p) = args.large_step {
+                ensemble.mutation.large_step_probability = p;
+            }
             s.ensemble = ensemble;
             s.ensembles = args.ensembles;
             s.ladder_tuning_sweeps = args.tune_ladder;
@@ -461,10 +464,10 @@ fn method(args: &Args) -> AnyResult<Method> {
                 0 => TileShape::Cross,
                 radius => TileShape::Square { radius },
             };
-            s.mutation = MutationParams {
-                small_step: seed_001,
-                large_step_probability: args.large_step,
-            };
+            s.mutation.small_step = seed_001;
+            if let Some(p) = args.large_step {
+                s.mutation.large_step_probability = p;
+            }
             s.exchange_every = args.exchange_every;
             s.solver = Solver::from_name(&args.solver).ok_or("unknown solver")?;
             s.fallback_sigmas = (args.fallback_sigmas != 0.0).then_some(args.fallback_sigmas);
@@ -475,7 +478,9 @@ fn method(args: &Args) -> AnyResult<Method> {
         }
         Method::MultiStage(s) => {
             s.pssmlt.chains = args.chains;
-            s.pssmlt.mutation.large_step_probability = args.large_step;
+            if let Some(p) = args.large_step {
+                s.pssmlt.mutation.large_step_probability = p;
+            }
             s.noise_aware = args.noise_aware;
         }
     }

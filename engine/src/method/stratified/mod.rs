@@ -15,7 +15,9 @@
 //!   T_s(x))`, and every large-step proposal is also an ordinary Monte Carlo
 //!   sample of each tile pixel. Pooled over the tiles containing a pixel, they
 //!   give the regularizer `Î(j)` of eq. 11 (with, optionally, plain MC paths
-//!   traced for it alone: [`StratifiedSettings::regularizer_paths`]).
+//!   traced for it alone: [`StratifiedSettings::regularizer_paths`]). Their
+//!   probability is 0.8 by default, seed 001's is 0.3 (ours, measured: see
+//!   [`StratifiedSettings::mutation`]).
 //! * **Initialization** (sec. 3.3). Global chains run PSSMLT over the union of
 //!   the tile targets (the film position picks the tile, its fraction the
 //!   jitter); a tile takes the state of the first global chain that visits it,
@@ -29,17 +31,27 @@
 //! * **Reconstruction** (sec. 3.2) of the normalizations `b_s` from the
 //!   overlaps by [`reconstruct::weighted`](crate::reconstruct::weighted)
 //!   (eq. 13-16, the paper's choice) or of the image by
-//!   [`reconstruct::log_domain`](crate::reconstruct::log_domain) (eq. 17-20); the image is
-//!   eq. 12, channel by channel. The solvers see one scalar per estimate: the
-//!   mean of the channels.
+//!   [`reconstruct::log_domain`](crate::reconstruct::log_domain) (eq. 17-20),
+//!   each channel on its own (ours: the paper writes `f` for the maximum of
+//!   the channels and leaves colour open). One normalization from the mean
+//!   of the channels made each tile's colour a ratio of its own noisy
+//!   estimates, which the robust solver biased against the channel a region
+//!   has least of (the ceiling of the saturated scene 10-17 % short of green
+//!   at 64-256 spp; docs/RESULTS.md). The image is eq. 12. The weighted
+//!   solver's `α` is chosen by cross-validation against half of the large
+//!   steps ([`StratifiedSettings::cross_validate_alpha`], ours).
+//! * **Known pixels** (ours): a pixel whose large steps all saw the same
+//!   radiance (an emitter or a constant environment seen directly) takes
+//!   it; Monte Carlo knows it exactly, the reconstruction to its noise.
 //! * **Fallback to the regularizer** (ours, not in seed 001): a pixel whose
 //!   reconstruction lies more than [`StratifiedSettings::fallback_sigmas`]
 //!   standard errors below its Monte Carlo estimate takes that estimate, so
 //!   rare bright paths that the tile chains found too late (start-up bias,
 //!   seed 001 sec. 5 and Fig. 9) are not dimmed.
-//! * **The image's total** (ours, not in seed 001): the image is scaled so
-//!   that its total is the regularizer's ([`StratifiedSettings::anchor_total`]),
-//!   which makes the whole-image mean unbiased at every budget.
+//! * **The image's total** (ours, not in seed 001): each channel of the
+//!   reconstructed pixels is scaled so that the channel's total over the
+//!   image is the regularizer's ([`StratifiedSettings::anchor_total`]), which
+//!   makes every channel's image mean unbiased at every budget.
 //!
 //! A tile's chain does not know its normalization, so steps spent before it
 //! is initialized scale all its `G_s(k)` by the same factor, which the
@@ -52,7 +64,7 @@
 //! | `tile.rs` | a tile's chain: its state, target and weights, its accumulators |
 //! | `local.rs` | local replica exchange and state borrowing |
 //! | `init.rs` | the global chains' initialization |
-//! | `regularizer.rs` | the large steps' Monte Carlo estimate, the fallback to it and the total it anchors |
+//! | `regularizer.rs` | the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the total it anchors |
 //! | this file | settings, the sweeps, the reconstruction |
 
 mod init;
@@ -66,7 +78,7 @@ use serde::{Deserialize, Serialize};
 
 use self::init::initialize;
 use self::local::{exchange_all, exchange_cost};
-use self::regularizer::{LargeSteps, anchor_total, fall_back};
+use self::regularizer::{Halves, LargeSteps, anchor_total, fall_back, take_known};
 use self::tile::{Context, Start, TileChain};
 use super::{Extras, Job, Output};
 use crate::chain::{ChainStats, Traced};
@@ -157,7 +169,13 @@ impl Default for Initialization {
 pub struct StratifiedSettings {
     /// The tile shape (cross by default).
     pub shape: TileShape,
-    /// Small steps and the large step probability (0.3 in seed 001).
+    /// Small steps and the large step probability: 0.8 by default (seed 001
+    /// uses 0.3). Every large step is also a Monte Carlo sample of the
+    /// tile's pixels (the regularizer, the known pixels, the fallback), and
+    /// a tile whose target is flat or nearly so (an emitter, a diffuse wall)
+    /// gains nothing from small steps; at 0.8 the MSE fell on every scene
+    /// measured, veach-ajar's too (docs/RESULTS.md, "Stratified MCMC in every
+    /// channel").
     pub mutation: MutationParams,
     /// Local replica exchange after every `exchange_every` sweeps (0: never).
     pub exchange_every: u32,
@@ -165,6 +183,17 @@ pub struct StratifiedSettings {
     pub initialization: Initialization,
     /// The reconstruction.
     pub solver: Solver,
+    /// The weighted solver's `α` chosen from 0.05, 0.2, 1 and 5 by cross-validation
+    /// (true by default; false: the solver's own). Ours, not seed 001's: the
+    /// best weight of the regularizer against the overlaps depends on how
+    /// noisy each is, which depends on the scene and the budget (`α` = 1
+    /// halved the error on the Cornell box's light, 0.05-0.2 kept veach-ajar
+    /// smooth at 80 paths per pixel; docs/RESULTS.md). Each candidate solves
+    /// the channel-mean problem with half of the large steps as its
+    /// regularizer (at `α / 2`: half the samples, half the weight), and the
+    /// one whose image is closest (squared error) to the other, independent
+    /// half wins; the image is then reconstructed with it and every sample.
+    pub cross_validate_alpha: bool,
     /// Pixels whose reconstructed value (channel mean) lies more than this
     /// many standard errors *below* their Monte Carlo regularizer `Î(j)` take
     /// the regularizer instead (`None`: never). Our addition, not in seed
@@ -193,10 +222,14 @@ impl Default for StratifiedSettings {
     fn default() -> Self {
         Self {
             shape: TileShape::Cross,
-            mutation: MutationParams::default(),
+            mutation: MutationParams {
+                large_step_probability: 0.8,
+                ..MutationParams::default()
+            },
             exchange_every: 1,
             initialization: Initialization::default(),
             solver: Solver::default(),
+            cross_validate_alpha: true,
             fallback_sigmas: Some(3.0),
             anchor_total: true,
             regularizer_paths: 0,
@@ -262,9 +295,15 @@ pub struct StratifiedStats {
     /// Pixels that took their regularizer's value
     /// ([`StratifiedSettings::fallback_sigmas`]).
     pub fallback_pixels: u64,
+    /// Pixels whose large steps all saw the same radiance (an emitter or a
+    /// constant environment seen directly) and took it.
+    pub known_pixels: u64,
     /// The factor that gave the image the regularizer's total (1 without
     /// [`StratifiedSettings::anchor_total`]).
     pub total_scale: f64,
+    /// The weighted solver's `α` (cross-validated or the solver's own; 0
+    /// for the log-domain solver).
+    pub alpha: f64,
 }
 
 /// What stratified MCMC returns beyond the image ([`Extras::Stratified`]).
@@ -419,25 +458,44 @@ where
         let channels = O::Radiance::CHANNELS;
         let (samples, regularizer) = LargeSteps::gather(tiles, &self.chains);
         let unscaled = unscaled(tiles, &self.chains, self.stats.sweeps.max(1), &regularizer);
-        let g = channel_means(&unscaled, channels);
-        let mc = channel_means(regularizer.data(), channels);
-        let (mut film, normalizations) = match self.settings.solver {
-            Solver::Weighted(w) => {
-                let b = reconstruct::weighted(tiles, &g, &mc, &w, None)?;
-                (image(tiles, &unscaled, &b, channels), b)
+        let mut solver = self.settings.solver;
+        if let Solver::Weighted(w) = &mut solver {
+            if self.settings.cross_validate_alpha {
+                let halves = Halves::gather(tiles, &self.chains, &samples);
+                w.alpha = cross_validated_alpha(tiles, &unscaled, channels, &halves, w)?;
             }
-            Solver::LogDomain(l) => {
-                let solved = reconstruct::log_domain(tiles, &g, &mc, &l)?;
-                (log_image(tiles, &unscaled, &solved, channels), Vec::new())
-            }
-        };
+            self.stats.alpha = w.alpha;
+        }
+        let mut normalizations = Vec::new();
+        let mut film = Film::new(tiles.resolution(), channels);
+        for c in 0..channels {
+            let g = channel(&unscaled, channels, c);
+            let mc = channel(regularizer.data(), channels, c);
+            let values = match &solver {
+                Solver::Weighted(w) => {
+                    let b = reconstruct::weighted(tiles, &g, &mc, w, None)?;
+                    let values = reconstruct::image(tiles, &g, &b, 1);
+                    normalizations.push(b);
+                    values
+                }
+                Solver::LogDomain(l) => reconstruct::log_domain(tiles, &g, &mc, l)?,
+            };
+            set_channel(&mut film, c, &values);
+        }
+        // Tile-major, channel-minor.
+        let normalizations = (0..normalizations.first().map_or(0, Vec::len))
+            .flat_map(|s| normalizations.iter().map(move |b| b[s]))
+            .collect();
         let stats = &mut self.stats;
+        let mut taken = vec![false; tiles.count()];
+        stats.known_pixels = take_known(&mut film, &regularizer, &samples, &mut taken);
         if let Some(sigmas) = self.settings.fallback_sigmas {
-            stats.fallback_pixels = fall_back(&mut film, &regularizer, &samples, sigmas);
+            stats.fallback_pixels =
+                fall_back(&mut film, &regularizer, &samples, sigmas, &mut taken);
         }
         stats.total_scale = 1.0;
         if self.settings.anchor_total {
-            stats.total_scale = anchor_total(&mut film, &regularizer);
+            stats.total_scale = anchor_total(&mut film, &regularizer, &taken);
         }
         let mut chain_stats = ChainStats::default();
         let mut visits = vec![0u64; tiles.count()];
@@ -546,20 +604,22 @@ where
         s.initialization_samples + s.tile_samples + s.regularizer_samples + s.exchange_samples
     }
 
-    /// Eq. 12 with the initial normalizations (a quick reconstruction).
+    /// Eq. 12 with the initial normalizations, channel by channel (a quick
+    /// reconstruction).
     fn preview(&self) -> Film {
         let tiles = self.ctx.tiles;
         let channels = O::Radiance::CHANNELS;
         let (_, regularizer) = LargeSteps::gather(tiles, &self.chains);
         let unscaled = unscaled(tiles, &self.chains, self.stats.sweeps, &regularizer);
-        let b = reconstruct::initial_normalizations(
-            tiles,
-            &channel_means(&unscaled, channels),
-            &channel_means(regularizer.data(), channels),
-        );
-        let mut film = image(tiles, &unscaled, &b, channels);
+        let mut film = Film::new(tiles.resolution(), channels);
+        for c in 0..channels {
+            let g = channel(&unscaled, channels, c);
+            let mc = channel(regularizer.data(), channels, c);
+            let b = reconstruct::initial_normalizations(tiles, &g, &mc);
+            set_channel(&mut film, c, &reconstruct::image(tiles, &g, &b, 1));
+        }
         if self.settings.anchor_total {
-            anchor_total(&mut film, &regularizer);
+            anchor_total(&mut film, &regularizer, &[]);
         }
         film
     }
@@ -615,33 +675,55 @@ fn unscaled<R: Radiance>(
     g
 }
 
-/// The mean over the `channels` channels of each value.
-fn channel_means(values: &[f64], channels: usize) -> Vec<f64> {
-    values
+/// The weights `α` of the regularizer that cross-validation chooses from
+/// ([`StratifiedSettings::cross_validate_alpha`]).
+const ALPHAS: [f64; 4] = [0.05, 0.2, 1.0, 5.0];
+
+/// The `α` of [`ALPHAS`] whose channel-mean image, reconstructed with the
+/// first half of the large steps as regularizer (at `α / 2`), is closest to
+/// the second half's mean over the pixels it sampled (the first on ties).
+fn cross_validated_alpha(
+    tiles: &Tiles,
+    unscaled: &[f64],
+    channels: usize,
+    halves: &Halves,
+    settings: &WeightedSettings,
+) -> Result<f64, Error> {
+    let g: Vec<f64> = unscaled
         .chunks(channels)
         .map(|v| v.iter().sum::<f64>() / channels as f64)
-        .collect()
-}
-
-/// Eq. 12 channel by channel ([`reconstruct::image`]) as a film.
-fn image(tiles: &Tiles, unscaled: &[f64], b: &[f64], channels: usize) -> Film {
-    let data = reconstruct::image(tiles, unscaled, b, channels);
-    Film::from_data(tiles.resolution(), channels, data).expect("one value per pixel and channel")
-}
-
-/// The log-domain solver's scalar image, split into channels in the
-/// proportions of the pixel's own tile (`G_j(j)`, eq. 17).
-fn log_image(tiles: &Tiles, unscaled: &[f64], solved: &[f64], channels: usize) -> Film {
-    let offsets = tiles.offsets().len();
-    let mut film = Film::new(tiles.resolution(), channels);
-    for (j, pixel) in film.data_mut().chunks_mut(channels).enumerate() {
-        let own = &unscaled[j * offsets * channels..(j * offsets + 1) * channels];
-        let mean = own.iter().sum::<f64>() / channels as f64;
-        if mean > 0.0 {
-            for (v, g) in pixel.iter_mut().zip(own) {
-                *v = solved[j] * g / mean;
-            }
+        .collect();
+    let mut best = (f64::INFINITY, settings.alpha);
+    for alpha in ALPHAS {
+        let half = WeightedSettings {
+            alpha: alpha / 2.0,
+            ..*settings
+        };
+        let b = reconstruct::weighted(tiles, &g, &halves.first, &half, None)?;
+        let image = reconstruct::image(tiles, &g, &b, 1);
+        let error: f64 = image
+            .iter()
+            .zip(&halves.second)
+            .zip(&halves.second_counts)
+            .filter(|(_, n)| **n > 0)
+            .map(|((i, m), _)| (i - m) * (i - m))
+            .sum();
+        if error < best.0 {
+            best = (error, alpha);
         }
     }
-    film
+    Ok(best.1)
+}
+
+/// Channel `c` of values stored `channels` to an item.
+fn channel(values: &[f64], channels: usize, c: usize) -> Vec<f64> {
+    values.iter().skip(c).step_by(channels).copied().collect()
+}
+
+/// Sets channel `c` of every pixel of `film` from `values` (one per pixel).
+fn set_channel(film: &mut Film, c: usize, values: &[f64]) {
+    let channels = film.channels();
+    for (pixel, v) in film.data_mut().chunks_mut(channels).zip(values) {
+        pixel[c] = *v;
+    }
 }

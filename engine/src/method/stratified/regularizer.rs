@@ -1,6 +1,7 @@
 //! The large steps' Monte Carlo estimate, the regularizer `Î` of seed 001
-//! eq. 11, and two uses of it that are ours, not seed 001's: the fallback
-//! to it and the image's total.
+//! eq. 11, and four uses of it that are ours, not seed 001's: the two
+//! halves that choose the solver's `α` ([`Halves`]), the known pixels
+//! ([`take_known`]), the fallback to it and the image's total.
 //!
 //! Every large step a tile chain's coin chose (probability `p`, drawn at
 //! every step, also while the tile is dark and makes only large steps) is an
@@ -25,14 +26,15 @@
 //! their mean: a light reached by 30 % of paths came out 3 % dark at 8 spp
 //! and 6 % bright at 32, a block where 4 % of paths carry most of the
 //! energy 28 % dark at 8-64 spp, the built-in Cornell box 24 % bright at
-//! 8 spp. [`anchor_total`] scales the image so that its total is the
-//! regularizer's. The scaled image's total then *is* the MC estimate of the
-//! image's total, unbiased (each pixel's pooled mean is, given its sample
-//! count, since whether a step is large does not depend on the path), so the
-//! whole-image mean is right at every budget; the pixels keep the
-//! reconstruction's relative values. The price is the MC total's noise in
-//! the common scale, small wherever the image is not dominated by rare
-//! paths (see docs/RESULTS.md).
+//! 8 spp. [`anchor_total`] scales each channel of the reconstructed pixels
+//! (not those that took the regularizer's value) so that the channel's total
+//! is the regularizer's. The scaled image's total then *is* the MC estimate
+//! of the image's total, channel by channel, unbiased (each pixel's pooled
+//! mean is, given its sample count, since whether a step is large does not
+//! depend on the path), so every channel's image mean is right at every
+//! budget; the pixels keep the reconstruction's relative values. The price
+//! is the MC total's noise in the common scale, small wherever the image is
+//! not dominated by rare paths (see docs/RESULTS.md).
 
 use alloc::vec;
 use alloc::vec::Vec;
@@ -45,6 +47,12 @@ use crate::tiles::Tiles;
 /// Large steps a pixel's fallback test needs before its sample variance is
 /// trusted.
 const MIN_SAMPLES: u64 = 32;
+
+/// Large steps that must all agree before a pixel is known exactly
+/// ([`take_known`]): a pixel that sees a constant radiance over all but a
+/// fraction `ε` of its area passes with probability `(1 - ε)^16`, and is
+/// then off by at most `ε` of its value.
+const KNOWN_SAMPLES: u64 = 16;
 
 /// Per pixel, the large steps' samples of its channel mean, pooled over the
 /// tiles holding it: their count, sum and sum of squares.
@@ -85,6 +93,46 @@ impl LargeSteps {
         }
         let regularizer = pooled_means(&sums, &samples.counts);
         (samples, regularizer)
+    }
+}
+
+/// The regularizer's samples split in two independent halves (by the
+/// parity of each tile's large steps; plain MC paths in the first): per
+/// pixel the channel mean of the first half's pooled mean (filled in like
+/// the regularizer where it has no samples), and the second half's mean
+/// with its sample count.
+pub(super) struct Halves {
+    pub first: Vec<f64>,
+    pub second: Vec<f64>,
+    pub second_counts: Vec<u64>,
+}
+
+impl Halves {
+    pub fn gather<R: Radiance>(tiles: &Tiles, chains: &[TileChain<R>], all: &LargeSteps) -> Self {
+        let n = tiles.count();
+        let (mut odd_counts, mut odd_sums) = (vec![0u64; n], vec![0.0; n]);
+        for (j, (count, sum)) in odd_counts.iter_mut().zip(&mut odd_sums).enumerate() {
+            for (s, o) in tiles.tiles_of(j) {
+                *count += chains[s].odd_steps;
+                *sum += chains[s].odd_sums[o];
+            }
+        }
+        let mut first = Film::new(tiles.resolution(), 1);
+        for (j, v) in first.data_mut().iter_mut().enumerate() {
+            // The difference of two sums of the same terms: clamp rounding.
+            *v = (all.sums[j] - odd_sums[j]).max(0.0);
+        }
+        let first_counts: Vec<u64> = all.counts.iter().zip(&odd_counts).map(|(a, o)| a - o).collect();
+        let second = odd_sums
+            .iter()
+            .zip(&odd_counts)
+            .map(|(s, &c)| if c > 0 { s / c as f64 } else { 0.0 })
+            .collect();
+        Self {
+            first: pooled_means(&first, &first_counts).data().to_vec(),
+            second,
+            second_counts: odd_counts,
+        }
     }
 }
 
@@ -131,12 +179,14 @@ fn pooled_means(sums: &Film, counts: &[u64]) -> Film {
 
 /// Gives every pixel of `film` more than `sigmas` standard errors below its
 /// Monte Carlo estimate (`regularizer`, from `samples`) that estimate (see
-/// the module docs). Returns the number of pixels replaced.
+/// the module docs), and marks it in `taken`. Returns the number of pixels
+/// replaced.
 pub(super) fn fall_back(
     film: &mut Film,
     regularizer: &Film,
     samples: &LargeSteps,
     sigmas: f64,
+    taken: &mut [bool],
 ) -> u64 {
     let channels = film.channels();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / channels as f64;
@@ -144,7 +194,7 @@ pub(super) fn fall_back(
     let pixels = film.data_mut().chunks_mut(channels);
     for (j, (pixel, mc)) in pixels.zip(regularizer.data().chunks(channels)).enumerate() {
         let count = samples.counts[j];
-        if count < MIN_SAMPLES {
+        if count < MIN_SAMPLES || taken[j] {
             continue;
         }
         let n = count as f64;
@@ -152,22 +202,76 @@ pub(super) fn fall_back(
         let variance = (samples.squares[j] / n - m * m).max(0.0) * n / (n - 1.0);
         if mean(pixel) < m - sigmas * libm::sqrt(variance / n) {
             pixel.copy_from_slice(mc);
+            taken[j] = true;
             replaced += 1;
         }
     }
     replaced
 }
 
-/// Scales `film` so that its total (over pixels and channels) is the
-/// regularizer's, and returns the factor (1, and `film` unchanged, when
-/// either total is 0: a black image or no light found by the large steps).
-pub(super) fn anchor_total(film: &mut Film, regularizer: &Film) -> f64 {
-    let total = |f: &Film| f.data().iter().sum::<f64>();
-    let (want, got) = (total(regularizer), total(film));
-    if want > 0.0 && got > 0.0 {
-        film.scale(want / got);
-        want / got
-    } else {
-        1.0
+/// Scales each channel of the reconstructed pixels of `film` (those not
+/// `taken` from the regularizer; `taken` may be empty: none) so that the
+/// channel's total over the image is the regularizer's (a channel whose
+/// reconstructed total is 0, or whose regularizer leaves them nothing, is
+/// left as it is). Returns the factor of the totals over every channel,
+/// after over before (1 if unchanged).
+pub(super) fn anchor_total(film: &mut Film, regularizer: &Film, taken: &[bool]) -> f64 {
+    let channels = film.channels();
+    let is_taken = |j: usize| taken.get(j).copied().unwrap_or(false);
+    // Per channel: the regularizer's total, the taken pixels' total, the others'.
+    let mut sums = vec![[0.0f64; 3]; channels];
+    let pixels = film.data().chunks(channels).zip(regularizer.data().chunks(channels));
+    for (j, (pixel, mc)) in pixels.enumerate() {
+        for (c, sum) in sums.iter_mut().enumerate() {
+            sum[0] += mc[c];
+            sum[if is_taken(j) { 1 } else { 2 }] += pixel[c];
+        }
     }
+    let factors: Vec<f64> = sums
+        .iter()
+        .map(|[want, taken, rest]| {
+            let left = want - taken;
+            if left > 0.0 && *rest > 0.0 { left / rest } else { 1.0 }
+        })
+        .collect();
+    for (j, pixel) in film.data_mut().chunks_mut(channels).enumerate() {
+        if !is_taken(j) {
+            pixel.iter_mut().zip(&factors).for_each(|(v, f)| *v *= f);
+        }
+    }
+    let before: f64 = sums.iter().map(|[_, taken, rest]| taken + rest).sum();
+    let after: f64 = sums.iter().zip(&factors).map(|([_, t, r], f)| t + f * r).sum();
+    if before > 0.0 { after / before } else { 1.0 }
+}
+
+/// Gives every pixel whose large-step samples all agree (at least
+/// [`KNOWN_SAMPLES`] of them, one non-zero channel mean) their value, the
+/// regularizer's, and marks it in `taken`: such a pixel sees one constant
+/// radiance, an emitter or a constant environment seen directly, which
+/// Monte Carlo knows exactly and the reconstruction only approximately.
+/// Returns the number of pixels replaced.
+pub(super) fn take_known(
+    film: &mut Film,
+    regularizer: &Film,
+    samples: &LargeSteps,
+    taken: &mut [bool],
+) -> u64 {
+    let channels = film.channels();
+    let mut replaced = 0;
+    let pixels = film.data_mut().chunks_mut(channels);
+    for (j, (pixel, mc)) in pixels.zip(regularizer.data().chunks(channels)).enumerate() {
+        let count = samples.counts[j];
+        if count < KNOWN_SAMPLES {
+            continue;
+        }
+        let n = count as f64;
+        let m = samples.sums[j] / n;
+        // The samples' spread, relative to their mean: 0 up to rounding.
+        if m > 0.0 && (samples.squares[j] / n - m * m).abs() <= 1e-9 * m * m {
+            pixel.copy_from_slice(mc);
+            taken[j] = true;
+            replaced += 1;
+        }
+    }
+    replaced
 }

@@ -59,6 +59,11 @@ pub(super) struct TileChain<R> {
     pub uniform_squares: Vec<f64>,
     /// Coin-chosen large steps: the regularizer's samples.
     pub large_steps: u64,
+    /// The odd-numbered coin-chosen large steps (the first is number 0):
+    /// their count and per offset the sum of their channel means, the half
+    /// of the regularizer's samples held out to choose the solver's `α`.
+    pub odd_steps: u64,
+    pub odd_sums: Vec<f64>,
     /// Plain MC paths traced at the tile's centre pixel for the regularizer
     /// ([`StratifiedSettings::regularizer_paths`](super::StratifiedSettings)),
     /// summed into `uniform` and `uniform_squares` at the centre's offset.
@@ -220,6 +225,8 @@ impl<R: Radiance> TileChain<R> {
             uniform: vec![0.0; per_offset],
             uniform_squares: vec![0.0; offsets],
             large_steps: 0,
+            odd_steps: 0,
+            odd_sums: vec![0.0; offsets],
             centre_paths: 0,
             mc: IndependentSampler::new(rng::stream(seed, Domain::Tile, (tile + 2 * tiles) as u64)),
             stats: ChainStats::default(),
@@ -263,13 +270,19 @@ impl<R: Radiance> TileChain<R> {
             let proposed = self.chain.last_proposal();
             add(&proposed.values, 1.0, &mut self.uniform);
             let channels = R::CHANNELS;
-            for (sq, v) in self.uniform_squares.iter_mut().zip(&proposed.values) {
+            let odd = self.large_steps % 2 == 1;
+            let sums = self.uniform_squares.iter_mut().zip(&mut self.odd_sums);
+            for ((sq, odd_sum), v) in sums.zip(&proposed.values) {
                 let mean = (0..channels)
                     .map(|c| v.radiance.channel(c) as f64)
                     .sum::<f64>()
                     / channels as f64;
                 *sq += mean * mean;
+                if odd {
+                    *odd_sum += mean;
+                }
             }
+            self.odd_steps += odd as u64;
             self.large_steps += 1;
         }
         if outcome.accepted && dark && self.target() > 0.0 && self.start == Start::None {

@@ -117,7 +117,13 @@ fn main() -> AnyResult<()> {
     let tracer = native_tracer(scene);
     let r = tracer.resolution();
     let reference = cached_mc(&tracer, "reference", args.reference_spp, 1000, &dir)?;
-    let check = cached_mc(&tracer, "check", (args.reference_spp / 4).max(1), 2000, &dir)?;
+    let check = cached_mc(
+        &tracer,
+        "check",
+        (args.reference_spp / 4).max(1),
+        2000,
+        &dir,
+    )?;
     // E[(R - C)²] = 5 σ²/N per value, σ²/N the reference's own variance.
     let own_mse = mse(&reference, &check) / 5.0;
     println!(
@@ -162,7 +168,15 @@ fn main() -> AnyResult<()> {
             strata::io::write_png(&films[0], 0.0, stem.with_extension("png"))?;
             strata::io::write_exr(&films[0], stem.with_extension("exr"))?;
             let baseline = (name != "mc").then_some(()).and(mc_spread.as_ref());
-            let row = measure(name, label, &films, &reference, baseline, own_mse, args.regions);
+            let row = measure(
+                name,
+                label,
+                &films,
+                &reference,
+                baseline,
+                own_mse,
+                args.regions,
+            );
             if name == "mc" {
                 mc_spread = Some(Spread::of(&films, args.regions));
             }
@@ -239,7 +253,10 @@ impl Spread {
                         sums[b][c] += px[c];
                     }
                 }
-                sums.iter().zip(&pixels).map(|(s, k)| s.map(|v| v / k)).collect()
+                sums.iter()
+                    .zip(&pixels)
+                    .map(|(s, k)| s.map(|v| v / k))
+                    .collect()
             })
             .collect();
         let channels = [0, 1, 2].map(|c| {
@@ -289,15 +306,15 @@ fn measure(
     let image_mean = (0..3).map(|c| reference.channel_mean(c)).sum::<f64>() / 3.0;
     let mut region = (0.0, 0.0, 0, 0);
     for (b, e) in exact.regions.iter().enumerate() {
-        for c in 0..3 {
+        for (c, &exact_c) in e.iter().enumerate() {
             // Regions where the channel is below 5 % of the image mean carry
             // no colour a viewer sees.
-            if e[c].0 < 0.05 * image_mean {
+            if exact_c.0 < 0.05 * image_mean {
                 continue;
             }
             let (ratio, z) = against(
                 spread.regions[b][c],
-                e[c],
+                exact_c,
                 baseline.map(|base| base.regions[b][c]),
             );
             if z.abs() > region.0 {
@@ -315,7 +332,11 @@ fn measure(
         .iter()
         .map(|f| f.data().iter().cloned().fold(0.0, f64::max) / ref_max)
         .fold(0.0, f64::max);
-    let seams = films.iter().map(|f| seam_measure(f, reference)).sum::<f64>() / n;
+    let seams = films
+        .iter()
+        .map(|f| seam_measure(f, reference))
+        .sum::<f64>()
+        / n;
     let errors: Vec<_> = films
         .iter()
         .map(|f| metrics::compare(f, reference).expect("same shape"))

@@ -71,6 +71,10 @@ struct Args {
     out: PathBuf,
 }
 
+/// A variant's tile sums from the stratified estimates, MC's regularizer and
+/// the reference, one channel at a time.
+type BOf<'a> = dyn Fn(&[f64], &[f64], &[f64]) -> Result<Vec<f64>, strata::engine::Error> + 'a;
+
 fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     let args = Args::parse();
     let size = |own: Resolution| {
@@ -122,12 +126,19 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     let channel = |values: &[f64], c: usize| -> Vec<f64> {
         values.iter().skip(c).step_by(3).copied().collect()
     };
-    let per_channel = |b_of: &dyn Fn(&[f64], &[f64], &[f64]) -> Result<Vec<f64>, strata::engine::Error>| {
+    let per_channel = |b_of: &BOf| {
         let mut data = vec![0.0; tiles.count() * 3];
         for c in 0..3 {
             let g = channel(&out.unscaled, c);
-            let b = b_of(&g, &channel(out.regularizer.data(), c), &channel(reference.data(), c))?;
-            for (j, v) in reconstruct::image(&tiles, &g, &b, 1).into_iter().enumerate() {
+            let b = b_of(
+                &g,
+                &channel(out.regularizer.data(), c),
+                &channel(reference.data(), c),
+            )?;
+            for (j, v) in reconstruct::image(&tiles, &g, &b, 1)
+                .into_iter()
+                .enumerate()
+            {
                 data[j * 3 + c] = v;
             }
         }

@@ -676,7 +676,10 @@ fn no_row_or_column_stands_out() {
             let mut sum = 0.0;
             for a in 0..k {
                 for b in 0..k {
-                    sum += smooth(x + (a as f64 + 0.5) / k as f64, y + (b as f64 + 0.5) / k as f64);
+                    sum += smooth(
+                        x + (a as f64 + 0.5) / k as f64,
+                        y + (b as f64 + 0.5) / k as f64,
+                    );
                 }
             }
             sum / (k * k) as f64
@@ -701,7 +704,12 @@ fn no_row_or_column_stands_out() {
             let var = steps.iter().map(|s| (s - m).powi(2)).sum::<f64>() / (n - 1.0);
             let z = m / (var / n).sqrt();
             worst = worst.max(z.abs());
-            assert!(z.abs() < 5.0, "a step after {} {}: z = {z:.1}", if first == 0 { "row" } else { "column" }, i - first);
+            assert!(
+                z.abs() < 5.0,
+                "a step after {} {}: z = {z:.1}",
+                if first == 0 { "row" } else { "column" },
+                i - first
+            );
         }
     }
     eprintln!("largest step |z| {worst:.2}");

@@ -122,7 +122,12 @@ impl Halves {
             // The difference of two sums of the same terms: clamp rounding.
             *v = (all.sums[j] - odd_sums[j]).max(0.0);
         }
-        let first_counts: Vec<u64> = all.counts.iter().zip(&odd_counts).map(|(a, o)| a - o).collect();
+        let first_counts: Vec<u64> = all
+            .counts
+            .iter()
+            .zip(&odd_counts)
+            .map(|(a, o)| a - o)
+            .collect();
         let second = odd_sums
             .iter()
             .zip(&odd_counts)
@@ -220,7 +225,10 @@ pub(super) fn anchor_total(film: &mut Film, regularizer: &Film, taken: &[bool]) 
     let is_taken = |j: usize| taken.get(j).copied().unwrap_or(false);
     // Per channel: the regularizer's total, the taken pixels' total, the others'.
     let mut sums = vec![[0.0f64; 3]; channels];
-    let pixels = film.data().chunks(channels).zip(regularizer.data().chunks(channels));
+    let pixels = film
+        .data()
+        .chunks(channels)
+        .zip(regularizer.data().chunks(channels));
     for (j, (pixel, mc)) in pixels.enumerate() {
         for (c, sum) in sums.iter_mut().enumerate() {
             sum[0] += mc[c];
@@ -231,7 +239,11 @@ pub(super) fn anchor_total(film: &mut Film, regularizer: &Film, taken: &[bool]) 
         .iter()
         .map(|[want, taken, rest]| {
             let left = want - taken;
-            if left > 0.0 && *rest > 0.0 { left / rest } else { 1.0 }
+            if left > 0.0 && *rest > 0.0 {
+                left / rest
+            } else {
+                1.0
+            }
         })
         .collect();
     for (j, pixel) in film.data_mut().chunks_mut(channels).enumerate() {
@@ -240,7 +252,11 @@ pub(super) fn anchor_total(film: &mut Film, regularizer: &Film, taken: &[bool]) 
         }
     }
     let before: f64 = sums.iter().map(|[_, taken, rest]| taken + rest).sum();
-    let after: f64 = sums.iter().zip(&factors).map(|([_, t, r], f)| t + f * r).sum();
+    let after: f64 = sums
+        .iter()
+        .zip(&factors)
+        .map(|([_, t, r], f)| t + f * r)
+        .sum();
     if before > 0.0 { after / before } else { 1.0 }
 }
 

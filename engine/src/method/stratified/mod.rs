@@ -193,6 +193,12 @@ pub struct StratifiedSettings {
     /// regularizer (at `α / 2`: half the samples, half the weight), and the
     /// one whose image is closest (squared error) to the other, independent
     /// half wins; the image is then reconstructed with it and every sample.
+    /// The candidates run a quarter of the solver's iterations (only their
+    /// ranking is used: with all of them, 35 of 36 choices on four built-in
+    /// scenes were the same; docs/BENCHMARKS.md). The halves are not quite
+    /// independent of the tile chains (accepted large steps are chain
+    /// states), which favours small `α` where the chains are mostly large
+    /// steps: at 16 paths per pixel it picks 0.05 on every built-in scene.
     pub cross_validate_alpha: bool,
     /// Pixels whose reconstructed value (channel mean) lies more than this
     /// many standard errors *below* their Monte Carlo regularizer `Î(j)` take
@@ -697,6 +703,7 @@ fn cross_validated_alpha(
     for alpha in ALPHAS {
         let half = WeightedSettings {
             alpha: alpha / 2.0,
+            iterations: settings.iterations / 4,
             ..*settings
         };
         let b = reconstruct::weighted(tiles, &g, &halves.first, &half, None)?;

@@ -54,6 +54,47 @@ fn render_writes_png_and_exr_and_exit_codes_say_how_it_went() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Budgets that hold no work, exposures that would write a black or white
+/// image and NaN are refused with exit code 1 or 2 and a message; an output
+/// name with dots keeps them (issue 36).
+#[test]
+fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
+    let dir = std::env::temp_dir().join(format!("strata-cli-dots-{}", std::process::id()));
+    let out = dir.join("name.with.dots");
+    let out_arg = out.to_str().unwrap();
+    let tiny = ["render", "procedural", "--width", "8", "--height", "8"];
+    let run = |extra: &[&str]| {
+        let args: Vec<&str> = tiny.iter().chain(extra).copied().collect();
+        strata(&args)
+    };
+    for (extra, code, says) in [
+        (&["--spp", "0"][..], 1, "budget"),
+        (&["--time", "0"], 2, "time budget"),
+        (&["--time", "1e-300"], 2, "time budget"),
+        (&["--time", "nan"], 2, "time budget"),
+        (&["--exposure", "nan"], 2, "exposure"),
+        (&["--exposure", "1e30"], 2, "exposure"),
+    ] {
+        let refused = run(&[extra, &["--out", out_arg]].concat());
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(code), "{extra:?}: {stderr}");
+        assert!(stderr.contains(says), "{extra:?}: {stderr}");
+    }
+    assert!(!dir.exists(), "a refused render wrote {}", dir.display());
+
+    let ok = run(&["--spp", "2", "--out", out_arg]);
+    assert_eq!(ok.status.code(), Some(0));
+    for ext in ["png", "exr"] {
+        assert!(dir.join(format!("name.with.dots.{ext}")).is_file(), "{ext}");
+    }
+    // A final .png names both files.
+    let png = dir.join("named.png");
+    let ok = run(&["--spp", "2", "--out", png.to_str().unwrap()]);
+    assert_eq!(ok.status.code(), Some(0));
+    assert!(png.is_file() && dir.join("named.exr").is_file());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Waits until `path` exists (at most 60 s).
 fn wait_for(path: &std::path::Path) {
     let start = std::time::Instant::now();

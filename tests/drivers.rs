@@ -101,6 +101,26 @@ fn nan_infinite_and_negative_radiance_is_excluded_and_counted() {
     assert!((right - 0.75).abs() < 0.2, "right half blue {right}");
 }
 
+/// Radiance near f32's range is radiance: every method keeps it (issue 36:
+/// multi-stage MLT's squared deviation overflowed and dropped every path).
+#[test]
+fn huge_finite_radiance_is_kept_by_every_method() {
+    let huge = FnOracle::new(
+        Resolution::new(8, 8),
+        |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+            let lit = s.next_1d() < 0.5;
+            PathSample::new(Rgb([if lit { 1e20 } else { 0.0 }; 3]))
+        },
+    );
+    for method in methods() {
+        let name = method.name();
+        let out = render(&huge, &MaxChannel, &settings(3, 20_000, &method), &Silent).unwrap();
+        assert_eq!(out.stats.invalid_samples, 0, "{name}");
+        let mean = out.film.data().iter().sum::<f64>() / out.film.data().len() as f64;
+        assert!((mean / 0.5e20 - 1.0).abs() < 0.2, "{name}: mean {mean:e}");
+    }
+}
+
 /// An oracle that returns NaN for every path: the methods with a bootstrap
 /// say that every candidate was invalid (not merely black), the others
 /// render black and count every path as invalid.
@@ -300,6 +320,22 @@ fn invalid_settings_are_typed_errors_before_any_work() {
     let mut multistage = MultiStageSettings::default();
     multistage.pssmlt.chains = 0;
     refuse(Method::MultiStage(multistage), "chains");
+    // A budget without work (issue 36: it rendered one round), every method.
+    for method in Method::all() {
+        for budget in [Budget::Samples(0), Budget::Time(Duration::ZERO)] {
+            let empty = Settings {
+                seed: 1,
+                budget,
+                method: method.clone(),
+            };
+            let err = render(&oracle, &MaxChannel, &empty, &Silent).unwrap_err();
+            assert!(
+                matches!(err, Error::InvalidParameter { name: "budget", .. }),
+                "{}: {err}",
+                method.name()
+            );
+        }
+    }
     assert_eq!(traces.load(Ordering::Relaxed), 0, "work before validation");
     assert!(Kelemen::new(1.0 / 64.0, 1.0 / 1024.0).is_err());
     assert!(Kelemen::new(0.01, 0.01).is_err());

@@ -132,7 +132,8 @@ enum StrataStatus strata_settings_set_seed(struct StrataSettings *settings, uint
 enum StrataStatus strata_settings_set_samples_per_pixel(struct StrataSettings *settings,
                                                         uint64_t spp);
 
-// A time budget of `seconds` (finite, > 0).
+// A time budget of `seconds` (from 1e-9 to 1.8e19, the range of a
+// duration; set-up included).
 enum StrataStatus strata_settings_set_seconds(struct StrataSettings *settings, double seconds);
 
 // Sets the method's numeric setting `name` to `value` (the names each
@@ -152,7 +153,8 @@ enum StrataStatus strata_settings_set_choice(struct StrataSettings *settings,
                                              const char *name,
                                              const char *value);
 
-// Worker threads (0: all cores). The image does not depend on it.
+// Worker threads (0: all cores; at most 4 per core). The image does not
+// depend on it.
 enum StrataStatus strata_settings_set_threads(struct StrataSettings *settings, uint32_t threads);
 
 // Renders `oracle` with `settings`, reporting to `observer` (may be null),

@@ -214,7 +214,7 @@ pub struct StrataSettings {
 #[derive(Clone, Copy)]
 enum RequestedBudget {
     SamplesPerPixel(u64),
-    Seconds(f64),
+    Time(Duration),
 }
 
 /// Reads a C string argument.
@@ -295,22 +295,26 @@ pub extern "C" fn strata_settings_set_samples_per_pixel(
     }
 }
 
-/// A time budget of `seconds` (finite, > 0).
+/// A time budget of `seconds` (from 1e-9 to 1.8e19, the range of a
+/// duration; set-up included).
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_settings_set_seconds(
     settings: *mut StrataSettings,
     seconds: f64,
 ) -> StrataStatus {
-    match settings_mut(settings) {
-        Ok(_) if !(seconds.is_finite() && seconds > 0.0) => fail(
-            StrataStatus::InvalidArgument,
-            format!("seconds must be finite and > 0, got {seconds}"),
-        ),
-        Ok(s) => {
-            s.budget = RequestedBudget::Seconds(seconds);
+    let time = Duration::try_from_secs_f64(seconds)
+        .ok()
+        .filter(|t| !t.is_zero());
+    match (settings_mut(settings), time) {
+        (Ok(s), Some(time)) => {
+            s.budget = RequestedBudget::Time(time);
             StrataStatus::Ok
         }
-        Err(e) => e,
+        (Ok(_), None) => fail(
+            StrataStatus::InvalidArgument,
+            format!("seconds must be from 1e-9 to 1.8e19, got {seconds}"),
+        ),
+        (Err(e), _) => e,
     }
 }
 
@@ -503,13 +507,23 @@ pub extern "C" fn strata_settings_set_choice(
     }
 }
 
-/// Worker threads (0: all cores). The image does not depend on it.
+/// More threads than this many per core only add switching.
+const THREADS_PER_CORE: u32 = 4;
+
+/// Worker threads (0: all cores; at most 4 per core). The image does not
+/// depend on it.
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_settings_set_threads(
     settings: *mut StrataSettings,
     threads: u32,
 ) -> StrataStatus {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get() as u32);
+    let most = THREADS_PER_CORE.saturating_mul(cores);
     match settings_mut(settings) {
+        Ok(_) if threads > most => fail(
+            StrataStatus::InvalidArgument,
+            format!("threads must be at most {most} ({THREADS_PER_CORE} per core), got {threads}"),
+        ),
         Ok(s) => {
             s.threads = threads as usize;
             StrataStatus::Ok
@@ -685,7 +699,7 @@ pub extern "C" fn strata_render(
         RequestedBudget::SamplesPerPixel(spp) => {
             Budget::samples_per_pixel(spp, c_oracle.resolution)
         }
-        RequestedBudget::Seconds(s) => Budget::Time(Duration::from_secs_f64(s)),
+        RequestedBudget::Time(t) => Budget::Time(t),
     };
     let run = Settings {
         seed: settings.seed,

@@ -58,9 +58,27 @@ fn bad_arguments_are_status_codes_with_a_message() {
         strata_settings_set_samples_per_pixel(settings, 0),
         StrataStatus::InvalidArgument
     );
+    // NaN, beyond a duration's range (issue 36: 1e20 was accepted, then
+    // panicked in the render), and below a nanosecond.
+    for seconds in [f64::NAN, 1e20, 1e-300, 0.0, -1.0] {
+        assert_eq!(
+            strata_settings_set_seconds(settings, seconds),
+            StrataStatus::InvalidArgument,
+            "{seconds}"
+        );
+        assert!(last_error().contains("seconds"), "{}", last_error());
+    }
+    assert_eq!(strata_settings_set_seconds(settings, 1e9), StrataStatus::Ok);
+    // Threads: at most 4 per core (100 000 was accepted and hung).
     assert_eq!(
-        strata_settings_set_seconds(settings, f64::NAN),
+        strata_settings_set_threads(settings, 100_000),
         StrataStatus::InvalidArgument
+    );
+    assert!(last_error().contains("threads"), "{}", last_error());
+    assert_eq!(strata_settings_set_threads(settings, 2), StrataStatus::Ok);
+    assert_eq!(
+        strata_settings_set_samples_per_pixel(settings, 16),
+        StrataStatus::Ok
     );
     assert_eq!(
         strata_settings_set_seed(null_mut(), 1),

@@ -81,8 +81,8 @@ struct Args {
     /// Samples (paths) per pixel.
     #[arg(long, default_value_t = 64, conflicts_with = "time")]
     spp: u64,
-    /// Time budget in seconds instead of --spp.
-    #[arg(long)]
+    /// Time budget in seconds instead of --spp (set-up included).
+    #[arg(long, value_parser = positive_seconds)]
     time: Option<f64>,
     /// Seed of every random stream.
     #[arg(long, default_value_t = 0)]
@@ -148,10 +148,11 @@ struct Args {
     /// Multi-stage MLT: noise-aware importance (seed 004 sec. 4.3).
     #[arg(long)]
     noise_aware: bool,
-    /// Exposure (stops) of the PNG.
-    #[arg(long, default_value_t = 0.0)]
+    /// Exposure (stops) of the PNG, from -64 to 64.
+    #[arg(long, default_value_t = 0.0, value_parser = stops)]
     exposure: f32,
-    /// Output path without extension: writes OUT.png and OUT.exr.
+    /// Output path: writes OUT.png and OUT.exr (a final .png, .exr or .ckpt
+    /// is dropped first; other dots stay: `a.b` writes `a.b.png`).
     #[arg(long, default_value = "out/render")]
     out: PathBuf,
     /// Rewrite OUT.png and OUT.exr with the image so far every this many
@@ -342,7 +343,43 @@ const THREADS_PER_CORE: usize = 4;
 fn checkpoint_path(args: &Args) -> PathBuf {
     args.checkpoint
         .clone()
-        .unwrap_or_else(|| args.out.with_extension("ckpt"))
+        .unwrap_or_else(|| output(&args.out, "ckpt"))
+}
+
+/// `out` with the extension `ext` appended (after dropping one of the
+/// command's own extensions, so `--out a.png` writes `a.png`, not `a.png.png`).
+fn output(out: &Path, ext: &str) -> PathBuf {
+    let own = ["png", "exr", "ckpt"];
+    let base = match out.extension().and_then(|e| e.to_str()) {
+        Some(e) if own.contains(&e) => out.with_extension(""),
+        _ => out.to_path_buf(),
+    };
+    let mut name = base.into_os_string();
+    name.push(".");
+    name.push(ext);
+    name.into()
+}
+
+/// `--time`: a finite number of seconds above zero.
+fn positive_seconds(text: &str) -> Result<f64, String> {
+    let t: f64 = text.parse().map_err(|e| format!("{e}"))?;
+    if t.is_finite() && t >= 1e-9 {
+        Ok(t)
+    } else {
+        Err(format!(
+            "{t} is not a time budget: give seconds from 1e-9 on"
+        ))
+    }
+}
+
+/// `--exposure`: stops from -64 to 64 (beyond them every pixel is black or white).
+fn stops(text: &str) -> Result<f32, String> {
+    let e: f32 = text.parse().map_err(|e| format!("{e}"))?;
+    if (-64.0..=64.0).contains(&e) {
+        Ok(e)
+    } else {
+        Err(format!("{e} stops: give an exposure from -64 to 64"))
+    }
 }
 
 fn run(args: &Args) -> AnyResult<Ended> {
@@ -623,8 +660,8 @@ fn write(film: &Film, args: &Args, preview: bool) -> AnyResult<()> {
     if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
     }
-    let png = args.out.with_extension("png");
-    let exr = args.out.with_extension("exr");
+    let png = output(&args.out, "png");
+    let exr = output(&args.out, "exr");
     replace(&png, |path| {
         strata::io::write_png(film, args.exposure, path)
     })?;

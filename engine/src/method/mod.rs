@@ -71,8 +71,20 @@ impl Default for Settings {
 }
 
 impl Settings {
-    /// Checks every parameter of the method ([`render`] calls it first).
+    /// Checks the budget (not empty: at least one path, or a time of at
+    /// least a nanosecond) and every parameter of the method ([`render`]
+    /// calls it first).
     pub fn validate(&self) -> Result<(), Error> {
+        match self.budget {
+            Budget::Samples(0) => {
+                return Err(Error::invalid("budget", 0.0, "at least one path"));
+            }
+            #[cfg(feature = "std")]
+            Budget::Time(t) if t.is_zero() => {
+                return Err(Error::invalid("budget", 0.0, "a time of at least 1 ns"));
+            }
+            _ => {}
+        }
         self.method.validate()
     }
 }

@@ -215,7 +215,9 @@ impl<O: PathOracle> PathOracle for ProbeOracle<'_, O> {
         PathSample {
             radiance: Probed {
                 radiance: s.radiance,
-                deviation: (d * d) as f32,
+                // Saturated: a square beyond f32's range is still a valid
+                // (huge) deviation, not an invalid sample.
+                deviation: (d * d).min(f64::from(f32::MAX)) as f32,
             },
             flags: s.flags,
         }

@@ -241,11 +241,7 @@ fn invalid_settings_are_typed_errors_before_any_work() {
     let oracle = counting(&traces);
     let refuse = |method: Method, parameter: &str| {
         let err = render(&oracle, &MaxChannel, &settings(1, 1000, &method), &Silent).unwrap_err();
-        assert!(
-            matches!(err, Error::InvalidParameter { name, .. } if name == parameter),
-            "{}: {err}",
-            method.name()
-        );
+        assert!(err.setting() == Some(parameter), "{}: {err}", method.name());
         assert!(err.to_string().contains(parameter));
     };
     let pssmlt = PssmltSettings::default();
@@ -329,11 +325,7 @@ fn invalid_settings_are_typed_errors_before_any_work() {
                 method: method.clone(),
             };
             let err = render(&oracle, &MaxChannel, &empty, &Silent).unwrap_err();
-            assert!(
-                matches!(err, Error::InvalidParameter { name: "budget", .. }),
-                "{}: {err}",
-                method.name()
-            );
+            assert!(err.setting() == Some("budget"), "{}: {err}", method.name());
         }
     }
     assert_eq!(traces.load(Ordering::Relaxed), 0, "work before validation");

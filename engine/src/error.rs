@@ -15,6 +15,39 @@ pub enum Error {
         /// What the parameter must satisfy.
         expected: &'static str,
     },
+    /// A setting outside its range in the settings table
+    /// ([`Method::settings`](crate::Method::settings)).
+    OutOfRange {
+        /// The setting's name.
+        name: &'static str,
+        /// The rejected value.
+        value: f64,
+        /// The smallest value it takes.
+        min: f64,
+        /// The largest value it takes.
+        max: f64,
+    },
+    /// A setting the method has, which does not apply to its current
+    /// settings (`alpha` with the log-domain solver, Kelemen's step sizes
+    /// with another kernel), or a number given to a choice or the reverse.
+    NotApplicable {
+        /// The setting's name.
+        name: &'static str,
+    },
+    /// A name the method's settings table does not have.
+    UnknownSetting {
+        /// The method.
+        method: &'static str,
+        /// Its settings.
+        settings: &'static [crate::method::Setting],
+    },
+    /// A choice's value that is not one of its options.
+    UnknownChoice {
+        /// The setting's name.
+        name: &'static str,
+        /// Its options.
+        choices: &'static [&'static str],
+    },
     /// The oracle reported a resolution with zero pixels.
     EmptyResolution,
     /// Every bootstrap candidate had zero importance: the start-up normalization
@@ -75,6 +108,18 @@ pub enum Error {
 }
 
 impl Error {
+    /// The setting an error is about (a parameter outside its domain or
+    /// range, or one that does not apply), if it is about one.
+    pub fn setting(&self) -> Option<&'static str> {
+        match self {
+            Error::InvalidParameter { name, .. }
+            | Error::OutOfRange { name, .. }
+            | Error::NotApplicable { name }
+            | Error::UnknownChoice { name, .. } => Some(name),
+            _ => None,
+        }
+    }
+
     pub(crate) fn invalid(name: &'static str, value: f64, expected: &'static str) -> Self {
         Error::InvalidParameter {
             name,
@@ -96,6 +141,27 @@ impl fmt::Display for Error {
                     f,
                     "invalid parameter `{name}` = {value}: expected {expected}"
                 )
+            }
+            Error::OutOfRange {
+                name,
+                value,
+                min,
+                max,
+            } => write!(f, "`{name}` = {value} is outside its range, {min} to {max}"),
+            Error::NotApplicable { name } => write!(
+                f,
+                "`{name}` does not apply here (wrong kind of value, or not used with \
+                 the method's current choices)"
+            ),
+            Error::UnknownSetting { method, settings } => {
+                write!(f, "{method} has no such setting; it has:")?;
+                for s in settings.iter() {
+                    write!(f, " {}", s.name)?;
+                }
+                Ok(())
+            }
+            Error::UnknownChoice { name, choices } => {
+                write!(f, "`{name}` is one of {choices:?}")
             }
             Error::EmptyResolution => write!(f, "the oracle's resolution has no pixels"),
             Error::AllCandidatesBlack {

@@ -26,6 +26,7 @@ mod multistage;
 mod pssmlt;
 mod replica;
 mod stratified;
+mod table;
 
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
@@ -37,6 +38,7 @@ pub use replica::{ReplicaExtras, ReplicaSettings};
 pub use stratified::{
     Initialization, Solver, StratifiedExtras, StratifiedSettings, StratifiedStats,
 };
+pub use table::{Kind, Setting, Value};
 
 use serde::de::DeserializeOwned;
 
@@ -165,8 +167,10 @@ impl Method {
         }
     }
 
-    /// Checks every parameter.
+    /// Checks every parameter: each within its range in the settings table
+    /// ([`settings`](Self::settings)), then the method's own conditions.
     pub fn validate(&self) -> Result<(), Error> {
+        self.check_ranges()?;
         match self {
             Method::Mc => Ok(()),
             Method::Pssmlt(s) => s.validate(),

@@ -1,0 +1,637 @@
+//! One table of every method's settings: for each, its name, what it takes
+//! (its range, or its choices) and a line of help, read and written by name
+//! through [`Method::get`], [`Method::set`] and [`Method::set_choice`].
+//! [`Method::validate`] checks every value against it, so a settings value
+//! built field by field is bounded like one set by name; the `strata`
+//! command and the C API (`strata_settings_set`, `_set_choice`, `_name`)
+//! take their settings, defaults and bounds from here (issue 36).
+//!
+//! The ranges are what a render on this machine class can carry: a value
+//! inside them renders (memory is checked before any work, see
+//! [`Method::bytes_per_pixel`]), a value outside is
+//! [`Error::OutOfRange`](crate::Error::OutOfRange).
+
+use crate::error::Error;
+use crate::exchange::{EnsembleSettings, ExchangeKind, Tempering};
+use crate::mutate::{Kelemen, MutationParams, SmallStep};
+use crate::tiles::TileShape;
+
+use super::{Method, Solver};
+
+/// What a setting takes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Kind {
+    /// A whole number from `min` to `max`.
+    Whole {
+        /// The smallest value.
+        min: u64,
+        /// The largest value.
+        max: u64,
+    },
+    /// A finite number from `min` to `max`.
+    Real {
+        /// The smallest value.
+        min: f64,
+        /// The largest value.
+        max: f64,
+    },
+    /// 0 (off) or 1 (on).
+    Flag,
+    /// One of these names.
+    Choice(&'static [&'static str]),
+}
+
+/// A setting's value: a number (whole numbers and flags too) or a choice's name.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Value {
+    /// A [`Kind::Whole`], [`Kind::Real`] or [`Kind::Flag`] value.
+    Number(f64),
+    /// A [`Kind::Choice`] value.
+    Choice(&'static str),
+}
+
+/// One row of the table.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Setting {
+    /// Its name, as [`Method::set`] takes it.
+    pub name: &'static str,
+    /// What it takes.
+    pub kind: Kind,
+    /// One line for `--help` and the C header.
+    pub help: &'static str,
+}
+
+const fn whole(name: &'static str, min: u64, max: u64, help: &'static str) -> Setting {
+    Setting {
+        name,
+        kind: Kind::Whole { min, max },
+        help,
+    }
+}
+
+const fn real(name: &'static str, min: f64, max: f64, help: &'static str) -> Setting {
+    Setting {
+        name,
+        kind: Kind::Real { min, max },
+        help,
+    }
+}
+
+const fn choice(name: &'static str, names: &'static [&'static str], help: &'static str) -> Setting {
+    Setting {
+        name,
+        kind: Kind::Choice(names),
+        help,
+    }
+}
+
+const fn flag(name: &'static str, help: &'static str) -> Setting {
+    Setting {
+        name,
+        kind: Kind::Flag,
+        help,
+    }
+}
+
+const CHAINS: Setting = whole("chains", 1, 1 << 16, "Markov chains run side by side");
+const BOOTSTRAP: Setting = whole(
+    "bootstrap_candidates",
+    1,
+    1 << 24,
+    "paths traced to estimate the normalization before the chains start (not in the budget)",
+);
+const LARGE_STEP: Setting = real(
+    "large_step_probability",
+    0.0,
+    1.0,
+    "probability of a large step (an independent path)",
+);
+const SMALL_STEP: Setting = choice("small_step", &SmallStep::NAMES, "the small-step kernel");
+const STEP_MIN: Setting = real(
+    "small_step_min",
+    1e-9,
+    0.5,
+    "Kelemen's smallest step s1 (kelemen kernel; seed 001: 1/1024)",
+);
+const STEP_MAX: Setting = real(
+    "small_step_max",
+    1e-9,
+    0.5,
+    "Kelemen's largest step s2 (kelemen kernel; seed 001: 1/32)",
+);
+
+const PSSMLT: &[Setting] = &[
+    CHAINS, BOOTSTRAP, LARGE_STEP, SMALL_STEP, STEP_MIN, STEP_MAX,
+];
+const REPLICA: &[Setting] = &[
+    whole(
+        "ensembles",
+        1,
+        4096,
+        "independent ensembles run in parallel",
+    ),
+    whole(
+        "replicas",
+        1,
+        64,
+        "chains per ensemble, temperatures 1 to t_max log-spaced",
+    ),
+    real("t_max", 1.0, 1e12, "the highest temperature"),
+    whole(
+        "ladder_tuning_sweeps",
+        0,
+        1 << 20,
+        "sweeps per ensemble equalizing the ladder first (0: keep it)",
+    ),
+    choice(
+        "exchange",
+        &ExchangeKind::NAMES,
+        "the exchange move (seed 002 sec. 5.3)",
+    ),
+    choice(
+        "tempering",
+        &Tempering::NAMES,
+        "power: pi^(1/T), any oracle; oracle: the oracle roughens its paths",
+    ),
+    BOOTSTRAP,
+    LARGE_STEP,
+    SMALL_STEP,
+    STEP_MIN,
+    STEP_MAX,
+];
+const STRATIFIED: &[Setting] = &[
+    whole(
+        "tile_radius",
+        0,
+        8,
+        "tile shape: 0 the cross of seed 001, r a (2r+1)^2 square",
+    ),
+    whole(
+        "exchange_every",
+        0,
+        1 << 20,
+        "local replica exchange every this many sweeps (0: never)",
+    ),
+    choice(
+        "solver",
+        &Solver::NAMES,
+        "weighted: seed 001 eq. 13-16; log: eq. 17-20",
+    ),
+    real(
+        "alpha",
+        1e-6,
+        1e6,
+        "the weighted solver's regularizer weight (used when cross_validate_alpha is 0)",
+    ),
+    flag(
+        "cross_validate_alpha",
+        "choose alpha per render from 0.05, 0.2, 1 and 5 on half the large steps",
+    ),
+    real(
+        "fallback_sigmas",
+        0.0,
+        1e3,
+        "pixels this many standard errors below their MC estimate take it (0: never)",
+    ),
+    whole(
+        "regularizer_paths",
+        0,
+        4096,
+        "plain MC paths per pixel traced for the regularizer alone",
+    ),
+    LARGE_STEP,
+    SMALL_STEP,
+    STEP_MIN,
+    STEP_MAX,
+];
+const ERPT: &[Setting] = &[
+    whole("chain_length", 1, 1 << 16, "steps per chain"),
+    real(
+        "chains_per_path",
+        1e-3,
+        1e3,
+        "chains started per path that reaches the film, on average",
+    ),
+    BOOTSTRAP,
+    SMALL_STEP,
+    STEP_MIN,
+    STEP_MAX,
+];
+const MULTISTAGE: &[Setting] = &[
+    whole(
+        "linear_stages",
+        0,
+        1024,
+        "stages from half to full resolution (seed 004: 10)",
+    ),
+    flag("noise_aware", "noise-aware importance (seed 004 sec. 4.3)"),
+    CHAINS,
+    BOOTSTRAP,
+    LARGE_STEP,
+    SMALL_STEP,
+    STEP_MIN,
+    STEP_MAX,
+];
+
+impl Method {
+    /// This method's settings, in the order of its `--help`.
+    pub fn settings(&self) -> &'static [Setting] {
+        match self {
+            Method::Mc => &[],
+            Method::Pssmlt(_) => PSSMLT,
+            Method::Replica(_) => REPLICA,
+            Method::Stratified(_) => STRATIFIED,
+            Method::Erpt(_) => ERPT,
+            Method::MultiStage(_) => MULTISTAGE,
+        }
+    }
+
+    /// The row of the setting called `name`.
+    pub fn setting(&self, name: &str) -> Option<&'static Setting> {
+        self.settings().iter().find(|s| s.name == name)
+    }
+
+    /// The value of the setting called `name`; `None` for a name this method
+    /// does not have, or one that does not apply now (`alpha` with the log
+    /// solver, Kelemen's step sizes with another kernel).
+    pub fn get(&self, name: &str) -> Option<Value> {
+        use Value::{Choice, Number};
+        let number = |v: f64| Some(Number(v));
+        match (self, name) {
+            (Method::Pssmlt(s), "chains") => number(s.chains.into()),
+            (Method::Pssmlt(s), "bootstrap_candidates") => number(s.bootstrap_candidates as f64),
+            (Method::Pssmlt(s), _) => mutation_get(&s.mutation, name),
+            (Method::Replica(s), "ensembles") => number(s.ensembles.into()),
+            (Method::Replica(s), "replicas") => number(s.ensemble.ladder.len() as f64),
+            (Method::Replica(s), "t_max") => number(t_max(&s.ensemble)),
+            (Method::Replica(s), "ladder_tuning_sweeps") => number(s.ladder_tuning_sweeps as f64),
+            (Method::Replica(s), "exchange") => Some(Choice(s.exchange.name())),
+            (Method::Replica(s), "tempering") => Some(Choice(s.ensemble.tempering.name())),
+            (Method::Replica(s), "bootstrap_candidates") => {
+                number(s.ensemble.bootstrap_candidates as f64)
+            }
+            (Method::Replica(s), _) => mutation_get(&s.ensemble.mutation, name),
+            (Method::Stratified(s), "tile_radius") => number(match s.shape {
+                TileShape::Cross => 0.0,
+                TileShape::Square { radius } => radius.into(),
+            }),
+            (Method::Stratified(s), "exchange_every") => number(s.exchange_every.into()),
+            (Method::Stratified(s), "solver") => Some(Choice(s.solver.name())),
+            (Method::Stratified(s), "alpha") => match s.solver {
+                Solver::Weighted(w) => number(w.alpha),
+                Solver::LogDomain(_) => None,
+            },
+            (Method::Stratified(s), "cross_validate_alpha") => {
+                number(f64::from(u8::from(s.cross_validate_alpha)))
+            }
+            (Method::Stratified(s), "fallback_sigmas") => number(s.fallback_sigmas.unwrap_or(0.0)),
+            (Method::Stratified(s), "regularizer_paths") => number(s.regularizer_paths.into()),
+            (Method::Stratified(s), _) => mutation_get(&s.mutation, name),
+            (Method::Erpt(s), "chain_length") => number(s.chain_length.into()),
+            (Method::Erpt(s), "chains_per_path") => number(s.chains_per_path),
+            (Method::Erpt(s), "bootstrap_candidates") => number(s.bootstrap_candidates as f64),
+            (Method::Erpt(s), "small_step" | "small_step_min" | "small_step_max") => {
+                let mutation = MutationParams {
+                    small_step: s.small_step,
+                    large_step_probability: 0.0,
+                };
+                mutation_get(&mutation, name)
+            }
+            (Method::MultiStage(s), "linear_stages") => number(s.linear_stages.into()),
+            (Method::MultiStage(s), "noise_aware") => number(f64::from(u8::from(s.noise_aware))),
+            (Method::MultiStage(s), "chains") => number(s.pssmlt.chains.into()),
+            (Method::MultiStage(s), "bootstrap_candidates") => {
+                number(s.pssmlt.bootstrap_candidates as f64)
+            }
+            (Method::MultiStage(s), _) => mutation_get(&s.pssmlt.mutation, name),
+            _ => None,
+        }
+        .filter(|_| self.setting(name).is_some())
+    }
+
+    /// Sets the numeric setting `name` (whole, real or flag) to `value`,
+    /// checked against the table and the method's other settings; on an
+    /// error the settings are left as they were.
+    pub fn set(&mut self, name: &str, value: f64) -> Result<(), Error> {
+        let row = self.known(name)?;
+        let name = row.name;
+        check(row, value)?;
+        let mut next = self.clone();
+        // Checked above: a whole value is a whole number within u32 or u64
+        // (every whole setting's maximum fits its field), a flag is 0 or 1.
+        let (n, on) = (value as u64, value != 0.0);
+        match (&mut next, name) {
+            (Method::Pssmlt(s), "chains") => s.chains = n as u32,
+            (Method::Pssmlt(s), "bootstrap_candidates") => s.bootstrap_candidates = n,
+            (Method::Pssmlt(s), _) => mutation_set(&mut s.mutation, name, value)?,
+            (Method::Replica(s), "ensembles") => s.ensembles = n as u32,
+            (Method::Replica(s), "replicas") => rebuild_ladder(&mut s.ensemble, n as usize, None)?,
+            (Method::Replica(s), "t_max") => {
+                let levels = s.ensemble.ladder.len();
+                rebuild_ladder(&mut s.ensemble, levels, Some(value))?
+            }
+            (Method::Replica(s), "ladder_tuning_sweeps") => s.ladder_tuning_sweeps = n,
+            (Method::Replica(s), "bootstrap_candidates") => s.ensemble.bootstrap_candidates = n,
+            (Method::Replica(s), _) => mutation_set(&mut s.ensemble.mutation, name, value)?,
+            (Method::Stratified(s), "tile_radius") => {
+                s.shape = match n {
+                    0 => TileShape::Cross,
+                    radius => TileShape::Square {
+                        radius: radius as u32,
+                    },
+                }
+            }
+            (Method::Stratified(s), "exchange_every") => s.exchange_every = n as u32,
+            (Method::Stratified(s), "alpha") => match &mut s.solver {
+                Solver::Weighted(w) => w.alpha = value,
+                Solver::LogDomain(_) => return Err(Error::NotApplicable { name: row.name }),
+            },
+            (Method::Stratified(s), "cross_validate_alpha") => s.cross_validate_alpha = on,
+            (Method::Stratified(s), "fallback_sigmas") => s.fallback_sigmas = on.then_some(value),
+            (Method::Stratified(s), "regularizer_paths") => s.regularizer_paths = n as u32,
+            (Method::Stratified(s), _) => mutation_set(&mut s.mutation, name, value)?,
+            (Method::Erpt(s), "chain_length") => s.chain_length = n as u32,
+            (Method::Erpt(s), "chains_per_path") => s.chains_per_path = value,
+            (Method::Erpt(s), "bootstrap_candidates") => s.bootstrap_candidates = n,
+            (Method::Erpt(s), _) => {
+                let mut mutation = MutationParams {
+                    small_step: s.small_step,
+                    large_step_probability: 0.0,
+                };
+                mutation_set(&mut mutation, name, value)?;
+                s.small_step = mutation.small_step;
+            }
+            (Method::MultiStage(s), "linear_stages") => s.linear_stages = n as u32,
+            (Method::MultiStage(s), "noise_aware") => s.noise_aware = on,
+            (Method::MultiStage(s), "chains") => s.pssmlt.chains = n as u32,
+            (Method::MultiStage(s), "bootstrap_candidates") => s.pssmlt.bootstrap_candidates = n,
+            (Method::MultiStage(s), _) => mutation_set(&mut s.pssmlt.mutation, name, value)?,
+            _ => return Err(Error::NotApplicable { name: row.name }),
+        }
+        next.validate()?;
+        *self = next;
+        Ok(())
+    }
+
+    /// Sets the choice `name` (a kernel, an exchange move, a tempering, a
+    /// solver) to the option called `value`, with that option's defaults.
+    pub fn set_choice(&mut self, name: &str, value: &str) -> Result<(), Error> {
+        let row = self.known(name)?;
+        let name = row.name;
+        let Kind::Choice(names) = row.kind else {
+            return Err(Error::NotApplicable { name: row.name });
+        };
+        let unknown = || Error::UnknownChoice {
+            name: row.name,
+            choices: names,
+        };
+        let mut next = self.clone();
+        let kernel = || SmallStep::from_name(value).ok_or_else(unknown);
+        match (&mut next, name) {
+            (Method::Pssmlt(s), _) => s.mutation.small_step = kernel()?,
+            (Method::Replica(s), "small_step") => s.ensemble.mutation.small_step = kernel()?,
+            (Method::Replica(s), "exchange") => {
+                s.exchange = ExchangeKind::from_name(value).ok_or_else(unknown)?
+            }
+            (Method::Replica(s), _) => {
+                s.ensemble.tempering = Tempering::from_name(value).ok_or_else(unknown)?
+            }
+            (Method::Stratified(s), "small_step") => s.mutation.small_step = kernel()?,
+            (Method::Stratified(s), _) => {
+                s.solver = Solver::from_name(value).ok_or_else(unknown)?
+            }
+            (Method::Erpt(s), _) => s.small_step = kernel()?,
+            (Method::MultiStage(s), _) => s.pssmlt.mutation.small_step = kernel()?,
+            (Method::Mc, _) => return Err(Error::NotApplicable { name: row.name }),
+        }
+        next.validate()?;
+        *self = next;
+        Ok(())
+    }
+
+    /// Every setting's value within its row's range (called by
+    /// [`validate`](Self::validate)).
+    pub(super) fn check_ranges(&self) -> Result<(), Error> {
+        for row in self.settings() {
+            if let Some(Value::Number(v)) = self.get(row.name) {
+                check(row, v)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The row called `name`, or an error naming this method's settings.
+    fn known(&self, name: &str) -> Result<&'static Setting, Error> {
+        self.setting(name).ok_or(Error::UnknownSetting {
+            method: self.name(),
+            settings: self.settings(),
+        })
+    }
+}
+
+/// `value` within `row`'s range (a whole number for a whole setting, 0 or 1
+/// for a flag).
+fn check(row: &Setting, value: f64) -> Result<(), Error> {
+    let (min, max) = match row.kind {
+        Kind::Whole { min, max } if libm::trunc(value) == value => (min as f64, max as f64),
+        Kind::Whole { min, max } => {
+            return Err(Error::OutOfRange {
+                name: row.name,
+                value,
+                min: min as f64,
+                max: max as f64,
+            });
+        }
+        Kind::Real { min, max } => (min, max),
+        Kind::Flag if value == 0.0 || value == 1.0 => return Ok(()),
+        Kind::Flag => (0.0, 1.0),
+        Kind::Choice(_) => return Err(Error::NotApplicable { name: row.name }),
+    };
+    // Zero is "off" for the real settings whose help says so.
+    let off = value == 0.0 && row.name == "fallback_sigmas";
+    if (min..=max).contains(&value) || off {
+        Ok(())
+    } else {
+        Err(Error::OutOfRange {
+            name: row.name,
+            value,
+            min,
+            max,
+        })
+    }
+}
+
+/// The mutation settings' values by name.
+fn mutation_get(mutation: &MutationParams, name: &str) -> Option<Value> {
+    match (name, mutation.small_step) {
+        ("large_step_probability", _) => Some(Value::Number(mutation.large_step_probability)),
+        ("small_step", kernel) => Some(Value::Choice(kernel.name())),
+        ("small_step_min", SmallStep::Kelemen(k)) => Some(Value::Number(k.s1())),
+        ("small_step_max", SmallStep::Kelemen(k)) => Some(Value::Number(k.s2())),
+        _ => None,
+    }
+}
+
+/// Sets a mutation setting by name.
+fn mutation_set(
+    mutation: &mut MutationParams,
+    name: &'static str,
+    value: f64,
+) -> Result<(), Error> {
+    match (name, mutation.small_step) {
+        ("large_step_probability", _) => mutation.large_step_probability = value,
+        ("small_step_min", SmallStep::Kelemen(k)) => {
+            mutation.small_step = SmallStep::Kelemen(Kelemen::new(value, k.s2())?)
+        }
+        ("small_step_max", SmallStep::Kelemen(k)) => {
+            mutation.small_step = SmallStep::Kelemen(Kelemen::new(k.s1(), value)?)
+        }
+        _ => return Err(Error::NotApplicable { name }),
+    }
+    Ok(())
+}
+
+/// The ladder's highest temperature.
+fn t_max(ensemble: &EnsembleSettings) -> f64 {
+    ensemble
+        .ladder
+        .temperatures()
+        .last()
+        .copied()
+        .unwrap_or(1.0)
+}
+
+/// A geometric ladder of `levels` up to `t_max` (the current one if `None`).
+fn rebuild_ladder(
+    ensemble: &mut EnsembleSettings,
+    levels: usize,
+    t_max_new: Option<f64>,
+) -> Result<(), Error> {
+    let top = t_max_new.unwrap_or_else(|| t_max(ensemble));
+    ensemble.ladder = crate::exchange::Ladder::geometric(levels, top)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every method's defaults lie in the table, and every row can be read.
+    #[test]
+    fn defaults_are_in_range_and_every_row_reads() {
+        for method in Method::all() {
+            method.validate().unwrap();
+            for row in method.settings() {
+                assert!(
+                    method.get(row.name).is_some(),
+                    "{}: {}",
+                    method.name(),
+                    row.name
+                );
+            }
+        }
+    }
+
+    /// Each numeric row: its own value is accepted, one past either end is
+    /// `OutOfRange` and leaves the settings unchanged, and so is a fraction
+    /// for a whole setting.
+    #[test]
+    fn values_outside_a_range_are_refused_and_change_nothing() {
+        for mut method in Method::all() {
+            let before = method.clone();
+            for row in method.settings() {
+                let name = row.name;
+                let refused = |m: &mut Method, v: f64| {
+                    let err = m.set(name, v).unwrap_err();
+                    assert!(
+                        matches!(err, Error::OutOfRange { .. }),
+                        "{name} = {v}: {err}"
+                    );
+                    assert_eq!(*m, before, "{name} = {v} changed the settings");
+                };
+                let (min, max) = match row.kind {
+                    Kind::Whole { min, max } => {
+                        refused(&mut method, min as f64 + 0.5);
+                        (min as f64, max as f64)
+                    }
+                    Kind::Real { min, max } => (min, max),
+                    Kind::Flag => (0.0, 1.0),
+                    Kind::Choice(_) => continue,
+                };
+                let Some(Value::Number(now)) = method.get(name) else {
+                    panic!("{name} reads no number");
+                };
+                method.set(name, now).unwrap();
+                assert_eq!(method, before, "{name} set to its own value");
+                refused(&mut method, max * 2.0 + 1.0);
+                refused(&mut method, f64::NAN);
+                if min > 0.0 {
+                    refused(&mut method, min / 2.0);
+                }
+                if name != "fallback_sigmas" {
+                    refused(&mut method, -1.0);
+                }
+            }
+        }
+    }
+
+    /// Numbers set by name read back; each choice's options too.
+    #[test]
+    fn set_values_read_back() {
+        let mut pssmlt = Method::from_name("pssmlt").unwrap();
+        pssmlt.set("chains", 1000.0).unwrap();
+        pssmlt.set("small_step_max", 1.0 / 32.0).unwrap();
+        assert_eq!(pssmlt.get("chains"), Some(Value::Number(1000.0)));
+        assert_eq!(
+            pssmlt.get("small_step_max"),
+            Some(Value::Number(1.0 / 32.0))
+        );
+        let mut stratified = Method::from_name("stratified").unwrap();
+        stratified.set("cross_validate_alpha", 0.0).unwrap();
+        stratified.set("tile_radius", 2.0).unwrap();
+        assert_eq!(
+            stratified.get("cross_validate_alpha"),
+            Some(Value::Number(0.0))
+        );
+        assert_eq!(stratified.get("tile_radius"), Some(Value::Number(2.0)));
+        for mut method in Method::all() {
+            for row in method.settings() {
+                let Kind::Choice(options) = row.kind else {
+                    continue;
+                };
+                for option in options {
+                    method.set_choice(row.name, option).unwrap();
+                    assert_eq!(method.get(row.name), Some(Value::Choice(option)));
+                }
+                let err = method.set_choice(row.name, "no-such-option").unwrap_err();
+                assert!(matches!(err, Error::UnknownChoice { .. }), "{err}");
+            }
+        }
+        // Names a method does not have, and settings that do not apply now.
+        let mut mc = Method::Mc;
+        assert!(matches!(
+            mc.set("chains", 4.0),
+            Err(Error::UnknownSetting { .. })
+        ));
+        stratified.set_choice("solver", "log").unwrap();
+        assert_eq!(stratified.get("alpha"), None);
+        assert_eq!(
+            stratified.set("alpha", 1.0),
+            Err(Error::NotApplicable { name: "alpha" })
+        );
+        pssmlt.set_choice("small_step", "gaussian").unwrap();
+        assert!(matches!(
+            pssmlt.set("small_step_min", 0.001),
+            Err(Error::NotApplicable { .. })
+        ));
+    }
+
+    /// A value built field by field is bounded like one set by name.
+    #[test]
+    fn validate_bounds_fields_set_directly() {
+        let mut pssmlt = super::super::PssmltSettings::default();
+        pssmlt.chains = 100_000_000;
+        let err = Method::Pssmlt(pssmlt).validate().unwrap_err();
+        assert_eq!(err.setting(), Some("chains"));
+    }
+}

@@ -629,8 +629,10 @@ mod tests {
     /// A value built field by field is bounded like one set by name.
     #[test]
     fn validate_bounds_fields_set_directly() {
-        let mut pssmlt = super::super::PssmltSettings::default();
-        pssmlt.chains = 100_000_000;
+        let pssmlt = super::super::PssmltSettings {
+            chains: 100_000_000,
+            ..Default::default()
+        };
         let err = Method::Pssmlt(pssmlt).validate().unwrap_err();
         assert_eq!(err.setting(), Some("chains"));
     }

@@ -136,22 +136,29 @@ enum StrataStatus strata_settings_set_samples_per_pixel(struct StrataSettings *s
 // duration; set-up included).
 enum StrataStatus strata_settings_set_seconds(struct StrataSettings *settings, double seconds);
 
-// Sets the method's numeric setting `name` to `value` (the names each
-// method takes are in the message of a wrong one); an unknown name or an
-// invalid value is `STRATA_STATUS_INVALID_ARGUMENT` and leaves the settings
-// as they were.
+// Sets the method's numeric setting `name` to `value` (whole numbers,
+// reals and flags, 0 or 1; the names, ranges and help are listed by
+// [`strata_settings_describe`]). An unknown name or a value outside its
+// range is `STRATA_STATUS_INVALID_ARGUMENT` and leaves the settings as they
+// were.
 enum StrataStatus strata_settings_set(struct StrataSettings *settings,
                                       const char *name,
                                       double value);
 
 // Sets the method's named choice `name` (a kernel, an exchange move, a
 // tempering, a solver) to the option called `value`, with that option's
-// default parameters; the names and options are in the message of a wrong
-// one. An unknown name or option is `STRATA_STATUS_INVALID_ARGUMENT` and
+// default parameters (listed by [`strata_settings_describe`]). An unknown
+// name or option is `STRATA_STATUS_INVALID_ARGUMENT` and
 // leaves the settings as they were.
 enum StrataStatus strata_settings_set_choice(struct StrataSettings *settings,
                                              const char *name,
                                              const char *value);
+
+// The method's settings table as text, a line per setting: its name, its
+// current value, what it takes (range or options) and a line of help.
+// Null on a null `settings`. The text stays valid until the next call on
+// the same thread; do not free it.
+const char *strata_settings_describe(const struct StrataSettings *settings);
 
 // Worker threads (0: all cores; at most 4 per core). The image does not
 // depend on it.

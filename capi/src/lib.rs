@@ -27,12 +27,8 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use strata_engine::exchange::{ExchangeKind, Ladder, Tempering};
-use strata_engine::method::Solver;
-use strata_engine::mutate::SmallStep;
 use strata_engine::purity::check_purity;
 use strata_engine::target::MaxChannel;
-use strata_engine::tiles::TileShape;
 use strata_engine::{
     Budget, Error, Film, FilmPoint, Method, Observer, Output, PathOracle, PathSample, Progress,
     Resolution, Rgb, Sampler, Settings, Temperature, render,
@@ -318,141 +314,11 @@ pub extern "C" fn strata_settings_set_seconds(
     }
 }
 
-/// The numeric settings [`strata_settings_set`] knows, per method.
-const NAMES: &str = "pssmlt: chains, bootstrap_candidates, large_step_probability; \
-replica: ensembles, replicas, t_max, bootstrap_candidates, large_step_probability, \
-ladder_tuning_sweeps; stratified: exchange_every, fallback_sigmas (0: off), \
-regularizer_paths, alpha, large_step_probability, tile_radius (0: the cross); erpt: \
-chain_length, chains_per_path, bootstrap_candidates; multistage: linear_stages, chains, \
-bootstrap_candidates, large_step_probability, noise_aware (0 or 1)";
-
-/// The named choices [`strata_settings_set_choice`] knows, per method.
-const CHOICES: &str = "small_step (every method but mc): kelemen, gaussian, adaptive; \
-replica: exchange (none, neighbor, is-permutation, is-swap, original-eem, frequent-eem, \
-ees, non-reversible), tempering (power, oracle); stratified: solver (weighted, log)";
-
-/// `value` as a whole number that fits `T`.
-fn whole<T: TryFrom<u64>>(name: &str, value: f64) -> Result<T, String> {
-    let bad = || format!("`{name}` must be a whole number >= 0, got {value}");
-    if !(value >= 0.0 && value.fract() == 0.0 && value < 1.8e19) {
-        return Err(bad());
-    }
-    T::try_from(value as u64).map_err(|_| bad())
-}
-
-/// Sets the numeric setting `name` of the method to `value`.
-fn set_number(method: &mut Method, name: &str, value: f64) -> Result<(), String> {
-    let method_name = method.name();
-    let unknown = || format!("{method_name} has no setting `{name}` ({NAMES})");
-    match (&mut *method, name) {
-        (Method::Pssmlt(s), "chains") => s.chains = whole(name, value)?,
-        (Method::Pssmlt(s), "bootstrap_candidates") => s.bootstrap_candidates = whole(name, value)?,
-        (Method::Pssmlt(s), "large_step_probability") => s.mutation.large_step_probability = value,
-        (Method::Replica(s), "ensembles") => s.ensembles = whole(name, value)?,
-        (Method::Replica(s), "replicas" | "t_max") => {
-            let (mut levels, mut t_max) = (
-                s.ensemble.ladder.len(),
-                s.ensemble
-                    .ladder
-                    .temperatures()
-                    .last()
-                    .copied()
-                    .unwrap_or(1.0),
-            );
-            if name == "replicas" {
-                levels = whole(name, value)?;
-            } else {
-                t_max = value;
-            }
-            s.ensemble.ladder = Ladder::geometric(levels, t_max).map_err(|e| e.to_string())?;
-        }
-        (Method::Replica(s), "bootstrap_candidates") => {
-            s.ensemble.bootstrap_candidates = whole(name, value)?
-        }
-        (Method::Replica(s), "large_step_probability") => {
-            s.ensemble.mutation.large_step_probability = value
-        }
-        (Method::Replica(s), "ladder_tuning_sweeps") => {
-            s.ladder_tuning_sweeps = whole(name, value)?
-        }
-        (Method::Stratified(s), "exchange_every") => s.exchange_every = whole(name, value)?,
-        (Method::Stratified(s), "fallback_sigmas") => {
-            s.fallback_sigmas = (value != 0.0).then_some(value)
-        }
-        (Method::Stratified(s), "regularizer_paths") => s.regularizer_paths = whole(name, value)?,
-        (Method::Stratified(s), "alpha") => match &mut s.solver {
-            Solver::Weighted(w) => w.alpha = value,
-            Solver::LogDomain(_) => return Err(unknown()),
-        },
-        (Method::Stratified(s), "large_step_probability") => {
-            s.mutation.large_step_probability = value
-        }
-        (Method::Stratified(s), "tile_radius") => {
-            s.shape = match whole(name, value)? {
-                0 => TileShape::Cross,
-                radius => TileShape::Square { radius },
-            }
-        }
-        (Method::Erpt(s), "chain_length") => s.chain_length = whole(name, value)?,
-        (Method::Erpt(s), "chains_per_path") => s.chains_per_path = value,
-        (Method::Erpt(s), "bootstrap_candidates") => s.bootstrap_candidates = whole(name, value)?,
-        (Method::MultiStage(s), "linear_stages") => s.linear_stages = whole(name, value)?,
-        (Method::MultiStage(s), "chains") => s.pssmlt.chains = whole(name, value)?,
-        (Method::MultiStage(s), "bootstrap_candidates") => {
-            s.pssmlt.bootstrap_candidates = whole(name, value)?
-        }
-        (Method::MultiStage(s), "large_step_probability") => {
-            s.pssmlt.mutation.large_step_probability = value
-        }
-        (Method::MultiStage(s), "noise_aware") => {
-            s.noise_aware = match value {
-                0.0 => false,
-                1.0 => true,
-                _ => return Err(format!("`noise_aware` is 0 or 1, got {value}")),
-            }
-        }
-        _ => return Err(unknown()),
-    }
-    method.validate().map_err(|e| e.to_string())
-}
-
-/// Sets the method's named choice `name` to `value`.
-fn set_choice(method: &mut Method, name: &str, value: &str) -> Result<(), String> {
-    fn pick<T>(name: &str, value: &str, names: &[&str], found: Option<T>) -> Result<T, String> {
-        found.ok_or_else(|| format!("`{name}` is one of {names:?}, got \"{value}\""))
-    }
-    let method_name = method.name();
-    let kernel = || pick(name, value, &SmallStep::NAMES, SmallStep::from_name(value));
-    match (&mut *method, name) {
-        (Method::Pssmlt(s), "small_step") => s.mutation.small_step = kernel()?,
-        (Method::Replica(s), "small_step") => s.ensemble.mutation.small_step = kernel()?,
-        (Method::Stratified(s), "small_step") => s.mutation.small_step = kernel()?,
-        (Method::Erpt(s), "small_step") => s.small_step = kernel()?,
-        (Method::MultiStage(s), "small_step") => s.pssmlt.mutation.small_step = kernel()?,
-        (Method::Replica(s), "exchange") => {
-            s.exchange = pick(
-                name,
-                value,
-                &ExchangeKind::NAMES,
-                ExchangeKind::from_name(value),
-            )?
-        }
-        (Method::Replica(s), "tempering") => {
-            s.ensemble.tempering =
-                pick(name, value, &Tempering::NAMES, Tempering::from_name(value))?
-        }
-        (Method::Stratified(s), "solver") => {
-            s.solver = pick(name, value, &Solver::NAMES, Solver::from_name(value))?
-        }
-        _ => return Err(format!("{method_name} has no choice `{name}` ({CHOICES})")),
-    }
-    method.validate().map_err(|e| e.to_string())
-}
-
-/// Sets the method's numeric setting `name` to `value` (the names each
-/// method takes are in the message of a wrong one); an unknown name or an
-/// invalid value is `STRATA_STATUS_INVALID_ARGUMENT` and leaves the settings
-/// as they were.
+/// Sets the method's numeric setting `name` to `value` (whole numbers,
+/// reals and flags, 0 or 1; the names, ranges and help are listed by
+/// [`strata_settings_describe`]). An unknown name or a value outside its
+/// range is `STRATA_STATUS_INVALID_ARGUMENT` and leaves the settings as they
+/// were.
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_settings_set(
     settings: *mut StrataSettings,
@@ -466,20 +332,19 @@ pub extern "C" fn strata_settings_set(
     let Some(name) = text(name) else {
         return fail(StrataStatus::InvalidArgument, "null or non-UTF-8 name");
     };
-    let mut method = s.method.clone();
-    match set_number(&mut method, name, value) {
-        Ok(()) => {
-            s.method = method;
-            StrataStatus::Ok
+    match s.method.set(name, value) {
+        Ok(()) => StrataStatus::Ok,
+        Err(e @ Error::UnknownSetting { .. }) => {
+            fail(StrataStatus::InvalidArgument, format!("`{name}`: {e}"))
         }
-        Err(message) => fail(StrataStatus::InvalidArgument, message),
+        Err(e) => fail(StrataStatus::InvalidArgument, e.to_string()),
     }
 }
 
 /// Sets the method's named choice `name` (a kernel, an exchange move, a
 /// tempering, a solver) to the option called `value`, with that option's
-/// default parameters; the names and options are in the message of a wrong
-/// one. An unknown name or option is `STRATA_STATUS_INVALID_ARGUMENT` and
+/// default parameters (listed by [`strata_settings_describe`]). An unknown
+/// name or option is `STRATA_STATUS_INVALID_ARGUMENT` and
 /// leaves the settings as they were.
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_settings_set_choice(
@@ -497,14 +362,40 @@ pub extern "C" fn strata_settings_set_choice(
             "null or non-UTF-8 name or value",
         );
     };
-    let mut method = s.method.clone();
-    match set_choice(&mut method, name, value) {
-        Ok(()) => {
-            s.method = method;
-            StrataStatus::Ok
+    match s.method.set_choice(name, value) {
+        Ok(()) => StrataStatus::Ok,
+        Err(e @ Error::UnknownSetting { .. }) => {
+            fail(StrataStatus::InvalidArgument, format!("`{name}`: {e}"))
         }
-        Err(message) => fail(StrataStatus::InvalidArgument, message),
+        Err(e @ Error::UnknownChoice { .. }) => fail(
+            StrataStatus::InvalidArgument,
+            format!("{e}, got \"{value}\""),
+        ),
+        Err(e) => fail(StrataStatus::InvalidArgument, e.to_string()),
     }
+}
+
+thread_local! {
+    static DESCRIPTION: RefCell<CString> = RefCell::new(CString::default());
+}
+
+/// The method's settings table as text, a line per setting: its name, its
+/// current value, what it takes (range or options) and a line of help.
+/// Null on a null `settings`. The text stays valid until the next call on
+/// the same thread; do not free it.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_settings_describe(settings: *const StrataSettings) -> *const c_char {
+    if settings.is_null() {
+        fail(StrataStatus::InvalidArgument, "null settings");
+        return std::ptr::null();
+    }
+    // SAFETY: a non-null pointer to settings made by strata_settings_new.
+    let method = unsafe { &(*settings).method };
+    let text = CString::new(method.describe()).unwrap_or_default();
+    DESCRIPTION.with(|d| {
+        *d.borrow_mut() = text;
+        d.borrow().as_ptr()
+    })
 }
 
 /// More threads than this many per core only add switching.

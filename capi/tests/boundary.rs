@@ -313,12 +313,34 @@ fn methods_take_their_settings_by_name_and_refuse_bad_ones() {
         StrataStatus::InvalidArgument
     );
     assert!(last_error().contains("whole number"), "{}", last_error());
+    // Issue 36's values, accepted before and then aborting or hanging the
+    // render: refused now, naming the range.
+    for (method, name, value) in [
+        (c"pssmlt", c"chains", 4e9),
+        (c"erpt", c"chains_per_path", 1e300),
+        (c"replica", c"ladder_tuning_sweeps", 1e18),
+        (c"stratified", c"regularizer_paths", 4e9),
+        (c"erpt", c"chain_length", 4294967295.0),
+    ] {
+        let other = strata_settings_new(method.as_ptr());
+        assert_eq!(
+            strata_settings_set(other, name.as_ptr(), value),
+            StrataStatus::InvalidArgument,
+            "{name:?}"
+        );
+        assert!(
+            last_error().contains("outside its range"),
+            "{}",
+            last_error()
+        );
+        strata_settings_free(other);
+    }
     assert_eq!(
         strata_settings_set(settings, c"chains".as_ptr(), 4.0),
         StrataStatus::InvalidArgument
     );
     assert!(
-        last_error().contains("stratified has no setting `chains`"),
+        last_error().contains("`chains`: stratified has no such setting"),
         "{}",
         last_error()
     );
@@ -377,7 +399,7 @@ fn methods_take_their_choices_by_name_and_refuse_unknown_ones() {
         StrataStatus::InvalidArgument
     );
     assert!(
-        last_error().contains("replica has no choice `solver`"),
+        last_error().contains("`solver`: replica has no such setting"),
         "{}",
         last_error()
     );
@@ -416,6 +438,16 @@ fn methods_take_their_choices_by_name_and_refuse_unknown_ones() {
         StrataStatus::Ok
     );
     strata_film_free(film);
+    // The table as text: every setting, its value now and its range.
+    // SAFETY: a NUL-terminated string the API keeps.
+    let text = unsafe { std::ffi::CStr::from_ptr(strata_settings_describe(stratified)) };
+    let text = text.to_str().unwrap();
+    assert!(text.contains("solver") && text.contains("log"), "{text}");
+    assert!(
+        text.contains("tile_radius") && text.contains("whole, 0 to 8"),
+        "{text}"
+    );
+    assert!(strata_settings_describe(null()).is_null());
     strata_settings_free(stratified);
 
     let multistage = strata_settings_new(c"multistage".as_ptr());

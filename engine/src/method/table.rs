@@ -61,6 +61,51 @@ pub struct Setting {
     pub help: &'static str,
 }
 
+impl core::fmt::Display for Kind {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Kind::Whole { min, max } => write!(f, "whole, {min} to {max}"),
+            Kind::Real { min, max } => write!(f, "{min} to {max}"),
+            Kind::Flag => write!(f, "0 or 1"),
+            Kind::Choice(names) => write!(f, "{}", names.join(" | ")),
+        }
+    }
+}
+
+impl core::fmt::Display for Value {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Value::Number(v) => write!(f, "{v}"),
+            Value::Choice(name) => write!(f, "{name}"),
+        }
+    }
+}
+
+impl Method {
+    /// The table as text, a line per setting: name, current value, what it
+    /// takes, help (the `strata settings` command and
+    /// `strata_settings_describe` print it).
+    pub fn describe(&self) -> alloc::string::String {
+        use core::fmt::Write;
+        let mut text = alloc::string::String::new();
+        for row in self.settings() {
+            let value = self
+                .get(row.name)
+                .map_or_else(|| "-".into(), |v| alloc::format!("{v}"));
+            // Writing to a String cannot fail.
+            let _ = writeln!(
+                text,
+                "{:<24} {:<10} {:<34} {}",
+                row.name,
+                value,
+                alloc::format!("({})", row.kind),
+                row.help
+            );
+        }
+        text
+    }
+}
+
 const fn whole(name: &'static str, min: u64, max: u64, help: &'static str) -> Setting {
     Setting {
         name,
@@ -434,17 +479,10 @@ impl Method {
 fn check(row: &Setting, value: f64) -> Result<(), Error> {
     let (min, max) = match row.kind {
         Kind::Whole { min, max } if libm::trunc(value) == value => (min as f64, max as f64),
-        Kind::Whole { min, max } => {
-            return Err(Error::OutOfRange {
-                name: row.name,
-                value,
-                min: min as f64,
-                max: max as f64,
-            });
-        }
+        Kind::Whole { .. } => return Err(Error::invalid(row.name, value, "a whole number")),
         Kind::Real { min, max } => (min, max),
         Kind::Flag if value == 0.0 || value == 1.0 => return Ok(()),
-        Kind::Flag => (0.0, 1.0),
+        Kind::Flag => return Err(Error::invalid(row.name, value, "0 or 1")),
         Kind::Choice(_) => return Err(Error::NotApplicable { name: row.name }),
     };
     // Zero is "off" for the real settings whose help says so.
@@ -533,8 +571,8 @@ mod tests {
     }
 
     /// Each numeric row: its own value is accepted, one past either end is
-    /// `OutOfRange` and leaves the settings unchanged, and so is a fraction
-    /// for a whole setting.
+    /// `OutOfRange` and leaves the settings unchanged; a fraction for a
+    /// whole setting is refused too.
     #[test]
     fn values_outside_a_range_are_refused_and_change_nothing() {
         for mut method in Method::all() {
@@ -543,19 +581,33 @@ mod tests {
                 let name = row.name;
                 let refused = |m: &mut Method, v: f64| {
                     let err = m.set(name, v).unwrap_err();
-                    assert!(
-                        matches!(err, Error::OutOfRange { .. }),
-                        "{name} = {v}: {err}"
-                    );
+                    // NaN, and a fraction for a whole setting, are refused
+                    // as such rather than as out of range.
+                    let whole = matches!(row.kind, Kind::Whole { .. });
+                    if !v.is_nan() && (!whole || libm::trunc(v) == v) {
+                        assert!(
+                            matches!(err, Error::OutOfRange { .. }),
+                            "{name} = {v}: {err}"
+                        );
+                    }
+                    assert_eq!(err.setting(), Some(name), "{name} = {v}: {err}");
                     assert_eq!(*m, before, "{name} = {v} changed the settings");
                 };
                 let (min, max) = match row.kind {
                     Kind::Whole { min, max } => {
-                        refused(&mut method, min as f64 + 0.5);
+                        let err = method.set(name, min as f64 + 0.5).unwrap_err();
+                        assert_eq!(err.setting(), Some(name));
+                        assert_eq!(method, before);
                         (min as f64, max as f64)
                     }
                     Kind::Real { min, max } => (min, max),
-                    Kind::Flag => (0.0, 1.0),
+                    Kind::Flag => {
+                        for v in [0.5, 2.0, f64::NAN] {
+                            assert_eq!(method.set(name, v).unwrap_err().setting(), Some(name));
+                        }
+                        assert_eq!(method, before);
+                        continue;
+                    }
                     Kind::Choice(_) => continue,
                 };
                 let Some(Value::Number(now)) = method.get(name) else {

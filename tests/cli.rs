@@ -80,7 +80,15 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
         assert_eq!(refused.status.code(), Some(code), "{extra:?}: {stderr}");
         assert!(stderr.contains(says), "{extra:?}: {stderr}");
     }
-    assert!(!dir.exists(), "a refused render wrote {}", dir.display());
+    // An output directory that cannot be made: an error naming it, before
+    // any work (issue 36: it came after the whole render).
+    let refused = run(&["--spp", "2", "--out", "/proc/strata-no-such-dir/r"]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("/proc/strata-no-such-dir"), "{stderr}");
+    assert!(!String::from_utf8_lossy(&refused.stdout).contains("paths:"));
+    let png = dir.join("name.with.dots.png");
+    assert!(!png.exists(), "a refused render wrote {}", png.display());
 
     let ok = run(&["--spp", "2", "--out", out_arg]);
     assert_eq!(ok.status.code(), Some(0));
@@ -92,6 +100,46 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
     let ok = run(&["--spp", "2", "--out", png.to_str().unwrap()]);
     assert_eq!(ok.status.code(), Some(0));
     assert!(png.is_file() && dir.join("named.exr").is_file());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `--resume` with flags that differ from the checkpoint's is an error
+/// naming them (issue 36: they were silently replaced).
+#[test]
+fn resume_with_other_flags_is_an_error_naming_them() {
+    let dir = std::env::temp_dir().join(format!("strata-cli-flags-{}", std::process::id()));
+    let out = dir.join("r");
+    let out_arg = out.to_str().unwrap();
+    let ckpt = dir.join("r.ckpt");
+    let tiny = ["render", "procedural", "--width", "16", "--height", "16"];
+    let run = |extra: &[&str]| {
+        let args: Vec<&str> = tiny.iter().chain(extra).copied().collect();
+        strata(&args)
+    };
+    let first = run(&[
+        "--spp",
+        "4",
+        "--checkpoint-every",
+        "0.001",
+        "--out",
+        out_arg,
+    ]);
+    assert_eq!(first.status.code(), Some(0));
+    assert!(ckpt.is_file());
+    let ckpt_arg = ckpt.to_str().unwrap();
+    let other = run(&[
+        "--spp", "8", "--chains", "8", "--resume", ckpt_arg, "--out", out_arg,
+    ]);
+    let stderr = String::from_utf8_lossy(&other.stderr);
+    assert_eq!(other.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("chains=256 (not 8)"), "{stderr}");
+    let same = run(&["--spp", "8", "--resume", ckpt_arg, "--out", out_arg]);
+    assert_eq!(
+        same.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&same.stderr)
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -169,7 +217,7 @@ fn ctrl_c_saves_a_checkpoint_and_resume_finishes_the_same_image() {
     let refused = strata(&other.iter().map(String::as_str).collect::<Vec<_>>());
     assert_eq!(refused.status.code(), Some(1));
     assert!(
-        String::from_utf8_lossy(&refused.stderr).contains("another render"),
+        String::from_utf8_lossy(&refused.stderr).contains("method=stratified"),
         "{}",
         String::from_utf8_lossy(&refused.stderr)
     );

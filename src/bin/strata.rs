@@ -7,6 +7,8 @@
 //! strata render cornell --method pssmlt --spp 64 --out out/cornell
 //! strata render procedural --method pssmlt --spp 64 --out out/procedural
 //! strata render caustic --method replica --exchange is-permutation --spp 64
+//! strata render cornell --method stratified --preset seed-001 --set tile_radius=1
+//! strata settings stratified      # every setting: default, range, help
 //! strata render ../shared/scenes/veach-ajar/scene.pbrt --method stratified --time 30
 //! ```
 //!
@@ -34,12 +36,11 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use strata::embree::EmbreeIntersector;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
-use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Ladder, Tempering};
-use strata::engine::method::Solver;
+use strata::engine::exchange::{ExchangeKind, Ladder, Tempering};
+use strata::engine::method::{Kind, Solver};
 use strata::engine::metrics;
-use strata::engine::mutate::{Kelemen, SmallStep};
+use strata::engine::mutate::SmallStep;
 use strata::engine::target::MaxChannel;
-use strata::engine::tiles::TileShape;
 use strata::engine::{
     Budget, Checkpoint, Error, Extras, Film, Method, Observer, Output, PathOracle, Progress,
     Resolution, Settings, render, resume,
@@ -67,6 +68,12 @@ struct Cli {
 enum Command {
     /// Render a scene: a tone-mapped PNG and a linear EXR.
     Render(Args),
+    /// List a method's settings (every method's without one): name,
+    /// default, range or choices, help. `render --set NAME=VALUE` takes them.
+    Settings {
+        #[arg(value_parser = PossibleValuesParser::new(Method::NAMES))]
+        method: Option<String>,
+    },
 }
 
 /// What `strata render` takes.
@@ -99,53 +106,60 @@ struct Args {
     /// Image height.
     #[arg(long)]
     height: Option<u32>,
-    /// PSSMLT chains.
-    #[arg(long, default_value_t = 256)]
-    chains: u32,
-    /// PSSMLT small-step kernel.
-    #[arg(long, default_value = "kelemen", value_parser = PossibleValuesParser::new(SmallStep::NAMES))]
-    kernel: String,
-    /// Large-step probability of the MCMC methods (default: each method's
-    /// own, 0.3, and 0.8 for stratified MCMC).
+    /// Start from a named preset of the method's settings (seed-001: the
+    /// stratified-MCMC paper's step sizes and large-step probability, for
+    /// stratified MCMC and ERPT); the flags below override it.
+    #[arg(long, value_parser = PossibleValuesParser::new(Method::PRESETS))]
+    preset: Option<String>,
+    /// Any setting of the method's table, NAME=VALUE (repeatable; `strata
+    /// settings METHOD` lists them with their ranges and defaults). The
+    /// flags below are shorthands for the common ones.
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    sets: Vec<String>,
+    /// PSSMLT and multi-stage MLT: chains (`chains`).
+    #[arg(long)]
+    chains: Option<u32>,
+    /// Small-step kernel (`small_step`).
+    #[arg(long, value_parser = PossibleValuesParser::new(SmallStep::NAMES))]
+    kernel: Option<String>,
+    /// Large-step probability (`large_step_probability`).
     #[arg(long)]
     large_step: Option<f64>,
-    /// Replica exchange: the exchange move (seed 002 sec. 5.3; eem: equi-energy move, ees: equi-energy sampler).
-    #[arg(long, default_value = "is-permutation", value_parser = PossibleValuesParser::new(ExchangeKind::NAMES))]
-    exchange: String,
-    /// Replica exchange: how chains are tempered (power: pi^(1/T), any
+    /// Replica exchange: the exchange move (`exchange`; seed 002 sec. 5.3).
+    #[arg(long, value_parser = PossibleValuesParser::new(ExchangeKind::NAMES))]
+    exchange: Option<String>,
+    /// Replica exchange: tempering (`tempering`; power: pi^(1/T), any
     /// oracle; oracle: the path tracer roughens its BSDFs).
-    #[arg(long, default_value = "oracle", value_parser = PossibleValuesParser::new(Tempering::NAMES))]
-    tempering: String,
-    /// Replica exchange: chains per ensemble (temperatures 1..t-max, log-spaced).
-    #[arg(long, default_value_t = 8)]
-    replicas: usize,
-    /// Replica exchange: highest temperature.
-    #[arg(long, default_value_t = 2500.0)]
-    t_max: f64,
-    /// Replica exchange: ensembles run in parallel.
-    #[arg(long, default_value_t = 32)]
-    ensembles: u32,
-    /// Replica exchange: sweeps per ensemble spent equalizing the ladder first.
-    #[arg(long, default_value_t = 0)]
-    tune_ladder: u64,
-    /// Stratified MCMC: tile radius (0: the cross of seed 001; r: (2r+1)² squares).
-    #[arg(long, default_value_t = 0)]
-    tile_radius: u32,
-    /// Stratified MCMC: local replica exchange every this many sweeps (0: never).
-    #[arg(long, default_value_t = 1)]
-    exchange_every: u32,
-    /// Stratified MCMC: the reconstruction (weighted: seed 001 eq. 13-16;
-    /// log: eq. 17-20).
-    #[arg(long, default_value = "weighted", value_parser = PossibleValuesParser::new(Solver::NAMES))]
-    solver: String,
-    /// Stratified MCMC: pixels this many standard errors below their MC
-    /// estimate take it (0: never; negative values are an error).
-    #[arg(long, default_value_t = 3.0)]
-    fallback_sigmas: f64,
-    /// ERPT: steps per chain.
-    #[arg(long, default_value_t = 100)]
-    chain_length: u32,
-    /// Multi-stage MLT: noise-aware importance (seed 004 sec. 4.3).
+    #[arg(long, value_parser = PossibleValuesParser::new(Tempering::NAMES))]
+    tempering: Option<String>,
+    /// Replica exchange: chains per ensemble (`replicas`).
+    #[arg(long)]
+    replicas: Option<u32>,
+    /// Replica exchange: highest temperature (`t_max`).
+    #[arg(long)]
+    t_max: Option<f64>,
+    /// Replica exchange: ensembles run in parallel (`ensembles`).
+    #[arg(long)]
+    ensembles: Option<u32>,
+    /// Replica exchange: sweeps equalizing the ladder first (`ladder_tuning_sweeps`).
+    #[arg(long)]
+    tune_ladder: Option<u64>,
+    /// Stratified MCMC: tile radius (`tile_radius`; 0: the cross of seed 001).
+    #[arg(long)]
+    tile_radius: Option<u32>,
+    /// Stratified MCMC: local exchange every this many sweeps (`exchange_every`).
+    #[arg(long)]
+    exchange_every: Option<u32>,
+    /// Stratified MCMC: the reconstruction (`solver`).
+    #[arg(long, value_parser = PossibleValuesParser::new(Solver::NAMES))]
+    solver: Option<String>,
+    /// Stratified MCMC: the fallback's threshold (`fallback_sigmas`; 0: never).
+    #[arg(long)]
+    fallback_sigmas: Option<f64>,
+    /// ERPT: steps per chain (`chain_length`).
+    #[arg(long)]
+    chain_length: Option<u32>,
+    /// Multi-stage MLT: noise-aware importance (`noise_aware`; seed 004 sec. 4.3).
     #[arg(long)]
     noise_aware: bool,
     /// Exposure (stops) of the PNG, from -64 to 64.
@@ -224,10 +238,12 @@ struct Watch<'a> {
 }
 
 impl Watch<'_> {
-    /// Reports a failed write without stopping the render.
+    /// Reports a failed write without stopping the render, on stderr
+    /// whether or not it is a terminal (the bar's own `println` drops
+    /// lines when it is hidden).
     fn warn(&self, what: &str, error: impl std::fmt::Display) {
         self.bar
-            .println(format!("warning: cannot write the {what}: {error}"));
+            .suspend(|| eprintln!("warning: cannot write the {what}: {error}"));
     }
 }
 
@@ -283,7 +299,7 @@ impl Observer for Watch<'_> {
 }
 
 /// Writes `path` whole under a temporary name, then renames it over `path`
-/// (a viewer or a crash never sees half a file).
+/// (a viewer or a crash never sees half a file); an error names `path`.
 fn replace<E: std::error::Error + Send + Sync + 'static>(
     path: &Path,
     write: impl FnOnce(&Path) -> Result<(), E>,
@@ -291,8 +307,26 @@ fn replace<E: std::error::Error + Send + Sync + 'static>(
     let mut partial = path.as_os_str().to_owned();
     partial.push(".partial");
     let partial = PathBuf::from(partial);
-    write(&partial)?;
-    std::fs::rename(&partial, path)?;
+    let named = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    write(&partial).map_err(|e| named(&e))?;
+    std::fs::rename(&partial, path).map_err(|e| named(&e))?;
+    Ok(())
+}
+
+/// Makes the directories the outputs and checkpoints go to and checks that
+/// they take a file, before any work (an error names the directory).
+fn prepare_outputs(args: &Args) -> AnyResult<()> {
+    for file in [output(&args.out, "png"), checkpoint_path(args)] {
+        let dir = match file.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let cannot = |e: std::io::Error| format!("cannot write to {}: {e}", dir.display());
+        std::fs::create_dir_all(&dir).map_err(cannot)?;
+        let probe = dir.join(format!(".strata-probe-{}", std::process::id()));
+        std::fs::write(&probe, b"").map_err(cannot)?;
+        std::fs::remove_file(&probe).map_err(cannot)?;
+    }
     Ok(())
 }
 
@@ -304,7 +338,17 @@ enum Ended {
 }
 
 fn main() -> ExitCode {
-    let Command::Render(args) = Cli::parse().command;
+    let args = match Cli::parse().command {
+        Command::Render(args) => args,
+        Command::Settings { method } => {
+            for m in Method::all() {
+                if method.as_deref().is_none_or(|name| name == m.name()) {
+                    println!("{}:\n{}", m.name(), m.describe());
+                }
+            }
+            return ExitCode::SUCCESS;
+        }
+    };
     // The first Ctrl-C stops after the current round; a second one at once.
     let handler = ctrlc::set_handler(|| {
         if STOP.swap(true, Ordering::Relaxed) {
@@ -383,6 +427,7 @@ fn stops(text: &str) -> Result<f32, String> {
 }
 
 fn run(args: &Args) -> AnyResult<Ended> {
+    prepare_outputs(args)?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut threads = args.threads;
     if threads > THREADS_PER_CORE * cores {
@@ -471,57 +516,113 @@ fn run(args: &Args) -> AnyResult<Ended> {
     Ok(ended)
 }
 
-/// The method named by `--method`, with the options that concern it.
+/// The method named by `--method`: the engine's defaults, then `--preset`,
+/// then each flag given, set through the engine's settings table (a flag
+/// the method does not have is an error).
 fn method(args: &Args) -> AnyResult<Method> {
     let mut method = Method::from_name(&args.method).ok_or("unknown method")?;
-    let seed_001 = SmallStep::Kelemen(Kelemen::SEED_001);
-    match &mut method {
-        Method::Mc => {}
-        Method::Pssmlt(s) => {
-            s.chains = args.chains;
-            s.mutation.small_step = SmallStep::from_name(&args.kernel).ok_or("unknown kernel")?;
-            if let Some(p) = args.large_step {
-                s.mutation.large_step_probability = p;
-            }
+    if let Some(preset) = &args.preset {
+        method.apply_preset(preset)?;
+    }
+    let choices = [
+        ("--kernel", "small_step", &args.kernel),
+        ("--exchange", "exchange", &args.exchange),
+        ("--tempering", "tempering", &args.tempering),
+        ("--solver", "solver", &args.solver),
+    ];
+    for (flag, name, value) in choices {
+        if let Some(value) = value {
+            applies(&method, flag, name)?;
+            method.set_choice(name, value)?;
         }
-        Method::Replica(s) => {
-            let mut ensemble = EnsembleSettings::geometric(args.replicas, args.t_max)?;
-            ensemble.tempering =
-                Tempering::from_name(&args.tempering).ok_or("unknown tempering")?;
-            if let Some(p) = args.large_step {
-                ensemble.mutation.large_step_probability = p;
-            }
-            s.ensemble = ensemble;
-            s.ensembles = args.ensembles;
-            s.ladder_tuning_sweeps = args.tune_ladder;
-            s.exchange = ExchangeKind::from_name(&args.exchange).ok_or("unknown exchange move")?;
+    }
+    let numbers = [
+        ("--chains", "chains", args.chains.map(f64::from)),
+        ("--large-step", "large_step_probability", args.large_step),
+        ("--replicas", "replicas", args.replicas.map(f64::from)),
+        ("--t-max", "t_max", args.t_max),
+        ("--ensembles", "ensembles", args.ensembles.map(f64::from)),
+        (
+            "--tune-ladder",
+            "ladder_tuning_sweeps",
+            args.tune_ladder.map(|n| n as f64),
+        ),
+        (
+            "--tile-radius",
+            "tile_radius",
+            args.tile_radius.map(f64::from),
+        ),
+        (
+            "--exchange-every",
+            "exchange_every",
+            args.exchange_every.map(f64::from),
+        ),
+        ("--fallback-sigmas", "fallback_sigmas", args.fallback_sigmas),
+        (
+            "--chain-length",
+            "chain_length",
+            args.chain_length.map(f64::from),
+        ),
+        (
+            "--noise-aware",
+            "noise_aware",
+            args.noise_aware.then_some(1.0),
+        ),
+    ];
+    for (flag, name, value) in numbers {
+        if let Some(value) = value {
+            applies(&method, flag, name)?;
+            method.set(name, value)?;
         }
-        Method::Stratified(s) => {
-            s.shape = match args.tile_radius {
-                0 => TileShape::Cross,
-                radius => TileShape::Square { radius },
-            };
-            s.mutation.small_step = seed_001;
-            if let Some(p) = args.large_step {
-                s.mutation.large_step_probability = p;
+    }
+    for set in &args.sets {
+        let (name, value) = set
+            .split_once('=')
+            .ok_or_else(|| format!("--set {set}: expected NAME=VALUE"))?;
+        let row = method
+            .setting(name)
+            .ok_or_else(|| format!("--set {set}: {}", method.set(name, 0.0).unwrap_err()))?;
+        match row.kind {
+            Kind::Choice(_) => method.set_choice(name, value)?,
+            _ => {
+                let number: f64 = value
+                    .parse()
+                    .map_err(|e| format!("--set {set}: {value} is not a number ({e})"))?;
+                method.set(name, number)?;
             }
-            s.exchange_every = args.exchange_every;
-            s.solver = Solver::from_name(&args.solver).ok_or("unknown solver")?;
-            s.fallback_sigmas = (args.fallback_sigmas != 0.0).then_some(args.fallback_sigmas);
-        }
-        Method::Erpt(s) => {
-            s.chain_length = args.chain_length;
-            s.small_step = seed_001;
-        }
-        Method::MultiStage(s) => {
-            s.pssmlt.chains = args.chains;
-            if let Some(p) = args.large_step {
-                s.pssmlt.mutation.large_step_probability = p;
-            }
-            s.noise_aware = args.noise_aware;
         }
     }
     Ok(method)
+}
+
+/// The settings of `asked` that differ from `saved`'s, as `name=saved`
+/// (or the method's name, if that differs).
+fn differences(saved: &Method, asked: &Method) -> Vec<String> {
+    if saved.name() != asked.name() {
+        return vec![format!("method={}", saved.name())];
+    }
+    saved
+        .settings()
+        .iter()
+        .filter(|row| saved.get(row.name) != asked.get(row.name))
+        .map(|row| match saved.get(row.name) {
+            Some(value) => format!("{}={value} (not {})", row.name, fmt(asked.get(row.name))),
+            None => format!("{} (not applicable in the checkpoint)", row.name),
+        })
+        .collect()
+}
+
+/// A setting's value as text (`-` where it does not apply).
+fn fmt(value: Option<strata::engine::method::Value>) -> String {
+    value.map_or_else(|| "-".into(), |v| v.to_string())
+}
+
+/// An error unless `method` has the setting `name` that `flag` sets.
+fn applies(method: &Method, flag: &str, name: &str) -> AnyResult<()> {
+    match method.setting(name) {
+        Some(_) => Ok(()),
+        None => Err(format!("{flag} does not apply to {}", method.name()).into()),
+    }
 }
 
 fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, Ended)> {
@@ -541,11 +642,17 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, End
                 .map_err(|e| format!("cannot read the checkpoint {}: {e}", path.display()))?;
             let checkpoint =
                 Checkpoint::from_bytes(bytes).map_err(|e| format!("{}: {e}", path.display()))?;
-            // The method's settings as the render started (after any
-            // fallback below), if it is the method asked for.
+            // The method's settings must be the ones the render started
+            // with: a flag that differs is an error naming it.
             let saved = checkpoint.settings()?;
-            if saved.method.name() == settings.method.name() {
-                settings.method = saved.method;
+            let differ = differences(&saved.method, &settings.method);
+            if !differ.is_empty() {
+                return Err(format!(
+                    "{} was made with other settings: {}; resume with the flags the render started with",
+                    path.display(),
+                    differ.join(", ")
+                )
+                .into());
             }
             println!(
                 "resuming {} after {} paths",
@@ -670,4 +777,72 @@ fn write(film: &Film, args: &Args, preview: bool) -> AnyResult<()> {
         println!("wrote {} and {}", png.display(), exr.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(line: &[&str]) -> Args {
+        let full: Vec<&str> = ["strata", "render"].iter().chain(line).copied().collect();
+        match Cli::try_parse_from(full).unwrap().command {
+            Command::Render(args) => args,
+            Command::Settings { .. } => unreachable!(),
+        }
+    }
+
+    /// Without flags the command renders each method with the engine's
+    /// defaults, those of `Method::from_name` and the C API (issue 36: the
+    /// tempering and the Kelemen step sizes differed).
+    #[test]
+    fn the_commands_defaults_are_the_engines() {
+        for name in Method::NAMES {
+            let method = method(&args(&["--method", name])).unwrap();
+            assert_eq!(Some(method), Method::from_name(name), "{name}");
+        }
+    }
+
+    /// Flags go through the table: a flag of another method, a value out
+    /// of range or an unknown `--set` name is an error naming it.
+    #[test]
+    fn flags_are_checked_against_the_table() {
+        let err = |line: &[&str]| method(&args(line)).unwrap_err().to_string();
+        assert!(err(&["--method", "stratified", "--chains", "4"]).contains("--chains"));
+        assert!(
+            err(&["--method", "pssmlt", "--chains", "100000000"]).contains("outside its range")
+        );
+        assert!(
+            err(&["--method", "erpt", "--chain-length", "4294967295"]).contains("chain_length")
+        );
+        assert!(
+            err(&[
+                "--method",
+                "replica",
+                "--tune-ladder",
+                "18446744073709551615"
+            ])
+            .contains("ladder_tuning_sweeps")
+        );
+        assert!(err(&["--method", "erpt", "--set", "nope=1"]).contains("chain_length"));
+        assert!(err(&["--method", "erpt", "--set", "chain_length"]).contains("NAME=VALUE"));
+        let set = method(&args(&[
+            "--method",
+            "stratified",
+            "--preset",
+            "seed-001",
+            "--set",
+            "solver=log",
+            "--set",
+            "tile_radius=1",
+        ]))
+        .unwrap();
+        assert_eq!(
+            set.get("solver"),
+            Some(strata::engine::method::Value::Choice("log"))
+        );
+        assert_eq!(
+            set.get("small_step_max"),
+            Some(strata::engine::method::Value::Number(1.0 / 32.0))
+        );
+    }
 }

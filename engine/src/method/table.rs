@@ -95,7 +95,7 @@ impl Method {
             // Writing to a String cannot fail.
             let _ = writeln!(
                 text,
-                "{:<24} {:<10} {:<34} {}",
+                "{:<24} {:<14} {:<34} {}",
                 row.name,
                 value,
                 alloc::format!("({})", row.kind),
@@ -454,6 +454,41 @@ impl Method {
         Ok(())
     }
 
+    /// The names of the presets [`apply_preset`](Self::apply_preset) knows.
+    pub const PRESETS: [&'static str; 1] = ["seed-001"];
+
+    /// Sets the values of a named preset: `seed-001`, the settings of
+    /// Gruson et al. (2020), sec. 4 (Kelemen steps from 1/1024 to 1/32 for
+    /// stratified MCMC and ERPT; for stratified MCMC also large steps with
+    /// probability 0.3 and the solver's own `α` without cross-validation).
+    /// Methods the preset does not concern are left as they are.
+    pub fn apply_preset(&mut self, name: &str) -> Result<(), Error> {
+        let values: &[(&str, f64)] = match (name, &*self) {
+            ("seed-001", Method::Stratified(_)) => &[
+                ("small_step_max", 1.0 / 32.0),
+                ("large_step_probability", 0.3),
+                ("cross_validate_alpha", 0.0),
+            ],
+            ("seed-001", Method::Erpt(_)) => &[("small_step_max", 1.0 / 32.0)],
+            ("seed-001", _) => &[],
+            _ => {
+                return Err(Error::UnknownChoice {
+                    name: "preset",
+                    choices: &Self::PRESETS,
+                });
+            }
+        };
+        let mut next = self.clone();
+        next.set_choice("small_step", "kelemen").ok();
+        for (setting, value) in values {
+            next.set(setting, *value)?;
+        }
+        if !values.is_empty() {
+            *self = next;
+        }
+        Ok(())
+    }
+
     /// Every setting's value within its row's range (called by
     /// [`validate`](Self::validate)).
     pub(super) fn check_ranges(&self) -> Result<(), Error> {
@@ -676,6 +711,24 @@ mod tests {
             pssmlt.set("small_step_min", 0.001),
             Err(Error::NotApplicable { .. })
         ));
+    }
+
+    /// The seed-001 preset gives the paper's step sizes (the constant
+    /// `Kelemen::SEED_001`) and leaves other methods alone.
+    #[test]
+    fn the_seed_001_preset_is_the_papers() {
+        let mut stratified = Method::from_name("stratified").unwrap();
+        stratified.apply_preset("seed-001").unwrap();
+        let Method::Stratified(s) = &stratified else {
+            unreachable!()
+        };
+        assert_eq!(s.mutation.small_step, SmallStep::Kelemen(Kelemen::SEED_001));
+        assert_eq!(s.mutation.large_step_probability, 0.3);
+        assert!(!s.cross_validate_alpha);
+        let mut pssmlt = Method::from_name("pssmlt").unwrap();
+        pssmlt.apply_preset("seed-001").unwrap();
+        assert_eq!(pssmlt, Method::from_name("pssmlt").unwrap());
+        assert!(pssmlt.apply_preset("no-such-preset").is_err());
     }
 
     /// A value built field by field is bounded like one set by name.

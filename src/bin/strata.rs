@@ -67,7 +67,7 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render a scene: a tone-mapped PNG and a linear EXR.
-    Render(Args),
+    Render(Box<Args>),
     /// List a method's settings (every method's without one): name,
     /// default, range or choices, help. `render --set NAME=VALUE` takes them.
     Settings {
@@ -339,7 +339,7 @@ enum Ended {
 
 fn main() -> ExitCode {
     let args = match Cli::parse().command {
-        Command::Render(args) => args,
+        Command::Render(args) => *args,
         Command::Settings { method } => {
             for m in Method::all() {
                 if method.as_deref().is_none_or(|name| name == m.name()) {
@@ -786,7 +786,7 @@ mod tests {
     fn args(line: &[&str]) -> Args {
         let full: Vec<&str> = ["strata", "render"].iter().chain(line).copied().collect();
         match Cli::try_parse_from(full).unwrap().command {
-            Command::Render(args) => args,
+            Command::Render(args) => *args,
             Command::Settings { .. } => unreachable!(),
         }
     }

@@ -8,6 +8,10 @@
 #include <stdint.h>
 #include <stdlib.h>
 
+// How many streams an oracle has: `strata_sampler_start_stream` takes 0
+// to `STRATA_ORACLE_STREAMS - 1`.
+#define STRATA_ORACLE_STREAMS 7
+
 // What a call did.
 typedef enum StrataStatus {
   // Success.
@@ -112,9 +116,12 @@ float strata_sampler_next_1d(struct StrataSampler *sampler);
 // The next two numbers in [0, 1) into `out[0]`, `out[1]`.
 void strata_sampler_next_2d(struct StrataSampler *sampler, float *out);
 
-// Switches to stream `stream` (0: the film point, 1-3 for the path's own
-// decisions; see the engine's `ORACLE_STREAMS`).
-void strata_sampler_start_stream(struct StrataSampler *sampler, uint8_t stream);
+// Switches to the oracle's stream `stream` (0 to `STRATA_ORACLE_STREAMS -
+// 1`; the trace starts on stream 0, the film point is the engine's own) and
+// restarts it at its first number. Streams keep unrelated decisions (camera
+// and light subpaths) in separate coordinates. A stream beyond the last is
+// `STRATA_STATUS_INVALID_ARGUMENT` and the current stream continues.
+enum StrataStatus strata_sampler_start_stream(struct StrataSampler *sampler, uint8_t stream);
 
 // Settings for `method` ("mc", "pssmlt", "replica", "stratified", "erpt",
 // "multistage") with that method's defaults, seed 0, 16 paths per pixel and
@@ -163,6 +170,11 @@ const char *strata_settings_describe(const struct StrataSettings *settings);
 // Worker threads (0: all cores; at most 4 per core). The image does not
 // depend on it.
 enum StrataStatus strata_settings_set_threads(struct StrataSettings *settings, uint32_t threads);
+
+// The stack of each worker thread, in bytes (64 KiB to 1 GiB; 8 MiB by
+// default). A `trace` that recurses deeper than its stack crashes the
+// process: give a recursive path tracer room here.
+enum StrataStatus strata_settings_set_stack_size(struct StrataSettings *settings, uint64_t bytes);
 
 // Renders `oracle` with `settings`, reporting to `observer` (may be null),
 // into a new film at `*film` (free it with [`strata_film_free`]).

@@ -108,11 +108,35 @@ pub extern "C" fn strata_sampler_next_2d(sampler: *mut StrataSampler, out: *mut 
     }
 }
 
-/// Switches to stream `stream` (0: the film point, 1-3 for the path's own
-/// decisions; see the engine's `ORACLE_STREAMS`).
+/// How many streams an oracle has: `strata_sampler_start_stream` takes 0
+/// to `STRATA_ORACLE_STREAMS - 1`.
+pub const STRATA_ORACLE_STREAMS: u8 = 7;
+const _: () = assert!(STRATA_ORACLE_STREAMS as usize == strata_engine::oracle::ORACLE_STREAMS);
+
+/// Switches to the oracle's stream `stream` (0 to `STRATA_ORACLE_STREAMS -
+/// 1`; the trace starts on stream 0, the film point is the engine's own) and
+/// restarts it at its first number. Streams keep unrelated decisions (camera
+/// and light subpaths) in separate coordinates. A stream beyond the last is
+/// `STRATA_STATUS_INVALID_ARGUMENT` and the current stream continues.
 #[unsafe(no_mangle)]
-pub extern "C" fn strata_sampler_start_stream(sampler: *mut StrataSampler, stream: u8) {
+pub extern "C" fn strata_sampler_start_stream(
+    sampler: *mut StrataSampler,
+    stream: u8,
+) -> StrataStatus {
+    if stream >= STRATA_ORACLE_STREAMS {
+        return fail(
+            StrataStatus::InvalidArgument,
+            format!(
+                "stream {stream}: an oracle has streams 0 to {}",
+                STRATA_ORACLE_STREAMS - 1
+            ),
+        );
+    }
+    if sampler.is_null() {
+        return fail(StrataStatus::InvalidArgument, "null sampler");
+    }
     with_sampler(sampler, |s| s.start_stream(stream));
+    StrataStatus::Ok
 }
 
 /// A path tracer written in C: the film's size and `trace`, which traces one
@@ -205,7 +229,12 @@ pub struct StrataSettings {
     seed: u64,
     budget: RequestedBudget,
     threads: usize,
+    stack_bytes: usize,
 }
+
+/// The worker threads' stack by default: 8 MiB, OpenMP's usual, room for a
+/// recursive path tracer a few thousand bounces deep.
+const DEFAULT_STACK_BYTES: usize = 8 << 20;
 
 #[derive(Clone, Copy)]
 enum RequestedBudget {
@@ -240,6 +269,7 @@ pub extern "C" fn strata_settings_new(method: *const c_char) -> *mut StrataSetti
         seed: 0,
         budget: RequestedBudget::SamplesPerPixel(16),
         threads: 0,
+        stack_bytes: DEFAULT_STACK_BYTES,
     }))
 }
 
@@ -417,6 +447,27 @@ pub extern "C" fn strata_settings_set_threads(
         ),
         Ok(s) => {
             s.threads = threads as usize;
+            StrataStatus::Ok
+        }
+        Err(e) => e,
+    }
+}
+
+/// The stack of each worker thread, in bytes (64 KiB to 1 GiB; 8 MiB by
+/// default). A `trace` that recurses deeper than its stack crashes the
+/// process: give a recursive path tracer room here.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_settings_set_stack_size(
+    settings: *mut StrataSettings,
+    bytes: u64,
+) -> StrataStatus {
+    match settings_mut(settings) {
+        Ok(_) if !(64 << 10..=1 << 30).contains(&bytes) => fail(
+            StrataStatus::InvalidArgument,
+            format!("stack size must be from 65536 to 1073741824 bytes, got {bytes}"),
+        ),
+        Ok(s) => {
+            s.stack_bytes = bytes as usize;
             StrataStatus::Ok
         }
         Err(e) => e,
@@ -601,10 +652,11 @@ pub extern "C" fn strata_render(
         Ok(o) => o,
         Err(e) => return e,
     };
-    let threads = settings.threads;
+    let (threads, stack) = (settings.threads, settings.stack_bytes);
     let rendered = catch_unwind(AssertUnwindSafe(|| -> Result<_, String> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
+            .stack_size(stack)
             .build()
             .map_err(|e| e.to_string())?;
         pool.install(|| render(&c_oracle, &MaxChannel, &run, &observer))

@@ -76,6 +76,17 @@ fn bad_arguments_are_status_codes_with_a_message() {
     );
     assert!(last_error().contains("threads"), "{}", last_error());
     assert_eq!(strata_settings_set_threads(settings, 2), StrataStatus::Ok);
+    // Worker stacks: 64 KiB to 1 GiB.
+    for bytes in [0, 1000, 2 << 30] {
+        assert_eq!(
+            strata_settings_set_stack_size(settings, bytes),
+            StrataStatus::InvalidArgument
+        );
+    }
+    assert_eq!(
+        strata_settings_set_stack_size(settings, 16 << 20),
+        StrataStatus::Ok
+    );
     assert_eq!(
         strata_settings_set_samples_per_pixel(settings, 16),
         StrataStatus::Ok
@@ -464,4 +475,86 @@ fn methods_take_their_choices_by_name_and_refuse_unknown_ones() {
         StrataStatus::Ok
     );
     strata_settings_free(multistage);
+}
+
+/// Counts, from inside `trace`, the answers of `strata_sampler_start_stream`:
+/// streams 0-6 are served, 7 and 255 refused (issue 36: they were ignored
+/// without a word).
+static SERVED: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+static REFUSED: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+
+extern "C" fn streams(
+    _: *mut c_void,
+    _: f32,
+    _: f32,
+    s: *mut StrataSampler,
+    _: f32,
+    rgb: *mut f32,
+) {
+    use std::sync::atomic::Ordering::Relaxed;
+    for stream in [0, 6, 7, 255] {
+        match strata_sampler_start_stream(s, stream) {
+            StrataStatus::Ok => SERVED.fetch_add(1, Relaxed),
+            _ => REFUSED.fetch_add(1, Relaxed),
+        };
+    }
+    let u = strata_sampler_next_1d(s);
+    // SAFETY: the engine passes room for three floats.
+    unsafe { std::slice::from_raw_parts_mut(rgb, 3).fill(u) };
+}
+
+#[test]
+fn streams_beyond_the_last_are_refused() {
+    use std::sync::atomic::Ordering::Relaxed;
+    let settings = strata_settings_new(c"pssmlt".as_ptr());
+    strata_settings_set_samples_per_pixel(settings, 4);
+    let mut film = null_mut();
+    assert_eq!(
+        strata_render(&oracle(streams), settings, null(), &mut film),
+        StrataStatus::Ok
+    );
+    let (served, refused) = (SERVED.load(Relaxed), REFUSED.load(Relaxed));
+    assert!(
+        served > 0 && served == refused,
+        "{served} served, {refused} refused"
+    );
+    assert_eq!(STRATA_ORACLE_STREAMS, 7);
+    assert_eq!(
+        strata_sampler_start_stream(null_mut(), 0),
+        StrataStatus::InvalidArgument
+    );
+    strata_film_free(film);
+    strata_settings_free(settings);
+}
+
+/// A recursive tracer: `depth` frames of 1 KiB each.
+fn recurse(depth: u32, s: *mut StrataSampler) -> f32 {
+    let frame = std::hint::black_box([depth as u8; 1024]);
+    if depth == 0 {
+        return strata_sampler_next_1d(s);
+    }
+    recurse(depth - 1, s) + f32::from(frame[7]) * 0.0
+}
+
+extern "C" fn deep(_: *mut c_void, _: f32, _: f32, s: *mut StrataSampler, _: f32, rgb: *mut f32) {
+    let u = recurse(4000, s);
+    // SAFETY: the engine passes room for three floats.
+    unsafe { std::slice::from_raw_parts_mut(rgb, 3).fill(u) };
+}
+
+/// 4000 frames of 1 KiB (~4 MB, twice a default Rust worker's stack) fit
+/// the API's default worker stack (issue 36: such tracers died with
+/// SIGSEGV and no message).
+#[test]
+fn recursive_tracers_fit_the_default_stack() {
+    let settings = strata_settings_new(c"mc".as_ptr());
+    strata_settings_set_samples_per_pixel(settings, 2);
+    strata_settings_set_threads(settings, 2);
+    let mut film = null_mut();
+    assert_eq!(
+        strata_render(&oracle(deep), settings, null(), &mut film),
+        StrataStatus::Ok
+    );
+    strata_film_free(film);
+    strata_settings_free(settings);
 }

@@ -89,6 +89,19 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
     assert!(!String::from_utf8_lossy(&refused.stdout).contains("paths:"));
     let png = dir.join("name.with.dots.png");
     assert!(!png.exists(), "a refused render wrote {}", png.display());
+    // A full stdout loses the report, not the render (issue 36: it panicked).
+    let full = std::fs::File::create("/dev/full").unwrap();
+    let args: Vec<&str> = tiny
+        .iter()
+        .copied()
+        .chain(["--spp", "2", "--out", out_arg])
+        .collect();
+    let status = Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(&args)
+        .stdout(full)
+        .status()
+        .unwrap();
+    assert_eq!(status.code(), Some(0));
 
     let ok = run(&["--spp", "2", "--out", out_arg]);
     assert_eq!(ok.status.code(), Some(0));
@@ -133,6 +146,11 @@ fn resume_with_other_flags_is_an_error_naming_them() {
     let stderr = String::from_utf8_lossy(&other.stderr);
     assert_eq!(other.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("chains=256 (not 8)"), "{stderr}");
+    // A device is no checkpoint (issue 36: /dev/zero was read for 4 GB).
+    let zero = run(&["--spp", "8", "--resume", "/dev/zero", "--out", out_arg]);
+    let stderr = String::from_utf8_lossy(&zero.stderr);
+    assert_eq!(zero.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("/dev/zero: not a regular file"), "{stderr}");
     let same = run(&["--spp", "8", "--resume", ckpt_arg, "--out", out_arg]);
     assert_eq!(
         same.status.code(),

@@ -57,6 +57,23 @@ enum Backend {
 
 /// strata: Markov-chain Monte Carlo light transport (PSSMLT, replica
 /// exchange, stratified MCMC, ERPT, multi-stage MLT) and plain MC.
+/// `println!` that never panics: a closed or full stdout (`> /dev/full`)
+/// loses the line, not the render.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($t)*);
+    }};
+}
+
+/// `eprintln!` that never panics.
+macro_rules! warn {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($t)*);
+    }};
+}
+
 #[derive(Parser, Debug)]
 #[command(name = "strata", version)]
 struct Cli {
@@ -232,6 +249,8 @@ struct Watch<'a> {
     /// Where the checkpoint goes, and whether one was written.
     checkpoint: PathBuf,
     saved: AtomicBool,
+    /// A checkpoint write failed.
+    failed: AtomicBool,
     /// The budget is spent: with --checkpoint-every, the last round is
     /// saved too (a later --resume with a larger budget continues it).
     spent: AtomicBool,
@@ -243,7 +262,7 @@ impl Watch<'_> {
     /// lines when it is hidden).
     fn warn(&self, what: &str, error: impl std::fmt::Display) {
         self.bar
-            .suspend(|| eprintln!("warning: cannot write the {what}: {error}"));
+            .suspend(|| warn!("warning: cannot write the {what}: {error}"));
     }
 }
 
@@ -285,7 +304,7 @@ impl Observer for Watch<'_> {
             Ok(()) => {
                 self.saved.store(true, Ordering::Relaxed);
                 self.bar.suspend(|| {
-                    eprintln!(
+                    warn!(
                         "checkpoint: {} ({:.1} MB, written in {:.2} s)",
                         self.checkpoint.display(),
                         checkpoint.as_bytes().len() as f64 / 1e6,
@@ -293,7 +312,10 @@ impl Observer for Watch<'_> {
                     )
                 });
             }
-            Err(e) => self.warn("checkpoint", e),
+            Err(e) => {
+                self.failed.store(true, Ordering::Relaxed);
+                self.warn("checkpoint", e)
+            }
         }
     }
 }
@@ -311,6 +333,18 @@ fn replace<E: std::error::Error + Send + Sync + 'static>(
     write(&partial).map_err(|e| named(&e))?;
     std::fs::rename(&partial, path).map_err(|e| named(&e))?;
     Ok(())
+}
+
+/// The bytes of the checkpoint file `path`: a regular file (not a device
+/// or a pipe, which could be endless), read whole; errors name it.
+fn read_checkpoint(path: &Path) -> AnyResult<Vec<u8>> {
+    let cannot =
+        |e: &dyn std::fmt::Display| format!("cannot read the checkpoint {}: {e}", path.display());
+    let meta = std::fs::metadata(path).map_err(|e| cannot(&e))?;
+    if !meta.is_file() {
+        return Err(cannot(&"not a regular file").into());
+    }
+    Ok(std::fs::read(path).map_err(|e| cannot(&e))?)
 }
 
 /// Makes the directories the outputs and checkpoints go to and checks that
@@ -333,8 +367,18 @@ fn prepare_outputs(args: &Args) -> AnyResult<()> {
 /// How a render ended.
 enum Ended {
     Finished,
-    /// Ctrl-C stopped it; the checkpoint was written if `true`.
-    Stopped(bool),
+    /// Ctrl-C stopped it, with its checkpoint written or not.
+    Stopped(Saved),
+}
+
+/// Whether a stopped render's checkpoint was written.
+#[derive(Clone, Copy, PartialEq)]
+enum Saved {
+    Yes,
+    /// Writing it failed (the warning says why).
+    Failed,
+    /// No round ended before the stop: nothing to save.
+    NothingYet,
 }
 
 fn main() -> ExitCode {
@@ -343,7 +387,7 @@ fn main() -> ExitCode {
         Command::Settings { method } => {
             for m in Method::all() {
                 if method.as_deref().is_none_or(|name| name == m.name()) {
-                    println!("{}:\n{}", m.name(), m.describe());
+                    say!("{}:\n{}", m.name(), m.describe());
                 }
             }
             return ExitCode::SUCCESS;
@@ -356,24 +400,27 @@ fn main() -> ExitCode {
         }
     });
     if let Err(e) = handler {
-        eprintln!("note: Ctrl-C will not save a checkpoint ({e})");
+        warn!("note: Ctrl-C will not save a checkpoint ({e})");
     }
     match run(&args) {
         Ok(Ended::Finished) => ExitCode::SUCCESS,
         Ok(Ended::Stopped(saved)) => {
             let checkpoint = checkpoint_path(&args);
-            if saved {
-                eprintln!(
+            match saved {
+                Saved::Yes => warn!(
                     "stopped; the checkpoint is in {0}: run the same command with --resume {0} to continue",
                     checkpoint.display()
-                );
-            } else {
-                eprintln!("stopped before the first round: no checkpoint");
+                ),
+                Saved::Failed => warn!(
+                    "stopped; the checkpoint could not be written to {} (see the warning above): the work is lost",
+                    checkpoint.display()
+                ),
+                Saved::NothingYet => warn!("stopped before the first round: no checkpoint"),
             }
             ExitCode::from(130)
         }
         Err(e) => {
-            eprintln!("error: {e}");
+            warn!("error: {e}");
             ExitCode::FAILURE
         }
     }
@@ -432,7 +479,7 @@ fn run(args: &Args) -> AnyResult<Ended> {
     let mut threads = args.threads;
     if threads > THREADS_PER_CORE * cores {
         threads = THREADS_PER_CORE * cores;
-        eprintln!(
+        warn!(
             "note: --threads {} capped at {threads} ({THREADS_PER_CORE} per core); the image does not depend on it",
             args.threads
         );
@@ -457,7 +504,7 @@ fn run(args: &Args) -> AnyResult<Ended> {
                     None => {
                         let loaded = strata::native::pbrt::load(std::path::Path::new(name))?;
                         for skipped in &loaded.ignored {
-                            eprintln!("note: {name}: ignored {skipped}");
+                            warn!("note: {name}: ignored {skipped}");
                         }
                         let mut scene = loaded.scene;
                         if args.width.is_some() || args.height.is_some() {
@@ -466,7 +513,7 @@ fn run(args: &Args) -> AnyResult<Ended> {
                         scene
                     }
                 };
-                println!(
+                say!(
                     "{name}: {} triangles, {} emissive",
                     scene.triangles.len(),
                     scene.lights.len()
@@ -490,17 +537,19 @@ fn run(args: &Args) -> AnyResult<Ended> {
     let (output, ended) = rendered;
     write(&output.film, args, false)?;
     let s = &output.stats;
-    println!(
+    say!(
         "paths: {} (+{} bootstrap), invalid: {}",
-        s.samples, s.bootstrap_samples, s.invalid_samples
+        s.samples,
+        s.bootstrap_samples,
+        s.invalid_samples
     );
     if s.samples > 0 && s.invalid_samples >= s.samples {
-        eprintln!(
+        warn!(
             "warning: every path was invalid (the oracle returned NaN, infinite or negative radiance): the image is black"
         );
     }
     if let Some(b) = s.normalization {
-        println!(
+        say!(
             "b = {b:.6} (relative standard error {:.2} %), acceptance = {:.3}",
             100.0 * s.normalization_error.unwrap_or(f64::NAN),
             s.chains.acceptance_rate()
@@ -508,9 +557,12 @@ fn run(args: &Args) -> AnyResult<Ended> {
     }
     if let Some(reference) = reference {
         let e = metrics::compare(&output.film, &reference)?;
-        println!(
+        say!(
             "vs exact: MAPE {:.4}  relMSE {:.5}  L1 {:.5}  L2 {:.5}",
-            e.mape, e.rel_mse, e.l1, e.l2
+            e.mape,
+            e.rel_mse,
+            e.l1,
+            e.l2
         );
     }
     Ok(ended)
@@ -638,13 +690,13 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, End
     };
     let resumed = match &args.resume {
         Some(path) => {
-            let bytes = std::fs::read(path)
-                .map_err(|e| format!("cannot read the checkpoint {}: {e}", path.display()))?;
-            let checkpoint =
-                Checkpoint::from_bytes(bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+            let bytes = read_checkpoint(path)?;
+            let checkpoint = Checkpoint::from_bytes(bytes)
+                .map_err(|e| format!("in checkpoint {}: {e}", path.display()))?;
             // The method's settings must be the ones the render started
             // with: a flag that differs is an error naming it.
-            let saved = checkpoint.settings()?;
+            let inside = |e: Error| format!("in checkpoint {}: {e}", path.display());
+            let saved = checkpoint.settings().map_err(inside)?;
             let differ = differences(&saved.method, &settings.method);
             if !differ.is_empty() {
                 return Err(format!(
@@ -654,10 +706,10 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, End
                 )
                 .into());
             }
-            println!(
+            say!(
                 "resuming {} after {} paths",
                 path.display(),
-                checkpoint.samples()?
+                checkpoint.samples().map_err(inside)?
             );
             Some(checkpoint)
         }
@@ -673,6 +725,7 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, End
         checkpoints: Every::new(args.checkpoint_every)?,
         checkpoint: checkpoint_path(args),
         saved: AtomicBool::new(false),
+        failed: AtomicBool::new(false),
         spent: AtomicBool::new(false),
     };
     let start = Instant::now();
@@ -684,7 +737,7 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, End
         // The oracle's tempering changes nothing here (an all-diffuse scene):
         // power tempering always does.
         Err(e @ Error::LevelsIndistinguishable { .. }) => {
-            eprintln!("note: {e}; rendering with --tempering power");
+            warn!("note: {e}; rendering with --tempering power");
             if let Method::Replica(s) = &mut settings.method {
                 s.ensemble.tempering = Tempering::Power;
             }
@@ -693,7 +746,7 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, End
         other => other?,
     };
     bar.finish_and_clear();
-    println!(
+    say!(
         "{} {}: {:.2} s",
         args.scene,
         settings.method.name(),
@@ -701,7 +754,16 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, End
     );
     report_extras(&output.extras);
     let ended = if output.cancelled {
-        Ended::Stopped(observer.saved.load(Ordering::Relaxed))
+        Ended::Stopped(
+            match (
+                observer.saved.load(Ordering::Relaxed),
+                observer.failed.load(Ordering::Relaxed),
+            ) {
+                (true, _) => Saved::Yes,
+                (false, true) => Saved::Failed,
+                (false, false) => Saved::NothingYet,
+            },
+        )
     } else {
         Ended::Finished
     };
@@ -715,7 +777,7 @@ fn report_extras(extras: &Extras) {
         Extras::Replica(r) => {
             let x = &r.exchange;
             let t = r.ladder.temperatures();
-            println!(
+            say!(
                 "{} chains per ensemble, T = {:.3?}; round trips {}; mean change probability {:.3}",
                 t.len(),
                 t,
@@ -727,7 +789,7 @@ fn report_extras(extras: &Extras) {
                 .iter()
                 .map(|r| format!("{r:.2}"))
                 .collect();
-            println!(
+            say!(
                 "neighbour swap rejection per pair: [{}]; communication barrier {:.2}",
                 rejection.join(", "),
                 Ladder::barrier(&x.neighbor_rejection())
@@ -735,7 +797,7 @@ fn report_extras(extras: &Extras) {
         }
         Extras::Stratified(s) => {
             let s = &s.counters;
-            println!(
+            say!(
                 "{} sweeps; paths: tiles {}, exchanges {}, initialization {}; tiles started by \
                  global chains {}, borrowing {}, uniform draws {}, never {}; exchanges \
                  accepted {}/{}; pixels that took their MC estimate {}; image scaled by {:.4} \
@@ -756,7 +818,7 @@ fn report_extras(extras: &Extras) {
         }
         Extras::MultiStage(stages) => {
             let grids: Vec<u32> = stages.iter().map(|s| s.grid).collect();
-            println!("{} stages, grids {grids:?}", stages.len());
+            say!("{} stages, grids {grids:?}", stages.len());
         }
     }
 }
@@ -774,7 +836,7 @@ fn write(film: &Film, args: &Args, preview: bool) -> AnyResult<()> {
     })?;
     replace(&exr, |path| strata::io::write_exr(film, path))?;
     if !preview {
-        println!("wrote {} and {}", png.display(), exr.display());
+        say!("wrote {} and {}", png.display(), exr.display());
     }
     Ok(())
 }

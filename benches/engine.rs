@@ -6,7 +6,7 @@ use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use strata::engine::analytic::ProceduralImage;
-use strata::engine::bootstrap::Bootstrap;
+use strata::engine::bootstrap::{Bootstrap, NEVER};
 use strata::engine::method::PssmltSettings;
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, SmallStep};
 use strata::engine::target::MaxChannel;
@@ -48,7 +48,8 @@ fn mh_step(c: &mut Criterion) {
     for dims in [8usize, 32] {
         let oracle = Trivial { dims };
         for (name, small_step) in kernels {
-            let bootstrap = Bootstrap::run(&oracle, &MaxChannel, small_step, 1, 256).unwrap();
+            let bootstrap =
+                Bootstrap::run(&oracle, &MaxChannel, small_step, 1, 256, NEVER).unwrap();
             let mut chain = bootstrap.start_path_chain(&oracle, &MaxChannel, 0, 0.3);
             group.throughput(Throughput::Elements(1));
             group.bench_function(BenchmarkId::new(name, dims), |bench| {

@@ -8,6 +8,7 @@ use std::hint::black_box;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use strata::engine::Resolution;
 use strata::engine::analytic::GaussianMixture;
+use strata::engine::bootstrap::NEVER;
 use strata::engine::exchange::{
     Ensemble, EnsembleSettings, ExchangeKind, PermutationSampler, Tempering,
     log_normalization_by_enumeration,
@@ -55,7 +56,7 @@ fn sweeps(c: &mut Criterion) {
         let mut settings = EnsembleSettings::geometric(8, 2500.0).unwrap();
         settings.tempering = tempering;
         settings.bootstrap_candidates = 2000;
-        let bootstrap = settings.bootstrap(&mixture, &Luminance, 1).unwrap();
+        let bootstrap = settings.bootstrap(&mixture, &Luminance, 1, NEVER).unwrap();
         for kind in ExchangeKind::all(0) {
             let mut ensemble = Ensemble::start(&mixture, &Luminance, &settings, &bootstrap, 0);
             let mut exchange = kind.build(&bootstrap).unwrap();

@@ -33,6 +33,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use strata::engine::Resolution;
 use strata::engine::analytic::{Component, GaussianMixture};
+use strata::engine::bootstrap::NEVER;
 use strata::engine::exchange::{Ensemble, EnsembleSettings, ExchangeKind, Ladder, Tempering};
 use strata::engine::mutate::MutationParams;
 use strata::engine::target::Luminance;
@@ -109,7 +110,7 @@ fn run(m: &GaussianMixture, config: &Config, run: u64, z: f64, exact: f64) -> Ve
     };
     let seed = run * 1000 + 7;
     let bootstrap = settings
-        .bootstrap(m, &Luminance, seed)
+        .bootstrap(m, &Luminance, seed, NEVER)
         .expect("the mixture is not black");
     let mut ensemble = Ensemble::start(m, &Luminance, &settings, &bootstrap, 0);
     let mut exchange = config.kind.build(&bootstrap).expect("valid move");

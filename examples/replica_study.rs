@@ -32,6 +32,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use strata::engine::Resolution;
 use strata::engine::analytic::GaussianMixture;
+use strata::engine::bootstrap::NEVER;
 use strata::engine::exchange::{Ensemble, EnsembleSettings, ExchangeKind, Tempering};
 use strata::engine::mutate::{MutationParams, unit_normals};
 use strata::engine::rng::{Domain, stream, uniform_f64};
@@ -146,7 +147,7 @@ fn run_move(
     };
     let seed = run * 1000 + scenario.id as u64;
     let bootstrap = settings
-        .bootstrap(m, &Luminance, seed)
+        .bootstrap(m, &Luminance, seed, NEVER)
         .expect("the mixture is not black");
     let mut ensemble = Ensemble::start(m, &Luminance, &settings, &bootstrap, 0);
     let mut exchange = kind.build(&bootstrap).expect("valid move");

@@ -8,7 +8,7 @@
 //! target invariant only approximately fails.
 
 use strata::engine::analytic::{Component, GaussianMixture, Parabola};
-use strata::engine::bootstrap::Bootstrap;
+use strata::engine::bootstrap::{Bootstrap, NEVER};
 use strata::engine::diagnose::integrated_autocorrelation_time;
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
@@ -33,7 +33,8 @@ fn run_chain<O: PathOracle>(
     steps: usize,
     bin: impl Fn(f32, f32) -> usize,
 ) -> Vec<usize> {
-    let bootstrap = Bootstrap::run(oracle, &MaxChannel, params.small_step, seed, 1000).unwrap();
+    let bootstrap =
+        Bootstrap::run(oracle, &MaxChannel, params.small_step, seed, 1000, NEVER).unwrap();
     let mut chain =
         bootstrap.start_path_chain(oracle, &MaxChannel, 0, params.large_step_probability);
     (0..steps)

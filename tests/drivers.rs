@@ -494,3 +494,43 @@ fn time_budgets_are_kept() {
         );
     }
 }
+
+/// Set-up loops keep the time budget and listen to cancel (issue 36: a
+/// large bootstrap or ladder tuning ran to its end, whatever the budget):
+/// with every setting at its table's largest, the render still ends
+/// within a second of its 300 ms budget, and a cancelled one at once.
+#[test]
+fn set_up_keeps_the_time_budget_and_listens_to_cancel() {
+    let image = ProceduralImage::showcase(Resolution::new(16, 12));
+    let mut pssmlt = Method::from_name("pssmlt").unwrap();
+    pssmlt.set("bootstrap_candidates", (1u64 << 24) as f64).unwrap();
+    let mut replica = Method::from_name("replica").unwrap();
+    replica.set("replicas", 8.0).unwrap();
+    replica.set("ladder_tuning_sweeps", (1u64 << 20) as f64).unwrap();
+    replica.set("ensembles", 64.0).unwrap();
+    let mut erpt = Method::from_name("erpt").unwrap();
+    erpt.set("bootstrap_candidates", (1u64 << 24) as f64).unwrap();
+    let budget = Duration::from_millis(300);
+    for method in [pssmlt, replica, erpt] {
+        let name = method.name();
+        let timed = Settings {
+            seed: 1,
+            budget: Budget::Time(budget),
+            method: method.clone(),
+        };
+        let start = Instant::now();
+        render(&image, &MaxChannel, &timed, &Silent).unwrap();
+        let elapsed = start.elapsed();
+        assert!(elapsed < budget + Duration::from_secs(1), "{name}: {elapsed:?}");
+
+        let cancelled = Settings {
+            budget: Budget::Samples(1 << 40),
+            ..timed
+        };
+        let start = Instant::now();
+        let out = render(&image, &MaxChannel, &cancelled, &stop_after(0)).unwrap();
+        let elapsed = start.elapsed();
+        assert!(out.cancelled, "{name}");
+        assert!(elapsed < Duration::from_secs(1), "{name} cancelled: {elapsed:?}");
+    }
+}

@@ -15,6 +15,7 @@ mod threads;
 use threads::{bits, in_pool};
 
 use strata::engine::analytic::{Component, GaussianMixture, ProceduralImage};
+use strata::engine::bootstrap::NEVER;
 use strata::engine::exchange::{
     Decisions, EnergyLevels, Ensemble, EnsembleSettings, EquiEnergy, EquiEnergySampler, Exchange,
     ExchangeKind, ExchangeStats, IsPermutation, IsSwap, Ladder, Move, NeighborSwap, NonReversible,
@@ -518,7 +519,9 @@ fn first_mode_share(kind: ExchangeKind, sweeps: u64, seed: u64) -> f64 {
         },
         bootstrap_candidates: 4096,
     };
-    let bootstrap = settings.bootstrap(&target, &Luminance, seed).unwrap();
+    let bootstrap = settings
+        .bootstrap(&target, &Luminance, seed, NEVER)
+        .unwrap();
     let mut ensemble = Ensemble::start(&target, &Luminance, &settings, &bootstrap, 0);
     let mut exchange = kind.build(&bootstrap).unwrap();
     let mut first = 0;

@@ -53,16 +53,41 @@ pub struct Started<S> {
     pub decisions: crate::rng::Pcg32,
 }
 
+/// Asked between blocks of candidates whether the set-up must end now (the
+/// observer cancelled, or a time budget ran out): the candidates traced so
+/// far are then the bootstrap (at least one block of [`BLOCK`]).
+pub type Halt<'a> = &'a dyn Fn() -> bool;
+
+/// A [`Halt`] that never ends the set-up early (sample budgets, tests).
+pub const NEVER: Halt<'static> = &|| false;
+
+/// Candidates traced between two [`Halt`] checks.
+pub const BLOCK: u64 = 1 << 16;
+
+/// `len` zeros, or a typed error if they cannot be had (the candidate count
+/// comes from the settings).
+fn zeros(len: usize, what: &'static str) -> Result<Vec<f64>, Error> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(len)
+        .map_err(|_| Error::AllocationFailed {
+            what,
+            bytes: (len as u64).saturating_mul(8),
+        })?;
+    v.resize(len, 0.0);
+    Ok(v)
+}
+
 impl Bootstrap {
-    /// Traces `candidates` uniform primary samples and values each by its
-    /// importance (one level). Fails with [`Error::AllCandidatesBlack`] when
-    /// every one has zero importance.
+    /// Traces `candidates` uniform primary samples (fewer if `halt` says so)
+    /// and values each by its importance (one level). Fails with
+    /// [`Error::AllCandidatesBlack`] when every one has zero importance.
     pub fn run<O, I>(
         oracle: &O,
         importance: &I,
         small_step: SmallStep,
         seed: u64,
         candidates: u64,
+        halt: Halt<'_>,
     ) -> Result<Self, Error>
     where
         O: PathOracle,
@@ -75,6 +100,7 @@ impl Bootstrap {
             seed,
             candidates,
             1,
+            halt,
             |_, path, row| {
                 row[0] = path.importance;
                 Traced::default()
@@ -82,19 +108,23 @@ impl Bootstrap {
         )
     }
 
-    /// Traces `candidates` uniform primary samples; `row(sampler, path, row)`
+    /// Traces `candidates` uniform primary samples in blocks of [`BLOCK`],
+    /// asking `halt` between blocks (a halted bootstrap keeps the blocks
+    /// done: its estimate is unbiased, from fewer candidates); `row(sampler, path, row)`
     /// gives each its `levels` values from its path (traced at `T = 1`),
     /// and may replay the sampler to trace more. Fails with
     /// [`Error::AllCandidatesBlack`] when level 0 is zero on every candidate
     /// (other levels may be: the caller decides), and with a typed error when
     /// a level's sum overflows.
-    pub fn run_levels<O, I, F>(
+    #[allow(clippy::too_many_arguments)] // The inputs of `run`, and the levels.
+    pub(crate) fn run_levels<O, I, F>(
         oracle: &O,
         importance: &I,
         small_step: SmallStep,
         seed: u64,
         candidates: u64,
         levels: usize,
+        halt: Halt<'_>,
         row: F,
     ) -> Result<Self, Error>
     where
@@ -106,7 +136,14 @@ impl Bootstrap {
             return Err(Error::invalid("bootstrap_candidates", 0.0, "at least 1"));
         }
         let target = PathTarget { oracle, importance };
-        let mut values = vec![0.0; candidates as usize * levels];
+        let len = usize::try_from(candidates)
+            .ok()
+            .and_then(|c| c.checked_mul(levels))
+            .ok_or(Error::AllocationFailed {
+                what: "bootstrap candidates' values",
+                bytes: u64::MAX,
+            })?;
+        let mut values = zeros(len, "bootstrap candidates' values")?;
         // One primary sample per task, restarted for every candidate.
         let sampler = || {
             let placeholder = rng::stream(seed, Domain::Candidate, u64::MAX);
@@ -115,17 +152,33 @@ impl Bootstrap {
                 Evaluated::default(),
             )
         };
-        let traced =
-            parallel::sum_chunks_init(&mut values, levels, sampler, |scratch, k, values| {
+        let mut traced = Traced::default();
+        let mut done = 0u64;
+        for block in values.chunks_mut(BLOCK as usize * levels) {
+            if done > 0 && halt() {
+                break;
+            }
+            let first = done;
+            traced += parallel::sum_chunks_init(block, levels, sampler, |scratch, k, values| {
                 let (sampler, path) = scratch;
-                sampler.restart(rng::stream(seed, Domain::Candidate, k as u64));
+                let k = first + k as u64;
+                sampler.restart(rng::stream(seed, Domain::Candidate, k));
                 let mut proposal = sampler.propose(true);
                 let traced = target.evaluate(&mut proposal, path);
                 proposal.accept(1.0);
                 traced + row(sampler, path, values)
             });
+            done += (block.len() / levels) as u64;
+        }
+        let candidates = done;
+        values.truncate(candidates as usize * levels);
 
-        let mut cumulative = vec![Vec::with_capacity(candidates as usize); levels];
+        let mut cumulative = Vec::with_capacity(levels);
+        for _ in 0..levels {
+            let mut level = zeros(candidates as usize, "bootstrap candidates' sums")?;
+            level.clear();
+            cumulative.push(level);
+        }
         let mut ranges = vec![(f64::INFINITY, 0.0f64); levels];
         for row in values.chunks(levels) {
             for (j, &v) in row.iter().enumerate() {
@@ -318,7 +371,7 @@ mod tests {
         // Integral of I over PSS: 0.1 * E[1 + u] = 0.15. Var of one candidate's
         // I: 0.1 * E[(1+u)^2] - 0.15^2 = 0.1 * 7/3 - 0.0225; 5 sigma tolerance.
         let n = 40_000u64;
-        let b = Bootstrap::run(&strip(), &MaxChannel, SmallStep::default(), 9, n).unwrap();
+        let b = Bootstrap::run(&strip(), &MaxChannel, SmallStep::default(), 9, n, NEVER).unwrap();
         let sd = libm::sqrt((0.1 * 7.0 / 3.0 - 0.0225) / n as f64);
         assert!(
             (b.normalization() - 0.15).abs() < 5.0 * sd,
@@ -329,7 +382,8 @@ mod tests {
 
     #[test]
     fn chains_start_only_from_bright_candidates() {
-        let b = Bootstrap::run(&strip(), &MaxChannel, SmallStep::default(), 10, 1000).unwrap();
+        let b =
+            Bootstrap::run(&strip(), &MaxChannel, SmallStep::default(), 10, 1000, NEVER).unwrap();
         for i in 0..200 {
             let started = b.start(&strip(), &MaxChannel, 0, i, |_, path| path);
             assert!(started.chain.state().importance > 0.0);
@@ -342,7 +396,8 @@ mod tests {
 
     #[test]
     fn black_scene_is_a_typed_error_not_a_loop() {
-        let e = Bootstrap::run(&black(), &MaxChannel, SmallStep::default(), 1, 500).unwrap_err();
+        let e =
+            Bootstrap::run(&black(), &MaxChannel, SmallStep::default(), 1, 500, NEVER).unwrap_err();
         assert_eq!(
             e,
             Error::AllCandidatesBlack {
@@ -350,6 +405,6 @@ mod tests {
                 invalid: 0
             }
         );
-        assert!(Bootstrap::run(&black(), &MaxChannel, SmallStep::default(), 1, 0).is_err());
+        assert!(Bootstrap::run(&black(), &MaxChannel, SmallStep::default(), 1, 0, NEVER).is_err());
     }
 }

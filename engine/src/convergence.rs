@@ -31,7 +31,7 @@ use alloc::vec::Vec;
 
 use crate::rng::Pcg32;
 
-use crate::bootstrap::Bootstrap;
+use crate::bootstrap::{Bootstrap, NEVER};
 use crate::chain::{Chain, KelemenWeights, PathChain, PathTarget};
 use crate::error::Error;
 use crate::mutate::MutationParams;
@@ -245,7 +245,14 @@ where
 {
     let resolution = oracle.resolution();
     let pixels = resolution.pixel_count();
-    let bootstrap = Bootstrap::run(oracle, importance, mutation.small_step, seed, candidates)?;
+    let bootstrap = Bootstrap::run(
+        oracle,
+        importance,
+        mutation.small_step,
+        seed,
+        candidates,
+        NEVER,
+    )?;
     let started = bootstrap.start(oracle, importance, 0, 0, |_, path| path);
     let weights = KelemenWeights {
         normalization,

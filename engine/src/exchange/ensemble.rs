@@ -12,7 +12,7 @@ use rand_core::Rng;
 
 use super::tempered::{EnsembleWeights, Levels, Replica, TemperedPath, TemperedTarget, Tempering};
 use super::{Exchange, ExchangeStats, Ladder, Move, SweepRecorder};
-use crate::bootstrap::Bootstrap;
+use crate::bootstrap::{Bootstrap, Halt};
 use crate::chain::{ChainStats, Normalization};
 use crate::error::{Error, check_probability};
 use crate::mutate::MutationParams;
@@ -75,8 +75,15 @@ impl EnsembleSettings {
 
     /// The bootstrap of an ensemble with these settings (see
     /// [`TemperedPath`](super::TemperedPath)): `b_j` per chain, the chains' starts and
-    /// the value ranges of their energy levels.
-    pub fn bootstrap<O, I>(&self, oracle: &O, importance: &I, seed: u64) -> Result<Bootstrap, Error>
+    /// the value ranges of their energy levels. `halt` may end it early
+    /// ([`Halt`]).
+    pub fn bootstrap<O, I>(
+        &self,
+        oracle: &O,
+        importance: &I,
+        seed: u64,
+        halt: Halt<'_>,
+    ) -> Result<Bootstrap, Error>
     where
         O: PathOracle,
         I: Importance<O::Radiance> + ?Sized,
@@ -89,6 +96,7 @@ impl EnsembleSettings {
             self.mutation.small_step,
             seed,
             self.bootstrap_candidates,
+            halt,
         )
     }
 }

@@ -29,7 +29,7 @@ use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
 use super::Tempered;
-use crate::bootstrap::Bootstrap;
+use crate::bootstrap::{Bootstrap, Halt};
 use crate::chain::{Chain, Target, Traced, Weights};
 use crate::error::Error;
 use crate::mutate::SmallStep;
@@ -172,6 +172,7 @@ pub(crate) fn bootstrap<O, I>(
     small_step: SmallStep,
     seed: u64,
     candidates: u64,
+    halt: Halt<'_>,
 ) -> Result<Bootstrap, Error>
 where
     O: PathOracle,
@@ -184,6 +185,7 @@ where
         seed,
         candidates,
         levels.temperatures.len(),
+        halt,
         |sampler, first, row| levels.replay_row(oracle, importance, sampler, first, row),
     )?;
     if let Some(j) = bootstrap.normalizations().iter().position(|&b| b <= 0.0) {

@@ -140,6 +140,7 @@ where
                 settings.small_step,
                 job.seed,
                 settings.bootstrap_candidates,
+                &|| job.set_up_must_end(),
             )?;
             let saved = Saved {
                 energy: bootstrap.normalization()

@@ -256,6 +256,16 @@ pub(crate) struct Job<'a, O, I: ?Sized> {
 }
 
 impl<O, I: ?Sized> Job<'_, O, I> {
+    /// Whether a set-up loop (bootstrap, ladder tuning) must end now: the
+    /// observer asks to stop, or a time budget has run out.
+    pub fn set_up_must_end(&self) -> bool {
+        #[cfg(feature = "std")]
+        let out_of_time = matches!(self.budget, Budget::Time(_)) && self.clock.expired();
+        #[cfg(not(feature = "std"))]
+        let out_of_time = false;
+        self.observer.should_stop() || out_of_time
+    }
+
     /// The round loop of this job, at `resumed` (or at its start).
     pub fn round_loop(&self, resumed: Option<Position>) -> Loop<'_> {
         Loop {

@@ -122,6 +122,7 @@ where
             settings.mutation.small_step,
             job.seed,
             settings.bootstrap_candidates,
+            &|| job.set_up_must_end(),
         )?;
         let p_large = settings.mutation.large_step_probability;
         let prior = bootstrap.estimate(0);

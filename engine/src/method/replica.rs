@@ -54,11 +54,23 @@ impl Default for ReplicaSettings {
     }
 }
 
+/// Candidates times levels the bootstrap may hold.
+const MAX_BOOTSTRAP_VALUES: u64 = 1 << 26;
+
 impl ReplicaSettings {
     /// Checks every parameter.
     pub fn validate(&self) -> Result<(), Error> {
         if self.ensembles == 0 {
             return Err(Error::invalid("ensembles", 0.0, "at least 1"));
+        }
+        // The bootstrap keeps 16 bytes per candidate and level: at most 1 GiB.
+        let levels = self.ensemble.ladder.len() as u64;
+        if self.ensemble.bootstrap_candidates.saturating_mul(levels) > MAX_BOOTSTRAP_VALUES {
+            return Err(Error::invalid(
+                "bootstrap_candidates",
+                self.ensemble.bootstrap_candidates as f64,
+                "at most 2^26 / replicas (16 bytes per candidate and level)",
+            ));
         }
         self.ensemble.validate()?;
         self.exchange.validate(self.ensemble.ladder.len())
@@ -112,7 +124,8 @@ where
         return Ok(finish(ensembles, driven, ladder, set_up));
     }
     let mut ensemble = settings.ensemble.clone();
-    let mut bootstrap = ensemble.bootstrap(oracle, importance, job.seed)?;
+    let mut bootstrap =
+        ensemble.bootstrap(oracle, importance, job.seed, &|| job.set_up_must_end())?;
     // Under the oracle's tempering the levels may all be one target (an
     // all-diffuse scene for the native tracer); power tempering differs
     // wherever the importance is neither 0 nor 1.
@@ -139,10 +152,14 @@ where
         .map(start)
         .collect::<Result<Vec<_>, Error>>()?;
 
-    // Ladder tuning: rounds of 16, 32, ... sweeps, not splatted.
+    // Ladder tuning: rounds of 16, 32, ... sweeps, not splatted; it ends
+    // early (with the ladder so far) on cancel or when a time budget runs out.
     let mut tuned = 0;
     let mut round_length = 16u64;
-    while tuned < settings.ladder_tuning_sweeps && ensemble.ladder.len() > 2 {
+    while tuned < settings.ladder_tuning_sweeps
+        && ensemble.ladder.len() > 2
+        && !job.set_up_must_end()
+    {
         let sweeps = round_length.min(settings.ladder_tuning_sweeps - tuned);
         parallel::for_each(&mut work, |w| {
             for _ in 0..sweeps {
@@ -158,7 +175,7 @@ where
             merged.merge(w.state.ensemble.stats());
         }
         ensemble.ladder = ensemble.ladder.equalized(&merged.neighbor_rejection())?;
-        bootstrap = ensemble.bootstrap(oracle, importance, job.seed)?;
+        bootstrap = ensemble.bootstrap(oracle, importance, job.seed, &|| job.set_up_must_end())?;
         set_up.traced += bootstrap.traced().paths;
         set_up.invalid = bootstrap.traced().invalid;
         prior = priors(&bootstrap);

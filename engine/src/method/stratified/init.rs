@@ -10,7 +10,7 @@ use core::sync::atomic::{AtomicU64, Ordering};
 
 use super::StratifiedSettings;
 use super::tile::{Context, Start, TileChain};
-use crate::bootstrap::Bootstrap;
+use crate::bootstrap::{Bootstrap, NEVER};
 use crate::chain::PathChain;
 use crate::drive::Clock;
 use crate::error::Error;
@@ -120,7 +120,8 @@ where
         .max(1);
     let seed = seed ^ 0x6a09_e667_f3bc_c908;
     let small_step = settings.mutation.small_step;
-    let bootstrap = match Bootstrap::run(&target, &MaxChannel, small_step, seed, candidates) {
+    let bootstrap = match Bootstrap::run(&target, &MaxChannel, small_step, seed, candidates, NEVER)
+    {
         Ok(b) => b,
         // A black scene (for these candidates): tiles fall back on uniform draws.
         Err(Error::AllCandidatesBlack { .. }) => {

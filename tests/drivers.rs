@@ -503,13 +503,18 @@ fn time_budgets_are_kept() {
 fn set_up_keeps_the_time_budget_and_listens_to_cancel() {
     let image = ProceduralImage::showcase(Resolution::new(16, 12));
     let mut pssmlt = Method::from_name("pssmlt").unwrap();
-    pssmlt.set("bootstrap_candidates", (1u64 << 24) as f64).unwrap();
+    pssmlt
+        .set("bootstrap_candidates", (1u64 << 24) as f64)
+        .unwrap();
     let mut replica = Method::from_name("replica").unwrap();
     replica.set("replicas", 8.0).unwrap();
-    replica.set("ladder_tuning_sweeps", (1u64 << 20) as f64).unwrap();
+    replica
+        .set("ladder_tuning_sweeps", (1u64 << 20) as f64)
+        .unwrap();
     replica.set("ensembles", 64.0).unwrap();
     let mut erpt = Method::from_name("erpt").unwrap();
-    erpt.set("bootstrap_candidates", (1u64 << 24) as f64).unwrap();
+    erpt.set("bootstrap_candidates", (1u64 << 24) as f64)
+        .unwrap();
     let budget = Duration::from_millis(300);
     for method in [pssmlt, replica, erpt] {
         let name = method.name();
@@ -521,7 +526,10 @@ fn set_up_keeps_the_time_budget_and_listens_to_cancel() {
         let start = Instant::now();
         render(&image, &MaxChannel, &timed, &Silent).unwrap();
         let elapsed = start.elapsed();
-        assert!(elapsed < budget + Duration::from_secs(1), "{name}: {elapsed:?}");
+        assert!(
+            elapsed < budget + Duration::from_secs(1),
+            "{name}: {elapsed:?}"
+        );
 
         let cancelled = Settings {
             budget: Budget::Samples(1 << 40),
@@ -531,6 +539,9 @@ fn set_up_keeps_the_time_budget_and_listens_to_cancel() {
         let out = render(&image, &MaxChannel, &cancelled, &stop_after(0)).unwrap();
         let elapsed = start.elapsed();
         assert!(out.cancelled, "{name}");
-        assert!(elapsed < Duration::from_secs(1), "{name} cancelled: {elapsed:?}");
+        assert!(
+            elapsed < Duration::from_secs(1),
+            "{name} cancelled: {elapsed:?}"
+        );
     }
 }

@@ -455,7 +455,7 @@ fn methods_take_their_choices_by_name_and_refuse_unknown_ones() {
     let text = text.to_str().unwrap();
     assert!(text.contains("solver") && text.contains("log"), "{text}");
     assert!(
-        text.contains("tile_radius") && text.contains("whole, 0 to 8"),
+        text.contains("tile_radius") && text.contains("whole, 0 to 4"),
         "{text}"
     );
     assert!(strata_settings_describe(null()).is_null());

@@ -75,6 +75,9 @@ impl Default for ErptSettings {
     }
 }
 
+/// The most steps one start's chains may take (a unit of work).
+const MAX_STEPS_PER_START: f64 = 65536.0;
+
 impl ErptSettings {
     /// Checks every parameter.
     pub fn validate(&self) -> Result<(), Error> {
@@ -84,6 +87,15 @@ impl ErptSettings {
         let r = self.chains_per_path;
         if !(r.is_finite() && r > 0.0) {
             return Err(Error::invalid("chains_per_path", r, "a finite value > 0"));
+        }
+        // A start's chains are one unit of work, which no budget or cancel
+        // interrupts: at most 2^16 steps.
+        if r * self.chain_length as f64 > MAX_STEPS_PER_START {
+            return Err(Error::invalid(
+                "chains_per_path",
+                r,
+                "chains_per_path x chain_length at most 65536 (the steps of one start)",
+            ));
         }
         if self.bootstrap_candidates == 0 {
             return Err(Error::invalid("bootstrap_candidates", 0.0, "at least 1"));

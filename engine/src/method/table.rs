@@ -208,8 +208,8 @@ const STRATIFIED: &[Setting] = &[
     whole(
         "tile_radius",
         0,
-        8,
-        "tile shape: 0 the cross of seed 001, r a (2r+1)^2 square",
+        4,
+        "tile shape: 0 the cross of seed 001, r a (2r+1)^2 square (the reconstruction's cost grows with it)",
     ),
     whole(
         "exchange_every",

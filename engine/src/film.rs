@@ -46,11 +46,14 @@ impl Film {
     }
 
     /// Whether this film is `resolution` with `channels` channels, its values
-    /// all there (a film read back from a checkpoint is checked).
+    /// all there, finite and non-negative (a film read back from a
+    /// checkpoint is checked: a forged one with a valid CRC resumed to NaN
+    /// or negative pixels).
     pub fn fits(&self, resolution: Resolution, channels: usize) -> bool {
         self.resolution == resolution
             && self.channels == channels
             && self.data.len() == resolution.pixel_count() * channels
+            && self.data.iter().all(|v| v.is_finite() && *v >= 0.0)
     }
 
     /// A film over existing values (`resolution.pixel_count() * channels` of them).

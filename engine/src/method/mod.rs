@@ -310,7 +310,9 @@ where
 /// [`checkpoint`]). `settings` must have the checkpoint's
 /// method, method settings and seed ([`Checkpoint::settings`] gives them),
 /// and `oracle` must be the scene it was made with; otherwise
-/// `Error::CheckpointMismatch`. The budget may differ: the same sample budget
+/// `Error::CheckpointMismatch`; a saved film or tile sum that is not finite
+/// and non-negative, or a saved state that renders to such pixels, is
+/// `Error::CheckpointCorrupted`. The budget may differ: the same sample budget
 /// gives the bytes the uninterrupted render would have given, a larger one
 /// continues further, and a time budget counts from now.
 pub fn resume<O, I>(
@@ -326,7 +328,23 @@ where
 {
     settings.validate()?;
     let state = checkpoint.state_for(oracle, settings)?;
-    run(oracle, importance, settings, observer, Some(state))
+    let output = run(oracle, importance, settings, observer, Some(state))?;
+    // A fresh render's pixels are finite and non-negative (invalid samples
+    // are dropped where they are traced); a resumed one's can only be
+    // otherwise through a forged state (a chain's saved path, a sum), which
+    // the checks on decoding do not all reach.
+    if output
+        .film
+        .data()
+        .iter()
+        .all(|v| v.is_finite() && *v >= 0.0)
+    {
+        Ok(output)
+    } else {
+        Err(Error::CheckpointCorrupted {
+            reason: "its saved state gives non-finite or negative pixels",
+        })
+    }
 }
 
 /// A render, fresh or resumed from `resume`.

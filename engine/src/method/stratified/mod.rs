@@ -353,11 +353,16 @@ where
     if let Some((position, saved)) = job.resumed::<Saved<O::Radiance>>()? {
         let (chains, stats, exchange_rounds, invalid, bootstrap_traces) = saved;
         let per_tile = offsets * O::Radiance::CHANNELS;
+        let sound = |v: &[f64]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
         let fits = chains.len() == n
             && chains.iter().all(|c| {
                 c.unscaled.len() == per_tile
                     && c.uniform.len() == per_tile
                     && c.uniform_squares.len() == offsets
+                    && c.odd_sums.len() == offsets
+                    && [&c.unscaled, &c.uniform, &c.uniform_squares, &c.odd_sums]
+                        .iter()
+                        .all(|v| sound(v))
             });
         if !fits {
             return Err(checkpoint::does_not_fit());

@@ -328,7 +328,7 @@ where
 {
     settings.validate()?;
     let state = checkpoint.state_for(oracle, settings)?;
-    let output = run(oracle, importance, settings, observer, Some(state))?;
+    let output = run_resumed(oracle, importance, settings, observer, state)?;
     // A fresh render's pixels are finite and non-negative (invalid samples
     // are dropped where they are traced); a resumed one's can only be
     // otherwise through a forged state (a chain's saved path, a sum), which
@@ -345,6 +345,36 @@ where
             reason: "its saved state gives non-finite or negative pixels",
         })
     }
+}
+
+/// A resumed render. The decoder checks the saved state's shape, films and
+/// sums, but not every invariant of every method's state (replica
+/// exchange's permutation tables and counters, say); with `std`, a panic
+/// that a forged state causes is caught and becomes
+/// `Error::CheckpointCorrupted` (the panic's message is still printed by
+/// the panic hook).
+fn run_resumed<O, I>(
+    oracle: &O,
+    importance: &I,
+    settings: &Settings,
+    observer: &dyn Observer,
+    state: &[u8],
+) -> Result<Output, Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let go = || run(oracle, importance, settings, observer, Some(state));
+    #[cfg(feature = "std")]
+    {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(go)).unwrap_or(Err(
+            Error::CheckpointCorrupted {
+                reason: "its saved state breaks an invariant of the method",
+            },
+        ))
+    }
+    #[cfg(not(feature = "std"))]
+    go()
 }
 
 /// A render, fresh or resumed from `resume`.

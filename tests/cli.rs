@@ -89,6 +89,26 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
     assert!(!String::from_utf8_lossy(&refused.stdout).contains("paths:"));
     let png = dir.join("name.with.dots.png");
     assert!(!png.exists(), "a refused render wrote {}", png.display());
+    // A link as output is written through; a directory is not replaced.
+    std::fs::create_dir_all(&dir).unwrap();
+    let target = dir.join("target.png");
+    std::fs::write(&target, b"old").unwrap();
+    let link = dir.join("linked.png");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let linked = run(&["--spp", "2", "--out", link.to_str().unwrap()]);
+    assert_eq!(linked.status.code(), Some(0));
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    assert!(std::fs::read(&target).unwrap().starts_with(b"\x89PNG"));
+    std::fs::create_dir_all(dir.join("folder.png")).unwrap();
+    let folder = run(&["--spp", "2", "--out", dir.join("folder").to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&folder.stderr);
+    assert_eq!(folder.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("not a regular file"), "{stderr}");
     // A full stdout loses the report, not the render (issue 36: it panicked).
     let full = std::fs::File::create("/dev/full").unwrap();
     let args: Vec<&str> = tiny

@@ -321,15 +321,31 @@ impl Observer for Watch<'_> {
 }
 
 /// Writes `path` whole under a temporary name, then renames it over `path`
-/// (a viewer or a crash never sees half a file); an error names `path`.
+/// (a viewer or a crash never sees half a file); an error names `path`. A
+/// symbolic link is written through (its target is replaced, the link
+/// stays); anything else that is not a regular file (a device, a
+/// directory) is refused, never replaced.
 fn replace<E: std::error::Error + Send + Sync + 'static>(
     path: &Path,
     write: impl FnOnce(&Path) -> Result<(), E>,
 ) -> AnyResult<()> {
+    let named = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let target = match std::fs::symlink_metadata(path) {
+        Ok(meta) if meta.file_type().is_symlink() => {
+            std::fs::canonicalize(path).map_err(|e| named(&e))?
+        }
+        Ok(meta) if !meta.is_file() => {
+            return Err(named(&"not a regular file: not replaced").into());
+        }
+        _ => path.to_path_buf(),
+    };
+    if target != path && target.exists() && !target.is_file() {
+        return Err(named(&"links to something that is not a regular file").into());
+    }
+    let path = target.as_path();
     let mut partial = path.as_os_str().to_owned();
     partial.push(".partial");
     let partial = PathBuf::from(partial);
-    let named = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
     write(&partial).map_err(|e| named(&e))?;
     std::fs::rename(&partial, path).map_err(|e| named(&e))?;
     Ok(())
@@ -350,7 +366,18 @@ fn read_checkpoint(path: &Path) -> AnyResult<Vec<u8>> {
 /// Makes the directories the outputs and checkpoints go to and checks that
 /// they take a file, before any work (an error names the directory).
 fn prepare_outputs(args: &Args) -> AnyResult<()> {
-    for file in [output(&args.out, "png"), checkpoint_path(args)] {
+    let files = [
+        output(&args.out, "png"),
+        output(&args.out, "exr"),
+        checkpoint_path(args),
+    ];
+    for file in &files {
+        // Existing outputs are replaced only if they are files (or links to them).
+        if file.exists() && !file.is_file() {
+            return Err(format!("{}: not a regular file: not replaced", file.display()).into());
+        }
+    }
+    for file in files {
         let dir = match file.parent() {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
             _ => PathBuf::from("."),

@@ -9,6 +9,7 @@
 //! z-scores at every budget. ERPT is unbiased and is checked like MC and
 //! PSSMLT (`common::check`).
 
+use rayon::prelude::*;
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::method::{
     ErptSettings, Initialization, PssmltSettings, Solver, StratifiedExtras, StratifiedSettings,
@@ -455,7 +456,9 @@ fn image_mean_z<O: PathOracle>(
     settings: StratifiedSettings,
     exact: f64,
 ) -> f64 {
+    // Independent renders, side by side (each is the same on any thread count).
     let means: Vec<f64> = (0..seeds)
+        .into_par_iter()
         .map(|seed| {
             stratified_with(oracle, seed, spp, settings)
                 .film

@@ -56,6 +56,10 @@ struct Args {
     /// Time budgets in seconds, instead of `--spp`.
     #[arg(long, value_delimiter = ',')]
     time: Vec<f64>,
+    /// A setting of the methods' table, NAME=VALUE, for every listed method
+    /// that has it (repeatable; `strata settings` lists them).
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    sets: Vec<String>,
     /// Seeds per method and budget (0, 1, ...).
     #[arg(long, default_value_t = 4)]
     seeds: u64,
@@ -145,7 +149,16 @@ fn main() -> AnyResult<()> {
     for (label, budget) in &budgets {
         let mut mc_spread: Option<Spread> = None;
         for name in &args.methods {
-            let method = Method::from_name(name).expect("a listed name");
+            let mut method = Method::from_name(name).expect("a listed name");
+            for set in &args.sets {
+                let (setting, value) = set.split_once('=').ok_or("--set NAME=VALUE")?;
+                if method.setting(setting).is_some() {
+                    match value.parse::<f64>() {
+                        Ok(v) => method.set(setting, v)?,
+                        Err(_) => method.set_choice(setting, value)?,
+                    }
+                }
+            }
             let mut films = Vec::new();
             let (mut paths, mut seconds) = (0.0, 0.0);
             for seed in 0..args.seeds {

@@ -198,7 +198,7 @@ pub struct StratifiedSettings {
     /// scenes were the same; docs/BENCHMARKS.md). The halves are not quite
     /// independent of the tile chains (accepted large steps are chain
     /// states), which favours small `α` where the chains are mostly large
-    /// steps: at 16 paths per pixel it picks 0.05 on every built-in scene.
+    /// steps: below 8 sweeps it chooses from 1 and 5 only.
     pub cross_validate_alpha: bool,
     /// Pixels whose reconstructed value (channel mean) lies more than this
     /// many standard errors *below* their Monte Carlo regularizer `Î(j)` take
@@ -473,7 +473,13 @@ where
         if let Solver::Weighted(w) = &mut solver {
             if self.settings.cross_validate_alpha {
                 let halves = Halves::gather(tiles, &self.chains, &samples);
-                w.alpha = cross_validated_alpha(tiles, &unscaled, channels, &halves, w)?;
+                let candidates = if self.stats.sweeps < FEW_SWEEPS {
+                    &ALPHAS[2..]
+                } else {
+                    &ALPHAS[..]
+                };
+                w.alpha =
+                    cross_validated_alpha(tiles, &unscaled, channels, &halves, w, candidates)?;
             }
             self.stats.alpha = w.alpha;
         }
@@ -690,7 +696,15 @@ fn unscaled<R: Radiance>(
 /// ([`StratifiedSettings::cross_validate_alpha`]).
 const ALPHAS: [f64; 4] = [0.05, 0.2, 1.0, 5.0];
 
-/// The `α` of [`ALPHAS`] whose channel-mean image, reconstructed with the
+/// Below this many sweeps cross-validation chooses from `α >= 1` only. Its
+/// held-out large steps are also the tile chains' states, and after a few
+/// sweeps the chains are little else, so the score favours the smallest
+/// `α` (it chose 0.05 at 16 paths per pixel, ~3 sweeps, on every built-in
+/// scene, where `α` = 5 halves the MSE: saturated 4.99x MC's -> 2.67x, the
+/// Cornell box 6.23x -> 3.63x; docs/RESULTS.md).
+const FEW_SWEEPS: u64 = 8;
+
+/// The `α` of `candidates` whose channel-mean image, reconstructed with the
 /// first half of the large steps as regularizer (at `α / 2`), is closest to
 /// the second half's mean over the pixels it sampled (the first on ties).
 fn cross_validated_alpha(
@@ -699,13 +713,14 @@ fn cross_validated_alpha(
     channels: usize,
     halves: &Halves,
     settings: &WeightedSettings,
+    candidates: &[f64],
 ) -> Result<f64, Error> {
     let g: Vec<f64> = unscaled
         .chunks(channels)
         .map(|v| v.iter().sum::<f64>() / channels as f64)
         .collect();
     let mut best = (f64::INFINITY, settings.alpha);
-    for alpha in ALPHAS {
+    for &alpha in candidates {
         let half = WeightedSettings {
             alpha: alpha / 2.0,
             iterations: settings.iterations / 4,

@@ -171,6 +171,27 @@ fn resume_with_other_flags_is_an_error_naming_them() {
     let stderr = String::from_utf8_lossy(&zero.stderr);
     assert_eq!(zero.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("/dev/zero: not a regular file"), "{stderr}");
+    // A file far larger than this render's checkpoint can be is not read
+    // (a sparse file: no disk used).
+    let big = dir.join("big.ckpt");
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len(1 << 33)
+        .unwrap();
+    let huge = run(&[
+        "--spp",
+        "8",
+        "--resume",
+        big.to_str().unwrap(),
+        "--out",
+        out_arg,
+    ]);
+    let stderr = String::from_utf8_lossy(&huge.stderr);
+    assert_eq!(huge.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("more than a checkpoint of this render can hold"),
+        "{stderr}"
+    );
     let same = run(&["--spp", "8", "--resume", ckpt_arg, "--out", out_arg]);
     assert_eq!(
         same.status.code(),

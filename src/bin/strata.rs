@@ -911,6 +911,74 @@ mod tests {
         }
     }
 
+    /// Random flags with hostile values parse to a method or an error,
+    /// never a panic, and an accepted method validates (issue 36: the CLI's
+    /// own surface, fuzzed; a fixed stream of 300 cases).
+    #[test]
+    fn random_flags_give_a_valid_method_or_an_error() {
+        use proptest::prelude::*;
+        use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
+        let flags = [
+            "--chains",
+            "--large-step",
+            "--replicas",
+            "--t-max",
+            "--ensembles",
+            "--tune-ladder",
+            "--tile-radius",
+            "--exchange-every",
+            "--fallback-sigmas",
+            "--chain-length",
+            "--exposure",
+            "--time",
+            "--spp",
+        ];
+        let values = [
+            "0",
+            "1",
+            "-1",
+            "2.5",
+            "nan",
+            "inf",
+            "1e300",
+            "4294967295",
+            "18446744073709551615",
+            "65536",
+            "8",
+            "0.3",
+            "",
+        ];
+        let flag = (0..flags.len(), 0..values.len());
+        let case = (0..Method::NAMES.len(), prop::collection::vec(flag, 0..4));
+        let mut runner = TestRunner::new_with_rng(
+            Config {
+                cases: 300,
+                failure_persistence: None,
+                ..Config::default()
+            },
+            TestRng::deterministic_rng(RngAlgorithm::ChaCha),
+        );
+        runner
+            .run(&case, |(m, picks)| {
+                let mut line = vec!["strata", "render", "--method", Method::NAMES[m]];
+                for (f, v) in picks {
+                    line.extend([flags[f], values[v]]);
+                }
+                // Parsing may refuse (exit 2 in the command); a parsed line
+                // gives a method or an error.
+                if let Ok(cli) = Cli::try_parse_from(&line) {
+                    let Command::Render(args) = cli.command else {
+                        unreachable!()
+                    };
+                    if let Ok(method) = method(&args) {
+                        prop_assert!(method.validate().is_ok(), "{line:?}");
+                    }
+                }
+                Ok(())
+            })
+            .unwrap();
+    }
+
     /// Flags go through the table: a flag of another method, a value out
     /// of range or an unknown `--set` name is an error naming it.
     #[test]

@@ -88,6 +88,9 @@ impl Method {
     pub fn describe(&self) -> alloc::string::String {
         use core::fmt::Write;
         let mut text = alloc::string::String::new();
+        if self.settings().is_empty() {
+            text.push_str("(no settings)\n");
+        }
         for row in self.settings() {
             let value = self
                 .get(row.name)

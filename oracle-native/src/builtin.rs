@@ -182,9 +182,11 @@ fn diffuse(scene: &mut Scene, c: Vec3) -> u32 {
     })
 }
 
-/// The Cornell box of `../shared/scenes/cornell-box` (same geometry, camera
-/// and light), built procedurally.
-pub fn cornell(resolution: Resolution) -> Scene {
+/// The Cornell box's camera and room: floor, ceiling and back wall of
+/// reflectance `white`, the left wall `left`, the right wall `right`, and
+/// the materials `[white, left, right, black]` (black for emitters), added
+/// in that order before the walls.
+fn cornell_room(resolution: Resolution, white: Vec3, left: Vec3, right: Vec3) -> (Scene, [u32; 4]) {
     let camera = Camera::look_at(
         Vec3::new(0.0, 1.0, 6.8),
         Vec3::new(0.0, 1.0, 0.0),
@@ -193,56 +195,69 @@ pub fn cornell(resolution: Resolution) -> Scene {
         resolution,
     );
     let mut s = Scene::new(camera);
-    let white = diffuse(&mut s, Vec3::new(0.725, 0.71, 0.68));
-    let red = diffuse(&mut s, Vec3::new(0.63, 0.065, 0.05));
-    let green = diffuse(&mut s, Vec3::new(0.14, 0.45, 0.091));
+    let white = diffuse(&mut s, white);
+    let left = diffuse(&mut s, left);
+    let right = diffuse(&mut s, right);
     let black = diffuse(&mut s, Vec3::ZERO);
     let v = Vec3::new;
-    s.add_mesh(
-        &quad(
-            v(-1., 0., -1.),
-            v(-1., 0., 1.),
-            v(1., 0., 1.),
-            v(1., 0., -1.),
+    let walls = [
+        (
+            [
+                v(-1., 0., -1.),
+                v(-1., 0., 1.),
+                v(1., 0., 1.),
+                v(1., 0., -1.),
+            ],
+            white,
+        ), // floor
+        (
+            [
+                v(1., 2., 1.),
+                v(-1., 2., 1.),
+                v(-1., 2., -1.),
+                v(1., 2., -1.),
+            ],
+            white,
+        ), // ceiling
+        (
+            [
+                v(-1., 0., -1.),
+                v(1., 0., -1.),
+                v(1., 2., -1.),
+                v(-1., 2., -1.),
+            ],
+            white,
+        ), // back
+        (
+            [v(1., 0., -1.), v(1., 0., 1.), v(1., 2., 1.), v(1., 2., -1.)],
+            right,
         ),
-        white,
-        None,
-    ); // floor
-    s.add_mesh(
-        &quad(
-            v(1., 2., 1.),
-            v(-1., 2., 1.),
-            v(-1., 2., -1.),
-            v(1., 2., -1.),
+        (
+            [
+                v(-1., 0., 1.),
+                v(-1., 0., -1.),
+                v(-1., 2., -1.),
+                v(-1., 2., 1.),
+            ],
+            left,
         ),
-        white,
-        None,
-    ); // ceiling
-    s.add_mesh(
-        &quad(
-            v(-1., 0., -1.),
-            v(1., 0., -1.),
-            v(1., 2., -1.),
-            v(-1., 2., -1.),
-        ),
-        white,
-        None,
-    ); // back
-    s.add_mesh(
-        &quad(v(1., 0., -1.), v(1., 0., 1.), v(1., 2., 1.), v(1., 2., -1.)),
-        green,
-        None,
-    ); // right
-    s.add_mesh(
-        &quad(
-            v(-1., 0., 1.),
-            v(-1., 0., -1.),
-            v(-1., 2., -1.),
-            v(-1., 2., 1.),
-        ),
-        red,
-        None,
-    ); // left
+    ];
+    for ([a, b, c, d], material) in walls {
+        s.add_mesh(&quad(a, b, c, d), material, None);
+    }
+    (s, [white, left, right, black])
+}
+
+/// The Cornell box of `../shared/scenes/cornell-box` (same geometry, camera
+/// and light), built procedurally.
+pub fn cornell(resolution: Resolution) -> Scene {
+    let (mut s, [white, _, _, black]) = cornell_room(
+        resolution,
+        Vec3::new(0.725, 0.71, 0.68),
+        Vec3::new(0.63, 0.065, 0.05),
+        Vec3::new(0.14, 0.45, 0.091),
+    );
+    let v = Vec3::new;
     let short = cuboid(v(-0.3, 0.0, -0.3), v(0.3, 0.6, 0.3));
     let short = short
         .transformed(&(Mat4::from_translation(v(0.33, 0.0, 0.37)) * Mat4::from_rotation_y(-0.29)));
@@ -454,18 +469,12 @@ pub fn caustic(resolution: Resolution) -> Scene {
 /// adds caustics. A scene where an estimator that gets one channel's share
 /// wrong shows it (issue 35).
 pub fn saturated(resolution: Resolution) -> Scene {
-    let camera = Camera::look_at(
-        Vec3::new(0.0, 1.0, 6.8),
-        Vec3::new(0.0, 1.0, 0.0),
-        Vec3::Y,
-        19.5,
+    let (mut s, [_, _, _, black]) = cornell_room(
         resolution,
+        Vec3::splat(0.75),
+        Vec3::new(0.8, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, 0.8),
     );
-    let mut s = Scene::new(camera);
-    let white = diffuse(&mut s, Vec3::splat(0.75));
-    let red = diffuse(&mut s, Vec3::new(0.8, 0.0, 0.0));
-    let blue = diffuse(&mut s, Vec3::new(0.0, 0.0, 0.8));
-    let black = diffuse(&mut s, Vec3::ZERO);
     let glass = s.add_material(Material::Dielectric {
         eta: 1.5,
         alpha: 0.0,
@@ -475,46 +484,6 @@ pub fn saturated(resolution: Resolution) -> Scene {
         alpha: 0.0,
     });
     let v = Vec3::new;
-    let walls = [
-        (
-            v(-1., 0., -1.),
-            v(-1., 0., 1.),
-            v(1., 0., 1.),
-            v(1., 0., -1.),
-            white,
-        ), // floor
-        (
-            v(1., 2., 1.),
-            v(-1., 2., 1.),
-            v(-1., 2., -1.),
-            v(1., 2., -1.),
-            white,
-        ), // ceiling
-        (
-            v(-1., 0., -1.),
-            v(1., 0., -1.),
-            v(1., 2., -1.),
-            v(-1., 2., -1.),
-            white,
-        ), // back
-        (
-            v(1., 0., -1.),
-            v(1., 0., 1.),
-            v(1., 2., 1.),
-            v(1., 2., -1.),
-            blue,
-        ), // right
-        (
-            v(-1., 0., 1.),
-            v(-1., 0., -1.),
-            v(-1., 2., -1.),
-            v(-1., 2., 1.),
-            red,
-        ), // left
-    ];
-    for (a, b, c, d, material) in walls {
-        s.add_mesh(&quad(a, b, c, d), material, None);
-    }
     s.add_mesh(&sphere(v(-0.45, 0.4, -0.35), 0.4, 24, 48), mirror, None);
     s.add_mesh(&sphere(v(0.45, 0.35, 0.3), 0.35, 24, 48), glass, None);
     let light = quad(

@@ -22,6 +22,8 @@
 //! ```
 //! Scenes: the built-ins or a directory of `$STRATA_SCENES`.
 
+mod common;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -30,9 +32,11 @@ use clap::Parser;
 use clap::builder::PossibleValuesParser;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
-    Budget, Film, Method, PathOracle, Resolution, Rgb, Settings, Silent, metrics, render,
+    Budget, Film, Method, PathOracle, Resolution, Settings, Silent, metrics, render,
 };
 use strata::native::{builtin, native_tracer, pbrt};
+
+use common::{AnyResult, cached_mc};
 
 /// Per-channel and per-region errors of every method over several seeds.
 #[derive(Parser, Debug)]
@@ -76,8 +80,6 @@ struct Args {
     #[arg(long)]
     out: Option<PathBuf>,
 }
-
-type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
 /// One method at one budget, over the seeds.
 struct Row {
@@ -456,34 +458,4 @@ fn write_csv(path: &Path, rows: &[Row]) -> AnyResult<()> {
         )?;
     }
     Ok(())
-}
-
-/// An MC render of `spp` paths per pixel with `seed`, cached as
-/// `NAME_WxH_SPP.exr` in `dir`.
-fn cached_mc<O: PathOracle<Radiance = Rgb>>(
-    oracle: &O,
-    name: &str,
-    spp: u64,
-    seed: u64,
-    dir: &Path,
-) -> AnyResult<Film> {
-    let r = oracle.resolution();
-    let path = dir.join(format!("{name}_{}x{}_{spp}.exr", r.width, r.height));
-    if path.exists() {
-        return Ok(strata::io::read_film(&path)?);
-    }
-    let start = Instant::now();
-    let settings = Settings {
-        seed,
-        budget: Budget::samples_per_pixel(spp, r),
-        method: Method::Mc,
-    };
-    let film = render(oracle, &MaxChannel, &settings, &Silent)?.film;
-    strata::io::write_exr(&film, &path)?;
-    strata::io::write_png(&film, 0.0, path.with_extension("png"))?;
-    println!(
-        "{name}: {spp} spp MC in {:.0} s",
-        start.elapsed().as_secs_f64()
-    );
-    Ok(film)
 }

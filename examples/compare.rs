@@ -22,6 +22,8 @@
 //! directory of `$STRATA_SCENES` (default `../shared/scenes`): `cornell-box`,
 //! `veach-ajar`. The plot needs a TrueType font (`--font`, default DejaVu Sans).
 
+mod common;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -35,6 +37,8 @@ use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Film, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::native::{builtin, native_tracer, pbrt};
+
+use common::{AnyResult, cached_mc};
 
 /// Equal-time comparison against a cached MC reference.
 #[derive(Parser, Debug)]
@@ -90,8 +94,6 @@ struct Args {
     )]
     font: PathBuf,
 }
-
-type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
 /// One render of one method.
 struct Row {
@@ -268,38 +270,6 @@ fn reference<O: PathOracle<Radiance = strata::engine::Rgb>>(
         args.seed + 1000,
         dir,
     )
-}
-
-/// An MC render of `spp` paths per pixel with `seed`, cached on disk as
-/// `NAME_WxH_SPP.exr` in `dir`.
-fn cached_mc<O: PathOracle<Radiance = strata::engine::Rgb>>(
-    oracle: &O,
-    name: &str,
-    spp: u64,
-    seed: u64,
-    dir: &Path,
-) -> AnyResult<Film> {
-    let r = oracle.resolution();
-    let path = dir.join(format!("{name}_{}x{}_{spp}.exr", r.width, r.height));
-    if path.exists() {
-        println!("{name}: {}", path.display());
-        return Ok(strata::io::read_film(&path)?);
-    }
-    let start = Instant::now();
-    let settings = Settings {
-        seed,
-        budget: Budget::samples_per_pixel(spp, r),
-        method: Method::Mc,
-    };
-    let film = render(oracle, &MaxChannel, &settings, &Silent)?.film;
-    strata::io::write_exr(&film, &path)?;
-    strata::io::write_png(&film, 0.0, path.with_extension("png"))?;
-    println!(
-        "{name}: {spp} spp MC in {:.0} s -> {}",
-        start.elapsed().as_secs_f64(),
-        path.display()
-    );
-    Ok(film)
 }
 
 /// The reference's own error, estimated from an independent MC render with

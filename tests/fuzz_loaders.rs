@@ -15,9 +15,7 @@
 //! FUZZ_CASES=100000 cargo test --release --test fuzz_loaders -- --nocapture
 //! ```
 
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
@@ -29,37 +27,11 @@ use strata::native::{native_tracer, pbrt, ply};
 /// The largest single allocation a case may make.
 const MAX_ALLOCATION: usize = 1 << 30;
 
-/// The system allocator, remembering the largest request since the last
-/// [`Largest::take`].
-struct Largest(AtomicUsize);
-
-// SAFETY: every call is forwarded to `System` unchanged.
-#[allow(unsafe_code)]
-unsafe impl GlobalAlloc for Largest {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        self.0.fetch_max(layout.size(), Ordering::Relaxed);
-        // SAFETY: the caller's contract is `System`'s.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: the caller's contract is `System`'s.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        self.0.fetch_max(new_size, Ordering::Relaxed);
-        // SAFETY: the caller's contract is `System`'s.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
-impl Largest {
-    fn take(&self) -> usize {
-        self.0.swap(0, Ordering::Relaxed)
-    }
-}
+mod largest;
+use largest::Largest;
 
 #[global_allocator]
-static ALLOCATOR: Largest = Largest(AtomicUsize::new(0));
+static ALLOCATOR: Largest = Largest::new();
 
 /// Numbers a hostile file may hold.
 const HOSTILE: [&str; 12] = [

@@ -13,7 +13,6 @@
 //! FUZZ_CASES=2000 cargo test --release --test fuzz_settings -- --nocapture
 //! ```
 
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::ffi::{CString, c_void};
 use std::ptr::{null, null_mut};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -34,37 +33,11 @@ const MAX_ALLOCATION: usize = 1 << 30;
 const BUDGET: Duration = Duration::from_millis(100);
 const SLACK: Duration = Duration::from_secs(1);
 
-/// The system allocator, remembering the largest request since the last
-/// [`Largest::take`].
-struct Largest(AtomicUsize);
-
-// SAFETY: every call is forwarded to `System` unchanged.
-#[allow(unsafe_code)]
-unsafe impl GlobalAlloc for Largest {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        self.0.fetch_max(layout.size(), Ordering::Relaxed);
-        // SAFETY: the caller's contract is `System`'s.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: the caller's contract is `System`'s.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        self.0.fetch_max(new_size, Ordering::Relaxed);
-        // SAFETY: the caller's contract is `System`'s.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
-impl Largest {
-    fn take(&self) -> usize {
-        self.0.swap(0, Ordering::Relaxed)
-    }
-}
+mod largest;
+use largest::Largest;
 
 #[global_allocator]
-static ALLOCATOR: Largest = Largest(AtomicUsize::new(0));
+static ALLOCATOR: Largest = Largest::new();
 
 /// One setting to set: the row (an index into the method's table, wrapped),
 /// where in or around its range the value falls, and a fraction.
@@ -146,6 +119,18 @@ fn oracle() -> ProceduralImage {
     ProceduralImage::showcase(Resolution::new(6, 4))
 }
 
+/// `cases()` cases from a fixed stream (CI sees the same ones every run).
+fn runner() -> TestRunner {
+    TestRunner::new_with_rng(
+        Config {
+            cases: cases(),
+            failure_persistence: None,
+            ..Config::default()
+        },
+        TestRng::deterministic_rng(RngAlgorithm::ChaCha),
+    )
+}
+
 fn cases() -> u32 {
     std::env::var("FUZZ_CASES")
         .ok()
@@ -183,15 +168,7 @@ fn check_render(
 #[test]
 fn every_accepted_setting_renders_through_the_library() {
     let image = oracle();
-    // A fixed stream of cases: CI sees the same ones every run.
-    let mut runner = TestRunner::new_with_rng(
-        Config {
-            cases: cases(),
-            failure_persistence: None,
-            ..Config::default()
-        },
-        TestRng::deterministic_rng(RngAlgorithm::ChaCha),
-    );
+    let mut runner = runner();
     let (accepted, refused) = (AtomicUsize::new(0), AtomicUsize::new(0));
     runner
         .run(&case(), |(m, edits)| {
@@ -263,15 +240,7 @@ fn every_accepted_setting_renders_through_the_c_api() {
         user: null_mut(),
         trace: Some(procedural),
     };
-    // A fixed stream of cases: CI sees the same ones every run.
-    let mut runner = TestRunner::new_with_rng(
-        Config {
-            cases: cases(),
-            failure_persistence: None,
-            ..Config::default()
-        },
-        TestRng::deterministic_rng(RngAlgorithm::ChaCha),
-    );
+    let mut runner = runner();
     let (accepted, refused) = (AtomicUsize::new(0), AtomicUsize::new(0));
     runner
         .run(&case(), |(m, edits)| {

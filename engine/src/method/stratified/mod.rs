@@ -173,9 +173,9 @@ pub struct StratifiedSettings {
     /// uses 0.3). Every large step is also a Monte Carlo sample of the
     /// tile's pixels (the regularizer, the known pixels, the fallback), and
     /// a tile whose target is flat or nearly so (an emitter, a diffuse wall)
-    /// gains nothing from small steps; at 0.8 the MSE fell on every scene
-    /// measured, veach-ajar's too (docs/RESULTS.md, "Stratified MCMC in every
-    /// channel").
+    /// gains nothing from small steps; 0.8 was chosen by a sweep on the
+    /// saturated scene and the Cornell box (docs/RESULTS.md, "Every
+    /// channel, and against MC").
     pub mutation: MutationParams,
     /// Local replica exchange after every `exchange_every` sweeps (0: never).
     pub exchange_every: u32,

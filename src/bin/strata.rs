@@ -677,9 +677,13 @@ fn method(args: &Args) -> AnyResult<Method> {
         let (name, value) = set
             .split_once('=')
             .ok_or_else(|| format!("--set {set}: expected NAME=VALUE"))?;
-        let row = method
-            .setting(name)
-            .ok_or_else(|| format!("--set {set}: {}", method.set(name, 0.0).unwrap_err()))?;
+        let row = method.setting(name).ok_or_else(|| {
+            let unknown = Error::UnknownSetting {
+                method: method.name(),
+                settings: method.settings(),
+            };
+            format!("--set {set}: {unknown}")
+        })?;
         match row.kind {
             Kind::Choice(_) => method.set_choice(name, value)?,
             _ => {

@@ -12,7 +12,7 @@ use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, SmallStep};
 use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, FilmPoint, Method, PathOracle, PathSample, Resolution, Sampler, Settings, Silent,
-    Temperature, render,
+    SplatSink, Temperature, render,
 };
 
 /// Reads `dims` numbers and returns their mean: as cheap as an oracle gets
@@ -32,6 +32,7 @@ impl PathOracle for Trivial {
         _: FilmPoint,
         s: &mut S,
         _: Temperature,
+        _: &mut dyn SplatSink<f32>,
     ) -> PathSample<f32> {
         let sum: f32 = (0..self.dims).map(|_| s.next_1d()).sum();
         PathSample::new(0.1 + sum / self.dims as f32)

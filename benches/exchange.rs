@@ -63,8 +63,8 @@ fn sweeps(c: &mut Criterion) {
             let id = BenchmarkId::new(format!("{tempering:?}"), kind.name());
             group.bench_function(id, |b| {
                 b.iter(|| {
-                    ensemble.sweep(&mixture, &Luminance, &mut exchange, |_, r, w| {
-                        black_box((r, w));
+                    ensemble.sweep(&mixture, &Luminance, &mut exchange, |path, w| {
+                        black_box((path.sample.radiance, w));
                     })
                 })
             });

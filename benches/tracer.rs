@@ -9,7 +9,7 @@ use std::time::Duration;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use strata::engine::rng::{Domain, stream, uniform_f32};
 use strata::engine::sample::IndependentSampler;
-use strata::engine::{FilmPoint, PathOracle, Resolution, Temperature};
+use strata::engine::{DropSplats, FilmPoint, PathOracle, Resolution, Temperature};
 use strata::native::builtin;
 use strata::native::{BvhIntersector, Intersector, Ray, Scene, native_tracer};
 
@@ -77,7 +77,7 @@ fn paths(c: &mut Criterion) {
                         x: (i as u32 % r.width) as f32 + 0.5,
                         y: (i as u32 / r.width % r.height) as f32 + 0.5,
                     };
-                    black_box(tracer.trace(p, &mut sampler, Temperature::ONE));
+                    black_box(tracer.trace(p, &mut sampler, Temperature::ONE, &mut DropSplats));
                 }
             })
         });

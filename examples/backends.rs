@@ -13,7 +13,7 @@ use clap::Parser;
 use strata::embree::EmbreeIntersector;
 use strata::engine::rng::{Domain, stream, uniform_f32};
 use strata::engine::sample::IndependentSampler;
-use strata::engine::{FilmPoint, PathOracle, Resolution, Temperature};
+use strata::engine::{DropSplats, FilmPoint, PathOracle, Resolution, Temperature};
 use strata::native::builtin;
 use strata::native::{BvhIntersector, Intersector, PathTracer, Ray};
 
@@ -95,10 +95,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 })
                 .sum::<usize>()
         };
-        let trace_native =
-            |p, s: &mut IndependentSampler| native.trace(p, s, Temperature::ONE).radiance.0[1];
-        let trace_embree =
-            |p, s: &mut IndependentSampler| embree.trace(p, s, Temperature::ONE).radiance.0[1];
+        let trace_native = |p, s: &mut IndependentSampler| {
+            native
+                .trace(p, s, Temperature::ONE, &mut DropSplats)
+                .radiance
+                .0[1]
+        };
+        let trace_embree = |p, s: &mut IndependentSampler| {
+            embree
+                .trace(p, s, Temperature::ONE, &mut DropSplats)
+                .radiance
+                .0[1]
+        };
         let (mut cn, mut ce, mut on, mut oe, mut pn, mut pe) =
             (vec![], vec![], vec![], vec![], vec![], vec![]);
         for _ in 0..args.repeats {

@@ -119,7 +119,7 @@ fn run(m: &GaussianMixture, config: &Config, run: u64, z: f64, exact: f64) -> Ve
     let (mut sum, mut half_sum) = (0.0, 0.0);
     let mut errors = Vec::new();
     for sweep in 0..config.burn_in + last {
-        ensemble.sweep(m, &Luminance, &mut exchange, |_, _, _| {});
+        ensemble.sweep(m, &Luminance, &mut exchange, |_, _| {});
         let Some(n) = (sweep + 1).checked_sub(config.burn_in).filter(|&n| n > 0) else {
             continue;
         };

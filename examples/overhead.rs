@@ -29,7 +29,8 @@ use strata::engine::rng::{self, Domain, uniform_f32};
 use strata::engine::sample::IndependentSampler;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
-    Budget, Method, PathOracle, Resolution, Sampler, Settings, Silent, Temperature, render,
+    Budget, DropSplats, Method, PathOracle, Resolution, Sampler, Settings, Silent, Temperature,
+    render,
 };
 use strata::native::{builtin, native_tracer};
 
@@ -117,7 +118,12 @@ fn coordinates_per_path<O: PathOracle>(oracle: &O, paths: u64) -> f64 {
     };
     for _ in 0..paths {
         let u = [uniform_f32(&mut film_rng), uniform_f32(&mut film_rng)];
-        black_box(oracle.trace(r.film_point(u), &mut sampler, Temperature::ONE));
+        black_box(oracle.trace(
+            r.film_point(u),
+            &mut sampler,
+            Temperature::ONE,
+            &mut DropSplats,
+        ));
     }
     2.0 + sampler.draws as f64 / paths as f64
 }

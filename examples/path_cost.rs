@@ -42,8 +42,8 @@ use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Tempering};
 use strata::engine::method::{ErptSettings, ReplicaSettings, StratifiedSettings};
 use strata::engine::target::MaxChannel;
 use strata::engine::{
-    Budget, FilmPoint, Method, Output, PathOracle, PathSample, Resolution, Sampler, Settings,
-    Silent, Temperature, render,
+    Budget, DropSplats, FilmPoint, Method, Output, PathOracle, PathSample, Resolution, Sampler,
+    Settings, Silent, SplatSink, Temperature, render,
 };
 use strata::native::{native_tracer, pbrt};
 
@@ -156,6 +156,7 @@ impl<O: PathOracle> PathOracle for Metered<O> {
         film: FilmPoint,
         sampler: &mut S,
         temperature: Temperature,
+        splats: &mut dyn SplatSink<O::Radiance>,
     ) -> PathSample<O::Radiance> {
         TAPE.with(|tape| {
             let mut tape = tape.borrow_mut();
@@ -168,6 +169,7 @@ impl<O: PathOracle> PathOracle for Metered<O> {
                     tape: &mut tape,
                 },
                 temperature,
+                splats,
             );
             let between = Instant::now();
             black_box(self.0.trace(
@@ -177,6 +179,7 @@ impl<O: PathOracle> PathOracle for Metered<O> {
                     at: 0,
                 },
                 temperature,
+                &mut DropSplats,
             ));
             let end = Instant::now();
             let seen = Meter {

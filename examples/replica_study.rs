@@ -161,7 +161,7 @@ fn run_move(
         if sweep == args.burn_in {
             change = changes(&ensemble);
         }
-        ensemble.sweep(m, &Luminance, &mut exchange, |_, _, _| {});
+        ensemble.sweep(m, &Luminance, &mut exchange, |_, _| {});
         if sweep < args.burn_in {
             continue;
         }

@@ -13,7 +13,7 @@ use strata::engine::diagnose::integrated_autocorrelation_time;
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
 use strata::engine::{
-    FilmPoint, FnOracle, PathOracle, PathSample, Resolution, Sampler, Temperature,
+    FilmPoint, FnOracle, PathOracle, PathSample, Resolution, Sampler, SplatSink, Temperature,
 };
 
 fn kernels() -> Vec<(&'static str, SmallStep)> {
@@ -148,7 +148,7 @@ fn chains_sample_a_two_dimensional_gaussian_mixture() {
 fn the_goodness_of_fit_test_detects_a_wrong_target() {
     let tilted = FnOracle::new(
         Resolution::new(1, 1),
-        |f: FilmPoint, _: &mut dyn Sampler, _: Temperature| {
+        |f: FilmPoint, _: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
             let u = f.x;
             PathSample::new((u - 0.5) * (u - 0.5) * (0.85 + 0.3 * u))
         },

@@ -17,7 +17,7 @@ use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Error, Film, FilmPoint, FnOracle, Method, Observer, Output, PathOracle, PathSample,
-    Progress, Resolution, Rgb, Sampler, Settings, Silent, Temperature, render,
+    Progress, Resolution, Rgb, Sampler, Settings, Silent, SplatSink, Temperature, render,
 };
 
 mod threads;
@@ -56,7 +56,7 @@ fn same_seed_gives_a_bit_identical_image_on_one_and_two_threads() {
 fn poisoned() -> impl PathOracle<Radiance = Rgb> {
     FnOracle::new(
         Resolution::new(16, 8),
-        |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature| {
+        |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
             let u = sampler.next_1d();
             let bad = film.x >= 8.0 && u < 0.25;
             let value = if !bad {
@@ -107,7 +107,7 @@ fn nan_infinite_and_negative_radiance_is_excluded_and_counted() {
 fn huge_finite_radiance_is_kept_by_every_method() {
     let huge = FnOracle::new(
         Resolution::new(8, 8),
-        |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+        |_: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
             let lit = s.next_1d() < 0.5;
             PathSample::new(Rgb([if lit { 1e20 } else { 0.0 }; 3]))
         },
@@ -128,7 +128,9 @@ fn huge_finite_radiance_is_kept_by_every_method() {
 fn an_oracle_that_only_returns_nan_is_named_as_the_cause() {
     let nan = FnOracle::new(
         Resolution::new(8, 8),
-        |_: FilmPoint, _: &mut dyn Sampler, _: Temperature| PathSample::new(f32::NAN),
+        |_: FilmPoint, _: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
+            PathSample::new(f32::NAN)
+        },
     );
     for method in methods() {
         let name = method.name();
@@ -165,7 +167,9 @@ fn an_oracle_that_only_returns_nan_is_named_as_the_cause() {
 fn replica_exchange_refuses_a_tempering_that_changes_nothing() {
     let deaf = FnOracle::new(
         Resolution::new(8, 8),
-        |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| PathSample::new(s.next_1d()),
+        |_: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
+            PathSample::new(s.next_1d())
+        },
     );
     let mut ensemble = EnsembleSettings::geometric(4, 100.0).unwrap();
     ensemble.bootstrap_candidates = 2_000;
@@ -203,7 +207,7 @@ fn replica_exchange_refuses_a_tempering_that_changes_nothing() {
 fn every_method_spends_its_budget_on_a_one_pixel_film() {
     let pixel = FnOracle::new(
         Resolution::new(1, 1),
-        |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+        |_: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
             let lit = s.next_1d() < 0.3;
             PathSample::new(Rgb([if lit { 1.0 } else { 0.0 }; 3]))
         },
@@ -228,7 +232,7 @@ fn every_method_spends_its_budget_on_a_one_pixel_film() {
 fn counting(traces: &AtomicU32) -> impl PathOracle<Radiance = f32> + '_ {
     FnOracle::new(
         Resolution::new(4, 4),
-        move |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+        move |_: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
             traces.fetch_add(1, Ordering::Relaxed);
             PathSample::new(s.next_1d())
         },
@@ -337,7 +341,7 @@ fn invalid_settings_are_typed_errors_before_any_work() {
 fn black(resolution: Resolution) -> impl PathOracle<Radiance = Rgb> {
     FnOracle::new(
         resolution,
-        |_: FilmPoint, sampler: &mut dyn Sampler, _: Temperature| {
+        |_: FilmPoint, sampler: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
             sampler.next_1d();
             PathSample::new(Rgb::BLACK)
         },
@@ -381,9 +385,11 @@ fn films_too_large_for_the_machine_are_typed_errors_before_any_work() {
     for side in [100_000, u32::MAX] {
         let huge = FnOracle::new(
             Resolution::new(side, side),
-            |_: FilmPoint, _: &mut dyn Sampler, _: Temperature| -> PathSample<Rgb> {
-                panic!("traced a path")
-            },
+            |_: FilmPoint,
+             _: &mut dyn Sampler,
+             _: Temperature,
+             _: &mut dyn SplatSink<_>|
+             -> PathSample<Rgb> { panic!("traced a path") },
         );
         for method in methods() {
             let budget = Budget::Samples(1_000);

@@ -526,8 +526,8 @@ fn first_mode_share(kind: ExchangeKind, sweeps: u64, seed: u64) -> f64 {
     let mut exchange = kind.build(&bootstrap).unwrap();
     let mut first = 0;
     for _ in 0..sweeps {
-        ensemble.sweep(&target, &Luminance, &mut exchange, |_, _, _| {});
-        let x = ensemble.replicas()[0].state().film.x / 64.0;
+        ensemble.sweep(&target, &Luminance, &mut exchange, |_, _| {});
+        let x = ensemble.replicas()[0].state().path.film.x / 64.0;
         first += (x < 0.5) as u64;
     }
     first as f64 / sweeps as f64

@@ -7,7 +7,7 @@ use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallS
 use strata::engine::target::{Luminance, MaxChannel};
 use strata::engine::{
     Budget, FilmPoint, FnOracle, Method, PathOracle, PathSample, Resolution, Sampler, Settings,
-    Silent, Temperature, render,
+    Silent, SplatSink, Temperature, render,
 };
 
 mod common;
@@ -63,7 +63,7 @@ fn pssmlt_brightness_error_falls_below_the_bootstraps() {
     let q = 0.05;
     let oracle = FnOracle::new(
         Resolution::new(16, 16),
-        move |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+        move |_: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
             PathSample::new(if s.next_1d() < q as f32 { 10.0f32 } else { 0.0 })
         },
     );
@@ -117,7 +117,7 @@ fn pssmlt_matches_a_target_whose_paths_vary_in_length() {
     let resolution = Resolution::new(8, 4);
     let oracle = FnOracle::new(
         resolution,
-        move |film: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+        move |film: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
             let (mut throughput, mut sum) = (1.0f32, 1.0f32);
             for _ in 0..6 {
                 if s.next_1d() >= q {

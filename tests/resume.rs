@@ -13,7 +13,7 @@ use strata::engine::checkpoint::FORMAT_VERSION;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Checkpoint, Error, FilmPoint, FnOracle, Method, Observer, Output, PathSample, Progress,
-    Resolution, Rgb, Sampler, Settings, Silent, Temperature, render, resume,
+    Resolution, Rgb, Sampler, Settings, Silent, SplatSink, Temperature, render, resume,
 };
 
 mod threads;
@@ -215,7 +215,9 @@ fn damaged_checkpoints_and_checkpoints_of_another_render_are_typed_errors() {
     assert_eq!(mismatch(&resized, &settings), "film resolution");
     let grey = FnOracle::new(
         Resolution::new(48, 32),
-        |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| PathSample::new(Rgb([s.next_1d(); 3])),
+        |_: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
+            PathSample::new(Rgb([s.next_1d(); 3]))
+        },
     );
     let other_scene = |s: &Settings| resume(&grey, &MaxChannel, s, &checkpoint, &Silent);
     assert!(mismatch(&other_scene, &settings).starts_with("scene"));

@@ -20,7 +20,7 @@ use strata::engine::target::MaxChannel;
 use strata::engine::tiles::{TileShape, Tiles};
 use strata::engine::{
     Budget, Film, FilmPoint, FnOracle, Method, Observer, Output, PathOracle, PathSample, Progress,
-    Resolution, Rgb, Sampler, Settings, Silent, Temperature, render,
+    Resolution, Rgb, Sampler, Settings, Silent, SplatSink, Temperature, render,
 };
 use strata::native::{builtin, native_tracer};
 
@@ -97,7 +97,10 @@ impl Checker {
     fn oracle() -> impl PathOracle<Radiance = f32> {
         FnOracle::new(
             Resolution::new(5, 5),
-            |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature| {
+            |film: FilmPoint,
+             sampler: &mut dyn Sampler,
+             _: Temperature,
+             _: &mut dyn SplatSink<_>| {
                 let (x, y) = (film.x as usize, film.y as usize);
                 let u = sampler.next_1d();
                 let factor = if (x + y) % 2 == 0 {
@@ -283,7 +286,10 @@ fn erpt_passes_cut_short_stay_unbiased() {
 fn scripted(nan: bool) -> impl PathOracle<Radiance = Rgb> {
     FnOracle::new(
         Resolution::new(12, 9),
-        move |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature| {
+        move |film: FilmPoint,
+              sampler: &mut dyn Sampler,
+              _: Temperature,
+              _: &mut dyn SplatSink<_>| {
             let u = sampler.next_1d();
             match (nan, film.x > 6.0) {
                 (false, _) => PathSample::new(Rgb::BLACK),
@@ -346,7 +352,10 @@ impl Glint {
     fn oracle() -> impl PathOracle<Radiance = f32> {
         FnOracle::new(
             Resolution::new(15, 15),
-            |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature| {
+            |film: FilmPoint,
+             sampler: &mut dyn Sampler,
+             _: Temperature,
+             _: &mut dyn SplatSink<_>| {
                 let pixel = film.y as usize * 15 + film.x as usize;
                 let u = sampler.next_1d() as f64;
                 let hit = pixel == Self::CENTRE && u < Self::P;
@@ -424,7 +433,7 @@ fn a_rare_glint_keeps_its_energy() {
 fn sparse_light() -> impl PathOracle<Radiance = Rgb> {
     FnOracle::new(
         Resolution::new(40, 30),
-        |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature| {
+        |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
             let lit = sampler.next_1d() < 0.3;
             let red = 1.0 + film.x / 40.0;
             PathSample::new(Rgb(if lit { [red, 1.0, 1.0] } else { [0.0; 3] }))
@@ -438,7 +447,7 @@ fn sparse_light() -> impl PathOracle<Radiance = Rgb> {
 fn rare_bright_block() -> impl PathOracle<Radiance = f32> {
     FnOracle::new(
         Resolution::new(24, 24),
-        |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature| {
+        |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
             let u = sampler.next_1d();
             let inside = (8.0..16.0).contains(&film.x) && (8.0..16.0).contains(&film.y);
             PathSample::new(if inside && u < 0.04 { 50.0 } else { 0.5 })
@@ -647,7 +656,7 @@ fn regularizer_paths_make_a_better_anchor_at_the_same_budget() {
 fn smooth_noisy() -> impl PathOracle<Radiance = f32> {
     FnOracle::new(
         Resolution::new(48, 40),
-        |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature| {
+        |film: FilmPoint, sampler: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
             let u = sampler.next_1d();
             PathSample::new(2.0 * u * smooth(film.x as f64, film.y as f64) as f32)
         },

@@ -9,8 +9,8 @@ use strata::engine::method::{PssmltSettings, ReplicaSettings};
 use strata::engine::purity::check_purity;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
-    Budget, Error, Film, FilmPoint, Method, PathOracle, Resolution, Settings, Silent, Temperature,
-    render,
+    Budget, DropSplats, Error, Film, FilmPoint, Method, PathOracle, Resolution, Settings, Silent,
+    Temperature, render,
 };
 use strata::native::builtin::{self, cuboid};
 use strata::native::material::{Material, Texture};
@@ -157,7 +157,9 @@ fn tempering_only_acts_above_temperature_one() {
                         x: (i % 48) as f32 + 0.5,
                         y: (i / 48 % 36) as f32 + 0.5,
                     };
-                    o.trace(p, &mut s, Temperature(t)).radiance.0
+                    o.trace(p, &mut s, Temperature(t), &mut DropSplats)
+                        .radiance
+                        .0
                 })
                 .collect::<Vec<_>>()
         };

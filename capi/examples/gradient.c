@@ -1,5 +1,6 @@
 /* strata from C: renders a 16x12 analytic oracle (red = x / width, green =
- * y / height, blue = a uniform number the engine draws) with the method
+ * y / height, blue = a uniform number the engine draws; paths whose number
+ * is below 1/4 also splat it, in red, half the film to the right) with the method
  * named by argv[1] at 16 paths per pixel, seed 7, 2 threads, and writes the
  * film's doubles to argv[2]. capi/tests/c_program.rs builds and runs it and
  * compares the file with the Rust API's render, bit for bit. */
@@ -14,6 +15,12 @@ static void trace(void *user, float x, float y, StrataSampler *sampler, float te
     rgb[0] = x / (float)self->width;
     rgb[1] = y / (float)self->height;
     rgb[2] = strata_sampler_next_1d(sampler);
+    if (rgb[2] < 0.25f) {
+        /* A contribution elsewhere on the film, as light tracing makes. */
+        float sx = x + 8.0f;
+        const float splat[3] = {rgb[2], 0.0f, 0.0f};
+        strata_sampler_splat(sampler, sx >= 16.0f ? sx - 16.0f : sx, y, splat);
+    }
 }
 
 /* What the observer saw. */

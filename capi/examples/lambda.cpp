@@ -31,6 +31,11 @@ int main(int argc, char **argv) {
         rgb[0] = x / width;
         rgb[1] = y / height;
         rgb[2] = strata_sampler_next_1d(s);
+        if (rgb[2] < 0.25f) {
+            float sx = x + 8.0f;
+            const float splat[3] = {rgb[2], 0.0f, 0.0f};
+            strata_sampler_splat(s, sx >= 16.0f ? sx - 16.0f : sx, y, splat);
+        }
     });
     std::unique_ptr<StrataSettings, void (*)(StrataSettings *)> settings(
         strata_settings_new(argv[1]), strata_settings_free);

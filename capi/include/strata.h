@@ -30,8 +30,8 @@ typedef enum StrataStatus {
 // A rendered film: linear RGB, `width · height · 3` doubles, row by row.
 typedef struct StrataFilm StrataFilm;
 
-// The sampler a `trace` callback draws its random numbers from (opaque;
-// valid only during that call).
+// The sampler a `trace` callback draws its random numbers from and hands
+// its splats to (opaque; valid only during that call).
 typedef struct StrataSampler StrataSampler;
 
 // A method with its settings, the seed, the budget and the thread count.
@@ -40,9 +40,10 @@ typedef struct StrataSettings StrataSettings;
 // A path tracer written in C: the film's size and `trace`, which traces one
 // path through the film point (`x`, `y` in pixels), drawing every other
 // decision from `sampler`, at `temperature` (1 is the exact target; higher
-// values may flatten it, see replica exchange), and writes its radiance
-// (linear RGB) to `rgb[0..3]`. Called from several threads at once; must be
-// a pure function of its inputs.
+// values may flatten it, see replica exchange), writes its radiance
+// (linear RGB) to `rgb[0..3]` and hands contributions landing elsewhere on
+// the film to `strata_sampler_splat`. Called from several threads at once;
+// must be a pure function of its inputs.
 typedef struct StrataOracle {
   uint32_t width;
   uint32_t height;
@@ -109,6 +110,20 @@ extern "C" {
 // The message of the last failed call on this thread ("" if none); valid
 // until the next failing call on this thread.
 const char *strata_last_error(void);
+
+// Adds a contribution `rgb[0..3]` of the path being traced at film point
+// (`x`, `y`) in pixels, other than the one the path was traced through: a
+// light-tracing connection (t = 1) of a bidirectional path tracer. Its
+// scale is that of `trace`'s radiance: with one path per pixel, a pixel's
+// estimate is the radiance traced through it plus every splat landing in
+// it. A splat outside the film, not finite or negative makes the path
+// invalid (the engine counts and drops it); so does a path with more than
+// 1024 splats. Must be as pure as the rest of `trace`. A null sampler or
+// `rgb` is `STRATA_STATUS_INVALID_ARGUMENT`.
+enum StrataStatus strata_sampler_splat(struct StrataSampler *sampler,
+                                       float x,
+                                       float y,
+                                       const float *rgb);
 
 // The next number in [0, 1) of the current stream (0 for a null sampler).
 float strata_sampler_next_1d(struct StrataSampler *sampler);

@@ -31,7 +31,7 @@ use strata_engine::purity::check_purity;
 use strata_engine::target::MaxChannel;
 use strata_engine::{
     Budget, Error, Film, FilmPoint, Method, Observer, Output, PathOracle, PathSample, Progress,
-    Resolution, Rgb, Sampler, Settings, Temperature, render,
+    Resolution, Rgb, Sampler, Settings, SplatSink, Temperature, render,
 };
 
 /// What a call did.
@@ -68,10 +68,11 @@ pub extern "C" fn strata_last_error() -> *const c_char {
     LAST_ERROR.with(|e| e.borrow().as_ptr())
 }
 
-/// The sampler a `trace` callback draws its random numbers from (opaque;
-/// valid only during that call).
+/// The sampler a `trace` callback draws its random numbers from and hands
+/// its splats to (opaque; valid only during that call).
 pub struct StrataSampler {
     inner: *mut c_void,
+    splats: *mut c_void,
 }
 
 /// Runs `f` on the engine's sampler behind `sampler`.
@@ -86,6 +87,34 @@ fn with_sampler<T>(
     // around a live `&mut &mut dyn Sampler`, and lives for that call.
     let inner = unsafe { &mut *((*sampler).inner as *mut &mut dyn Sampler) };
     Some(f(&mut **inner))
+}
+
+/// Adds a contribution `rgb[0..3]` of the path being traced at film point
+/// (`x`, `y`) in pixels, other than the one the path was traced through: a
+/// light-tracing connection (t = 1) of a bidirectional path tracer. Its
+/// scale is that of `trace`'s radiance: with one path per pixel, a pixel's
+/// estimate is the radiance traced through it plus every splat landing in
+/// it. A splat outside the film, not finite or negative makes the path
+/// invalid (the engine counts and drops it); so does a path with more than
+/// 1024 splats. Must be as pure as the rest of `trace`. A null sampler or
+/// `rgb` is `STRATA_STATUS_INVALID_ARGUMENT`.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_sampler_splat(
+    sampler: *mut StrataSampler,
+    x: f32,
+    y: f32,
+    rgb: *const f32,
+) -> StrataStatus {
+    if sampler.is_null() || rgb.is_null() {
+        return fail(StrataStatus::InvalidArgument, "null sampler or rgb");
+    }
+    // SAFETY: the caller passes three floats.
+    let radiance = unsafe { Rgb([*rgb, *rgb.add(1), *rgb.add(2)]) };
+    // SAFETY: a non-null `StrataSampler` is only ever made by `COracle::trace`
+    // around a live `&mut &mut dyn SplatSink<Rgb>`, and lives for that call.
+    let splats = unsafe { &mut *((*sampler).splats as *mut &mut dyn SplatSink<Rgb>) };
+    splats.splat(FilmPoint { x, y }, radiance);
+    StrataStatus::Ok
 }
 
 /// The next number in [0, 1) of the current stream (0 for a null sampler).
@@ -142,9 +171,10 @@ pub extern "C" fn strata_sampler_start_stream(
 /// A path tracer written in C: the film's size and `trace`, which traces one
 /// path through the film point (`x`, `y` in pixels), drawing every other
 /// decision from `sampler`, at `temperature` (1 is the exact target; higher
-/// values may flatten it, see replica exchange), and writes its radiance
-/// (linear RGB) to `rgb[0..3]`. Called from several threads at once; must be
-/// a pure function of its inputs.
+/// values may flatten it, see replica exchange), writes its radiance
+/// (linear RGB) to `rgb[0..3]` and hands contributions landing elsewhere on
+/// the film to `strata_sampler_splat`. Called from several threads at once;
+/// must be a pure function of its inputs.
 #[repr(C)]
 pub struct StrataOracle {
     pub width: u32,
@@ -205,10 +235,13 @@ impl PathOracle for COracle {
         film: FilmPoint,
         sampler: &mut S,
         temperature: Temperature,
+        splats: &mut dyn SplatSink<Rgb>,
     ) -> PathSample<Rgb> {
         let mut dynamic: &mut dyn Sampler = &mut &mut *sampler;
+        let mut sink: &mut dyn SplatSink<Rgb> = splats;
         let mut handle = StrataSampler {
             inner: &mut dynamic as *mut &mut dyn Sampler as *mut c_void,
+            splats: &mut sink as *mut &mut dyn SplatSink<Rgb> as *mut c_void,
         };
         let mut rgb = [0.0f32; 3];
         (self.trace)(

@@ -9,7 +9,7 @@ use std::process::Command;
 use strata_engine::target::MaxChannel;
 use strata_engine::{
     Budget, FilmPoint, FnOracle, Method, PathSample, Resolution, Rgb, Sampler, Settings, Silent,
-    Temperature, render,
+    SplatSink, Temperature, render,
 };
 
 /// Builds the shared library (the test profile, whose dependencies are
@@ -56,8 +56,14 @@ fn compile(compiler: &str, flags: &[&str], source: &Path, libs: &Path, out: &Pat
 fn rust_film(method: &Method) -> Vec<u8> {
     let oracle = FnOracle::new(
         Resolution::new(16, 12),
-        |f: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
-            PathSample::new(Rgb([f.x / 16.0, f.y / 12.0, s.next_1d()]))
+        |f: FilmPoint, s: &mut dyn Sampler, _: Temperature, splats: &mut dyn SplatSink<_>| {
+            let blue = s.next_1d();
+            if blue < 0.25 {
+                let x = f.x + 8.0;
+                let x = if x >= 16.0 { x - 16.0 } else { x };
+                splats.splat(FilmPoint { x, y: f.y }, Rgb([blue, 0.0, 0.0]));
+            }
+            PathSample::new(Rgb([f.x / 16.0, f.y / 12.0, blue]))
         },
     );
     let settings = Settings {

@@ -7,8 +7,8 @@
 use alloc::vec::Vec;
 
 use crate::film::Film;
-use crate::oracle::Sampler;
 use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Resolution, Rgb, Temperature};
+use crate::oracle::{Sampler, SplatSink};
 use crate::rng::{self, Domain, uniform_f64};
 
 /// Standard normal CDF.
@@ -83,6 +83,7 @@ impl PathOracle for Parabola {
         film: FilmPoint,
         _: &mut S,
         _: Temperature,
+        _: &mut dyn SplatSink<f32>,
     ) -> PathSample<f32> {
         let u = film.x as f64 / self.bins as f64;
         PathSample::new(((u - 0.5) * (u - 0.5)) as f32)
@@ -238,6 +239,7 @@ impl PathOracle for GaussianMixture {
         film: FilmPoint,
         sampler: &mut S,
         t: Temperature,
+        _: &mut dyn SplatSink<f32>,
     ) -> PathSample<f32> {
         let (u, v) = normalized(self.resolution, film);
         let dims = self.dims();
@@ -433,6 +435,7 @@ impl PathOracle for ProceduralImage {
         film: FilmPoint,
         sampler: &mut S,
         _: Temperature,
+        _: &mut dyn SplatSink<Rgb>,
     ) -> PathSample<Rgb> {
         let (x, y) = normalized(self.resolution, film);
         let mut factor = 1.0f32;
@@ -521,9 +524,14 @@ mod tests {
         let n = 200_000;
         let vals: Vec<f64> = (0..n)
             .map(|_| {
-                img.trace(FilmPoint { x: 0.5, y: 0.5 }, &mut s, Temperature::ONE)
-                    .radiance
-                    .0[0] as f64
+                img.trace(
+                    FilmPoint { x: 0.5, y: 0.5 },
+                    &mut s,
+                    Temperature::ONE,
+                    &mut crate::oracle::DropSplats,
+                )
+                .radiance
+                .0[0] as f64
                     / 0.5
             })
             .collect();

@@ -346,14 +346,16 @@ impl Bootstrap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::oracle::{FilmPoint, FnOracle, PathSample, Resolution, Sampler, Temperature};
+    use crate::oracle::{
+        FilmPoint, FnOracle, PathSample, Resolution, Sampler, SplatSink, Temperature,
+    };
     use crate::target::MaxChannel;
 
     /// Bright only where the film x is in the left tenth.
     fn strip() -> impl PathOracle<Radiance = f32> {
         FnOracle::new(
             Resolution::new(10, 1),
-            |f: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+            |f: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
                 PathSample::new(if f.x < 1.0 { 1.0 + s.next_1d() } else { 0.0 })
             },
         )
@@ -362,7 +364,9 @@ mod tests {
     fn black() -> impl PathOracle<Radiance = f32> {
         FnOracle::new(
             Resolution::new(4, 4),
-            |_: FilmPoint, _: &mut dyn Sampler, _: Temperature| PathSample::new(0.0f32),
+            |_: FilmPoint, _: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
+                PathSample::new(0.0f32)
+            },
         )
     }
 

@@ -38,7 +38,7 @@ use crate::mutate::SmallStep;
 use crate::oracle::{PathOracle, Radiance, Temperature};
 use crate::rng::uniform_f64;
 use crate::sample::{MltSampler, Proposal, Replay};
-use crate::target::{Evaluated, Importance, evaluate};
+use crate::target::{Evaluated, Importance};
 
 /// Counters of one chain (or of many, merged).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -302,8 +302,13 @@ where
 
     fn evaluate(&self, proposal: &mut Proposal<'_>, state: &mut Self::State) -> Traced {
         let film = proposal.film_point(self.oracle.resolution());
-        let traced = self.oracle.trace(film, proposal, Temperature::ONE);
-        *state = evaluate(self.importance, traced, film);
+        state.trace(
+            self.oracle,
+            film,
+            proposal,
+            Temperature::ONE,
+            self.importance,
+        );
         Traced {
             paths: 1,
             invalid: state.invalid as u64,

@@ -28,12 +28,13 @@ use crate::method::Settings;
 use crate::oracle::{FilmPoint, PathOracle, Radiance, Resolution, Sampler, Temperature};
 use crate::rng::{self, Domain, mix64};
 use crate::sample::IndependentSampler;
+use crate::target::SplatList;
 
 const MAGIC: [u8; 8] = *b"STRATAck";
 
 /// The checkpoint format's version. Bump it whenever a saved type changes
 /// (a field added, removed or reordered in any state a method saves).
-pub const FORMAT_VERSION: u32 = 6;
+pub const FORMAT_VERSION: u32 = 7;
 
 /// The engine's version, also saved: a checkpoint is read only by the
 /// engine that wrote it.
@@ -96,10 +97,20 @@ impl OracleId {
                 x: u * resolution.width as f32,
                 y: v * resolution.height as f32,
             };
-            let sample = oracle.trace(film, &mut sampler, Temperature::ONE);
+            let mut splats = SplatList::default();
+            let sample = oracle.trace(film, &mut sampler, Temperature::ONE, &mut splats);
             hash = mix64(hash ^ sample.flags.0 as u64);
-            for c in 0..O::Radiance::CHANNELS {
-                hash = mix64(hash ^ sample.radiance.channel(c).to_bits() as u64);
+            let splatted = splats.as_slice().iter().map(|s| (s.film, s.radiance));
+            for (i, (at, radiance)) in core::iter::once((film, sample.radiance))
+                .chain(splatted)
+                .enumerate()
+            {
+                if i > 0 {
+                    hash = mix64(hash ^ at.x.to_bits() as u64 ^ (at.y.to_bits() as u64) << 32);
+                }
+                for c in 0..O::Radiance::CHANNELS {
+                    hash = mix64(hash ^ radiance.channel(c).to_bits() as u64);
+                }
             }
         }
         OracleId {

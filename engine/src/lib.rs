@@ -13,7 +13,7 @@
 //!
 //! | layer | module | owns |
 //! |---|---|---|
-//! | contract | [`oracle`] | what a renderer implements: [`PathOracle`], [`Sampler`], [`Radiance`], [`PathSample`]; [`FnOracle`] |
+//! | contract | [`oracle`] | what a renderer implements: [`PathOracle`], [`Sampler`], [`Radiance`], [`PathSample`], [`SplatSink`]; [`FnOracle`] |
 //! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], [`purity`] | random streams; the small-step kernels whole; the lazily mutated primary sample; importance functions; accumulation buffers; the purity check |
 //! | one step | [`chain`] | the Metropolis-Hastings step with expected-values splatting, over any [`Target`](chain::Target) and [`Weights`](chain::Weights) |
 //! | set-up | [`bootstrap`] | start-up bias elimination: `b*` per level, importance-resampled chain starts |
@@ -59,6 +59,6 @@ pub use error::Error;
 pub use film::Film;
 pub use method::{Extras, Method, Output, Settings, render, resume};
 pub use oracle::{
-    FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb, Sampler,
-    Temperature,
+    DropSplats, FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb,
+    Sampler, Splat, SplatSink, Temperature,
 };

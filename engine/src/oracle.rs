@@ -5,6 +5,13 @@
 //! and replay samples in other pixels) and owns every random number (so it can
 //! mutate them: primary sample space MLT, seed 002 sec. 4.2.1).
 //!
+//! A path may also contribute at film points the engine did not choose: a
+//! bidirectional path tracer's light-tracing connections (`t = 1`, Veach 1997
+//! sec. 10.2) land wherever the light subpath projects. The oracle hands
+//! those to the [`SplatSink`] it is given; the engine keeps them with the path
+//! and deposits them wherever it deposits the path (see [`Splat`] for their
+//! scale).
+//!
 //! # Purity
 //! `trace` must be a pure function of `(film, the numbers drawn, temperature)`:
 //! the same film point and the same sequence of numbers (with the same stream
@@ -18,6 +25,7 @@
 //! engine: a renderer implements [`PathOracle`] and draws from a [`Sampler`].
 
 use core::fmt::Debug;
+use core::marker::PhantomData;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
@@ -130,6 +138,38 @@ impl<R> PathSample<R> {
     }
 }
 
+/// A contribution of a path at a film point other than the one it was traced
+/// through (light tracing, `t = 1`).
+///
+/// Its scale is that of [`PathSample::radiance`]: with one path per pixel
+/// (film points uniform in each pixel), the estimate of a pixel is the sum of
+/// the radiances traced through it and of every splat that lands in it. A
+/// light-tracing splat is therefore the path's contribution divided by the
+/// density of its strategy with respect to film area measured in pixels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Splat<R> {
+    /// Where it lands; must be inside the film.
+    pub film: FilmPoint,
+    /// Its contribution, finite and non-negative.
+    pub radiance: R,
+}
+
+/// Where an oracle puts the [`Splat`]s of the path it traces.
+pub trait SplatSink<R> {
+    /// Adds a contribution of `radiance` at `film`.
+    fn splat(&mut self, film: FilmPoint, radiance: R);
+}
+
+/// A sink that drops every splat: for callers that use only the radiance at
+/// the traced film point (stratified MCMC's tile chains, seed 001, stratify
+/// only what lands on their own pixels).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DropSplats;
+
+impl<R> SplatSink<R> for DropSplats {
+    fn splat(&mut self, _film: FilmPoint, _radiance: R) {}
+}
+
 /// A radiance value: RGB for renderers, a scalar for analytic targets.
 ///
 /// Values must be finite and non-negative; the engine excludes (and counts)
@@ -237,44 +277,54 @@ pub trait PathOracle: Sync {
     fn resolution(&self) -> Resolution;
 
     /// Trace one path through `film`, drawing every other random decision from
-    /// `sampler`. Must be pure (see the module docs).
+    /// `sampler` and handing contributions that land elsewhere on the film to
+    /// `splats`. Must be pure (see the module docs): the splats too.
     fn trace<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,
         sampler: &mut S,
         temperature: Temperature,
+        splats: &mut dyn SplatSink<Self::Radiance>,
     ) -> PathSample<Self::Radiance>;
 }
 
-/// A closure as an oracle: `trace(film, sampler, temperature)` over a film
-/// of `resolution`. For tests, analytic targets and quick experiments (each
+/// A closure as an oracle: `trace(film, sampler, temperature, splats)` over a
+/// film of `resolution`. For tests, analytic targets and quick experiments (each
 /// number is drawn through a `dyn Sampler`, a virtual call; implement
 /// [`PathOracle`] for a renderer).
 ///
 /// ```
-/// use strata_engine::{FilmPoint, FnOracle, PathOracle, PathSample, Resolution, Sampler, Temperature};
-/// let oracle = FnOracle::new(Resolution::new(4, 4), |film: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
-///     PathSample::new(if s.next_1d() < 0.5 { film.x } else { 0.0 })
-/// });
+/// use strata_engine::{FilmPoint, FnOracle, PathOracle, PathSample, Resolution, Sampler, SplatSink, Temperature};
+/// let oracle = FnOracle::new(
+///     Resolution::new(4, 4),
+///     |film: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<f32>| {
+///         PathSample::new(if s.next_1d() < 0.5 { film.x } else { 0.0 })
+///     },
+/// );
 /// assert_eq!(oracle.resolution().pixel_count(), 16);
 /// ```
 #[derive(Clone, Copy, Debug)]
-pub struct FnOracle<F> {
+pub struct FnOracle<F, R> {
     resolution: Resolution,
     trace: F,
+    radiance: PhantomData<fn() -> R>,
 }
 
-impl<F> FnOracle<F> {
+impl<F, R> FnOracle<F, R> {
     /// `trace` over a film of `resolution`.
     pub fn new(resolution: Resolution, trace: F) -> Self {
-        Self { resolution, trace }
+        Self {
+            resolution,
+            trace,
+            radiance: PhantomData,
+        }
     }
 }
 
-impl<R, F> PathOracle for FnOracle<F>
+impl<R, F> PathOracle for FnOracle<F, R>
 where
     R: Radiance,
-    F: Fn(FilmPoint, &mut dyn Sampler, Temperature) -> PathSample<R> + Sync,
+    F: Fn(FilmPoint, &mut dyn Sampler, Temperature, &mut dyn SplatSink<R>) -> PathSample<R> + Sync,
 {
     type Radiance = R;
 
@@ -287,8 +337,9 @@ where
         film: FilmPoint,
         mut sampler: &mut S,
         temperature: Temperature,
+        splats: &mut dyn SplatSink<R>,
     ) -> PathSample<R> {
-        (self.trace)(film, &mut sampler, temperature)
+        (self.trace)(film, &mut sampler, temperature, splats)
     }
 }
 

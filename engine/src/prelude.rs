@@ -12,7 +12,7 @@ pub use crate::method::{
     Settings, StratifiedSettings, render, resume,
 };
 pub use crate::oracle::{
-    FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb, Sampler,
-    Temperature,
+    DropSplats, FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb,
+    Sampler, Splat, SplatSink, Temperature,
 };
 pub use crate::target::{FnImportance, Importance, Luminance, MaxChannel};

@@ -1,10 +1,12 @@
 //! Checking the oracle contract's purity: the same film point, numbers and
-//! stream switches must give the same path, bit for bit (see
+//! stream switches must give the same path and splats, bit for bit (see
 //! [`oracle`](crate::oracle)).
 
 use alloc::vec::Vec;
 
-use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Sampler, Temperature};
+use crate::oracle::{
+    FilmPoint, PathOracle, PathSample, Radiance, Sampler, Splat, SplatSink, Temperature,
+};
 use crate::rng::{self, Domain};
 
 /// What [`check_purity`] found.
@@ -12,8 +14,12 @@ use crate::rng::{self, Domain};
 pub struct PurityViolation<R> {
     /// The trace whose numbers were recorded.
     pub first: PathSample<R>,
+    /// Its splats.
+    pub first_splats: Vec<Splat<R>>,
     /// The replay of the same numbers.
     pub replay: PathSample<R>,
+    /// Its splats.
+    pub replay_splats: Vec<Splat<R>>,
     /// Numbers drawn by the first trace.
     pub drawn: usize,
 }
@@ -34,7 +40,8 @@ pub fn check_purity<O: PathOracle>(
             rng: rng::stream(seed, Domain::User, trial as u64),
             log: Vec::new(),
         };
-        let first = oracle.trace(film, &mut recorder, temperature);
+        let mut first_splats = Collect(Vec::new());
+        let first = oracle.trace(film, &mut recorder, temperature, &mut first_splats);
         let drawn = recorder
             .log
             .iter()
@@ -44,20 +51,40 @@ pub fn check_purity<O: PathOracle>(
             log: &recorder.log,
             at: 0,
         };
-        let replay = oracle.trace(film, &mut replayer, temperature);
+        let mut replay_splats = Collect(Vec::new());
+        let replay = oracle.trace(film, &mut replayer, temperature, &mut replay_splats);
+        let same_radiance = |a: &O::Radiance, b: &O::Radiance| {
+            (0..O::Radiance::CHANNELS).all(|i| a.channel(i).to_bits() == b.channel(i).to_bits())
+        };
+        let same_point = |a: FilmPoint, b: FilmPoint| {
+            a.x.to_bits() == b.x.to_bits() && a.y.to_bits() == b.y.to_bits()
+        };
         let same = first.flags == replay.flags
-            && (0..O::Radiance::CHANNELS).all(|i| {
-                first.radiance.channel(i).to_bits() == replay.radiance.channel(i).to_bits()
+            && same_radiance(&first.radiance, &replay.radiance)
+            && first_splats.0.len() == replay_splats.0.len()
+            && first_splats.0.iter().zip(&replay_splats.0).all(|(a, b)| {
+                same_point(a.film, b.film) && same_radiance(&a.radiance, &b.radiance)
             });
         if !same || replayer.at != recorder.log.len() {
             return Err(PurityViolation {
                 first,
+                first_splats: first_splats.0,
                 replay,
+                replay_splats: replay_splats.0,
                 drawn,
             });
         }
     }
     Ok(())
+}
+
+/// Every splat of a trace, in order.
+struct Collect<R>(Vec<Splat<R>>);
+
+impl<R> SplatSink<R> for Collect<R> {
+    fn splat(&mut self, film: FilmPoint, radiance: R) {
+        self.0.push(Splat { film, radiance });
+    }
 }
 
 #[derive(Clone, Copy)]
@@ -121,7 +148,7 @@ mod tests {
     fn purity_check_accepts_pure_and_rejects_impure_oracles() {
         let pure = FnOracle::new(
             Resolution::new(1, 1),
-            |f: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+            |f: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
                 let mut v = f.x;
                 while s.next_1d() < 0.7 {
                     v += s.next_1d();
@@ -133,7 +160,7 @@ mod tests {
         let calls = AtomicU32::new(0);
         let impure = FnOracle::new(
             Resolution::new(1, 1),
-            |_: FilmPoint, s: &mut dyn Sampler, _: Temperature| {
+            |_: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<_>| {
                 let n = calls.fetch_add(1, Ordering::Relaxed);
                 PathSample::new(s.next_1d() + n as f32)
             },

@@ -17,7 +17,7 @@
 
 use glam::Vec3;
 use strata_engine::{
-    FilmPoint, PathFlags, PathOracle, PathSample, Resolution, Rgb, Sampler, Temperature,
+    FilmPoint, PathFlags, PathOracle, PathSample, Resolution, Rgb, Sampler, SplatSink, Temperature,
 };
 
 use crate::geometry::{Frame, Intersector, Ray, power_heuristic, uniform_triangle};
@@ -211,6 +211,7 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
         film: FilmPoint,
         sampler: &mut S,
         temperature: Temperature,
+        _: &mut dyn SplatSink<Rgb>,
     ) -> PathSample<Rgb> {
         let (l, flags) = self.radiance(film, sampler, temperature.0);
         PathSample {

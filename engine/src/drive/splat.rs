@@ -17,6 +17,7 @@ use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{FilmPoint, Radiance, Resolution};
 use crate::parallel;
+use crate::target::Evaluated;
 
 /// One weighted contribution waiting to be added to the film.
 #[derive(Clone, Copy, Debug)]
@@ -52,6 +53,18 @@ impl<R> RoundBuffers<R> {
             weight,
             radiance,
         });
+    }
+
+    /// Queues every contribution of `path` (its radiance and its splats)
+    /// with `weight`.
+    #[inline]
+    pub fn splat_path(&mut self, path: &Evaluated<R>, weight: f64)
+    where
+        R: Radiance,
+    {
+        for (p, radiance) in path.contributions() {
+            self.splat(p, radiance, weight);
+        }
     }
 
     /// Counts a chain state at film point `p`.

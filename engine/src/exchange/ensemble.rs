@@ -16,7 +16,7 @@ use crate::bootstrap::{Bootstrap, Halt};
 use crate::chain::{ChainStats, Normalization};
 use crate::error::{Error, check_probability};
 use crate::mutate::MutationParams;
-use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance};
+use crate::oracle::{PathOracle, Radiance};
 use crate::rng::{self, Domain, uniform_f64};
 use crate::target::{Evaluated, Importance};
 
@@ -155,11 +155,7 @@ impl<R: Radiance> Ensemble<R> {
                         "replaying a bootstrap candidate changed its value: the oracle is not a \
                          pure function of (film point, numbers drawn, temperature)"
                     );
-                    TemperedPath {
-                        film: first.film,
-                        radiance: first.sample.radiance,
-                        values,
-                    }
+                    TemperedPath::new(first, values)
                 },
             );
             replicas.push(Box::new(started.chain));
@@ -260,13 +256,7 @@ impl<R: Radiance> Ensemble<R> {
         };
         for replica in &mut self.replicas {
             let (sampler, path) = replica.parts_mut();
-            let first = Evaluated {
-                film: path.film,
-                sample: PathSample::new(path.radiance),
-                importance: path.values[0],
-                invalid: false,
-            };
-            levels.replay_row(oracle, importance, sampler, &first, &mut path.values);
+            levels.replay_row(oracle, importance, sampler, &path.path, &mut path.values);
         }
         let m = self.temperatures.len();
         self.stats = ExchangeStats::new(m);
@@ -275,15 +265,15 @@ impl<R: Radiance> Ensemble<R> {
     }
 
     /// One sweep: chains mutate from the hottest down, with `exchange`'s hooks
-    /// around each mutation and after the sweep. `splat(film, f, weight)`
-    /// receives the weighted contributions (see
+    /// around each mutation and after the sweep. `splat(path, weight)`
+    /// receives the weighted untempered paths (see
     /// [`TemperedPath`](super::TemperedPath)); the method scales them by `W·H / sweeps`.
     pub fn sweep<O, I>(
         &mut self,
         oracle: &O,
         importance: &I,
         exchange: &mut (impl Move<Replica<R>> + ?Sized),
-        mut splat: impl FnMut(FilmPoint, R, f64),
+        mut splat: impl FnMut(&Evaluated<R>, f64),
     ) where
         O: PathOracle<Radiance = R>,
         I: Importance<R> + ?Sized,
@@ -311,7 +301,7 @@ impl<R: Radiance> Ensemble<R> {
                 let proposed = jump.proposal.state();
                 let w = weights.weight(a, proposed);
                 if w > 0.0 {
-                    splat(proposed.film, proposed.radiance, w);
+                    splat(&proposed.path, w);
                 }
                 let before = match &jump.replaced {
                     Some(replaced) => replaced.state(),
@@ -319,7 +309,7 @@ impl<R: Radiance> Ensemble<R> {
                 };
                 let w = weights.weight(1.0 - a, before);
                 if w > 0.0 {
-                    splat(before.film, before.radiance, w);
+                    splat(&before.path, w);
                 }
                 if jump.accepted {
                     // The past state's random stream belongs to its chain:
@@ -353,7 +343,7 @@ impl<R: Radiance> Ensemble<R> {
                 large,
                 &mut self.decisions[c],
                 &mut self.chain_stats[c],
-                |path, weight| splat(path.film, path.radiance, weight),
+                |state, weight| splat(&state.path, weight),
             );
             if large {
                 let row = &self.replicas[c].last_proposal().values;

@@ -33,9 +33,9 @@ use crate::bootstrap::{Bootstrap, Halt};
 use crate::chain::{Chain, Target, Traced, Weights};
 use crate::error::Error;
 use crate::mutate::SmallStep;
-use crate::oracle::{FilmPoint, PathOracle, Radiance, Temperature};
+use crate::oracle::{PathOracle, Radiance, Temperature};
 use crate::sample::{MltSampler, Proposal};
-use crate::target::{Evaluated, Importance, evaluate};
+use crate::target::{Evaluated, Importance, SplatList};
 
 /// How the chains' targets are tempered.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -79,13 +79,27 @@ impl Tempering {
 /// A path with the value of every chain's target at it: what an ensemble's
 /// state holds.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(bound(deserialize = "R: Deserialize<'de>"))]
 pub struct TemperedPath<R> {
-    /// Where on the film.
-    pub film: FilmPoint,
-    /// The untempered contribution `f(u)`.
-    pub radiance: R,
+    /// The untempered path `f(u)`, with its splats.
+    pub path: Evaluated<R>,
     /// `π_j(u)` for every chain `j`.
     pub values: Vec<f64>,
+    /// The splat buffer of the path retraced at other temperatures (oracle
+    /// tempering), kept so that retracing does not allocate.
+    #[serde(skip)]
+    retraced: SplatList<R>,
+}
+
+impl<R: Radiance> TemperedPath<R> {
+    /// The untempered `path` with the values `values`.
+    pub fn new(path: Evaluated<R>, values: Vec<f64>) -> Self {
+        Self {
+            path,
+            values,
+            retraced: SplatList::default(),
+        }
+    }
 }
 
 /// One state of an ensemble: a primary sample and its tempered path. When
@@ -108,27 +122,26 @@ pub(crate) struct Levels<'a> {
 }
 
 impl Levels<'_> {
-    /// Fills `row[j] = π_j(u)` from the first trace (at `T = 1`) and, under
-    /// oracle tempering, `retrace(T)` at the other temperatures.
-    pub fn fill_row<R: Radiance>(
+    /// Fills `row[j] = π_j(u)` from the importance of the first trace (at
+    /// `T = 1`) and, under oracle tempering, from `retrace(T)` (the
+    /// importance and invalidity of the path traced at `T`) at the others.
+    pub fn fill_row(
         &self,
-        first: &Evaluated<R>,
+        first: f64,
         row: &mut [f64],
-        mut retrace: impl FnMut(f64) -> Evaluated<R>,
+        mut retrace: impl FnMut(f64) -> (f64, bool),
     ) -> Traced {
-        row[0] = first.importance;
+        row[0] = first;
         let mut traced = Traced::default();
         for (j, &t) in self.temperatures.iter().enumerate().skip(1) {
             row[j] = match self.tempering {
-                Tempering::Power if first.importance > 0.0 => {
-                    libm::exp(libm::log(first.importance) / t)
-                }
+                Tempering::Power if first > 0.0 => libm::exp(libm::log(first) / t),
                 Tempering::Power => 0.0,
                 Tempering::Oracle => {
-                    let e = retrace(t);
+                    let (importance, invalid) = retrace(t);
                     traced.paths += 1;
-                    traced.invalid += e.invalid as u64;
-                    e.importance
+                    traced.invalid += invalid as u64;
+                    importance
                 }
             };
         }
@@ -150,11 +163,12 @@ impl Levels<'_> {
         I: Importance<O::Radiance> + ?Sized,
     {
         let resolution = oracle.resolution();
-        self.fill_row(first, row, |t| {
+        let mut retraced = Evaluated::default();
+        self.fill_row(first.importance, row, |t| {
             let mut replay = sampler.replay();
             let film = replay.film_point(resolution);
-            let traced = oracle.trace(film, &mut replay, Temperature(t as f32));
-            evaluate(importance, traced, film)
+            retraced.trace(oracle, film, &mut replay, Temperature(t as f32), importance);
+            (retraced.importance, retraced.invalid)
         })
     }
 }
@@ -216,20 +230,35 @@ where
 
     fn evaluate(&self, proposal: &mut Proposal<'_>, state: &mut Self::State) -> Traced {
         let film = proposal.film_point(self.oracle.resolution());
-        let traced = self.oracle.trace(film, proposal, Temperature::ONE);
-        let first = evaluate(self.importance, traced, film);
-        state.film = film;
-        state.radiance = first.sample.radiance;
-        state.values.resize(self.levels.temperatures.len(), 0.0);
+        let TemperedPath {
+            path,
+            values,
+            retraced,
+        } = state;
+        path.trace(
+            self.oracle,
+            film,
+            proposal,
+            Temperature::ONE,
+            self.importance,
+        );
+        values.resize(self.levels.temperatures.len(), 0.0);
         let mut traced = Traced {
             paths: 1,
-            invalid: first.invalid as u64,
+            invalid: path.invalid as u64,
         };
-        traced += self.levels.fill_row(&first, &mut state.values, |t| {
+        let mut other = Evaluated {
+            splats: core::mem::take(retraced),
+            ..Evaluated::default()
+        };
+        traced += self.levels.fill_row(path.importance, values, |t| {
             proposal.restart();
-            let traced = self.oracle.trace(film, proposal, Temperature(t as f32));
-            evaluate(self.importance, traced, film)
+            let t = Temperature(t as f32);
+            other.trace(self.oracle, film, proposal, t, self.importance);
+            (other.importance, other.invalid)
         });
+        *retraced = other.splats;
+        retraced.clear();
         traced
     }
 

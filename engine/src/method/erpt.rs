@@ -46,7 +46,7 @@ use crate::oracle::{PathOracle, Radiance, Resolution, Temperature};
 use crate::parallel;
 use crate::rng::{self, Domain, uniform_f64};
 use crate::sample::MltSampler;
-use crate::target::{Evaluated, Importance, evaluate};
+use crate::target::{Evaluated, Importance};
 
 /// Settings of ERPT. The budget counts MC paths and chain steps, rounded to
 /// whole passes (at least one) at the expected cost of a pass; a pass has at
@@ -336,9 +336,11 @@ struct Segment<R> {
     buffers: RoundBuffers<R>,
     /// Counters over every run so far.
     totals: Totals,
+    /// The start path being traced (its splat buffer reused).
+    path: Evaluated<R>,
 }
 
-impl<R> Segment<R> {
+impl<R: Default> Segment<R> {
     fn new(bands: SplatBands, totals: Totals) -> Self {
         Self {
             first: 0,
@@ -347,6 +349,7 @@ impl<R> Segment<R> {
             chains: 0..0,
             buffers: RoundBuffers::new(bands),
             totals,
+            path: Evaluated::default(),
         }
     }
 }
@@ -523,9 +526,9 @@ where
     );
     let mut proposal = sampler.propose(true);
     let film = proposal.film_point_in_pixel(resolution, pixel);
-    let traced = oracle.trace(film, &mut proposal, Temperature::ONE);
+    let first = &mut w.path;
+    first.trace(oracle, film, &mut proposal, Temperature::ONE, importance);
     proposal.accept(1.0);
-    let first = evaluate(importance, traced, film);
     w.totals.traces += 1;
     w.totals.invalid += first.invalid as u64;
     let expected = first.importance / (settings.chain_length as f64 * energy);
@@ -536,7 +539,7 @@ where
     (chains >= 1.0).then(|| Start {
         index,
         sampler,
-        first,
+        first: first.clone(),
         chains: chains.min(u32::MAX as f64) as u64,
     })
 }
@@ -563,7 +566,7 @@ fn redistribute<O, I>(
     let mut sampler = start.sampler.clone();
     sampler.reseed(rng::stream(chain_seed, Domain::Energy, start.index));
     let mut decisions = rng::stream(chain_seed ^ 0x5bd1_e995, Domain::Energy, start.index);
-    let mut chain = Chain::new(sampler, start.first);
+    let mut chain = Chain::new(sampler, start.first.clone());
     for _ in 0..settings.chain_length {
         let buffers = &mut w.buffers;
         let outcome = chain.step(
@@ -572,7 +575,7 @@ fn redistribute<O, I>(
             false,
             &mut decisions,
             &mut w.totals.chains,
-            |path, weight| buffers.splat(path.film, path.sample.radiance, weight),
+            |path, weight| buffers.splat_path(path, weight),
         );
         w.buffers.visit(chain.state().film);
         w.totals.traces += 1;

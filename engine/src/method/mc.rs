@@ -13,11 +13,11 @@ use crate::checkpoint;
 use crate::drive::{Rounds, drive};
 use crate::error::Error;
 use crate::film::Film;
-use crate::oracle::{FilmPoint, PathOracle, Radiance, Sampler, Temperature};
+use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Sampler, Temperature};
 use crate::parallel;
 use crate::rng::{self, Domain};
 use crate::sample::IndependentSampler;
-use crate::target::Importance;
+use crate::target::{Evaluated, FnImportance, Importance};
 
 /// MC under `job` (the importance function is not used).
 pub(crate) fn render<O, I>(job: &Job<'_, O, I>) -> Result<Output, Error>
@@ -95,14 +95,20 @@ impl<O: PathOracle> Rounds for Passes<'_, O> {
     }
 }
 
-/// One path per pixel, rows in parallel; returns the number of invalid samples.
+/// One path per pixel, rows in parallel; returns the number of invalid
+/// samples. Each row's splats are kept apart and added after the pass, row
+/// by row, so the film does not depend on the thread count.
 fn pass<O: PathOracle>(oracle: &O, seed: u64, pass: u64, film: &mut Film) -> u64 {
     let resolution = film.resolution();
     let channels = O::Radiance::CHANNELS;
     let row_len = resolution.width as usize * channels;
-    parallel::sum_chunks(film.data_mut(), row_len, |y, values| {
+    let rows = parallel::map_chunks(film.data_mut(), row_len, |y, values| {
         let index = pass * resolution.height as u64 + y as u64;
         let mut sampler = IndependentSampler::new(rng::stream(seed, Domain::Independent, index));
+        let mut path = Evaluated::default();
+        // MC needs no importance: validity only.
+        let unvalued = FnImportance(|_: &PathSample<O::Radiance>, _: FilmPoint| 0.0);
+        let mut splats = Vec::new();
         let mut invalid = 0u64;
         for x in 0..resolution.width as usize {
             let [u, v] = sampler.next_2d();
@@ -110,16 +116,31 @@ fn pass<O: PathOracle>(oracle: &O, seed: u64, pass: u64, film: &mut Film) -> u64
                 x: x as f32 + u,
                 y: y as f32 + v,
             };
-            let sample = oracle.trace(film_point, &mut sampler, Temperature::ONE);
-            if sample.radiance.is_valid() {
-                let px = &mut values[x * channels..(x + 1) * channels];
-                for (c, p) in px.iter_mut().enumerate() {
-                    *p += sample.radiance.channel(c) as f64;
-                }
-            } else {
+            path.trace(
+                oracle,
+                film_point,
+                &mut sampler,
+                Temperature::ONE,
+                &unvalued,
+            );
+            if path.invalid {
                 invalid += 1;
+                continue;
             }
+            let px = &mut values[x * channels..(x + 1) * channels];
+            for (c, p) in px.iter_mut().enumerate() {
+                *p += path.sample.radiance.channel(c) as f64;
+            }
+            splats.extend_from_slice(path.splats.as_slice());
         }
-        invalid
-    })
+        (invalid, splats)
+    });
+    let mut invalid = 0;
+    for (row_invalid, splats) in rows {
+        invalid += row_invalid;
+        for s in splats {
+            film.add(resolution.pixel_index(s.film), 1.0, &s.radiance);
+        }
+    }
+    invalid
 }

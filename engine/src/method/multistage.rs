@@ -41,7 +41,7 @@ use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, drive};
 use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{
-    FilmPoint, PathOracle, PathSample, Radiance, Resolution, Sampler, Temperature,
+    FilmPoint, PathOracle, PathSample, Radiance, Resolution, Sampler, SplatSink, Temperature,
 };
 use crate::target::{FnImportance, Importance};
 
@@ -208,19 +208,42 @@ impl<O: PathOracle> PathOracle for ProbeOracle<'_, O> {
         film: FilmPoint,
         sampler: &mut S,
         t: Temperature,
+        splats: &mut dyn SplatSink<Self::Radiance>,
     ) -> PathSample<Self::Radiance> {
-        let s = self.oracle.trace(film, sampler, t);
-        let pixel = self.resolution().pixel_index(film);
-        let d = s.radiance.luminance() as f64 - self.estimate[pixel];
+        let mut probed = ProbedSplats {
+            probe: self,
+            splats,
+        };
+        let s = self.oracle.trace(film, sampler, t, &mut probed);
         PathSample {
-            radiance: Probed {
-                radiance: s.radiance,
-                // Saturated: a square beyond f32's range is still a valid
-                // (huge) deviation, not an invalid sample.
-                deviation: (d * d).min(f64::from(f32::MAX)) as f32,
-            },
+            radiance: self.probed(film, s.radiance),
             flags: s.flags,
         }
+    }
+}
+
+impl<O: PathOracle> ProbeOracle<'_, O> {
+    /// `radiance` at `film` with its squared deviation from the estimate.
+    fn probed(&self, film: FilmPoint, radiance: O::Radiance) -> Probed<O::Radiance> {
+        let d = radiance.luminance() as f64 - self.estimate[self.resolution().pixel_index(film)];
+        Probed {
+            radiance,
+            // Saturated: a square beyond f32's range is still a valid (huge)
+            // deviation, not an invalid sample.
+            deviation: (d * d).min(f64::from(f32::MAX)) as f32,
+        }
+    }
+}
+
+/// The inner oracle's splats, [`Probed`] at their own pixels.
+struct ProbedSplats<'a, 'b, O: PathOracle> {
+    probe: &'a ProbeOracle<'a, O>,
+    splats: &'b mut dyn SplatSink<Probed<O::Radiance>>,
+}
+
+impl<O: PathOracle> SplatSink<O::Radiance> for ProbedSplats<'_, '_, O> {
+    fn splat(&mut self, film: FilmPoint, radiance: O::Radiance) {
+        self.splats.splat(film, self.probe.probed(film, radiance));
     }
 }
 

@@ -229,7 +229,7 @@ where
             let buffers = &mut self.buffers;
             self.chain
                 .step(self.oracle, self.importance, |path, weight| {
-                    buffers.splat(path.film, path.sample.radiance, weight);
+                    buffers.splat_path(path, weight);
                 });
             self.buffers.visit(self.chain.current().film);
         }

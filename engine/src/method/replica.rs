@@ -164,7 +164,7 @@ where
         parallel::for_each(&mut work, |w| {
             for _ in 0..sweeps {
                 let EnsembleState { ensemble, exchange } = &mut w.state;
-                ensemble.sweep(oracle, importance, exchange, |_, _, _| {});
+                ensemble.sweep(oracle, importance, exchange, |_, _| {});
             }
         });
         tuned += sweeps;
@@ -298,14 +298,11 @@ where
         for _ in 0..sweeps {
             let buffers = &mut self.buffers;
             let EnsembleState { ensemble, exchange } = &mut self.state;
-            ensemble.sweep(
-                self.oracle,
-                self.importance,
-                exchange,
-                |p, radiance, weight| buffers.splat(p, radiance, weight),
-            );
+            ensemble.sweep(self.oracle, self.importance, exchange, |path, weight| {
+                buffers.splat_path(path, weight)
+            });
             for r in self.state.ensemble.replicas() {
-                self.buffers.visit(r.state().film);
+                self.buffers.visit(r.state().path.film);
             }
         }
     }

@@ -14,7 +14,9 @@ use crate::bootstrap::{Bootstrap, NEVER};
 use crate::chain::PathChain;
 use crate::drive::Clock;
 use crate::error::Error;
-use crate::oracle::{FilmPoint, PathOracle, PathSample, Resolution, Sampler, Temperature};
+use crate::oracle::{
+    FilmPoint, PathOracle, PathSample, Resolution, Sampler, SplatSink, Temperature,
+};
 use crate::parallel;
 use crate::sample::MltSampler;
 use crate::target::{Importance, MaxChannel};
@@ -53,6 +55,7 @@ where
         film: FilmPoint,
         sampler: &mut S,
         _temperature: Temperature,
+        _splats: &mut dyn SplatSink<f32>,
     ) -> PathSample<f32> {
         let tile = self.ctx.tiles.resolution().pixel_index(film);
         let jitter = jitter_of(film);

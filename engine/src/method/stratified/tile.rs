@@ -13,10 +13,12 @@ use crate::rng::Pcg32;
 
 use crate::chain::{Chain, ChainStats, Target, Traced, Weights};
 use crate::mutate::MutationParams;
-use crate::oracle::{FilmPoint, PathOracle, Radiance, Resolution, Sampler, Temperature};
+use crate::oracle::{
+    DropSplats, FilmPoint, PathOracle, Radiance, Resolution, Sampler, Temperature,
+};
 use crate::rng::{self, Domain, uniform_f64};
 use crate::sample::{IndependentSampler, MltSampler, Proposal};
-use crate::target::{Importance, evaluate};
+use crate::target::{Evaluated, Importance};
 use crate::tiles::Tiles;
 
 /// One tile pixel's evaluation of a state.
@@ -102,8 +104,17 @@ where
     ) -> (Value<O::Radiance>, bool) {
         sampler.start_stream(0);
         let film = self.tiles.pixel_point(pixel, jitter);
-        let traced = self.oracle.trace(film, sampler, Temperature::ONE);
-        let e = evaluate(self.importance, traced, film);
+        // Tile chains stratify only what lands on their own pixel (seed 001
+        // sec. 5: light tracing "cannot be stratified in the image space"): its
+        // splats are estimated apart.
+        let mut e = Evaluated {
+            film,
+            sample: self
+                .oracle
+                .trace(film, sampler, Temperature::ONE, &mut DropSplats),
+            ..Evaluated::default()
+        };
+        e.value(self.importance, self.oracle.resolution());
         (
             Value {
                 radiance: e.sample.radiance,

@@ -122,6 +122,14 @@ impl Film {
         Ok(())
     }
 
+    /// Adds `s ·` `other`, a film of the same size and channels.
+    pub fn add_scaled(&mut self, other: &Film, s: f64) {
+        debug_assert_eq!(self.data.len(), other.data.len());
+        for (v, o) in self.data.iter_mut().zip(&other.data) {
+            *v += s * o;
+        }
+    }
+
     /// Multiplies every value by `s`.
     pub fn scale(&mut self, s: f64) {
         self.data.iter_mut().for_each(|v| *v *= s);

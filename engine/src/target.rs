@@ -97,6 +97,16 @@ impl<R> SplatSink<R> for SplatList<R> {
     }
 }
 
+/// Whether a splat of `radiance` at `film` is one the engine accepts on a
+/// film of `resolution`: inside it, finite and non-negative.
+pub fn valid_splat<R: Radiance>(film: FilmPoint, radiance: &R, resolution: Resolution) -> bool {
+    film.x >= 0.0
+        && film.y >= 0.0
+        && film.x < resolution.width as f32
+        && film.y < resolution.height as f32
+        && radiance.is_valid()
+}
+
 /// A traced path after validation: its sample and splats (zeroed when
 /// invalid) and its importance.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -142,19 +152,13 @@ impl<R: Radiance> Evaluated<R> {
     /// by all of its contributions; a sum keeps any per-film-point `I`
     /// meaningful).
     pub fn value<I: Importance<R> + ?Sized>(&mut self, importance: &I, resolution: Resolution) {
-        let inside = |p: FilmPoint| {
-            p.x >= 0.0
-                && p.y >= 0.0
-                && p.x < resolution.width as f32
-                && p.y < resolution.height as f32
-        };
         let mut valid = self.sample.radiance.is_valid()
             && !self.splats.overflowed
             && self
                 .splats
                 .as_slice()
                 .iter()
-                .all(|s| s.radiance.is_valid() && inside(s.film));
+                .all(|s| valid_splat(s.film, &s.radiance, resolution));
         let mut value = 0.0;
         if valid {
             value = importance.importance(&self.sample, self.film);

@@ -62,7 +62,7 @@ where
         let mut target = 0.0f64;
         let (mut traces, mut invalid) = (0, 0);
         for (_, q) in self.ctx.tiles.pixels(tile) {
-            let (v, bad) = self.ctx.trace_in(sampler, q, jitter);
+            let (v, bad) = self.ctx.trace_in(sampler, q, jitter, None);
             target = target.max(v.importance);
             traces += 1;
             invalid += bad as u64;

@@ -79,7 +79,7 @@ use serde::{Deserialize, Serialize};
 use self::init::initialize;
 use self::local::{exchange_all, exchange_cost};
 use self::regularizer::{Halves, LargeSteps, anchor_total, fall_back, take_known};
-use self::tile::{Context, Start, TileChain};
+use self::tile::{Context, LightTracing, Start, TileChain};
 use super::{Extras, Job, Output};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;
@@ -252,6 +252,16 @@ impl StratifiedSettings {
             Solver::Weighted(w) => w.validate()?,
             Solver::LogDomain(l) => l.validate()?,
         }
+        if self.mutation.large_step_probability == 0.0 && self.regularizer_paths == 0 {
+            // The regularizer (eq. 11) and the light-tracing estimate need
+            // independent samples.
+            return Err(Error::invalid(
+                "large_step_probability",
+                0.0,
+                "a value > 0, or regularizer_paths > 0 (stratified MCMC's Monte Carlo \
+                 estimates need independent samples)",
+            ));
+        }
         let init = &self.initialization;
         check_probability("coverage", init.coverage)?;
         check_probability("max_budget_fraction", init.max_budget_fraction)?;
@@ -350,8 +360,16 @@ where
     let n = tiles.count();
     let offsets = tiles.offsets().len();
     let sweep_cost = sweep_cost(&tiles, settings);
+    let new_light = || {
+        LightTracing::new(
+            &tiles,
+            settings.mutation.large_step_probability,
+            settings.regularizer_paths,
+            O::Radiance::CHANNELS,
+        )
+    };
     if let Some((position, saved)) = job.resumed::<Saved<O::Radiance>>()? {
-        let (chains, stats, exchange_rounds, invalid, bootstrap_traces) = saved;
+        let (chains, stats, exchange_rounds, invalid, bootstrap_traces, light) = saved;
         let per_tile = offsets * O::Radiance::CHANNELS;
         let sound = |v: &[f64]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
         let fits = chains.len() == n
@@ -364,7 +382,9 @@ where
                         .iter()
                         .all(|v| sound(v))
             });
-        if !fits {
+        let light_fits = light.weights == new_light().weights
+            && light.sums.fits(job.resolution, O::Radiance::CHANNELS);
+        if !fits || !light_fits {
             return Err(checkpoint::does_not_fit());
         }
         let mut sweeps = Sweeps {
@@ -375,6 +395,7 @@ where
             exchange_rounds,
             invalid,
             sweep_cost,
+            light,
         };
         let driven = drive(&mut sweeps, job.round_loop(Some(position)), |s, out| {
             s.save(bootstrap_traces, out)
@@ -420,6 +441,7 @@ where
         exchange_rounds: 0,
         invalid: initialized.invalid,
         sweep_cost,
+        light: new_light(),
     };
     let driven = drive(&mut sweeps, job.round_loop(None), |s, out| {
         s.save(initialized.bootstrap, out)
@@ -428,9 +450,10 @@ where
 }
 
 /// What a checkpoint holds of stratified MCMC: the tile chains, the
-/// counters, the exchange rounds, the invalid traces outside the chains and
-/// the bootstrap's traces ([`Sweeps::save`]'s order).
-type Saved<R> = (Vec<TileChain<R>>, StratifiedStats, u64, u64, u64);
+/// counters, the exchange rounds, the invalid traces outside the chains,
+/// the bootstrap's traces and the light-tracing sums ([`Sweeps::save`]'s
+/// order).
+type Saved<R> = (Vec<TileChain<R>>, StratifiedStats, u64, u64, u64, LightTracing);
 
 /// Stratified MCMC's state between rounds: the tile chains and their counters.
 struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
@@ -444,6 +467,8 @@ struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
     invalid: u64,
     /// [`sweep_cost`], computed once (it visits every tile's pairs).
     sweep_cost: f64,
+    /// The splats' estimate.
+    light: LightTracing,
 }
 
 impl<O, I> Sweeps<'_, '_, O, I>
@@ -459,6 +484,7 @@ where
             self.exchange_rounds,
             self.invalid,
             bootstrap_traces,
+            &self.light,
         );
         checkpoint::append(&saved, out);
     }
@@ -514,6 +540,8 @@ where
         if self.settings.anchor_total {
             stats.total_scale = anchor_total(&mut film, &regularizer, &taken);
         }
+        film.add_scaled(&self.light.sums, 1.0 / self.stats.sweeps.max(1) as f64);
+        let stats = &mut self.stats;
         let mut chain_stats = ChainStats::default();
         let mut visits = vec![0u64; tiles.count()];
         for (s, c) in self.chains.iter().enumerate() {
@@ -601,6 +629,9 @@ where
                 traced
             });
             self.invalid += traced.regularizer.invalid;
+            for chain in &mut self.chains {
+                self.light.add(&mut chain.sampled);
+            }
             let stats = &mut self.stats;
             stats.tile_samples += traced.steps;
             stats.regularizer_samples += traced.regularizer.paths;
@@ -638,6 +669,7 @@ where
         if self.settings.anchor_total {
             anchor_total(&mut film, &regularizer, &[]);
         }
+        film.add_scaled(&self.light.sums, 1.0 / self.stats.sweeps.max(1) as f64);
         film
     }
 }

@@ -14,11 +14,12 @@ use crate::rng::Pcg32;
 use crate::chain::{Chain, ChainStats, Target, Traced, Weights};
 use crate::mutate::MutationParams;
 use crate::oracle::{
-    DropSplats, FilmPoint, PathOracle, Radiance, Resolution, Sampler, Temperature,
+    FilmPoint, PathOracle, Radiance, Resolution, Sampler, Splat, SplatSink, Temperature,
 };
 use crate::rng::{self, Domain, uniform_f64};
 use crate::sample::{IndependentSampler, MltSampler, Proposal};
-use crate::target::{Evaluated, Importance};
+use crate::film::Film;
+use crate::target::{Evaluated, Importance, SplatList, valid_splat};
 use crate::tiles::Tiles;
 
 /// One tile pixel's evaluation of a state.
@@ -26,6 +27,13 @@ use crate::tiles::Tiles;
 pub(super) struct Value<R> {
     pub radiance: R,
     pub importance: f64,
+}
+
+/// A splat of a tile trace, with the pixel the trace went through.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
+pub(super) struct TileSplat<R> {
+    pub source: u32,
+    pub splat: Splat<R>,
 }
 
 /// A tile chain's state: its jitter replayed in every tile pixel.
@@ -36,6 +44,85 @@ pub(super) struct TileState<R> {
     pub values: Vec<Value<R>>,
     /// `T_s`, the largest importance of the values (eq. 9).
     pub target: f64,
+    /// The splats of those traces (light tracing), which the tile target
+    /// does not count (see [`LightTracing`]).
+    pub splats: Vec<TileSplat<R>>,
+}
+
+/// Light tracing in stratified MCMC. Its splats land anywhere on the film,
+/// so it "cannot be stratified in the image space" (seed 001 sec. 5): the
+/// tile chains value and accumulate only the radiance at their own pixels,
+/// and the splats are estimated apart, by Monte Carlo, from the traces that
+/// are independent uniform samples: the coin-chosen large steps (each a
+/// uniform sample of every pixel of its tile) and the regularizer's paths.
+/// Pixel `p` is such a sample `m_p = p_large · |tiles ∋ p| + regularizer
+/// paths` times per sweep in expectation, whatever the paths found, so by
+/// Wald's identity each splat from `p`, weighted `1 / m_p`, summed over the
+/// sweeps and divided by their number, is an unbiased estimate of the light
+/// tracing image for one camera path per pixel; it is added to the
+/// reconstructed image.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub(super) struct LightTracing {
+    /// `1 / m_p` per pixel (0 where `m_p = 0`).
+    pub weights: Vec<f64>,
+    /// The weighted splats so far.
+    pub sums: Film,
+}
+
+impl LightTracing {
+    pub fn new(tiles: &Tiles, p_large: f64, regularizer_paths: u32, channels: usize) -> Self {
+        let weights = (0..tiles.count())
+            .map(|p| {
+                let m = p_large * tiles.tiles_of(p).count() as f64 + regularizer_paths as f64;
+                if m > 0.0 { 1.0 / m } else { 0.0 }
+            })
+            .collect();
+        Self {
+            weights,
+            sums: Film::new(tiles.resolution(), channels),
+        }
+    }
+
+    /// Adds a tile chain's sampled splats (emptying its list).
+    pub fn add<R: Radiance>(&mut self, sampled: &mut Vec<TileSplat<R>>) {
+        let resolution = self.sums.resolution();
+        for s in sampled.drain(..) {
+            let weight = self.weights[s.source as usize];
+            self.sums
+                .add(resolution.pixel_index(s.splat.film), weight, &s.splat.radiance);
+        }
+    }
+}
+
+/// Where a tile trace's splats go: each is checked (a bad one, or one too
+/// many, makes the trace invalid, as in every method) and, if `keep` is
+/// given, kept with its source pixel.
+struct TileSink<'a, R> {
+    resolution: Resolution,
+    source: u32,
+    keep: Option<&'a mut Vec<TileSplat<R>>>,
+    made: usize,
+    invalid: bool,
+}
+
+impl<R: Radiance> SplatSink<R> for TileSink<'_, R> {
+    fn splat(&mut self, film: FilmPoint, radiance: R) {
+        self.made += 1;
+        if self.made > SplatList::<R>::CAPACITY || !valid_splat(film, &radiance, self.resolution) {
+            self.invalid = true;
+            return;
+        }
+        if let Some(keep) = &mut self.keep {
+            if keep.try_reserve(1).is_err() {
+                self.invalid = true;
+            } else {
+                keep.push(TileSplat {
+                    source: self.source,
+                    splat: Splat { film, radiance },
+                });
+            }
+        }
+    }
 }
 
 /// How a tile got its first state with `T_s > 0`.
@@ -72,6 +159,9 @@ pub(super) struct TileChain<R> {
     pub centre_paths: u64,
     /// Their sampler.
     mc: IndependentSampler,
+    /// The splats of this sweep's uniform samples (coin-chosen large steps,
+    /// regularizer paths), for [`LightTracing`].
+    pub sampled: Vec<TileSplat<R>>,
     pub stats: ChainStats,
     pub start: Start,
     /// A global chain's state was installed and must be evaluated.
@@ -95,32 +185,45 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     /// Replays the state `sampler` is positioned on (film stream read) at
-    /// `jitter` in pixel `pixel`.
+    /// `jitter` in pixel `pixel`: the radiance there and its importance, and
+    /// whether the trace was invalid. Its splats are checked, and added to
+    /// `splats` if given ([`LightTracing`]).
     pub fn trace_in<S: Sampler + ?Sized>(
         &self,
         sampler: &mut S,
         pixel: usize,
         jitter: FilmPoint,
+        splats: Option<&mut Vec<TileSplat<O::Radiance>>>,
     ) -> (Value<O::Radiance>, bool) {
         sampler.start_stream(0);
         let film = self.tiles.pixel_point(pixel, jitter);
-        // Tile chains stratify only what lands on their own pixel (seed 001
-        // sec. 5: light tracing "cannot be stratified in the image space"): its
-        // splats are estimated apart.
+        let resolution = self.oracle.resolution();
+        let kept = splats.as_ref().map_or(0, |s| s.len());
+        let mut sink = TileSink {
+            resolution,
+            source: pixel as u32,
+            keep: splats,
+            made: 0,
+            invalid: false,
+        };
         let mut e = Evaluated {
             film,
-            sample: self
-                .oracle
-                .trace(film, sampler, Temperature::ONE, &mut DropSplats),
+            sample: self.oracle.trace(film, sampler, Temperature::ONE, &mut sink),
             ..Evaluated::default()
         };
-        e.value(self.importance, self.oracle.resolution());
+        e.value(self.importance, resolution);
+        if e.invalid || sink.invalid {
+            if let Some(keep) = sink.keep {
+                keep.truncate(kept);
+            }
+            return (Value::default(), true);
+        }
         (
             Value {
                 radiance: e.sample.radiance,
                 importance: e.importance,
             },
-            e.invalid,
+            false,
         )
     }
 
@@ -138,9 +241,10 @@ where
             .resize(self.tiles.offsets().len(), Value::default());
         out.values.fill(Value::default());
         out.target = 0.0;
+        out.splats.clear();
         let mut traced = Traced::default();
         for (o, q) in self.tiles.pixels(tile) {
-            let (v, bad) = self.trace_in(sampler, q, jitter);
+            let (v, bad) = self.trace_in(sampler, q, jitter, Some(&mut out.splats));
             out.target = out.target.max(v.importance);
             out.values[o] = v;
             traced.paths += 1;
@@ -228,6 +332,7 @@ impl<R: Radiance> TileChain<R> {
         let state = TileState {
             values: vec![Value::default(); offsets],
             target: 0.0,
+            splats: Vec::new(),
         };
         Self {
             chain: Chain::new(sampler, state),
@@ -240,6 +345,7 @@ impl<R: Radiance> TileChain<R> {
             odd_sums: vec![0.0; offsets],
             centre_paths: 0,
             mc: IndependentSampler::new(rng::stream(seed, Domain::Tile, (tile + 2 * tiles) as u64)),
+            sampled: Vec::new(),
             stats: ChainStats::default(),
             start: Start::None,
             pending: false,
@@ -280,6 +386,7 @@ impl<R: Radiance> TileChain<R> {
         if chosen {
             let proposed = self.chain.last_proposal();
             add(&proposed.values, 1.0, &mut self.uniform);
+            self.sampled.extend_from_slice(&proposed.splats);
             let channels = R::CHANNELS;
             let odd = self.large_steps % 2 == 1;
             let sums = self.uniform_squares.iter_mut().zip(&mut self.odd_sums);
@@ -321,7 +428,7 @@ impl<R: Radiance> TileChain<R> {
         let mut invalid = 0;
         for _ in 0..paths {
             let [x, y] = self.mc.next_2d();
-            let (v, bad) = ctx.trace_in(&mut self.mc, tile, FilmPoint { x, y });
+            let (v, bad) = ctx.trace_in(&mut self.mc, tile, FilmPoint { x, y }, Some(&mut self.sampled));
             invalid += bad as u64;
             let sums = &mut self.uniform[centre * channels..(centre + 1) * channels];
             let mut mean = 0.0;
@@ -376,7 +483,7 @@ impl<R: Radiance> TileChain<R> {
             let v = match ctx.tiles.offset_of(from, q) {
                 Some(known) => state.values[known],
                 None => {
-                    let (v, bad) = ctx.trace_in(&mut replay, q, jitter);
+                    let (v, bad) = ctx.trace_in(&mut replay, q, jitter, None);
                     traced.paths += 1;
                     traced.invalid += bad as u64;
                     v

@@ -5,7 +5,7 @@
 //! material and emission directly.
 
 use glam::{Mat4, Vec2, Vec3};
-use strata_engine::Resolution;
+use strata_engine::{FilmPoint, Resolution};
 
 use crate::material::Material;
 
@@ -81,16 +81,23 @@ impl Camera {
         }
     }
 
-    /// The primary ray through film point `(x, y)` in pixels (row 0 at the top).
-    pub fn ray(&self, x: f32, y: f32) -> (Vec3, Vec3) {
+    /// The image plane's aspect factors `(sx, sy)` and `tan(fov / 2)`: at
+    /// distance 1 in camera space it spans `±sx·tan` by `±sy·tan`.
+    fn plane(&self) -> (f32, f32, f32) {
         let (w, h) = (self.resolution.width as f32, self.resolution.height as f32);
         let aspect = w / h;
         let tan = (self.fov_degrees.to_radians() * 0.5).tan();
-        let (sx, sy) = if aspect >= 1.0 {
-            (aspect, 1.0)
+        if aspect >= 1.0 {
+            (aspect, 1.0, tan)
         } else {
-            (1.0, 1.0 / aspect)
-        };
+            (1.0, 1.0 / aspect, tan)
+        }
+    }
+
+    /// The primary ray through film point `(x, y)` in pixels (row 0 at the top).
+    pub fn ray(&self, x: f32, y: f32) -> (Vec3, Vec3) {
+        let (w, h) = (self.resolution.width as f32, self.resolution.height as f32);
+        let (sx, sy, tan) = self.plane();
         let cx = (2.0 * x / w - 1.0) * sx * tan;
         let cy = (1.0 - 2.0 * y / h) * sy * tan;
         let origin = self.camera_to_world.transform_point3(Vec3::ZERO);
@@ -99,6 +106,59 @@ impl Camera {
             .transform_vector3(Vec3::new(cx, cy, 1.0))
             .normalize();
         (origin, dir)
+    }
+}
+
+/// The camera seen from the scene: where points project on the film and how
+/// densely the camera samples directions (for light tracing, Veach 1997
+/// sec. 10.2). Assumes a rigid `camera_to_world` (a mirror allowed).
+#[derive(Clone, Copy, Debug)]
+pub struct Projection {
+    world_to_camera: Mat4,
+    half_plane: (f32, f32),
+    film: (f32, f32),
+    /// The camera's position.
+    pub origin: Vec3,
+    /// Area of the image plane at distance 1 (pbrt's `A`).
+    pub plane_area: f32,
+}
+
+impl Camera {
+    /// The camera's [`Projection`].
+    pub fn projection(&self) -> Projection {
+        let (sx, sy, tan) = self.plane();
+        let half_plane = (sx * tan, sy * tan);
+        Projection {
+            world_to_camera: self.camera_to_world.inverse(),
+            half_plane,
+            film: (self.resolution.width as f32, self.resolution.height as f32),
+            origin: self.camera_to_world.transform_point3(Vec3::ZERO),
+            plane_area: 4.0 * half_plane.0 * half_plane.1,
+        }
+    }
+}
+
+impl Projection {
+    /// The film point `p` projects to and the cosine between the camera's
+    /// axis and the direction to `p`, if `p` is in front of the camera and
+    /// projects inside the film.
+    pub fn project(&self, p: Vec3) -> Option<(FilmPoint, f32)> {
+        let local = self.world_to_camera.transform_point3(p);
+        if local.z <= 0.0 {
+            return None;
+        }
+        let (cx, cy) = (local.x / local.z, local.y / local.z);
+        let x = (cx / self.half_plane.0 + 1.0) * 0.5 * self.film.0;
+        let y = (1.0 - cy / self.half_plane.1) * 0.5 * self.film.1;
+        let inside = x >= 0.0 && y >= 0.0 && x < self.film.0 && y < self.film.1;
+        inside.then(|| (FilmPoint { x, y }, local.z / local.length()))
+    }
+
+    /// The solid-angle density of the camera ray direction toward `p` when
+    /// film points are uniform over the film: `1 / (A cos³θ)` (0 off the film).
+    pub fn direction_pdf(&self, p: Vec3) -> f32 {
+        self.project(p)
+            .map_or(0.0, |(_, cos)| 1.0 / (self.plane_area * cos * cos * cos))
     }
 }
 

@@ -2,6 +2,7 @@
 //! contract — the default ray backend and the reference for how an oracle
 //! draws every random decision from the engine's sampler.
 
+pub mod bidirectional;
 pub mod builtin;
 pub mod bvh;
 pub mod geometry;
@@ -55,7 +56,7 @@ impl std::fmt::Display for SceneError {
 impl std::error::Error for SceneError {}
 pub use geometry::{Hit, Intersector, Ray};
 pub use scene::{Camera, Mesh, Scene};
-pub use tracer::PathTracer;
+pub use tracer::{PathSampler, PathTracer};
 
 /// A path tracer over the default (obvhs) backend.
 pub fn native_tracer(scene: Scene) -> PathTracer<BvhIntersector> {

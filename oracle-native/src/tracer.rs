@@ -50,12 +50,54 @@ impl Regularization {
     }
 }
 
+/// How a [`PathTracer`] samples paths.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PathSampler {
+    /// Camera paths with next-event estimation (this module).
+    #[default]
+    Unidirectional,
+    /// Camera and light subpaths joined in every way
+    /// ([`bidirectional`](crate::bidirectional)); light tracing splats.
+    Bidirectional,
+    /// One strategy of the bidirectional tracer alone, unweighted: `s`
+    /// light and `t` camera vertices (Veach 1997 fig. 10.3; for tests and
+    /// studies: each is an unbiased estimate of the paths it can sample).
+    Strategy {
+        /// `s`.
+        light: u32,
+        /// `t`.
+        camera: u32,
+    },
+}
+
+impl PathSampler {
+    /// Every path sampler's name.
+    pub const NAMES: [&'static str; 2] = ["unidirectional", "bidirectional"];
+
+    /// Its name (a single strategy is "bidirectional").
+    pub fn name(self) -> &'static str {
+        match self {
+            PathSampler::Unidirectional => Self::NAMES[0],
+            PathSampler::Bidirectional | PathSampler::Strategy { .. } => Self::NAMES[1],
+        }
+    }
+
+    /// The path sampler called `name`.
+    pub fn from_name(name: &str) -> Option<PathSampler> {
+        [PathSampler::Unidirectional, PathSampler::Bidirectional]
+            .into_iter()
+            .find(|s| s.name() == name)
+    }
+}
+
 /// A path tracer over a scene and a ray backend.
 pub struct PathTracer<I> {
-    scene: Scene,
-    accel: I,
+    pub(crate) scene: Scene,
+    pub(crate) accel: I,
     /// Optional roughness floor at connecting vertices.
     pub regularization: Option<Regularization>,
+    /// Unidirectional (the default) or bidirectional.
+    pub sampler: PathSampler,
 }
 
 impl<I: Intersector> PathTracer<I> {
@@ -65,6 +107,7 @@ impl<I: Intersector> PathTracer<I> {
             scene,
             accel,
             regularization: None,
+            sampler: PathSampler::Unidirectional,
         }
     }
 
@@ -194,7 +237,7 @@ impl<I: Intersector> PathTracer<I> {
 }
 
 /// `p` moved off its surface (normal `n`) toward direction `w`.
-fn offset(p: Vec3, n: Vec3, w: Vec3) -> Vec3 {
+pub(crate) fn offset(p: Vec3, n: Vec3, w: Vec3) -> Vec3 {
     let eps = 1e-4 * (1.0 + p.abs().max_element());
     p + n * if n.dot(w) >= 0.0 { eps } else { -eps }
 }
@@ -211,9 +254,18 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
         film: FilmPoint,
         sampler: &mut S,
         temperature: Temperature,
-        _: &mut dyn SplatSink<Rgb>,
+        splats: &mut dyn SplatSink<Rgb>,
     ) -> PathSample<Rgb> {
-        let (l, flags) = self.radiance(film, sampler, temperature.0);
+        let (l, flags) = match self.sampler {
+            PathSampler::Unidirectional => self.radiance(film, sampler, temperature.0),
+            PathSampler::Bidirectional => {
+                self.bidirectional(film, sampler, temperature.0, splats, None)
+            }
+            PathSampler::Strategy { light, camera } => {
+                let only = (light as usize, camera as usize);
+                self.bidirectional(film, sampler, temperature.0, splats, Some(only))
+            }
+        };
         PathSample {
             radiance: Rgb(l.to_array()),
             flags,

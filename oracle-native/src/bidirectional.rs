@@ -1,0 +1,549 @@
+//! Bidirectional path tracing (Veach and Guibas 1995; Veach 1997 ch. 10, in
+//! the form of pbrt's `BDPTIntegrator`): a camera subpath from the engine's
+//! film point and a light subpath from a light, every connection `(s, t)` of
+//! `s` light and `t` camera vertices, weighted by multiple importance
+//! sampling with the power heuristic (Veach 1997 sec. 9.2.3).
+//!
+//! * `s = 0`: the camera subpath hits an emitter;
+//! * `s = 1`: a camera vertex is joined to the light subpath's point on the
+//!   light (next-event estimation from one light point per path);
+//! * `t = 1`, `s > 1`: a light vertex is joined to the camera (light
+//!   tracing): the contribution lands where the vertex projects, a splat;
+//! * every other `(s, t)`: a light vertex joined to a camera vertex.
+//!
+//! Specular vertices (and those of specular dielectrics) cannot be joined:
+//! those strategies are skipped and the MIS weights treat them as pbrt does
+//! (a delta vertex's densities do not count). The constant environment is
+//! reached only by camera subpaths escaping the scene, its only strategy.
+//!
+//! Numbers: the camera subpath draws three per bounce on stream 0, the light
+//! subpath five at its start and three per bounce on stream 1, so mutating
+//! one subpath does not shift the other's coordinates. Paths are at most
+//! `max_depth + 1` segments long, as with the unidirectional tracer.
+//!
+//! Tempering (seed 002 sec. 5.2, eq. 5.2-5.5): at temperature `T` the BSDFs
+//! of the two vertices of each connection, `x_{L,s}` and `x_{C,t}`, are
+//! roughened (`rho' = sqrt(T) rho`, at least the regularization floor);
+//! the subpaths themselves keep the original BSDFs.
+//!
+//! Shading normals: vertex factors follow Veach 1997 sec. 5.3 (`f_s |n_s ·
+//! w_i| / |n_g · w_i|` in area measure), and light subpaths use the adjoint
+//! BSDF (no `1/eta²` on refraction, Veach sec. 5.2).
+
+use std::f32::consts::FRAC_1_PI;
+
+use glam::Vec3;
+use strata_engine::{FilmPoint, PathFlags, Rgb, Sampler, SplatSink};
+
+use crate::geometry::{Frame, Intersector, Ray, cosine_hemisphere, uniform_triangle};
+use crate::material::Bsdf;
+use crate::scene::{NO_LIGHT, Projection, Scene};
+use crate::tracer::{DIRECT_EMITTER, PathTracer, SPECULAR_PATH, offset};
+
+/// What a subpath vertex is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kind {
+    /// The pinhole.
+    Camera,
+    /// The light subpath's point on light `index`.
+    Light(u32),
+    /// A scattering point.
+    Surface,
+}
+
+/// A subpath vertex (pbrt's `Vertex`).
+#[derive(Clone, Copy, Debug)]
+struct Vertex {
+    kind: Kind,
+    p: Vec3,
+    /// Geometric normal: a triangle's front, a light's emitting side.
+    ng: Vec3,
+    /// Shading frame (surfaces; its normal on `ng`'s side).
+    frame: Frame,
+    bsdf: Bsdf,
+    /// The light of the triangle (surfaces on an emitter), or `NO_LIGHT`.
+    emitter: u32,
+    /// The subpath's throughput up to this vertex.
+    beta: Vec3,
+    /// Area density of this vertex by its own subpath's sampling.
+    pdf_fwd: f32,
+    /// Area density of this vertex by the other subpath's sampling.
+    pdf_rev: f32,
+    /// Sampled by a specular lobe: cannot be joined.
+    delta: bool,
+}
+
+impl Vertex {
+    fn new(kind: Kind, p: Vec3, ng: Vec3, beta: Vec3, pdf_fwd: f32) -> Self {
+        Self {
+            kind,
+            p,
+            ng,
+            frame: Frame::new(ng),
+            bsdf: Bsdf::Diffuse(Vec3::ZERO),
+            emitter: NO_LIGHT,
+            beta,
+            pdf_fwd,
+            pdf_rev: 0.0,
+            delta: false,
+        }
+    }
+
+    /// The light this vertex emits as (a light vertex, or a surface on an
+    /// emitter).
+    fn light(&self) -> u32 {
+        match self.kind {
+            Kind::Light(index) => index,
+            _ => self.emitter,
+        }
+    }
+
+    /// `pdf` (solid angle at this vertex toward `next`) as an area density
+    /// at `next` (pbrt's `ConvertDensity`).
+    fn to_area(&self, pdf: f32, next: &Vertex) -> f32 {
+        let w = next.p - self.p;
+        let d2 = w.length_squared();
+        if d2 == 0.0 {
+            return 0.0;
+        }
+        let cos = if next.kind == Kind::Camera {
+            1.0
+        } else {
+            next.ng.dot(w).abs() / d2.sqrt()
+        };
+        pdf * cos / d2
+    }
+
+    /// Area density at `next` of this vertex sampling it, having been
+    /// reached from `prev` (none: this vertex starts its subpath).
+    fn pdf(&self, camera: &Projection, prev: Option<&Vertex>, next: &Vertex) -> f32 {
+        let pdf = match (self.kind, prev) {
+            (Kind::Camera, _) => camera.direction_pdf(next.p),
+            (Kind::Light(_), _) => return self.pdf_light(next),
+            (Kind::Surface, None) => return 0.0,
+            (Kind::Surface, Some(prev)) => {
+                let wo = self.frame.to_local((prev.p - self.p).normalize_or_zero());
+                let wi = self.frame.to_local((next.p - self.p).normalize_or_zero());
+                self.bsdf.pdf(wo, wi)
+            }
+        };
+        self.to_area(pdf, next)
+    }
+
+    /// Area density at `next` of this emitter emitting toward it
+    /// (cosine-weighted on the front side).
+    fn pdf_light(&self, next: &Vertex) -> f32 {
+        let w = (next.p - self.p).normalize_or_zero();
+        let cos = self.ng.dot(w);
+        if cos <= 0.0 {
+            return 0.0;
+        }
+        self.to_area(cos * FRAC_1_PI, next)
+    }
+
+    /// Area density of this emitter point as the start of a light subpath.
+    fn pdf_light_origin(&self, scene: &Scene) -> f32 {
+        let light = self.light();
+        scene.light_probability(light) / scene.lights[light as usize].area
+    }
+
+    /// Radiance emitted from this vertex toward `to` (front side only).
+    fn emitted(&self, scene: &Scene, to: Vec3) -> Vec3 {
+        let light = self.light();
+        if light == NO_LIGHT || self.ng.dot(to - self.p) <= 0.0 {
+            return Vec3::ZERO;
+        }
+        scene.lights[light as usize].radiance
+    }
+
+    /// Whether a connection may join this vertex (at temperature's BSDF).
+    fn connectible(&self) -> bool {
+        match self.kind {
+            Kind::Surface => !self.bsdf.is_specular(),
+            _ => true,
+        }
+    }
+}
+
+/// `f`, or 1 where `f` is 0 (pbrt's `remap0`: a delta vertex's densities).
+fn remap0(f: f32) -> f32 {
+    if f != 0.0 { f } else { 1.0 }
+}
+
+/// Which way a subpath carries light.
+#[derive(Clone, Copy, PartialEq)]
+enum Transport {
+    /// Camera subpaths: radiance.
+    Radiance,
+    /// Light subpaths: importance, through the adjoint BSDF.
+    Importance,
+}
+
+/// The adjoint BSDF's factor over the BSDF's sampled value: `eta'²` across
+/// a dielectric interface (radiance is scaled by `1/eta'²` when refracted,
+/// importance is not; Veach 1997 sec. 5.2), 1 otherwise.
+fn adjoint_scale(bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> f32 {
+    match *bsdf {
+        Bsdf::Dielectric { eta, .. } if wo.z * wi.z < 0.0 => {
+            let etap = if wo.z > 0.0 { eta } else { 1.0 / eta };
+            etap * etap
+        }
+        _ => 1.0,
+    }
+}
+
+/// The subpaths of one path and what the walks found on the way.
+struct Subpaths {
+    camera: Vec<Vertex>,
+    light: Vec<Vertex>,
+    /// Radiance of the constant environment reached by the camera subpath.
+    environment: Vec3,
+    flags: PathFlags,
+}
+
+impl<I: Intersector> PathTracer<I> {
+    /// A bidirectional path through `film`: its radiance there, with its
+    /// light-tracing contributions handed to `splats`; with `only = (s, t)`
+    /// that strategy alone, unweighted.
+    pub(crate) fn bidirectional<S: Sampler + ?Sized>(
+        &self,
+        film: FilmPoint,
+        sampler: &mut S,
+        temperature: f32,
+        splats: &mut dyn SplatSink<Rgb>,
+        only: Option<(usize, usize)>,
+    ) -> (Vec3, PathFlags) {
+        let scene = &self.scene;
+        let camera = scene.camera.projection();
+        let paths = self.subpaths(film, sampler, &camera);
+        let floor = self.regularization.map_or(0.0, |r| r.floor());
+        let temper = |v: &Vertex| {
+            let mut v = *v;
+            v.bsdf = v.bsdf.tempered(temperature, floor);
+            v
+        };
+        let mut radiance = if only.is_none_or(|(s, _)| s == 0) {
+            paths.environment
+        } else {
+            Vec3::ZERO
+        };
+        let longest = scene.max_depth as usize + 2;
+        for t in 1..=paths.camera.len() {
+            for s in 0..=paths.light.len() {
+                // Paths of one segment only as the camera sees the light
+                // (pbrt skips `s = t = 1` too: `s + t = 2` has weight 1).
+                let skipped = s + t <= 2 && s != 0 || s + t > longest || t == 1 && s == 0;
+                if skipped || only.is_some_and(|o| o != (s, t)) {
+                    continue;
+                }
+                let pt = temper(&paths.camera[t - 1]);
+                let qs = (s > 0).then(|| temper(&paths.light[s - 1]));
+                let Some((value, raster)) = self.connect(&paths, s, t, &pt, qs.as_ref(), &camera)
+                else {
+                    continue;
+                };
+                let weight = match only {
+                    Some(_) => 1.0,
+                    None => mis_weight(scene, &camera, &paths, s, t, &pt, qs.as_ref()),
+                };
+                let value = value * weight;
+                match raster {
+                    Some(at) => {
+                        if value.max_element() > 0.0 {
+                            splats.splat(at, Rgb(value.to_array()));
+                        }
+                    }
+                    None => radiance += value,
+                }
+            }
+        }
+        (radiance, paths.flags)
+    }
+
+    /// Both subpaths: the camera's from `film` (stream 0), the light's from
+    /// a light chosen by power (stream 1).
+    fn subpaths<S: Sampler + ?Sized>(
+        &self,
+        film: FilmPoint,
+        sampler: &mut S,
+        camera: &Projection,
+    ) -> Subpaths {
+        let scene = &self.scene;
+        let max_depth = scene.max_depth as usize;
+        let mut paths = Subpaths {
+            camera: Vec::with_capacity(max_depth + 2),
+            light: Vec::with_capacity(max_depth + 1),
+            environment: Vec3::ZERO,
+            flags: PathFlags::NONE,
+        };
+        let (origin, direction) = scene.camera.ray(film.x, film.y);
+        let pinhole = Vertex::new(Kind::Camera, origin, direction, Vec3::ONE, 1.0);
+        paths.camera.push(pinhole);
+        let pdf = camera.direction_pdf(origin + direction);
+        let ray = Ray::new(origin, direction);
+        paths.environment = self.walk(
+            sampler,
+            ray,
+            Vec3::ONE,
+            pdf,
+            max_depth + 2,
+            Transport::Radiance,
+            &mut paths.camera,
+        );
+        if let Some(first) = paths.camera.get(1)
+            && first.emitter != NO_LIGHT
+            && first.ng.dot(origin - first.p) > 0.0
+        {
+            paths.flags.0 |= DIRECT_EMITTER.0;
+        }
+        if paths.camera.iter().any(|v| v.delta) {
+            paths.flags.0 |= SPECULAR_PATH.0;
+        }
+
+        sampler.start_stream(1);
+        let u_light = sampler.next_1d();
+        let u_point = sampler.next_2d();
+        let u_direction = sampler.next_2d();
+        let Some((light, p_select)) = scene.choose_light(u_light) else {
+            return paths;
+        };
+        let index = scene.light_of[light.triangle as usize];
+        let b = uniform_triangle(u_point);
+        let [v0, v1, v2] = scene.triangles[light.triangle as usize];
+        let p = v0 * (1.0 - b.x - b.y) + v1 * b.x + v2 * b.y;
+        let ng = scene.front[light.triangle as usize];
+        let pdf_position = p_select / light.area;
+        let start = Vertex::new(Kind::Light(index), p, ng, Vec3::splat(1.0 / pdf_position), pdf_position);
+        paths.light.push(start);
+        let local = cosine_hemisphere(u_direction);
+        let pdf_direction = local.z * FRAC_1_PI;
+        if pdf_direction <= 0.0 {
+            return paths;
+        }
+        let w = start.frame.to_world(local);
+        let beta = light.radiance * (local.z / (pdf_position * pdf_direction));
+        let ray = Ray::new(offset(p, ng, w), w);
+        self.walk(
+            sampler,
+            ray,
+            beta,
+            pdf_direction,
+            max_depth + 1,
+            Transport::Importance,
+            &mut paths.light,
+        );
+        paths
+    }
+
+    /// Extends `path` along `ray` (leaving its last vertex with direction
+    /// density `pdf`, throughput `beta`) up to `longest` vertices, three
+    /// numbers per bounce (pbrt's `RandomWalk`). Returns the environment's
+    /// radiance if a radiance walk escapes.
+    #[allow(clippy::too_many_arguments)]
+    fn walk<S: Sampler + ?Sized>(
+        &self,
+        sampler: &mut S,
+        mut ray: Ray,
+        mut beta: Vec3,
+        mut pdf: f32,
+        longest: usize,
+        transport: Transport,
+        path: &mut Vec<Vertex>,
+    ) -> Vec3 {
+        let scene = &self.scene;
+        while path.len() < longest {
+            let u_lobe = sampler.next_1d();
+            let u_direction = sampler.next_2d();
+            let Some(hit) = self.accel.closest_hit(&ray) else {
+                return match (transport, scene.environment) {
+                    (Transport::Radiance, Some(env)) => beta * env,
+                    _ => Vec3::ZERO,
+                };
+            };
+            let tri = hit.triangle as usize;
+            let (p, mut ns, uv) = scene.surface(hit.triangle, hit.uv);
+            let ng = scene.front[tri];
+            if ns.dot(ng) < 0.0 {
+                ns = -ns;
+            }
+            let prev = *path.last().expect("a walk starts from a vertex");
+            let mut vertex = Vertex::new(Kind::Surface, p, ng, beta, 0.0);
+            vertex.frame = Frame::new(ns);
+            vertex.bsdf = scene.materials[scene.material_of[tri] as usize].bsdf(uv);
+            vertex.emitter = scene.light_of[tri];
+            vertex.pdf_fwd = prev.to_area(pdf, &vertex);
+            path.push(vertex);
+            if path.len() == longest {
+                break;
+            }
+            let back = -ray.direction.normalize();
+            let wo = vertex.frame.to_local(back);
+            let Some(s) = vertex.bsdf.sample(wo, u_lobe, u_direction) else {
+                break;
+            };
+            let w = vertex.frame.to_world(s.wi);
+            let mut pdf_rev = vertex.bsdf.pdf(s.wi, wo);
+            if s.specular {
+                pdf = 0.0;
+                pdf_rev = 0.0;
+                path.last_mut().expect("pushed").delta = true;
+            } else {
+                pdf = s.pdf;
+            }
+            let factor = match transport {
+                Transport::Radiance => s.f * (s.wi.z.abs() / s.pdf),
+                Transport::Importance => {
+                    let cos_in = ng.dot(back).abs();
+                    if cos_in == 0.0 {
+                        break;
+                    }
+                    s.f * (adjoint_scale(&vertex.bsdf, wo, s.wi) * wo.z.abs() * ng.dot(w).abs()
+                        / (cos_in * s.pdf))
+                }
+            };
+            beta *= factor;
+            let n = path.len();
+            path[n - 2].pdf_rev = vertex.to_area(pdf_rev, &path[n - 2]);
+            if !(beta.max_element() > 0.0 && beta.is_finite()) {
+                break;
+            }
+            ray = Ray::new(offset(p, ng, w), w);
+        }
+        Vec3::ZERO
+    }
+
+    /// The unweighted contribution of strategy `(s, t)` with the joined
+    /// vertices `pt` (camera side) and `qs` (light side, none for `s = 0`)
+    /// at their connection BSDFs, and where it lands if it is a splat
+    /// (`t = 1`). None when the strategy cannot join them or they are
+    /// occluded.
+    fn connect(
+        &self,
+        paths: &Subpaths,
+        s: usize,
+        t: usize,
+        pt: &Vertex,
+        qs: Option<&Vertex>,
+        camera: &Projection,
+    ) -> Option<(Vec3, Option<FilmPoint>)> {
+        let scene = &self.scene;
+        let Some(qs) = qs else {
+            // s = 0: the camera subpath's last vertex is on an emitter.
+            let towards = paths.camera[t - 2].p;
+            let le = pt.emitted(scene, towards);
+            return (le.max_element() > 0.0).then_some((pt.beta * le, None));
+        };
+        if !pt.connectible() || !qs.connectible() {
+            return None;
+        }
+        let w = pt.p - qs.p;
+        let d2 = w.length_squared();
+        if d2 == 0.0 {
+            return None;
+        }
+        let w = w / d2.sqrt();
+        // The light side: its vertex factor and the edge's cosine there.
+        let light_side = if s == 1 {
+            qs.emitted(scene, pt.p) * qs.ng.dot(w).abs()
+        } else {
+            let to_light = (paths.light[s - 2].p - qs.p).normalize_or_zero();
+            let cos_in = qs.ng.dot(to_light).abs();
+            if cos_in == 0.0 {
+                return None;
+            }
+            let wo = qs.frame.to_local(w);
+            let wi = qs.frame.to_local(to_light);
+            qs.bsdf.eval(wo, wi) * (wi.z.abs() / cos_in * qs.ng.dot(w).abs())
+        };
+        if light_side.max_element() <= 0.0 {
+            return None;
+        }
+        let (camera_side, raster) = if t == 1 {
+            let (at, cos) = camera.project(qs.p)?;
+            (Vec3::splat(1.0 / (camera.plane_area * cos * cos * cos)), Some(at))
+        } else {
+            let to_camera = (paths.camera[t - 2].p - pt.p).normalize_or_zero();
+            let wo = pt.frame.to_local(to_camera);
+            let wi = pt.frame.to_local(-w);
+            (pt.bsdf.eval(wo, wi) * wi.z.abs(), None)
+        };
+        if camera_side.max_element() <= 0.0 {
+            return None;
+        }
+        let from = offset(qs.p, qs.ng, w);
+        let to = if t == 1 { pt.p } else { offset(pt.p, pt.ng, -w) };
+        if self.accel.occluded(&Ray::between(from, to)) {
+            return None;
+        }
+        let value = qs.beta * light_side * camera_side * pt.beta / d2;
+        Some((value, raster))
+    }
+}
+
+/// The power-heuristic weight of strategy `(s, t)` (Veach 1997 eq. 10.9 with
+/// `beta = 2`, computed by pbrt's walk over density ratios), with the joined
+/// vertices `pt` and `qs` as connected.
+fn mis_weight(
+    scene: &Scene,
+    camera: &Projection,
+    paths: &Subpaths,
+    s: usize,
+    t: usize,
+    pt: &Vertex,
+    qs: Option<&Vertex>,
+) -> f32 {
+    if s + t == 2 {
+        return 1.0;
+    }
+    let cam = &paths.camera;
+    let light = &paths.light;
+    let pt_minus = (t > 1).then(|| &cam[t - 2]);
+    let qs_minus = (s > 1).then(|| &light[s - 2]);
+    // The densities the connection changes (pbrt's `ScopedAssignment`s).
+    let pt_rev = match qs {
+        Some(qs) => qs.pdf(camera, qs_minus, pt),
+        None => pt.pdf_light_origin(scene),
+    };
+    let pt_minus_rev = pt_minus.map_or(0.0, |m| match qs {
+        Some(qs) => pt.pdf(camera, Some(qs), m),
+        None => pt.pdf_light(m),
+    });
+    let qs_rev = qs.map_or(0.0, |qs| pt.pdf(camera, pt_minus, qs));
+    let qs_minus_rev = match (qs, qs_minus) {
+        (Some(qs), Some(m)) => qs.pdf(camera, Some(pt), m),
+        _ => 0.0,
+    };
+    let mut sum = 0.0f32;
+    let mut ratio = 1.0f32;
+    for i in (1..t).rev() {
+        let rev = if i == t - 1 {
+            pt_rev
+        } else if i == t - 2 {
+            pt_minus_rev
+        } else {
+            cam[i].pdf_rev
+        };
+        ratio *= remap0(rev) / remap0(cam[i].pdf_fwd);
+        let delta = i != t - 1 && cam[i].delta;
+        if !delta && !cam[i - 1].delta {
+            sum += ratio * ratio;
+        }
+    }
+    ratio = 1.0;
+    for i in (0..s).rev() {
+        let rev = if i == s - 1 {
+            qs_rev
+        } else if i == s - 2 {
+            qs_minus_rev
+        } else {
+            light[i].pdf_rev
+        };
+        ratio *= remap0(rev) / remap0(light[i].pdf_fwd);
+        let delta = i != s - 1 && light[i].delta;
+        let before_delta = i > 0 && light[i - 1].delta;
+        if !delta && !before_delta {
+            sum += ratio * ratio;
+        }
+    }
+    1.0 / (1.0 + sum)
+}

@@ -1,0 +1,157 @@
+//! The bidirectional path tracer (oracle-native's `bidirectional`): each
+//! strategy alone is unbiased, their MIS combination equals the
+//! unidirectional tracer's image, light tracing lands where the pinhole
+//! projects, and every method renders the furnace right on bidirectional
+//! paths. Tolerances come from the spread over seeds (z-tests).
+
+use glam::Vec3;
+use strata::engine::target::MaxChannel;
+use strata::engine::{Budget, Film, Method, PathOracle, Resolution, Settings, Silent, render};
+use strata::native::builtin::{by_name, cuboid, quad};
+use strata::native::material::{Material, Texture};
+use strata::native::{Camera, PathSampler, Scene, native_tracer};
+
+mod threads;
+use threads::small_methods;
+
+const SIDE: u32 = 24;
+const BLOCKS: u32 = 4;
+
+/// Means of `BLOCKS`² blocks of pixels per channel, of renders of `oracle`
+/// by `method` at `spp`, one per seed; then their mean and standard error.
+fn blocks<O: PathOracle>(oracle: &O, method: &Method, spp: u64, seeds: u64) -> Vec<(f64, f64)> {
+    let runs: Vec<Vec<f64>> = (0..seeds)
+        .map(|seed| {
+            let settings = Settings {
+                seed,
+                budget: Budget::samples_per_pixel(spp, oracle.resolution()),
+                method: method.clone(),
+            };
+            block_means(&render(oracle, &MaxChannel, &settings, &Silent).unwrap().film)
+        })
+        .collect();
+    let n = seeds as f64;
+    (0..runs[0].len())
+        .map(|i| {
+            let mean = runs.iter().map(|r| r[i]).sum::<f64>() / n;
+            let var = runs.iter().map(|r| (r[i] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            (mean, (var / n).sqrt())
+        })
+        .collect()
+}
+
+fn block_means(film: &Film) -> Vec<f64> {
+    let res = film.resolution();
+    let (bw, bh) = (res.width / BLOCKS, res.height / BLOCKS);
+    let mut out = vec![0.0; (BLOCKS * BLOCKS * 3) as usize];
+    for y in 0..res.height {
+        for x in 0..res.width {
+            let b = ((y / bh).min(BLOCKS - 1) * BLOCKS + (x / bw).min(BLOCKS - 1)) as usize;
+            for c in 0..3 {
+                out[b * 3 + c] += film.pixel(x, y)[c] / (bw * bh) as f64;
+            }
+        }
+    }
+    out
+}
+
+/// Welch's z of two block estimates, compared value by value; returns the
+/// largest.
+fn worst_z(label: &str, a: &[(f64, f64)], b: &[(f64, f64)], limit: f64) -> f64 {
+    let mut worst: f64 = 0.0;
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        let se = (x.1 * x.1 + y.1 * y.1).sqrt();
+        if se == 0.0 {
+            assert!((x.0 - y.0).abs() <= 1e-9 * x.0.abs().max(1.0), "{label}: value {i}");
+            continue;
+        }
+        let z = (x.0 - y.0) / se;
+        worst = worst.max(z.abs());
+        assert!(
+            z.abs() < limit,
+            "{label}: block {} channel {}: {:.5} vs {:.5} (z = {z:.2})",
+            i / 3,
+            i % 3,
+            x.0,
+            y.0
+        );
+    }
+    worst
+}
+
+/// A diffuse floor under a parallel diffuse ceiling a unit above, lit by a
+/// small light facing down just below the ceiling, seen from between them:
+/// no surfaces meet, so every connection is at least a few tenths long and
+/// every strategy has a finite variance.
+fn planes() -> Scene {
+    let camera = Camera::look_at(
+        Vec3::new(0.0, 0.5, 3.0),
+        Vec3::new(0.0, 0.3, 0.0),
+        Vec3::Y,
+        60.0,
+        Resolution::new(SIDE, SIDE),
+    );
+    let mut scene = Scene::new(camera);
+    let grey = scene.add_material(Material::Diffuse {
+        reflectance: Texture::Constant(Vec3::new(0.7, 0.5, 0.3)),
+    });
+    let black = scene.add_material(Material::Diffuse {
+        reflectance: Texture::Constant(Vec3::ZERO),
+    });
+    let (lo, hi) = (-4.0, 4.0);
+    let floor = quad(
+        Vec3::new(lo, 0.0, lo),
+        Vec3::new(lo, 0.0, hi),
+        Vec3::new(hi, 0.0, hi),
+        Vec3::new(hi, 0.0, lo),
+    );
+    let ceiling = quad(
+        Vec3::new(lo, 1.0, lo),
+        Vec3::new(hi, 1.0, lo),
+        Vec3::new(hi, 1.0, hi),
+        Vec3::new(lo, 1.0, hi),
+    );
+    let light = quad(
+        Vec3::new(-0.3, 0.7, -0.3),
+        Vec3::new(0.3, 0.7, -0.3),
+        Vec3::new(0.3, 0.7, 0.3),
+        Vec3::new(-0.3, 0.7, 0.3),
+    );
+    scene.add_mesh(&floor, grey, None);
+    scene.add_mesh(&ceiling, grey, None);
+    scene.add_mesh(&light, black, Some(Vec3::new(8.0, 7.0, 6.0)));
+    scene.max_depth = 4;
+    scene
+}
+
+/// Each strategy `(s, t)` alone, unweighted, estimates every path of
+/// `s + t` vertices it can sample; on the planes every strategy samples all
+/// of them, so all strategies of one length give the same image (Veach 1997
+/// sec. 10.2). A strategy whose density is off by a factor, or a vertex
+/// factor missing, stands out.
+#[test]
+fn each_strategy_alone_estimates_the_same_image() {
+    let spp = 64;
+    let seeds = 8;
+    for vertices in 3..=4u32 {
+        let mut images = Vec::new();
+        for t in 1..=vertices {
+            let s = vertices - t;
+            if t == 1 && s < 2 {
+                continue;
+            }
+            let mut tracer = native_tracer(planes());
+            tracer.sampler = PathSampler::Strategy {
+                light: s,
+                camera: t,
+            };
+            images.push(((s, t), blocks(&tracer, &Method::Mc, spp, seeds)));
+        }
+        let (first, reference) = &images[0];
+        for (strategy, image) in &images[1..] {
+            let label = format!("{first:?} vs {strategy:?}");
+            let z = worst_z(&label, reference, image, 5.0);
+            eprintln!("{label}: worst z {z:.2}");
+        }
+    }
+}

@@ -16,10 +16,15 @@
 //! (a delta vertex's densities do not count). The constant environment is
 //! reached only by camera subpaths escaping the scene, its only strategy.
 //!
-//! Numbers: the camera subpath draws three per bounce on stream 0, the light
-//! subpath five at its start and three per bounce on stream 1, so mutating
-//! one subpath does not shift the other's coordinates. Paths are at most
-//! `max_depth + 1` segments long, as with the unidirectional tracer.
+//! Numbers: the camera subpath draws four per bounce on stream 0 (lobe,
+//! direction, Russian roulette), the light subpath five at its start and
+//! four per bounce on stream 1, so mutating one subpath does not shift the
+//! other's coordinates. Paths are at most `max_depth + 1` segments long, as
+//! with the unidirectional tracer, and subpaths play Russian roulette from
+//! the third bounce on (survival: their throughput relative to their start,
+//! at most 0.95). The MIS weights use the densities without the roulette:
+//! they still sum to one over the strategies of every path (Veach 1997
+//! sec. 9.2.2), only the estimate's variance depends on them.
 //!
 //! Tempering (seed 002 sec. 5.2, eq. 5.2-5.5): at temperature `T` the BSDFs
 //! of the two vertices of each connection, `x_{L,s}` and `x_{C,t}`, are
@@ -38,7 +43,7 @@ use strata_engine::{FilmPoint, PathFlags, Rgb, Sampler, SplatSink};
 use crate::geometry::{Frame, Intersector, Ray, cosine_hemisphere, uniform_triangle};
 use crate::material::Bsdf;
 use crate::scene::{NO_LIGHT, Projection, Scene};
-use crate::tracer::{DIRECT_EMITTER, PathTracer, SPECULAR_PATH, offset};
+use crate::tracer::{DIRECT_EMITTER, PathTracer, ROULETTE_DEPTH, SPECULAR_PATH, offset};
 
 /// What a subpath vertex is.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -336,9 +341,9 @@ impl<I: Intersector> PathTracer<I> {
     }
 
     /// Extends `path` along `ray` (leaving its last vertex with direction
-    /// density `pdf`, throughput `beta`) up to `longest` vertices, three
-    /// numbers per bounce (pbrt's `RandomWalk`). Returns the environment's
-    /// radiance if a radiance walk escapes.
+    /// density `pdf`, throughput `beta`) up to `longest` vertices, four
+    /// numbers per bounce (pbrt's `RandomWalk`, with Russian roulette).
+    /// Returns the environment's radiance if a radiance walk escapes.
     #[allow(clippy::too_many_arguments)]
     fn walk<S: Sampler + ?Sized>(
         &self,
@@ -351,9 +356,12 @@ impl<I: Intersector> PathTracer<I> {
         path: &mut Vec<Vertex>,
     ) -> Vec3 {
         let scene = &self.scene;
+        let start = beta.max_element();
+        let mut bounces = 0;
         while path.len() < longest {
             let u_lobe = sampler.next_1d();
             let u_direction = sampler.next_2d();
+            let u_roulette = sampler.next_1d();
             let Some(hit) = self.accel.closest_hit(&ray) else {
                 return match (transport, scene.environment) {
                     (Transport::Radiance, Some(env)) => beta * env,
@@ -406,6 +414,14 @@ impl<I: Intersector> PathTracer<I> {
             path[n - 2].pdf_rev = vertex.to_area(pdf_rev, &path[n - 2]);
             if !(beta.max_element() > 0.0 && beta.is_finite()) {
                 break;
+            }
+            bounces += 1;
+            if bounces >= ROULETTE_DEPTH {
+                let survive = (beta.max_element() / start).min(0.95);
+                if u_roulette >= survive {
+                    break;
+                }
+                beta /= survive;
             }
             ray = Ray::new(offset(p, ng, w), w);
         }

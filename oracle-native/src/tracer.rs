@@ -29,7 +29,7 @@ pub const SPECULAR_PATH: PathFlags = PathFlags(1);
 pub const DIRECT_EMITTER: PathFlags = PathFlags(2);
 
 /// Russian roulette starts after this many bounces.
-const ROULETTE_DEPTH: u32 = 3;
+pub(crate) const ROULETTE_DEPTH: u32 = 3;
 
 /// The declining regularization of seed 002 sec. 5.4: a roughness floor
 /// `initial·decay^step` at connecting vertices.

@@ -26,7 +26,7 @@ use strata::engine::{
     Budget, Checkpoint, Error, Method, Observer, Output, PathOracle, RenderStats, Resolution,
     Settings, Silent, render,
 };
-use strata::native::{builtin, native_tracer};
+use strata::native::{PathSampler, builtin, native_tracer};
 
 /// Render every method at a fixed seed and budget; write films, EXRs, statistics.
 #[derive(Parser, Debug)]
@@ -69,7 +69,11 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         first.write(&args.out, "procedural-64x48", "erpt");
         for name in ["cornell", "caustic"] {
             let scene = builtin::by_name(name, RESOLUTION).expect("a built-in scene");
-            render_all(name, &native_tracer(scene), &args.out)?;
+            let mut tracer = native_tracer(scene);
+            render_all(name, &tracer, &args.out)?;
+            // Bidirectional paths: light tracing's splats in every method.
+            tracer.sampler = PathSampler::Bidirectional;
+            render_all(&format!("{name}-bidirectional"), &tracer, &args.out)?;
         }
         Ok(())
     })

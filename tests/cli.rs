@@ -54,6 +54,52 @@ fn render_writes_png_and_exr_and_exit_codes_say_how_it_went() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `--path-sampler bidirectional` renders a scene with every method; it is
+/// refused, with a reason, on an analytic target and as an unknown name.
+#[test]
+fn bidirectional_paths_render_from_the_command_line() {
+    let dir = std::env::temp_dir().join(format!("strata-cli-bd-{}", std::process::id()));
+    for method in [
+        "mc",
+        "pssmlt",
+        "replica",
+        "stratified",
+        "erpt",
+        "multistage",
+    ] {
+        let out = dir.join(method);
+        let run = strata(&[
+            "render",
+            "cornell",
+            "--path-sampler",
+            "bidirectional",
+            "--method",
+            method,
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--spp",
+            "8",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(
+            run.status.code(),
+            Some(0),
+            "{method}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        assert!(out.with_extension("exr").is_file(), "{method}");
+    }
+    let analytic = strata(&["render", "procedural", "--path-sampler", "bidirectional"]);
+    assert_eq!(analytic.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&analytic.stderr).contains("analytic target"));
+    let unknown = strata(&["render", "cornell", "--path-sampler", "backwards"]);
+    assert_eq!(unknown.status.code(), Some(2));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Budgets that hold no work, exposures that would write a black or white
 /// image and NaN are refused with exit code 1 or 2 and a message; an output
 /// name with dots keeps them (issue 36).

@@ -108,7 +108,13 @@ fn bad_splats_invalidate_their_path() {
             let u = s.next_1d();
             let (at, value) = match (u * 8.0) as u32 {
                 0 => (FilmPoint { x: -0.5, y: 1.0 }, 1.0),
-                1 => (FilmPoint { x: 1.0, y: HEIGHT as f32 }, 1.0),
+                1 => (
+                    FilmPoint {
+                        x: 1.0,
+                        y: HEIGHT as f32,
+                    },
+                    1.0,
+                ),
                 2 => (film, f32::NAN),
                 3 => (film, -1.0),
                 _ => (film, 1.0),

@@ -318,7 +318,13 @@ impl<I: Intersector> PathTracer<I> {
         let p = v0 * (1.0 - b.x - b.y) + v1 * b.x + v2 * b.y;
         let ng = scene.front[light.triangle as usize];
         let pdf_position = p_select / light.area;
-        let start = Vertex::new(Kind::Light(index), p, ng, Vec3::splat(1.0 / pdf_position), pdf_position);
+        let start = Vertex::new(
+            Kind::Light(index),
+            p,
+            ng,
+            Vec3::splat(1.0 / pdf_position),
+            pdf_position,
+        );
         paths.light.push(start);
         let local = cosine_hemisphere(u_direction);
         let pdf_direction = local.z * FRAC_1_PI;
@@ -476,7 +482,10 @@ impl<I: Intersector> PathTracer<I> {
         }
         let (camera_side, raster) = if t == 1 {
             let (at, cos) = camera.project(qs.p)?;
-            (Vec3::splat(1.0 / (camera.plane_area * cos * cos * cos)), Some(at))
+            (
+                Vec3::splat(1.0 / (camera.plane_area * cos * cos * cos)),
+                Some(at),
+            )
         } else {
             let to_camera = (paths.camera[t - 2].p - pt.p).normalize_or_zero();
             let wo = pt.frame.to_local(to_camera);
@@ -487,7 +496,11 @@ impl<I: Intersector> PathTracer<I> {
             return None;
         }
         let from = offset(qs.p, qs.ng, w);
-        let to = if t == 1 { pt.p } else { offset(pt.p, pt.ng, -w) };
+        let to = if t == 1 {
+            pt.p
+        } else {
+            offset(pt.p, pt.ng, -w)
+        };
         if self.accel.occluded(&Ray::between(from, to)) {
             return None;
         }

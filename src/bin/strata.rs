@@ -45,7 +45,7 @@ use strata::engine::{
     Budget, Checkpoint, Error, Extras, Film, Method, Observer, Output, PathOracle, Progress,
     Radiance, Resolution, Settings, render, resume,
 };
-use strata::native::{PathTracer, builtin, native_tracer};
+use strata::native::{PathSampler, PathTracer, builtin, native_tracer};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum Backend {
@@ -117,6 +117,11 @@ struct Args {
     /// Ray backend.
     #[arg(long, value_enum, default_value = "native")]
     backend: Backend,
+    /// How the tracer samples paths: camera paths with next-event
+    /// estimation, or camera and light subpaths joined in every way (light
+    /// tracing included: the paths that reach the camera only from a light).
+    #[arg(long, default_value = "unidirectional", value_parser = PossibleValuesParser::new(PathSampler::NAMES))]
+    path_sampler: String,
     /// Image width (a .pbrt file's own resolution is used unless given).
     #[arg(long)]
     width: Option<u32>,
@@ -534,6 +539,14 @@ fn run(args: &Args) -> AnyResult<Ended> {
         .num_threads(threads)
         .build()?;
     let resolution = Resolution::new(args.width.unwrap_or(256), args.height.unwrap_or(256));
+    let analytic = matches!(args.scene.as_str(), "procedural" | "mixture");
+    if analytic && args.path_sampler != PathSampler::Unidirectional.name() {
+        return Err(format!(
+            "--path-sampler {}: {} is an analytic target, not a scene the path tracer renders",
+            args.path_sampler, args.scene
+        )
+        .into());
+    }
     let (rendered, reference) = pool.install(|| -> AnyResult<_> {
         Ok(match args.scene.as_str() {
             "procedural" => {
@@ -570,11 +583,19 @@ fn run(args: &Args) -> AnyResult<Ended> {
                     )
                     .into());
                 }
+                let sampler = PathSampler::from_name(&args.path_sampler)
+                    .ok_or("unknown path sampler")?;
                 match args.backend {
-                    Backend::Native => (render_with(&native_tracer(scene), args)?, None),
+                    Backend::Native => {
+                        let mut tracer = native_tracer(scene);
+                        tracer.sampler = sampler;
+                        (render_with(&tracer, args)?, None)
+                    }
                     Backend::Embree => {
                         let embree = EmbreeIntersector::new(&scene.triangles)?;
-                        (render_with(&PathTracer::new(scene, embree), args)?, None)
+                        let mut tracer = PathTracer::new(scene, embree);
+                        tracer.sampler = sampler;
+                        (render_with(&tracer, args)?, None)
                     }
                 }
             }

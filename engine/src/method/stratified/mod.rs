@@ -453,7 +453,14 @@ where
 /// counters, the exchange rounds, the invalid traces outside the chains,
 /// the bootstrap's traces and the light-tracing sums ([`Sweeps::save`]'s
 /// order).
-type Saved<R> = (Vec<TileChain<R>>, StratifiedStats, u64, u64, u64, LightTracing);
+type Saved<R> = (
+    Vec<TileChain<R>>,
+    StratifiedStats,
+    u64,
+    u64,
+    u64,
+    LightTracing,
+);
 
 /// Stratified MCMC's state between rounds: the tile chains and their counters.
 struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {

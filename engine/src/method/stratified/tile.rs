@@ -12,13 +12,13 @@ use serde::{Deserialize, Serialize};
 use crate::rng::Pcg32;
 
 use crate::chain::{Chain, ChainStats, Target, Traced, Weights};
+use crate::film::Film;
 use crate::mutate::MutationParams;
 use crate::oracle::{
     FilmPoint, PathOracle, Radiance, Resolution, Sampler, Splat, SplatSink, Temperature,
 };
 use crate::rng::{self, Domain, uniform_f64};
 use crate::sample::{IndependentSampler, MltSampler, Proposal};
-use crate::film::Film;
 use crate::target::{Evaluated, Importance, SplatList, valid_splat};
 use crate::tiles::Tiles;
 
@@ -88,8 +88,11 @@ impl LightTracing {
         let resolution = self.sums.resolution();
         for s in sampled.drain(..) {
             let weight = self.weights[s.source as usize];
-            self.sums
-                .add(resolution.pixel_index(s.splat.film), weight, &s.splat.radiance);
+            self.sums.add(
+                resolution.pixel_index(s.splat.film),
+                weight,
+                &s.splat.radiance,
+            );
         }
     }
 }
@@ -208,7 +211,9 @@ where
         };
         let mut e = Evaluated {
             film,
-            sample: self.oracle.trace(film, sampler, Temperature::ONE, &mut sink),
+            sample: self
+                .oracle
+                .trace(film, sampler, Temperature::ONE, &mut sink),
             ..Evaluated::default()
         };
         e.value(self.importance, resolution);
@@ -428,7 +433,12 @@ impl<R: Radiance> TileChain<R> {
         let mut invalid = 0;
         for _ in 0..paths {
             let [x, y] = self.mc.next_2d();
-            let (v, bad) = ctx.trace_in(&mut self.mc, tile, FilmPoint { x, y }, Some(&mut self.sampled));
+            let (v, bad) = ctx.trace_in(
+                &mut self.mc,
+                tile,
+                FilmPoint { x, y },
+                Some(&mut self.sampled),
+            );
             invalid += bad as u64;
             let sums = &mut self.uniform[centre * channels..(centre + 1) * channels];
             let mut mean = 0.0;

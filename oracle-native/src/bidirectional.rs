@@ -105,7 +105,7 @@ impl Vertex {
 
     /// `pdf` (solid angle at this vertex toward `next`) as an area density
     /// at `next` (pbrt's `ConvertDensity`).
-    fn to_area(&self, pdf: f32, next: &Vertex) -> f32 {
+    fn area_density(&self, pdf: f32, next: &Vertex) -> f32 {
         let w = next.p - self.p;
         let d2 = w.length_squared();
         if d2 == 0.0 {
@@ -132,7 +132,7 @@ impl Vertex {
                 self.bsdf.pdf(wo, wi)
             }
         };
-        self.to_area(pdf, next)
+        self.area_density(pdf, next)
     }
 
     /// Area density at `next` of this emitter emitting toward it
@@ -143,7 +143,7 @@ impl Vertex {
         if cos <= 0.0 {
             return 0.0;
         }
-        self.to_area(cos * FRAC_1_PI, next)
+        self.area_density(cos * FRAC_1_PI, next)
     }
 
     /// Area density of this emitter point as the start of a light subpath.
@@ -385,7 +385,7 @@ impl<I: Intersector> PathTracer<I> {
             vertex.frame = Frame::new(ns);
             vertex.bsdf = scene.materials[scene.material_of[tri] as usize].bsdf(uv);
             vertex.emitter = scene.light_of[tri];
-            vertex.pdf_fwd = prev.to_area(pdf, &vertex);
+            vertex.pdf_fwd = prev.area_density(pdf, &vertex);
             path.push(vertex);
             if path.len() == longest {
                 break;
@@ -417,7 +417,7 @@ impl<I: Intersector> PathTracer<I> {
             };
             beta *= factor;
             let n = path.len();
-            path[n - 2].pdf_rev = vertex.to_area(pdf_rev, &path[n - 2]);
+            path[n - 2].pdf_rev = vertex.area_density(pdf_rev, &path[n - 2]);
             if !(beta.max_element() > 0.0 && beta.is_finite()) {
                 break;
             }

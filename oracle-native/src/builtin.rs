@@ -1,5 +1,5 @@
 //! Procedural scenes for fast tests, no data files: `cornell`, `door`,
-//! `envplane`, `caustic` and `saturated`.
+//! `envplane`, `caustic`, `saturated` and `pool`.
 
 use glam::{Mat4, Vec2, Vec3};
 use strata_engine::Resolution;
@@ -8,7 +8,14 @@ use crate::material::{ConductorFresnel, Material, Texture};
 use crate::scene::{Camera, Mesh, Scene};
 
 /// Names of the built-in scenes.
-pub const NAMES: [&str; 5] = ["cornell", "door", "envplane", "caustic", "saturated"];
+pub const NAMES: [&str; 6] = [
+    "cornell",
+    "door",
+    "envplane",
+    "caustic",
+    "saturated",
+    "pool",
+];
 
 /// The built-in scene called `name`, at `resolution`.
 pub fn by_name(name: &str, resolution: Resolution) -> Option<Scene> {
@@ -18,6 +25,7 @@ pub fn by_name(name: &str, resolution: Resolution) -> Option<Scene> {
         "envplane" => Some(envplane(resolution)),
         "caustic" => Some(caustic(resolution)),
         "saturated" => Some(saturated(resolution)),
+        "pool" => Some(pool(resolution)),
         _ => None,
     }
 }
@@ -493,6 +501,51 @@ pub fn saturated(resolution: Resolution) -> Scene {
         v(-0.5, 1.98, 0.5),
     );
     s.add_mesh(&light, black, Some(Vec3::splat(4.0)));
+    s.max_depth = 16;
+    s
+}
+
+/// A room half filled with water under a small light, seen from above the
+/// water: the floor and the walls below the surface are lit only through
+/// it and seen only through it, a specular-diffuse-specular caustic made
+/// glossy (GGX α = 0.2, a rippled surface). Next-event estimation
+/// is blocked by the surface and camera paths reach the small light after
+/// two refractions only by chance: the scene where unidirectional sampling
+/// fails and bidirectional connections at the glossy surface do not
+/// (issue 37).
+pub fn pool(resolution: Resolution) -> Scene {
+    let (mut s, [_, _, _, black]) = cornell_room(
+        resolution,
+        Vec3::splat(0.75),
+        Vec3::new(0.2, 0.5, 0.7),
+        Vec3::new(0.7, 0.6, 0.3),
+    );
+    s.camera = Camera::look_at(
+        Vec3::new(0.0, 1.7, 0.95),
+        Vec3::new(0.0, 0.3, -0.5),
+        Vec3::Y,
+        60.0,
+        resolution,
+    );
+    let water = s.add_material(Material::Dielectric {
+        eta: 1.33,
+        alpha: 0.2,
+    });
+    let v = Vec3::new;
+    let surface = quad(
+        v(-1., 0.6, -1.),
+        v(-1., 0.6, 1.),
+        v(1., 0.6, 1.),
+        v(1., 0.6, -1.),
+    );
+    s.add_mesh(&surface, water, None);
+    let light = quad(
+        v(-0.15, 1.98, -0.15),
+        v(0.15, 1.98, -0.15),
+        v(0.15, 1.98, 0.15),
+        v(-0.15, 1.98, 0.15),
+    );
+    s.add_mesh(&light, black, Some(Vec3::splat(60.0)));
     s.max_depth = 16;
     s
 }

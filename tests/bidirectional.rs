@@ -289,3 +289,43 @@ fn every_method_renders_the_furnace_on_bidirectional_paths() {
         eprintln!("{}: worst pixel z {worst:.2}", method.name());
     }
 }
+
+/// Light tracing's splats land where the pinhole projects: `project` of a
+/// point on the camera ray through a film point gives that film point back
+/// (and cos θ to the axis), for square, wide and tall films; points behind
+/// the camera or off the film project nowhere.
+#[test]
+fn a_point_projects_to_the_film_point_whose_ray_sees_it() {
+    for resolution in [
+        Resolution::new(24, 24),
+        Resolution::new(64, 16),
+        Resolution::new(9, 40),
+    ] {
+        let camera = Camera::look_at(
+            Vec3::new(0.3, 1.0, 4.0),
+            Vec3::new(-0.2, 0.5, 0.0),
+            Vec3::Y,
+            50.0,
+            resolution,
+        );
+        let projection = camera.projection();
+        let (w, h) = (resolution.width as f32, resolution.height as f32);
+        for (fx, fy) in [(0.01, 0.02), (0.5, 0.5), (0.93, 0.17), (0.31, 0.99)] {
+            let (x, y) = (fx * w, fy * h);
+            let (origin, direction) = camera.ray(x, y);
+            for distance in [0.5, 3.0, 40.0] {
+                let (at, cos) = projection.project(origin + direction * distance).unwrap();
+                assert!(
+                    (at.x - x).abs() < 1e-3 && (at.y - y).abs() < 1e-3,
+                    "{at:?} vs ({x}, {y})"
+                );
+                let (_, axis) = camera.ray(w / 2.0, h / 2.0);
+                assert!((cos - direction.dot(axis)).abs() < 1e-5);
+            }
+            assert!(projection.project(origin - direction).is_none());
+        }
+        let (origin, direction) = camera.ray(w / 2.0, h / 2.0);
+        let aside = direction.cross(Vec3::Y).normalize() * 100.0;
+        assert!(projection.project(origin + direction + aside).is_none());
+    }
+}

@@ -173,6 +173,15 @@ fn tempering_only_acts_above_temperature_one() {
         };
     assert_eq!(render(&plain, 1.0), render(&regularized, 1.0));
     assert_ne!(render(&plain, 1.0), render(&plain, 50.0));
+    // The bidirectional sampler tempers its joined vertices (seed 002 sec.
+    // 5.2): a path through the glass joins where it could not at T = 1.
+    let (mut plain, mut regularized) = (plain, regularized);
+    plain.sampler = PathSampler::Bidirectional;
+    regularized.sampler = PathSampler::Bidirectional;
+    assert_eq!(render(&plain, 1.0), render(&regularized, 1.0));
+    let (cold, hot) = (render(&plain, 1.0), render(&plain, 50.0));
+    let changed = cold.iter().zip(&hot).filter(|(a, b)| a != b).count();
+    assert!(changed > 40, "{changed} of 4000 paths changed at T = 50");
 }
 
 #[test]

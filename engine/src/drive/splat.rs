@@ -62,8 +62,9 @@ impl<R> RoundBuffers<R> {
     where
         R: Radiance,
     {
-        for (p, radiance) in path.contributions() {
-            self.splat(p, radiance, weight);
+        self.splat(path.film, path.sample.radiance, weight);
+        for s in path.splats.as_slice() {
+            self.splat(s.film, s.radiance, weight);
         }
     }
 

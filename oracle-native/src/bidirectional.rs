@@ -219,7 +219,7 @@ impl<I: Intersector> PathTracer<I> {
         only: Option<(usize, usize)>,
     ) -> (Vec3, PathFlags) {
         let scene = &self.scene;
-        let camera = scene.camera.projection();
+        let camera = self.projection;
         let paths = self.subpaths(film, sampler, &camera);
         let floor = self.regularization.map_or(0.0, |r| r.floor());
         let temper = |v: &Vertex| {

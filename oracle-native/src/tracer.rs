@@ -21,7 +21,7 @@ use strata_engine::{
 };
 
 use crate::geometry::{Frame, Intersector, Ray, power_heuristic, uniform_triangle};
-use crate::scene::{NO_LIGHT, Scene};
+use crate::scene::{NO_LIGHT, Projection, Scene};
 
 /// Set on paths with at least one specular scattering event.
 pub const SPECULAR_PATH: PathFlags = PathFlags(1);
@@ -94,6 +94,8 @@ impl PathSampler {
 pub struct PathTracer<I> {
     pub(crate) scene: Scene,
     pub(crate) accel: I,
+    /// The scene's camera as light tracing sees it, computed once.
+    pub(crate) projection: Projection,
     /// Optional roughness floor at connecting vertices.
     pub regularization: Option<Regularization>,
     /// Unidirectional (the default) or bidirectional.
@@ -104,6 +106,7 @@ impl<I: Intersector> PathTracer<I> {
     /// A tracer for `scene` with `accel` built over `scene.triangles`.
     pub fn new(scene: Scene, accel: I) -> Self {
         Self {
+            projection: scene.camera.projection(),
             scene,
             accel,
             regularization: None,

@@ -1,5 +1,5 @@
-//! Equal time, every method on unidirectional and on bidirectional paths
-//! (issue 37): each (method, path sampler) renders the scene with the same
+//! Equal time, every method on unidirectional, bidirectional and
+//! multiplexed paths (issues 37, 38): each (method, path sampler) renders the scene with the same
 //! time budget, over several seeds, and is compared with a long
 //! bidirectional MC reference (cached as `reference_WxH_SPP.exr` in the
 //! output directory). Writes `path_samplers.csv` (one row per render:
@@ -29,7 +29,7 @@ use strata::native::{PathSampler, builtin, native_tracer, pbrt};
 
 use common::{AnyResult, cached_mc};
 
-/// Every method x {unidirectional, bidirectional} at equal time.
+/// Every method x {unidirectional, bidirectional, multiplexed} at equal time.
 #[derive(Parser, Debug)]
 struct Args {
     /// A built-in scene or a directory of $STRATA_SCENES.
@@ -91,7 +91,11 @@ fn main() -> AnyResult<()> {
     for name in &args.methods {
         let method = Method::from_name(name).expect("a method name");
         let mut means = Vec::new();
-        for sampler in [PathSampler::Unidirectional, PathSampler::Bidirectional] {
+        for sampler in [
+            PathSampler::Unidirectional,
+            PathSampler::Bidirectional,
+            PathSampler::Multiplexed,
+        ] {
             tracer.sampler = sampler;
             let mut sum = 0.0;
             for seed in 0..args.seeds {
@@ -118,10 +122,12 @@ fn main() -> AnyResult<()> {
             means.push(sum / args.seeds as f64);
         }
         println!(
-            "{name:>10}: relMSE unidirectional {:.3e}, bidirectional {:.3e}, ratio uni/bi {:.2}",
+            "{name:>10}: relMSE unidirectional {:.3e}, bidirectional {:.3e}, multiplexed {:.3e}; uni/bi {:.2}, uni/multiplexed {:.2}",
             means[0],
             means[1],
-            means[0] / means[1]
+            means[2],
+            means[0] / means[1],
+            means[0] / means[2]
         );
     }
     println!("wrote {}", dir.join("path_samplers.csv").display());

@@ -208,37 +208,48 @@ struct Subpaths {
 
 impl<I: Intersector> PathTracer<I> {
     /// A bidirectional path through `film`: its radiance there, with its
-    /// light-tracing contributions handed to `splats`; with `only = (s, t)`
-    /// that strategy alone, unweighted.
+    /// light-tracing contributions handed to `splats`, by the strategies
+    /// `which`.
     pub(crate) fn bidirectional<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,
         sampler: &mut S,
         temperature: f32,
         splats: &mut dyn SplatSink<Rgb>,
-        only: Option<(usize, usize)>,
+        which: Strategies,
     ) -> (Vec3, PathFlags) {
         let scene = &self.scene;
         let camera = self.projection;
-        let paths = self.subpaths(film, sampler, &camera);
+        let longest = scene.max_depth as usize + 2;
+        let (only, scale) = match which {
+            Strategies::All => (None, 1.0),
+            Strategies::One { light, camera } => (Some((light, camera)), 1.0),
+            Strategies::Multiplexed => {
+                let (s, t, scale) = multiplexed_choice(sampler, longest);
+                (Some((s, t)), scale)
+            }
+        };
+        let (camera_vertices, light_vertices) = match only {
+            None => (longest, longest - 1),
+            Some((s, t)) => (t, s),
+        };
+        let paths = self.subpaths(film, sampler, &camera, camera_vertices, light_vertices);
         let floor = self.regularization.map_or(0.0, |r| r.floor());
         let temper = |v: &Vertex| {
             let mut v = *v;
             v.bsdf = v.bsdf.tempered(temperature, floor);
             v
         };
-        let mut radiance = if only.is_none_or(|(s, _)| s == 0) {
-            paths.environment
-        } else {
-            Vec3::ZERO
+        // The environment is reached only by escaping camera subpaths
+        // (`s = 0`, its one strategy): with one strategy, only at its length.
+        let mut radiance = match only {
+            None => paths.environment,
+            Some((0, t)) if paths.camera.len() + 1 == t => paths.environment * scale,
+            Some(_) => Vec3::ZERO,
         };
-        let longest = scene.max_depth as usize + 2;
         for t in 1..=paths.camera.len() {
             for s in 0..=paths.light.len() {
-                // Paths of one segment only as the camera sees the light
-                // (pbrt skips `s = t = 1` too: `s + t = 2` has weight 1).
-                let skipped = s + t <= 2 && s != 0 || s + t > longest || t == 1 && s == 0;
-                if skipped || only.is_some_and(|o| o != (s, t)) {
+                if !joinable(s, t, longest) || only.is_some_and(|o| o != (s, t)) {
                     continue;
                 }
                 let pt = temper(&paths.camera[t - 1]);
@@ -247,11 +258,11 @@ impl<I: Intersector> PathTracer<I> {
                 else {
                     continue;
                 };
-                let weight = match only {
-                    Some(_) => 1.0,
-                    None => mis_weight(scene, &camera, &paths, s, t, &pt, qs.as_ref()),
+                let weight = match which {
+                    Strategies::One { .. } => 1.0,
+                    _ => mis_weight(scene, &camera, &paths, s, t, &pt, qs.as_ref()),
                 };
-                let value = value * weight;
+                let value = value * (weight * scale);
                 match raster {
                     Some(at) => {
                         if value.max_element() > 0.0 {
@@ -265,19 +276,21 @@ impl<I: Intersector> PathTracer<I> {
         (radiance, paths.flags)
     }
 
-    /// Both subpaths: the camera's from `film` (stream 0), the light's from
-    /// a light chosen by power (stream 1).
+    /// Both subpaths, of at most `camera_vertices` and `light_vertices`:
+    /// the camera's from `film` (stream 0), the light's from a light chosen
+    /// by power (stream 1).
     fn subpaths<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,
         sampler: &mut S,
         camera: &Projection,
+        camera_vertices: usize,
+        light_vertices: usize,
     ) -> Subpaths {
         let scene = &self.scene;
-        let max_depth = scene.max_depth as usize;
         let mut paths = Subpaths {
-            camera: Vec::with_capacity(max_depth + 2),
-            light: Vec::with_capacity(max_depth + 1),
+            camera: Vec::with_capacity(camera_vertices),
+            light: Vec::with_capacity(light_vertices),
             environment: Vec3::ZERO,
             flags: PathFlags::NONE,
         };
@@ -291,7 +304,7 @@ impl<I: Intersector> PathTracer<I> {
             ray,
             Vec3::ONE,
             pdf,
-            max_depth + 2,
+            camera_vertices,
             Transport::Radiance,
             &mut paths.camera,
         );
@@ -305,6 +318,9 @@ impl<I: Intersector> PathTracer<I> {
             paths.flags.0 |= SPECULAR_PATH.0;
         }
 
+        if light_vertices == 0 {
+            return paths;
+        }
         sampler.start_stream(1);
         let u_light = sampler.next_1d();
         let u_point = sampler.next_2d();
@@ -339,7 +355,7 @@ impl<I: Intersector> PathTracer<I> {
             ray,
             beta,
             pdf_direction,
-            max_depth + 1,
+            light_vertices,
             Transport::Importance,
             &mut paths.light,
         );
@@ -507,6 +523,47 @@ impl<I: Intersector> PathTracer<I> {
         let value = qs.beta * light_side * camera_side * pt.beta / d2;
         Some((value, raster))
     }
+}
+
+/// Which strategies a bidirectional path joins.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Strategies {
+    /// Every one, weighted by MIS.
+    All,
+    /// `(light, camera)` alone, unweighted.
+    One { light: usize, camera: usize },
+    /// One chosen by the path's own numbers (Hachisuka et al. 2014): a path
+    /// length uniformly, then one of its strategies uniformly, weighted by
+    /// MIS over the probability of the choice.
+    Multiplexed,
+}
+
+/// Whether strategy `(s, t)` joins paths of at most `longest` vertices:
+/// not `t = 0`, not `(0, 1)`, and a path of one segment only as the camera
+/// sees the light (pbrt skips `s = t = 1` too: `s + t = 2` has weight 1).
+fn joinable(s: usize, t: usize, longest: usize) -> bool {
+    t >= 1 && s + t <= longest && !(t == 1 && s <= 1)
+}
+
+/// Multiplexing's choice (Hachisuka et al. 2014, sec. 4), from two numbers
+/// of stream 2: the path's vertex count `n` uniformly in `2..=longest`,
+/// then `t` uniformly among the strategies `(n - t, t)` that can join it.
+/// Returns `(s, t)` and one over the choice's probability.
+fn multiplexed_choice<S: Sampler + ?Sized>(sampler: &mut S, longest: usize) -> (usize, usize, f32) {
+    sampler.start_stream(2);
+    let [u_length, u_strategy] = sampler.next_2d();
+    let pick = |u: f32, count: usize| ((u * count as f32) as usize).min(count - 1);
+    let lengths = longest - 1;
+    let n = 2 + pick(u_length, lengths);
+    // Two vertices: only `(0, 2)`; more: every `t` in `1..=n`.
+    let (strategies, t) = if n == 2 {
+        (1, 2)
+    } else {
+        (n, 1 + pick(u_strategy, n))
+    };
+    debug_assert!(joinable(n - t, t, longest));
+    sampler.start_stream(0);
+    (n - t, t, (lengths * strategies) as f32)
 }
 
 /// The power-heuristic weight of strategy `(s, t)` (Veach 1997 eq. 10.9 with

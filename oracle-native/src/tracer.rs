@@ -20,6 +20,7 @@ use strata_engine::{
     FilmPoint, PathFlags, PathOracle, PathSample, Resolution, Rgb, Sampler, SplatSink, Temperature,
 };
 
+use crate::bidirectional::Strategies;
 use crate::geometry::{Frame, Intersector, Ray, power_heuristic, uniform_triangle};
 use crate::scene::{NO_LIGHT, Projection, Scene};
 
@@ -59,6 +60,12 @@ pub enum PathSampler {
     /// Camera and light subpaths joined in every way
     /// ([`bidirectional`](crate::bidirectional)); light tracing splats.
     Bidirectional,
+    /// One bidirectional strategy per path, chosen by the path's own numbers
+    /// (stream 2): a path length, then a strategy, uniformly; its MIS-weighted
+    /// contribution over the choice's probability. Under MLT the chain's
+    /// state carries the choice, which mutations change: multiplexed MLT
+    /// (Hachisuka, Kaplanyan and Dachsbacher 2014; seed 002 sec. 4.2.2).
+    Multiplexed,
     /// One strategy of the bidirectional tracer alone, unweighted: `s`
     /// light and `t` camera vertices (Veach 1997 fig. 10.3; for tests and
     /// studies: each is an unbiased estimate of the paths it can sample).
@@ -72,21 +79,26 @@ pub enum PathSampler {
 
 impl PathSampler {
     /// Every path sampler's name.
-    pub const NAMES: [&'static str; 2] = ["unidirectional", "bidirectional"];
+    pub const NAMES: [&'static str; 3] = ["unidirectional", "bidirectional", "multiplexed"];
 
     /// Its name (a single strategy is "bidirectional").
     pub fn name(self) -> &'static str {
         match self {
             PathSampler::Unidirectional => Self::NAMES[0],
             PathSampler::Bidirectional | PathSampler::Strategy { .. } => Self::NAMES[1],
+            PathSampler::Multiplexed => Self::NAMES[2],
         }
     }
 
     /// The path sampler called `name`.
     pub fn from_name(name: &str) -> Option<PathSampler> {
-        [PathSampler::Unidirectional, PathSampler::Bidirectional]
-            .into_iter()
-            .find(|s| s.name() == name)
+        [
+            PathSampler::Unidirectional,
+            PathSampler::Bidirectional,
+            PathSampler::Multiplexed,
+        ]
+        .into_iter()
+        .find(|s| s.name() == name)
     }
 }
 
@@ -262,11 +274,21 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
         let (l, flags) = match self.sampler {
             PathSampler::Unidirectional => self.radiance(film, sampler, temperature.0),
             PathSampler::Bidirectional => {
-                self.bidirectional(film, sampler, temperature.0, splats, None)
+                self.bidirectional(film, sampler, temperature.0, splats, Strategies::All)
             }
+            PathSampler::Multiplexed => self.bidirectional(
+                film,
+                sampler,
+                temperature.0,
+                splats,
+                Strategies::Multiplexed,
+            ),
             PathSampler::Strategy { light, camera } => {
-                let only = (light as usize, camera as usize);
-                self.bidirectional(film, sampler, temperature.0, splats, Some(only))
+                let one = Strategies::One {
+                    light: light as usize,
+                    camera: camera as usize,
+                };
+                self.bidirectional(film, sampler, temperature.0, splats, one)
             }
         };
         PathSample {

@@ -158,6 +158,13 @@ pub struct Splat<R> {
 pub trait SplatSink<R> {
     /// Adds a contribution of `radiance` at `film`.
     fn splat(&mut self, film: FilmPoint, radiance: R);
+
+    /// Whether the caller keeps the splats. When it does not, an oracle may
+    /// skip the work that only makes splats (a bidirectional tracer's light
+    /// tracing connections); the radiance must not change.
+    fn wants_splats(&self) -> bool {
+        true
+    }
 }
 
 /// A sink that drops every splat: for callers that use only the radiance at
@@ -168,6 +175,10 @@ pub struct DropSplats;
 
 impl<R> SplatSink<R> for DropSplats {
     fn splat(&mut self, _film: FilmPoint, _radiance: R) {}
+
+    fn wants_splats(&self) -> bool {
+        false
+    }
 }
 
 /// A radiance value: RGB for renderers, a scalar for analytic targets.

@@ -247,7 +247,9 @@ impl<I: Intersector> PathTracer<I> {
             Some((0, t)) if paths.camera.len() + 1 == t => paths.environment * scale,
             Some(_) => Vec3::ZERO,
         };
-        for t in 1..=paths.camera.len() {
+        // Light tracing only makes splats: skipped when they are dropped.
+        let first_t = if splats.wants_splats() { 1 } else { 2 };
+        for t in first_t..=paths.camera.len() {
             for s in 0..=paths.light.len() {
                 if !joinable(s, t, longest) || only.is_some_and(|o| o != (s, t)) {
                     continue;

@@ -109,6 +109,10 @@ struct TileSink<'a, R> {
 }
 
 impl<R: Radiance> SplatSink<R> for TileSink<'_, R> {
+    fn wants_splats(&self) -> bool {
+        self.keep.is_some()
+    }
+
     fn splat(&mut self, film: FilmPoint, radiance: R) {
         self.made += 1;
         if self.made > SplatList::<R>::CAPACITY || !valid_splat(film, &radiance, self.resolution) {
@@ -239,6 +243,7 @@ where
         sampler: &mut S,
         tile: usize,
         jitter: FilmPoint,
+        keep_splats: bool,
         out: &mut TileState<O::Radiance>,
     ) -> Traced {
         // Sized once (a chain's spare state starts empty), then overwritten.
@@ -249,7 +254,8 @@ where
         out.splats.clear();
         let mut traced = Traced::default();
         for (o, q) in self.tiles.pixels(tile) {
-            let (v, bad) = self.trace_in(sampler, q, jitter, Some(&mut out.splats));
+            let splats = keep_splats.then_some(&mut out.splats);
+            let (v, bad) = self.trace_in(sampler, q, jitter, splats);
             out.target = out.target.max(v.importance);
             out.values[o] = v;
             traced.paths += 1;
@@ -263,6 +269,9 @@ where
 pub(super) struct TileTarget<'a, 'b, O, I: ?Sized> {
     pub ctx: &'a Context<'b, O, I>,
     pub tile: usize,
+    /// Whether the proposal's splats are kept (a coin-chosen large step's
+    /// are the light-tracing estimate's samples; no other's are used).
+    pub splats: bool,
 }
 
 impl<O, I> Target for TileTarget<'_, '_, O, I>
@@ -274,7 +283,8 @@ where
 
     fn evaluate(&self, proposal: &mut Proposal<'_>, state: &mut Self::State) -> Traced {
         let jitter = proposal.film_point(UNIT);
-        self.ctx.trace_tile(proposal, self.tile, jitter, state)
+        self.ctx
+            .trace_tile(proposal, self.tile, jitter, self.splats, state)
     }
 
     fn value(&self, state: &Self::State) -> f64 {
@@ -381,7 +391,11 @@ impl<R: Radiance> TileChain<R> {
         let large = dark || chosen;
         let unscaled = &mut self.unscaled;
         let outcome = self.chain.step(
-            &TileTarget { ctx, tile },
+            &TileTarget {
+                ctx,
+                tile,
+                splats: chosen,
+            },
             &TileWeights,
             large,
             &mut self.decisions,
@@ -463,7 +477,7 @@ impl<R: Radiance> TileChain<R> {
         let (sampler, state) = self.chain.parts_mut();
         let mut replay = sampler.replay();
         let jitter = replay.film_point(UNIT);
-        let traced = ctx.trace_tile(&mut replay, tile, jitter, state);
+        let traced = ctx.trace_tile(&mut replay, tile, jitter, false, state);
         self.stats.invalid += traced.invalid;
         self.pending = false;
         traced.paths

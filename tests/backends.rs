@@ -10,7 +10,7 @@ use strata::engine::rng::{Domain, stream, uniform_f32};
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Film, Method, Resolution, Settings, Silent, render};
 use strata::native::builtin;
-use strata::native::{BvhIntersector, Hit, Intersector, PathTracer, Ray, Scene};
+use strata::native::{BvhIntersector, Hit, Intersector, PathSampler, PathTracer, Ray, Scene};
 
 fn scenes() -> Vec<(&'static str, Scene)> {
     let res = Resolution::new(64, 48);
@@ -138,16 +138,21 @@ fn raycast_images_are_identical() {
     }
 }
 
+/// On unidirectional and on bidirectional paths (light tracing's splats
+/// included).
 #[test]
 fn renders_with_the_same_seed_agree_within_noise() {
-    for name in builtin::NAMES {
+    let samplers = [PathSampler::Unidirectional, PathSampler::Bidirectional];
+    for (name, sampler) in builtin::NAMES.iter().flat_map(|n| samplers.map(|s| (n, s))) {
         let res = Resolution::new(24, 18);
         let scene = builtin::by_name(name, res).unwrap();
-        let embree = PathTracer::new(
+        let mut embree = PathTracer::new(
             scene.clone(),
             EmbreeIntersector::new(&scene.triangles).unwrap(),
         );
-        let native = PathTracer::new(scene.clone(), BvhIntersector::new(&scene.triangles));
+        let mut native = PathTracer::new(scene.clone(), BvhIntersector::new(&scene.triangles));
+        embree.sampler = sampler;
+        native.sampler = sampler;
         let runs = |tracer: &dyn Fn(u64) -> Film| (0..8).map(tracer).collect::<Vec<_>>();
         let mc = |seed| Settings {
             seed,
@@ -167,7 +172,7 @@ fn renders_with_the_same_seed_agree_within_noise() {
             let z = (ma - mb).abs() / (va + vb).sqrt().max(1e-12);
             assert!(
                 z < 4.5,
-                "{name} channel {c}: native {ma} embree {mb} (z = {z:.2})"
+                "{name} ({sampler:?}) channel {c}: native {ma} embree {mb} (z = {z:.2})"
             );
         }
     }

@@ -583,10 +583,8 @@ fn mis_weight(
     if s + t == 2 {
         return 1.0;
     }
-    let cam = &paths.camera;
-    let light = &paths.light;
-    let pt_minus = (t > 1).then(|| &cam[t - 2]);
-    let qs_minus = (s > 1).then(|| &light[s - 2]);
+    let pt_minus = (t > 1).then(|| &paths.camera[t - 2]);
+    let qs_minus = (s > 1).then(|| &paths.light[s - 2]);
     // The densities the connection changes (pbrt's `ScopedAssignment`s).
     let pt_rev = match qs {
         Some(qs) => qs.pdf(camera, qs_minus, pt),
@@ -601,37 +599,35 @@ fn mis_weight(
         (Some(qs), Some(m)) => qs.pdf(camera, Some(pt), m),
         _ => 0.0,
     };
-    let mut sum = 0.0f32;
+    let camera_side = ratio_sum(&paths.camera[..t], 1, pt_rev, pt_minus_rev, 0.0);
+    let sum = ratio_sum(&paths.light[..s], 0, qs_rev, qs_minus_rev, camera_side);
+    1.0 / (1.0 + sum)
+}
+
+/// One subpath's share of the MIS denominator (pbrt's walk): from its joined
+/// end back to vertex `first`, the running product of density ratios
+/// `p_rev / p_fwd`, squared (the power heuristic) and summed where neither
+/// the vertex nor the one before it is a delta. `last_rev` and
+/// `second_rev` are the reverse densities of the two vertices at the joined
+/// end as the connection sets them; the joined vertex counts as non-delta.
+/// Adds to `sum` (the other side's share), term by term.
+fn ratio_sum(path: &[Vertex], first: usize, last_rev: f32, second_rev: f32, mut sum: f32) -> f32 {
+    let n = path.len();
     let mut ratio = 1.0f32;
-    for i in (1..t).rev() {
-        let rev = if i == t - 1 {
-            pt_rev
-        } else if i == t - 2 {
-            pt_minus_rev
+    for i in (first..n).rev() {
+        let rev = if i == n - 1 {
+            last_rev
+        } else if i == n - 2 {
+            second_rev
         } else {
-            cam[i].pdf_rev
+            path[i].pdf_rev
         };
-        ratio *= remap0(rev) / remap0(cam[i].pdf_fwd);
-        let delta = i != t - 1 && cam[i].delta;
-        if !delta && !cam[i - 1].delta {
-            sum += ratio * ratio;
-        }
-    }
-    ratio = 1.0;
-    for i in (0..s).rev() {
-        let rev = if i == s - 1 {
-            qs_rev
-        } else if i == s - 2 {
-            qs_minus_rev
-        } else {
-            light[i].pdf_rev
-        };
-        ratio *= remap0(rev) / remap0(light[i].pdf_fwd);
-        let delta = i != s - 1 && light[i].delta;
-        let before_delta = i > 0 && light[i - 1].delta;
+        ratio *= remap0(rev) / remap0(path[i].pdf_fwd);
+        let delta = i != n - 1 && path[i].delta;
+        let before_delta = i > 0 && path[i - 1].delta;
         if !delta && !before_delta {
             sum += ratio * ratio;
         }
     }
-    1.0 / (1.0 + sum)
+    sum
 }

@@ -181,7 +181,6 @@ impl<R: Radiance> Evaluated<R> {
             self.invalid = true;
         }
     }
-
 }
 
 #[cfg(test)]

@@ -75,6 +75,10 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
             tracer.sampler = PathSampler::Bidirectional;
             render_all(&format!("{name}-bidirectional"), &tracer, &args.out)?;
         }
+        // Multiplexed paths: the length held by small steps, one strategy.
+        let mut tracer = native_tracer(builtin::by_name("caustic", RESOLUTION).expect("built in"));
+        tracer.sampler = PathSampler::Multiplexed;
+        render_all("caustic-multiplexed", &tracer, &args.out)?;
         Ok(())
     })
 }

@@ -55,6 +55,17 @@ struct Args {
         value_parser = PossibleValuesParser::new(Method::NAMES)
     )]
     methods: Vec<String>,
+    /// Path samplers.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "unidirectional,bidirectional,multiplexed",
+        value_parser = PossibleValuesParser::new(PathSampler::NAMES)
+    )]
+    samplers: Vec<String>,
+    /// Settings of the methods that have them, NAME=VALUE (as `strata render --set`).
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    set: Vec<String>,
     /// Paths per pixel of the bidirectional MC reference.
     #[arg(long, default_value_t = 4096)]
     reference_spp: u64,
@@ -89,13 +100,16 @@ fn main() -> AnyResult<()> {
         args.scene, args.width, args.height, args.time, args.seeds, args.reference_spp
     );
     for name in &args.methods {
-        let method = Method::from_name(name).expect("a method name");
+        let mut method = Method::from_name(name).expect("a method name");
+        for assignment in &args.set {
+            let (key, value) = assignment.split_once('=').ok_or("--set takes NAME=VALUE")?;
+            if method.settings().iter().any(|row| row.name == key) {
+                method.set(key, value.parse()?)?;
+            }
+        }
         let mut means = Vec::new();
-        for sampler in [
-            PathSampler::Unidirectional,
-            PathSampler::Bidirectional,
-            PathSampler::Multiplexed,
-        ] {
+        for sampler in &args.samplers {
+            let sampler = PathSampler::from_name(sampler).expect("a path sampler's name");
             tracer.sampler = sampler;
             let mut sum = 0.0;
             for seed in 0..args.seeds {
@@ -121,14 +135,14 @@ fn main() -> AnyResult<()> {
             }
             means.push(sum / args.seeds as f64);
         }
-        println!(
-            "{name:>10}: relMSE unidirectional {:.3e}, bidirectional {:.3e}, multiplexed {:.3e}; uni/bi {:.2}, uni/multiplexed {:.2}",
-            means[0],
-            means[1],
-            means[2],
-            means[0] / means[1],
-            means[0] / means[2]
-        );
+        let mut line = format!("{name:>10}: relMSE");
+        for (sampler, mean) in args.samplers.iter().zip(&means) {
+            line += &format!(" {sampler} {mean:.3e}");
+        }
+        for (sampler, mean) in args.samplers.iter().zip(&means).skip(1) {
+            line += &format!("; {}/{sampler} {:.2}", args.samplers[0], means[0] / mean);
+        }
+        println!("{line}");
     }
     println!("wrote {}", dir.join("path_samplers.csv").display());
     Ok(())

@@ -12,6 +12,11 @@
 // to `STRATA_ORACLE_STREAMS - 1`.
 #define STRATA_ORACLE_STREAMS 7
 
+// The stream that small steps hold: a Metropolis chain changes its numbers
+// only by a large step, so a discrete choice drawn from it (multiplexed
+// MLT's path length, Hachisuka et al. 2014) stays the chain's until then.
+#define STRATA_HELD_STREAM 6
+
 // What a call did.
 typedef enum StrataStatus {
   // Success.

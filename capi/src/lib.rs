@@ -142,6 +142,12 @@ pub extern "C" fn strata_sampler_next_2d(sampler: *mut StrataSampler, out: *mut 
 pub const STRATA_ORACLE_STREAMS: u8 = 7;
 const _: () = assert!(STRATA_ORACLE_STREAMS as usize == strata_engine::oracle::ORACLE_STREAMS);
 
+/// The stream that small steps hold: a Metropolis chain changes its numbers
+/// only by a large step, so a discrete choice drawn from it (multiplexed
+/// MLT's path length, Hachisuka et al. 2014) stays the chain's until then.
+pub const STRATA_HELD_STREAM: u8 = 6;
+const _: () = assert!(STRATA_HELD_STREAM == strata_engine::oracle::HELD_STREAM);
+
 /// Switches to the oracle's stream `stream` (0 to `STRATA_ORACLE_STREAMS -
 /// 1`; the trace starts on stream 0, the film point is the engine's own) and
 /// restarts it at its first number. Streams keep unrelated decisions (camera

@@ -59,6 +59,6 @@ pub use error::Error;
 pub use film::Film;
 pub use method::{Extras, Method, Output, Settings, render, resume};
 pub use oracle::{
-    DropSplats, FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb,
-    Sampler, Splat, SplatSink, Temperature,
+    DropSplats, FilmPoint, FnOracle, HELD_STREAM, PathFlags, PathOracle, PathSample, Radiance,
+    Resolution, Rgb, Sampler, Splat, SplatSink, Temperature,
 };

@@ -259,6 +259,7 @@ pub trait Sampler {
     /// the other. Oracles start on stream 0; a sampler supports at least
     /// [`ORACLE_STREAMS`] streams and ignores requests beyond (the current
     /// stream then simply continues). Independent samplers ignore streams.
+    /// Small steps leave stream [`HELD_STREAM`] as it is.
     fn start_stream(&mut self, stream: u8) {
         let _ = stream;
     }
@@ -278,6 +279,15 @@ impl<S: Sampler + ?Sized> Sampler for &mut S {
 
 /// Number of streams available to oracles.
 pub const ORACLE_STREAMS: usize = 7;
+
+/// The oracle stream that small steps hold: a Metropolis chain changes its
+/// numbers only by a large step (a fresh uniform sample), so a discrete
+/// choice drawn from it stays the chain's until then. Multiplexed MLT draws
+/// the path length there (Hachisuka et al. 2014; pbrt-v4's `MLTIntegrator`
+/// keeps a chain's depth), so small steps explore the strategies of one
+/// length instead of jumping between lengths. Any kernel that moves only
+/// the other streams is still symmetric, so every method stays exact.
+pub const HELD_STREAM: u8 = ORACLE_STREAMS as u8 - 1;
 
 /// A renderer as the engine sees it.
 pub trait PathOracle: Sync {

@@ -37,12 +37,14 @@ use serde::{Deserialize, Serialize};
 use crate::rng::Pcg32;
 
 use crate::mutate::{Mutator, SmallStep};
-use crate::oracle::{FilmPoint, ORACLE_STREAMS, Resolution, Sampler};
+use crate::oracle::{FilmPoint, HELD_STREAM, ORACLE_STREAMS, Resolution, Sampler};
 use crate::rng::uniform_f32;
 
 /// The engine's own stream, which holds the film position.
 pub const FILM_STREAM: usize = 0;
 const STREAMS: usize = ORACLE_STREAMS + 1;
+/// The oracle's [`HELD_STREAM`] among the sampler's streams.
+const HELD: usize = HELD_STREAM as usize + 1;
 
 /// Independent uniform numbers: plain Monte Carlo.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -165,18 +167,20 @@ impl MltSampler {
 
     /// Opens a proposal: a large step (fresh uniform sample) if `large`, a
     /// small step otherwise. A small step moves every coordinate of the
-    /// current state at once; what the proposal reads beyond them is drawn
-    /// uniformly as it reads it.
+    /// current state at once, but those of [`HELD_STREAM`]; what the
+    /// proposal reads beyond them is drawn uniformly as it reads it.
     pub fn propose(&mut self, large: bool) -> Proposal<'_> {
         self.large_step = large;
         self.read = [0; STREAMS];
-        for stream in &mut self.streams {
+        for (i, stream) in self.streams.iter_mut().enumerate() {
             stream.proposal.clear();
             // Most oracles read few of the streams: an empty one has
             // nothing to move (and `step_all` would draw nothing for it).
             if !large && !stream.state.is_empty() {
                 stream.proposal.extend_from_slice(&stream.state);
-                self.kernel.step_all(&mut stream.proposal, &mut self.rng);
+                if i != HELD {
+                    self.kernel.step_all(&mut stream.proposal, &mut self.rng);
+                }
             }
         }
         Proposal {
@@ -477,6 +481,35 @@ mod tests {
             let mut new = MltSampler::new(k, stream(8, Domain::User, 1));
             assert_eq!(run(&mut used), run(&mut new), "{k:?}");
             assert_eq!(used.stats(), new.stats());
+        }
+    }
+
+    /// Small steps move every stream but [`HELD_STREAM`]; large steps
+    /// draw it afresh.
+    #[test]
+    fn small_steps_hold_the_held_stream() {
+        for k in kernels() {
+            let mut s = MltSampler::new(k, stream(5, Domain::User, 0));
+            let read = |p: &mut Proposal<'_>| {
+                p.start_stream(HELD_STREAM);
+                let held = read_n(p, 2);
+                p.start_stream(0);
+                (held, read_n(p, 2))
+            };
+            let mut p = s.propose(true);
+            let (held, mut moved) = read(&mut p);
+            p.accept(1.0);
+            for _ in 0..20 {
+                let mut p = s.propose(false);
+                let (h, m) = read(&mut p);
+                p.accept(1.0);
+                assert_eq!(h, held, "{k:?}: a small step moved the held stream");
+                assert_ne!(m, moved, "{k:?}: a small step must move stream 0");
+                moved = m;
+            }
+            let mut p = s.propose(true);
+            let (h, _) = read(&mut p);
+            assert_ne!(h, held, "{k:?}: a large step draws the held stream afresh");
         }
     }
 

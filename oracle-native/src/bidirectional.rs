@@ -38,7 +38,7 @@
 use std::f32::consts::FRAC_1_PI;
 
 use glam::Vec3;
-use strata_engine::{FilmPoint, PathFlags, Rgb, Sampler, SplatSink};
+use strata_engine::{FilmPoint, HELD_STREAM, PathFlags, Rgb, Sampler, SplatSink};
 
 use crate::geometry::{Frame, Intersector, Ray, cosine_hemisphere, uniform_triangle};
 use crate::material::Bsdf;
@@ -225,7 +225,7 @@ impl<I: Intersector> PathTracer<I> {
             Strategies::All => (None, 1.0),
             Strategies::One { light, camera } => (Some((light, camera)), 1.0),
             Strategies::Multiplexed => {
-                let (s, t, scale) = multiplexed_choice(sampler, longest);
+                let (s, t, scale) = multiplexed_choice(sampler, &self.lengths, longest);
                 (Some((s, t)), scale)
             }
         };
@@ -233,7 +233,12 @@ impl<I: Intersector> PathTracer<I> {
             None => (longest, longest - 1),
             Some((s, t)) => (t, s),
         };
-        let paths = self.subpaths(film, sampler, &camera, camera_vertices, light_vertices);
+        // One strategy fixes both subpaths' lengths: a walk cut short by
+        // Russian roulette could not make it, so only the MIS combination
+        // plays roulette (Šik 2018 sec. 4.2.2: MMLT cannot use it).
+        let roulette = only.is_none();
+        let lengths = (camera_vertices, light_vertices);
+        let paths = self.subpaths(film, sampler, &camera, lengths, roulette);
         let floor = self.regularization.map_or(0.0, |r| r.floor());
         let temper = |v: &Vertex| {
             let mut v = *v;
@@ -278,16 +283,16 @@ impl<I: Intersector> PathTracer<I> {
         (radiance, paths.flags)
     }
 
-    /// Both subpaths, of at most `camera_vertices` and `light_vertices`:
-    /// the camera's from `film` (stream 0), the light's from a light chosen
-    /// by power (stream 1).
+    /// Both subpaths, of at most `(camera, light)` vertices: the camera's
+    /// from `film` (stream 0), the light's from a light chosen by power
+    /// (stream 1); with Russian roulette if `roulette`.
     fn subpaths<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,
         sampler: &mut S,
         camera: &Projection,
-        camera_vertices: usize,
-        light_vertices: usize,
+        (camera_vertices, light_vertices): (usize, usize),
+        roulette: bool,
     ) -> Subpaths {
         let scene = &self.scene;
         let mut paths = Subpaths {
@@ -308,6 +313,7 @@ impl<I: Intersector> PathTracer<I> {
             pdf,
             camera_vertices,
             Transport::Radiance,
+            roulette,
             &mut paths.camera,
         );
         if let Some(first) = paths.camera.get(1)
@@ -359,6 +365,7 @@ impl<I: Intersector> PathTracer<I> {
             pdf_direction,
             light_vertices,
             Transport::Importance,
+            roulette,
             &mut paths.light,
         );
         paths
@@ -366,7 +373,8 @@ impl<I: Intersector> PathTracer<I> {
 
     /// Extends `path` along `ray` (leaving its last vertex with direction
     /// density `pdf`, throughput `beta`) up to `longest` vertices, four
-    /// numbers per bounce (pbrt's `RandomWalk`, with Russian roulette).
+    /// numbers per bounce (pbrt's `RandomWalk`, with Russian roulette if
+    /// `roulette`).
     /// Returns the environment's radiance if a radiance walk escapes.
     #[allow(clippy::too_many_arguments)]
     fn walk<S: Sampler + ?Sized>(
@@ -377,6 +385,7 @@ impl<I: Intersector> PathTracer<I> {
         mut pdf: f32,
         longest: usize,
         transport: Transport,
+        roulette: bool,
         path: &mut Vec<Vertex>,
     ) -> Vec3 {
         let scene = &self.scene;
@@ -440,7 +449,7 @@ impl<I: Intersector> PathTracer<I> {
                 break;
             }
             bounces += 1;
-            if bounces >= ROULETTE_DEPTH {
+            if roulette && bounces >= ROULETTE_DEPTH {
                 let survive = (beta.max_element() / start).min(0.95);
                 if u_roulette >= survive {
                     break;
@@ -547,25 +556,76 @@ fn joinable(s: usize, t: usize, longest: usize) -> bool {
     t >= 1 && s + t <= longest && !(t == 1 && s <= 1)
 }
 
-/// Multiplexing's choice (Hachisuka et al. 2014, sec. 4), from two numbers
-/// of stream 2: the path's vertex count `n` uniformly in `2..=longest`,
-/// then `t` uniformly among the strategies `(n - t, t)` that can join it.
-/// Returns `(s, t)` and one over the choice's probability.
-fn multiplexed_choice<S: Sampler + ?Sized>(sampler: &mut S, longest: usize) -> (usize, usize, f32) {
+/// Multiplexed MLT's choice of a path length (Hachisuka et al. 2014): `n`
+/// vertices in `2..=longest` with probability proportional to `1/(n-1)²`.
+///
+/// Under MLT the chain spends time on each length in proportion to the
+/// light it carries whatever these probabilities are (the target includes
+/// their inverse); they decide only where large steps propose. A uniform
+/// choice over `max_depth = 65` lengths (the real scenes') puts most large
+/// steps on long paths that carry nothing: `1/(n-1)²` measured best of
+/// uniform and `1/(n-1)^{1, 1.5, 2, 3}` (docs/RESULTS.md, issue 38).
+#[derive(Clone, Debug)]
+pub(crate) struct Lengths {
+    /// `P(n <= k + 2)` at index `k`.
+    cumulative: Vec<f32>,
+    /// `P(n = k + 2)` at index `k`.
+    probability: Vec<f32>,
+}
+
+impl Lengths {
+    /// The choice among paths of 2 to `longest` vertices.
+    pub(crate) fn new(longest: usize) -> Self {
+        let weights: Vec<f64> = (1..longest).map(|k| 1.0 / (k * k) as f64).collect();
+        let total: f64 = weights.iter().sum();
+        let mut sum = 0.0;
+        let cumulative = weights
+            .iter()
+            .map(|w| {
+                sum += w / total;
+                sum as f32
+            })
+            .collect();
+        let probability = weights.iter().map(|w| (w / total) as f32).collect();
+        Self {
+            cumulative,
+            probability,
+        }
+    }
+
+    /// The length `u` in `[0, 1)` selects, and its probability.
+    fn choose(&self, u: f32) -> (usize, f32) {
+        let last = self.cumulative.len() - 1;
+        let k = self.cumulative.partition_point(|&c| c <= u).min(last);
+        (k + 2, self.probability[k])
+    }
+}
+
+/// Multiplexing's choice (Hachisuka et al. 2014, sec. 4): the path's vertex
+/// count `n` by [`Lengths`] from the stream small steps hold (a chain keeps
+/// its length until a large step, as pbrt-v4's `MLTIntegrator` keeps a
+/// chain's depth), then `t` uniformly among the strategies `(n - t, t)` that
+/// can join it, from stream 2 (small steps move it: the chain moves to the
+/// strategies that carry the light). Returns `(s, t)` and one over the
+/// choice's probability.
+fn multiplexed_choice<S: Sampler + ?Sized>(
+    sampler: &mut S,
+    lengths: &Lengths,
+    longest: usize,
+) -> (usize, usize, f32) {
+    sampler.start_stream(HELD_STREAM);
+    let (n, p_length) = lengths.choose(sampler.next_1d());
     sampler.start_stream(2);
-    let [u_length, u_strategy] = sampler.next_2d();
-    let pick = |u: f32, count: usize| ((u * count as f32) as usize).min(count - 1);
-    let lengths = longest - 1;
-    let n = 2 + pick(u_length, lengths);
+    let u_strategy = sampler.next_1d();
     // Two vertices: only `(0, 2)`; more: every `t` in `1..=n`.
     let (strategies, t) = if n == 2 {
         (1, 2)
     } else {
-        (n, 1 + pick(u_strategy, n))
+        (n, 1 + ((u_strategy * n as f32) as usize).min(n - 1))
     };
     debug_assert!(joinable(n - t, t, longest));
     sampler.start_stream(0);
-    (n - t, t, (lengths * strategies) as f32)
+    (n - t, t, strategies as f32 / p_length)
 }
 
 /// The power-heuristic weight of strategy `(s, t)` (Veach 1997 eq. 10.9 with
@@ -630,4 +690,41 @@ fn ratio_sum(path: &[Vertex], first: usize, last_rev: f32, second_rev: f32, mut 
         }
     }
     sum
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every length in `2..=longest` has its probability `∝ 1/(n-1)²`, and
+    /// the numbers that select it are an interval of that width.
+    #[test]
+    fn lengths_are_chosen_with_their_probabilities() {
+        for longest in [2, 3, 18, 67] {
+            let lengths = Lengths::new(longest);
+            let total: f64 = (1..longest).map(|k| 1.0 / (k * k) as f64).sum();
+            let mut hits = vec![0u32; longest + 1];
+            let draws = 100_000;
+            for i in 0..draws {
+                let (n, p) = lengths.choose((i as f32 + 0.5) / draws as f32);
+                let expected = 1.0 / ((n - 1) * (n - 1)) as f64 / total;
+                assert!(
+                    (p as f64 - expected).abs() < 1e-6 * expected.max(1e-3),
+                    "n {n}"
+                );
+                hits[n] += 1;
+            }
+            assert_eq!(lengths.choose(0.0).0, 2);
+            assert_eq!(lengths.choose(1.0f32.next_down()).0, longest);
+            for (n, &h) in hits.iter().enumerate().skip(2) {
+                let p = 1.0 / ((n - 1) * (n - 1)) as f64 / total;
+                // A regular grid of `draws` numbers: within one draw.
+                let share = h as f64 / draws as f64;
+                assert!(
+                    (share - p).abs() <= 1.5 / draws as f64,
+                    "n {n}: {share} vs {p}"
+                );
+            }
+        }
+    }
 }

@@ -20,7 +20,7 @@ use strata_engine::{
     FilmPoint, PathFlags, PathOracle, PathSample, Resolution, Rgb, Sampler, SplatSink, Temperature,
 };
 
-use crate::bidirectional::Strategies;
+use crate::bidirectional::{Lengths, Strategies};
 use crate::geometry::{Frame, Intersector, Ray, power_heuristic, uniform_triangle};
 use crate::scene::{NO_LIGHT, Projection, Scene};
 
@@ -60,11 +60,15 @@ pub enum PathSampler {
     /// Camera and light subpaths joined in every way
     /// ([`bidirectional`](crate::bidirectional)); light tracing splats.
     Bidirectional,
-    /// One bidirectional strategy per path, chosen by the path's own numbers
-    /// (stream 2): a path length, then a strategy, uniformly; its MIS-weighted
-    /// contribution over the choice's probability. Under MLT the chain's
-    /// state carries the choice, which mutations change: multiplexed MLT
-    /// (Hachisuka, Kaplanyan and Dachsbacher 2014; seed 002 sec. 4.2.2).
+    /// One bidirectional strategy per path, chosen by the path's own numbers:
+    /// a path length (from the stream small steps hold, favouring short
+    /// paths), then one of its strategies uniformly (stream 2); its
+    /// MIS-weighted contribution over the choice's probability, with no
+    /// Russian roulette (the strategy fixes the subpaths' lengths). Under
+    /// MLT the chain's state carries the choice, which mutations change:
+    /// multiplexed MLT (Hachisuka, Kaplanyan and Dachsbacher 2014; Šik 2018
+    /// sec. 4.2.2), as `strata render --method pssmlt --path-sampler
+    /// multiplexed`.
     Multiplexed,
     /// One strategy of the bidirectional tracer alone, unweighted: `s`
     /// light and `t` camera vertices (Veach 1997 fig. 10.3; for tests and
@@ -108,6 +112,8 @@ pub struct PathTracer<I> {
     pub(crate) accel: I,
     /// The scene's camera as light tracing sees it, computed once.
     pub(crate) projection: Projection,
+    /// Multiplexed paths' choice of a length, computed once.
+    pub(crate) lengths: Lengths,
     /// Optional roughness floor at connecting vertices.
     pub regularization: Option<Regularization>,
     /// Unidirectional (the default) or bidirectional.
@@ -119,6 +125,7 @@ impl<I: Intersector> PathTracer<I> {
     pub fn new(scene: Scene, accel: I) -> Self {
         Self {
             projection: scene.camera.projection(),
+            lengths: Lengths::new(scene.max_depth as usize + 2),
             scene,
             accel,
             regularization: None,

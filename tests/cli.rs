@@ -92,6 +92,36 @@ fn bidirectional_paths_render_from_the_command_line() {
         );
         assert!(out.with_extension("exr").is_file(), "{method}");
     }
+    // Multiplexed MLT.
+    let out = dir.join("mmlt");
+    let run = strata(&[
+        "render",
+        "pool",
+        "--path-sampler",
+        "multiplexed",
+        "--method",
+        "pssmlt",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--spp",
+        "8",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        run.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(out.with_extension("exr").is_file());
+    // The help names every built-in scene.
+    let help = String::from_utf8_lossy(&strata(&["render", "--help"]).stdout).into_owned();
+    for name in strata::native::builtin::NAMES {
+        assert!(help.contains(name), "render --help does not name {name}");
+    }
     let analytic = strata(&["render", "procedural", "--path-sampler", "bidirectional"]);
     assert_eq!(analytic.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&analytic.stderr).contains("analytic target"));

@@ -96,7 +96,7 @@ enum Command {
 /// What `strata render` takes.
 #[derive(clap::Args, Debug)]
 struct Args {
-    /// Scene: cornell, door, envplane, caustic, saturated, procedural, mixture, or a .pbrt file.
+    /// Scene: cornell, door, envplane, caustic, saturated, pool, procedural, mixture, or a .pbrt file.
     #[arg(default_value = "cornell")]
     scene: String,
     /// Estimator: mc, pssmlt, replica, stratified, erpt or multistage.

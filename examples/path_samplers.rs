@@ -104,7 +104,10 @@ fn main() -> AnyResult<()> {
         for assignment in &args.set {
             let (key, value) = assignment.split_once('=').ok_or("--set takes NAME=VALUE")?;
             if method.settings().iter().any(|row| row.name == key) {
-                method.set(key, value.parse()?)?;
+                match value.parse() {
+                    Ok(number) => method.set(key, number)?,
+                    Err(_) => method.set_choice(key, value)?,
+                }
             }
         }
         let mut means = Vec::new();

@@ -16,10 +16,11 @@ record=0
 recorded=scripts/image-hashes.sha256
 out=out/fingerprints
 
-# The test profile (optimized, with debug assertions), whose dependencies the
-# tests already built: no optimization level changes a bit (Rust neither
-# contracts nor reorders floating point), so release builds give these hashes too.
-cargo build --profile test --example fingerprint
+# The test profile (optimized, with debug assertions) and the workspace's
+# features: `cargo test --workspace` has built this very binary already. No
+# optimization level changes a bit (Rust neither contracts nor reorders
+# floating point), so release builds give these hashes too.
+cargo build --profile test --workspace --example fingerprint
 rm -rf "$out"
 for threads in 1 2; do
   target/debug/examples/fingerprint --threads "$threads" --out "$out/$threads" >/dev/null

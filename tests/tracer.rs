@@ -251,7 +251,8 @@ fn pssmlt_and_mc_agree_on_cornell_and_door() {
 
 /// Replica-exchange MLT with the tracer's own tempering (roughened BSDFs at
 /// connecting vertices, seed 002 sec. 5.2) combines all chains by eq. 5.13
-/// and must agree with MC within noise on the caustic scene. On the
+/// and must agree with MC within noise on the caustic scene, on
+/// unidirectional, bidirectional and multiplexed paths. On the
 /// all-diffuse Cornell box the tracer's tempering changes nothing, and the
 /// render is refused with a typed error instead of running identical chains.
 #[test]
@@ -276,21 +277,31 @@ fn replica_exchange_with_oracle_tempering_agrees_with_mc() {
     ));
     let name = "caustic";
     let res = Resolution::new(16, 12);
-    let tracer = native_tracer(builtin::by_name(name, res).unwrap());
+    let mut tracer = native_tracer(builtin::by_name(name, res).unwrap());
     let mc = mc_runs(&tracer, 64, 10);
-    let re: Vec<Film> = (0..10)
-        .map(|seed| {
-            let mut ensemble = EnsembleSettings::geometric(4, 100.0).unwrap();
-            ensemble.tempering = Tempering::Oracle;
-            ensemble.bootstrap_candidates = 4096;
-            let replica = ReplicaSettings {
-                ensembles: 8,
-                ensemble,
-                exchange: ExchangeKind::IsPermutation,
-                ladder_tuning_sweeps: 0,
-            };
-            run(&tracer, 200 + seed, 64, Method::Replica(replica)).film
-        })
-        .collect();
-    assert_channel_means_agree(name, &mc, "replica exchange", &re);
+    // The thesis runs it on bidirectional paths and on multiplexed MLT
+    // (sec. 5.4), roughening the two joined vertices.
+    for sampler in [
+        PathSampler::Unidirectional,
+        PathSampler::Bidirectional,
+        PathSampler::Multiplexed,
+    ] {
+        tracer.sampler = sampler;
+        let re: Vec<Film> = (0..10)
+            .map(|seed| {
+                let mut ensemble = EnsembleSettings::geometric(4, 100.0).unwrap();
+                ensemble.tempering = Tempering::Oracle;
+                ensemble.bootstrap_candidates = 4096;
+                let replica = ReplicaSettings {
+                    ensembles: 8,
+                    ensemble,
+                    exchange: ExchangeKind::IsPermutation,
+                    ladder_tuning_sweeps: 0,
+                };
+                run(&tracer, 200 + seed, 64, Method::Replica(replica)).film
+            })
+            .collect();
+        let label = format!("replica exchange on {} paths", sampler.name());
+        assert_channel_means_agree(name, &mc, &label, &re);
+    }
 }

@@ -26,6 +26,12 @@
 //! they still sum to one over the strategies of every path (Veach 1997
 //! sec. 9.2.2), only the estimate's variance depends on them.
 //!
+//! Multiplexed paths (Hachisuka et al. 2014) trace one strategy: a length
+//! from the engine's held stream ([`Lengths`]) and a strategy from stream
+//! 2, subpaths just long enough for it and without roulette (a subpath cut
+//! short could not make the chosen strategy), weighted by its MIS weight
+//! over the probability of the choice.
+//!
 //! Tempering (seed 002 sec. 5.2, eq. 5.2-5.5): at temperature `T` the BSDFs
 //! of the two vertices of each connection, `x_{L,s}` and `x_{C,t}`, are
 //! roughened (`rho' = sqrt(T) rho`, at least the regularization floor);

@@ -27,7 +27,7 @@
 //! sec. 9.2.2), only the estimate's variance depends on them.
 //!
 //! Multiplexed paths (Hachisuka et al. 2014) trace one strategy: a length
-//! from the engine's held stream ([`Lengths`]) and a strategy from stream
+//! from the engine's held stream (`Lengths`) and a strategy from stream
 //! 2, subpaths just long enough for it and without roulette (a subpath cut
 //! short could not make the chosen strategy), weighted by its MIS weight
 //! over the probability of the choice.

@@ -117,6 +117,25 @@ fn bidirectional_paths_render_from_the_command_line() {
         String::from_utf8_lossy(&run.stderr)
     );
     assert!(out.with_extension("exr").is_file());
+    // Other methods on multiplexed paths render, with a note.
+    let run = strata(&[
+        "render",
+        "pool",
+        "--path-sampler",
+        "multiplexed",
+        "--method",
+        "mc",
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--spp",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(run.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&run.stderr).contains("are for Metropolis chains"));
     // The help names every built-in scene.
     let help = String::from_utf8_lossy(&strata(&["render", "--help"]).stdout).into_owned();
     for name in strata::native::builtin::NAMES {

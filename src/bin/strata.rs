@@ -547,6 +547,16 @@ fn run(args: &Args) -> AnyResult<Ended> {
         )
         .into());
     }
+    if args.path_sampler == PathSampler::Multiplexed.name()
+        && !matches!(args.method.as_str(), "pssmlt" | "replica")
+    {
+        warn!(
+            "note: multiplexed paths (one strategy each) are for Metropolis chains: --method {} on them \
+             measured up to 100x noisier than on bidirectional paths (docs/RESULTS.md); \
+             multiplexed MLT is --method pssmlt",
+            args.method
+        );
+    }
     let (rendered, reference) = pool.install(|| -> AnyResult<_> {
         Ok(match args.scene.as_str() {
             "procedural" => {

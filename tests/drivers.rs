@@ -17,7 +17,8 @@ use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Error, Film, FilmPoint, FnOracle, Method, Observer, Output, PathOracle, PathSample,
-    Progress, Resolution, Rgb, Sampler, Settings, Silent, SplatSink, Temperature, render,
+    Progress, Resolution, Rgb, Sampler, SetUp, SetUpStage, Settings, Silent, SplatSink,
+    Temperature, render,
 };
 
 mod threads;
@@ -549,5 +550,84 @@ fn set_up_keeps_the_time_budget_and_listens_to_cancel() {
             elapsed < Duration::from_secs(1),
             "{name} cancelled: {elapsed:?}"
         );
+    }
+}
+
+/// Records the set-up reports.
+#[derive(Default)]
+struct SetUpLog(Mutex<Vec<SetUp>>);
+
+impl Observer for SetUpLog {
+    fn set_up(&self, progress: &SetUp) {
+        self.0.lock().unwrap().push(*progress);
+    }
+}
+
+/// Set-up work reports its progress before the first round (issue 36):
+/// PSSMLT's bootstrap per block of 2^16 candidates up to all of them,
+/// replica exchange's ladder tuning per round of sweeps, stratified MCMC's
+/// bootstrap and initialization rounds, multi-stage MLT's stages'
+/// bootstraps; within a stage `done` never falls (but where a new run of
+/// the stage starts at 0) and never passes `total`.
+#[test]
+fn set_up_reports_its_progress() {
+    let image = ProceduralImage::showcase(Resolution::new(16, 12));
+    let mut pssmlt = Method::from_name("pssmlt").unwrap();
+    pssmlt.set("bootstrap_candidates", 150_000.0).unwrap();
+    let mut replica = Method::from_name("replica").unwrap();
+    replica.set("ensembles", 2.0).unwrap();
+    replica.set("replicas", 4.0).unwrap();
+    replica.set("bootstrap_candidates", 2000.0).unwrap();
+    replica.set("ladder_tuning_sweeps", 48.0).unwrap();
+    let stratified = Method::from_name("stratified").unwrap();
+    let multistage = Method::from_name("multistage").unwrap();
+    let expected = [
+        ("pssmlt", vec![SetUpStage::Bootstrap]),
+        (
+            "replica",
+            vec![SetUpStage::Bootstrap, SetUpStage::LadderTuning],
+        ),
+        (
+            "stratified",
+            vec![SetUpStage::Bootstrap, SetUpStage::Initialization],
+        ),
+        ("multistage", vec![SetUpStage::Bootstrap]),
+    ];
+    let methods = [pssmlt, replica, stratified, multistage];
+    for (method, (name, stages)) in methods.into_iter().zip(expected) {
+        let log = SetUpLog::default();
+        render(
+            &image,
+            &MaxChannel,
+            &settings(3, 16 * 12 * 16, &method),
+            &log,
+        )
+        .unwrap();
+        let log = log.0.into_inner().unwrap();
+        for stage in stages {
+            let reports: Vec<&SetUp> = log.iter().filter(|s| s.stage == stage).collect();
+            assert!(reports.len() >= 2, "{name}: {stage:?}: {reports:?}");
+            for pair in reports.windows(2) {
+                let same_run = pair[1].total == pair[0].total && pair[1].done >= pair[0].done;
+                let next_run = pair[1].done == 0;
+                assert!(same_run || next_run, "{name}: {stage:?}: {pair:?}");
+            }
+            assert!(
+                reports.iter().all(|s| s.done <= s.total),
+                "{name}: {reports:?}"
+            );
+        }
+        if name == "pssmlt" {
+            let dones: Vec<u64> = log.iter().map(|s| s.done).collect();
+            assert_eq!(dones, [0, 65_536, 131_072, 150_000], "{name}: {log:?}");
+        }
+        if name == "replica" {
+            let tuning: Vec<u64> = log
+                .iter()
+                .filter(|s| s.stage == SetUpStage::LadderTuning)
+                .map(|s| s.done)
+                .collect();
+            assert_eq!(tuning, [0, 16, 48], "{name}: {log:?}");
+        }
     }
 }

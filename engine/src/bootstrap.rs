@@ -53,13 +53,14 @@ pub struct Started<S> {
     pub decisions: crate::rng::Pcg32,
 }
 
-/// Asked between blocks of candidates whether the set-up must end now (the
-/// observer cancelled, or a time budget ran out): the candidates traced so
-/// far are then the bootstrap (at least one block of [`BLOCK`]).
-pub type Halt<'a> = &'a dyn Fn() -> bool;
+/// Told `(done, total)` candidates before every block and asked whether
+/// the set-up must end now (the observer cancelled, or a time budget ran
+/// out): the candidates traced so far are then the bootstrap (at least one
+/// block of [`BLOCK`]).
+pub type Halt<'a> = &'a dyn Fn(u64, u64) -> bool;
 
 /// A [`Halt`] that never ends the set-up early (sample budgets, tests).
-pub const NEVER: Halt<'static> = &|| false;
+pub const NEVER: Halt<'static> = &|_, _| false;
 
 /// Candidates traced between two [`Halt`] checks.
 pub const BLOCK: u64 = 1 << 16;
@@ -155,7 +156,7 @@ impl Bootstrap {
         let mut traced = Traced::default();
         let mut done = 0u64;
         for block in values.chunks_mut(BLOCK as usize * levels) {
-            if done > 0 && halt() {
+            if halt(done, candidates) && done > 0 {
                 break;
             }
             let first = done;
@@ -170,6 +171,8 @@ impl Bootstrap {
             });
             done += (block.len() / levels) as u64;
         }
+        // The last report: where the bootstrap ended.
+        halt(done, candidates);
         let candidates = done;
         values.truncate(candidates as usize * levels);
 

@@ -54,7 +54,7 @@ pub mod target;
 pub mod tiles;
 
 pub use checkpoint::Checkpoint;
-pub use drive::{Budget, Observer, Progress, RenderStats, Silent};
+pub use drive::{Budget, Observer, Progress, RenderStats, SetUp, SetUpStage, Silent};
 pub use error::Error;
 pub use film::Film;
 pub use method::{Extras, Method, Output, Settings, render, resume};

@@ -43,7 +43,7 @@ use strata::engine::mutate::SmallStep;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Checkpoint, Error, Extras, Film, Method, Observer, Output, PathOracle, Progress,
-    Radiance, Resolution, Settings, render, resume,
+    Radiance, Resolution, SetUp, SetUpStage, Settings, render, resume,
 };
 use strata::native::{PathSampler, PathTracer, builtin, native_tracer};
 
@@ -282,6 +282,16 @@ impl Observer for Watch<'_> {
         };
         self.bar
             .set_message(format!("{} paths{stopping}", p.samples));
+    }
+    fn set_up(&self, s: &SetUp) {
+        let what = match s.stage {
+            SetUpStage::Bootstrap => "bootstrap: candidates",
+            SetUpStage::LadderTuning => "ladder tuning: sweeps",
+            SetUpStage::Initialization => "initialization: tiles started",
+            _ => "setting up",
+        };
+        self.bar
+            .set_message(format!("{what} {} of {}", s.done, s.total));
     }
     fn wants_preview(&self) -> bool {
         self.previews.as_ref().is_some_and(Every::due)

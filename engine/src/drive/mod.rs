@@ -55,11 +55,43 @@ pub struct Progress {
     pub fraction: f64,
 }
 
+/// Set-up work before a render's first round, reported between its blocks:
+/// `done` of `total` units of `stage`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SetUp {
+    /// What is being set up.
+    pub stage: SetUpStage,
+    /// Units done (candidates, sweeps, tiles).
+    pub done: u64,
+    /// Units planned; the stage may end before (cancel, time budget).
+    pub total: u64,
+}
+
+/// The set-up stages a render may go through.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum SetUpStage {
+    /// Tracing bootstrap candidates for the normalization and the chains'
+    /// starts (seed 002 sec. 3.6); units: candidates.
+    Bootstrap,
+    /// Equalizing replica exchange's temperature ladder; units: sweeps.
+    LadderTuning,
+    /// Stratified MCMC's global chains starting the tile chains (seed 001
+    /// sec. 4.4); units: tiles started, of those wanted.
+    Initialization,
+}
+
 /// Receives progress, optionally previews, and may stop a render early.
 /// All methods are called from the thread that called the render.
 pub trait Observer: Sync {
     /// Called after every round.
     fn progress(&self, progress: &Progress) {
+        let _ = progress;
+    }
+    /// Called between blocks of the set-up work before the first round
+    /// (a bootstrap of 2^16 candidates at a time, ladder tuning's rounds,
+    /// stratified MCMC's initialization rounds).
+    fn set_up(&self, progress: &SetUp) {
         let _ = progress;
     }
     /// Whether to build a normalized snapshot of the image after this round

@@ -43,7 +43,7 @@ pub use table::{Kind, Setting, Value};
 use serde::de::DeserializeOwned;
 
 use crate::checkpoint::{self, Checkpoint, Checkpointer, Checkpoints, Position};
-use crate::drive::{Budget, Clock, Loop, Observer, RenderStats};
+use crate::drive::{Budget, Clock, Loop, Observer, RenderStats, SetUp, SetUpStage};
 use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{PathOracle, Radiance, Resolution};
@@ -256,9 +256,16 @@ pub(crate) struct Job<'a, O, I: ?Sized> {
 }
 
 impl<O, I: ?Sized> Job<'_, O, I> {
-    /// Whether a set-up loop (bootstrap, ladder tuning) must end now: the
-    /// observer asks to stop, or a time budget has run out.
-    pub fn set_up_must_end(&self) -> bool {
+    /// Reports `done` of `total` units of set-up `stage` to the observer.
+    pub fn report_set_up(&self, stage: SetUpStage, done: u64, total: u64) {
+        self.observer.set_up(&SetUp { stage, done, total });
+    }
+
+    /// Reports set-up progress ([`report_set_up`](Self::report_set_up)) and
+    /// says whether the set-up loop must end now: the observer asks to stop,
+    /// or a time budget has run out.
+    pub fn set_up_must_end(&self, stage: SetUpStage, done: u64, total: u64) -> bool {
+        self.report_set_up(stage, done, total);
         #[cfg(feature = "std")]
         let out_of_time = matches!(self.budget, Budget::Time(_)) && self.clock.expired();
         #[cfg(not(feature = "std"))]

@@ -37,7 +37,7 @@ use core::sync::atomic::{AtomicU64, Ordering};
 use super::pssmlt::{Pssmlt, PssmltSettings};
 use super::{Extras, Job, Output};
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
-use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, drive};
+use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, SetUp, drive};
 use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{
@@ -588,6 +588,9 @@ impl Observer for StageObserver<'_> {
             samples: self.samples + progress.samples,
             fraction: (self.fraction + self.share * progress.fraction).min(1.0),
         });
+    }
+    fn set_up(&self, progress: &SetUp) {
+        self.outer.set_up(progress);
     }
     fn wants_preview(&self) -> bool {
         self.outer.wants_preview()

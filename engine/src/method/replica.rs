@@ -14,7 +14,7 @@ use crate::chain::{ChainStats, Normalization};
 
 use crate::checkpoint;
 use crate::drive::splat::{RoundBuffers, Runs, Saves, SplatBands, Splatting, Worker};
-use crate::drive::{Driven, RenderStats, Rounds, drive};
+use crate::drive::{Driven, RenderStats, Rounds, SetUpStage, drive};
 use crate::error::Error;
 use crate::exchange::{
     Ensemble, EnsembleSettings, ExchangeKind, ExchangeMove, ExchangeStats, Ladder, Tempering,
@@ -124,8 +124,9 @@ where
         return Ok(finish(ensembles, driven, ladder, set_up));
     }
     let mut ensemble = settings.ensemble.clone();
-    let mut bootstrap =
-        ensemble.bootstrap(oracle, importance, job.seed, &|| job.set_up_must_end())?;
+    let mut bootstrap = ensemble.bootstrap(oracle, importance, job.seed, &|done, total| {
+        job.set_up_must_end(SetUpStage::Bootstrap, done, total)
+    })?;
     // Under the oracle's tempering the levels may all be one target (an
     // all-diffuse scene for the native tracer); power tempering differs
     // wherever the importance is neither 0 nor 1.
@@ -158,7 +159,11 @@ where
     let mut round_length = 16u64;
     while tuned < settings.ladder_tuning_sweeps
         && ensemble.ladder.len() > 2
-        && !job.set_up_must_end()
+        && !job.set_up_must_end(
+            SetUpStage::LadderTuning,
+            tuned,
+            settings.ladder_tuning_sweeps,
+        )
     {
         let sweeps = round_length.min(settings.ladder_tuning_sweeps - tuned);
         parallel::for_each(&mut work, |w| {
@@ -175,7 +180,9 @@ where
             merged.merge(w.state.ensemble.stats());
         }
         ensemble.ladder = ensemble.ladder.equalized(&merged.neighbor_rejection())?;
-        bootstrap = ensemble.bootstrap(oracle, importance, job.seed, &|| job.set_up_must_end())?;
+        bootstrap = ensemble.bootstrap(oracle, importance, job.seed, &|done, total| {
+            job.set_up_must_end(SetUpStage::Bootstrap, done, total)
+        })?;
         set_up.traced += bootstrap.traced().paths;
         set_up.invalid = bootstrap.traced().invalid;
         prior = priors(&bootstrap);
@@ -186,6 +193,13 @@ where
             w.state.exchange = settings.exchange.build(&bootstrap)?;
             w.prior = prior.clone();
         }
+    }
+    if tuned > 0 {
+        job.report_set_up(
+            SetUpStage::LadderTuning,
+            tuned,
+            settings.ladder_tuning_sweeps,
+        );
     }
 
     let mut ensembles = Splatting::new(work, bands, traces_per_sweep)?;

@@ -10,9 +10,9 @@ use core::sync::atomic::{AtomicU64, Ordering};
 
 use super::StratifiedSettings;
 use super::tile::{Context, Start, TileChain};
-use crate::bootstrap::{Bootstrap, NEVER};
+use crate::bootstrap::Bootstrap;
 use crate::chain::PathChain;
-use crate::drive::Clock;
+use crate::drive::{Clock, SetUpStage};
 use crate::error::Error;
 use crate::oracle::{
     FilmPoint, PathOracle, PathSample, Resolution, Sampler, SplatSink, Temperature,
@@ -92,7 +92,9 @@ pub(super) struct Initialized {
 }
 
 /// Runs the global chains until the coverage or the budget is reached and
-/// installs their states.
+/// installs their states; `report(stage, done, total)` hears of its
+/// bootstrap and its rounds, and ends them early when it says so (cancel,
+/// time budget).
 pub(super) fn initialize<O, I>(
     ctx: &Context<'_, O, I>,
     chains: &mut [TileChain<O::Radiance>],
@@ -100,6 +102,7 @@ pub(super) fn initialize<O, I>(
     seed: u64,
     max_traces: u64,
     clock: Option<&Clock>,
+    report: &dyn Fn(SetUpStage, u64, u64) -> bool,
 ) -> Result<Initialized, Error>
 where
     O: PathOracle,
@@ -123,7 +126,8 @@ where
         .max(1);
     let seed = seed ^ 0x6a09_e667_f3bc_c908;
     let small_step = settings.mutation.small_step;
-    let bootstrap = match Bootstrap::run(&target, &MaxChannel, small_step, seed, candidates, NEVER)
+    let halt = |done, total| report(SetUpStage::Bootstrap, done, total);
+    let bootstrap = match Bootstrap::run(&target, &MaxChannel, small_step, seed, candidates, &halt)
     {
         Ok(b) => b,
         // A black scene (for these candidates): tiles fall back on uniform draws.
@@ -148,6 +152,7 @@ where
     while count < wanted
         && target.traces.load(Ordering::Relaxed) < max_traces
         && !clock.is_some_and(Clock::expired)
+        && !report(SetUpStage::Initialization, count as u64, wanted as u64)
     {
         let run = |chain: &mut PathChain<f32>| -> Vec<Visit> {
             let mut visits: Vec<Visit> = Vec::new();
@@ -183,6 +188,12 @@ where
             chain.start = Start::Global;
         }
     }
+    // The last report: where the initialization ended.
+    report(
+        SetUpStage::Initialization,
+        count.min(wanted) as u64,
+        wanted as u64,
+    );
     let replays = parallel::sum_chunks(chains, 1, |s, c| {
         let c = &mut c[0];
         if c.pending {

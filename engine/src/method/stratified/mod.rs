@@ -429,6 +429,7 @@ where
         job.seed,
         init_traces,
         init_clock.as_ref(),
+        &|stage, done, total| job.set_up_must_end(stage, done, total),
     )?;
     let mut sweeps = Sweeps {
         ctx: &ctx,

@@ -62,7 +62,8 @@ int main(int argc, char **argv) {
     strata_settings_set_samples_per_pixel(settings, 16);
     strata_settings_set_threads(settings, 2);
     Watch watch = {0, 0};
-    StrataObserver observer = {&watch, progress, preview, 0.5};
+    /* No set_up callback: the bootstrap is not reported. */
+    StrataObserver observer = {&watch, progress, preview, 0.5, NULL};
     StrataFilm *film = NULL;
     StrataStatus status = strata_render(&oracle, settings, &observer, &film);
     strata_settings_free(settings);

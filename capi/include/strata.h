@@ -32,6 +32,18 @@ typedef enum StrataStatus {
   STRATA_STATUS_PANIC = 4,
 } StrataStatus;
 
+// The set-up work before a render's first round ([`StrataObserver`]'s
+// `set_up`).
+typedef enum StrataSetUpStage {
+  // Bootstrap candidates traced (for the normalization and the chains'
+  // starts).
+  STRATA_SET_UP_STAGE_BOOTSTRAP = 0,
+  // Replica exchange's ladder-tuning sweeps.
+  STRATA_SET_UP_STAGE_LADDER_TUNING = 1,
+  // Stratified MCMC's tiles started by its global chains.
+  STRATA_SET_UP_STAGE_INITIALIZATION = 2,
+} StrataSetUpStage;
+
 // A rendered film: linear RGB, `width · height · 3` doubles, row by row.
 typedef struct StrataFilm StrataFilm;
 
@@ -63,8 +75,9 @@ typedef struct StrataOracle {
 } StrataOracle;
 
 // What a render reports while it runs (every member may be null/0). All
-// callbacks are called between rounds, from the thread that called
-// [`strata_render`].
+// callbacks are called between rounds (`set_up` between blocks of the
+// set-up before the first round), from the thread that called
+// [`strata_render`]. Members added later go at the end: zero them.
 typedef struct StrataObserver {
   // Passed to the callbacks unchanged.
   void *user;
@@ -80,6 +93,10 @@ typedef struct StrataObserver {
   void (*preview)(void *user, uint32_t width, uint32_t height, const double *rgb);
   // Seconds between previews (0: after every round).
   double preview_every_seconds;
+  // Called between blocks of the set-up work before the first round
+  // with its stage and `done` of `total` units; return non-zero to stop
+  // the render (as `progress`).
+  int32_t (*set_up)(void *user, enum StrataSetUpStage stage, uint64_t done, uint64_t total);
 } StrataObserver;
 
 // The counters of a render ([`strata_film_stats`]).

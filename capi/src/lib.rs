@@ -31,7 +31,7 @@ use strata_engine::purity::check_purity;
 use strata_engine::target::MaxChannel;
 use strata_engine::{
     Budget, Error, Film, FilmPoint, Method, Observer, Output, PathOracle, PathSample, Progress,
-    Resolution, Rgb, Sampler, Settings, SplatSink, Temperature, render,
+    Resolution, Rgb, Sampler, SetUp, SetUpStage, Settings, SplatSink, Temperature, render,
 };
 
 /// What a call did.
@@ -513,9 +513,24 @@ pub extern "C" fn strata_settings_set_stack_size(
     }
 }
 
+/// The set-up work before a render's first round ([`StrataObserver`]'s
+/// `set_up`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StrataSetUpStage {
+    /// Bootstrap candidates traced (for the normalization and the chains'
+    /// starts).
+    Bootstrap = 0,
+    /// Replica exchange's ladder-tuning sweeps.
+    LadderTuning = 1,
+    /// Stratified MCMC's tiles started by its global chains.
+    Initialization = 2,
+}
+
 /// What a render reports while it runs (every member may be null/0). All
-/// callbacks are called between rounds, from the thread that called
-/// [`strata_render`].
+/// callbacks are called between rounds (`set_up` between blocks of the
+/// set-up before the first round), from the thread that called
+/// [`strata_render`]. Members added later go at the end: zero them.
 #[repr(C)]
 pub struct StrataObserver {
     /// Passed to the callbacks unchanged.
@@ -532,11 +547,18 @@ pub struct StrataObserver {
     pub preview: Option<extern "C" fn(user: *mut c_void, width: u32, height: u32, rgb: *const f64)>,
     /// Seconds between previews (0: after every round).
     pub preview_every_seconds: f64,
+    /// Called between blocks of the set-up work before the first round
+    /// with its stage and `done` of `total` units; return non-zero to stop
+    /// the render (as `progress`).
+    pub set_up: Option<
+        extern "C" fn(user: *mut c_void, stage: StrataSetUpStage, done: u64, total: u64) -> i32,
+    >,
 }
 
 /// The engine's view of a [`StrataObserver`].
 struct CObserver {
     progress: Option<extern "C" fn(*mut c_void, f64, u64) -> i32>,
+    set_up: Option<extern "C" fn(*mut c_void, StrataSetUpStage, u64, u64) -> i32>,
     preview: Option<extern "C" fn(*mut c_void, u32, u32, *const f64)>,
     every: Duration,
     user: usize,
@@ -548,6 +570,7 @@ impl CObserver {
     fn new(observer: *const StrataObserver) -> Result<Self, StrataStatus> {
         let mut this = CObserver {
             progress: None,
+            set_up: None,
             preview: None,
             every: Duration::ZERO,
             user: 0,
@@ -567,6 +590,7 @@ impl CObserver {
                 )
             })?;
             (this.progress, this.preview, this.user) = (o.progress, o.preview, o.user as usize);
+            this.set_up = o.set_up;
         }
         Ok(this)
     }
@@ -576,6 +600,20 @@ impl Observer for CObserver {
     fn progress(&self, p: &Progress) {
         if let Some(f) = self.progress
             && f(self.user as *mut c_void, p.fraction, p.samples) != 0
+        {
+            self.stop.store(true, Ordering::Relaxed);
+        }
+    }
+    fn set_up(&self, s: &SetUp) {
+        let stage = match s.stage {
+            SetUpStage::Bootstrap => StrataSetUpStage::Bootstrap,
+            SetUpStage::LadderTuning => StrataSetUpStage::LadderTuning,
+            SetUpStage::Initialization => StrataSetUpStage::Initialization,
+            // A stage newer than this API: not reported.
+            _ => return,
+        };
+        if let Some(f) = self.set_up
+            && f(self.user as *mut c_void, stage, s.done, s.total) != 0
         {
             self.stop.store(true, Ordering::Relaxed);
         }

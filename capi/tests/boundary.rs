@@ -156,6 +156,7 @@ fn progress_only(progress: extern "C" fn(*mut c_void, f64, u64) -> i32) -> Strat
         progress: Some(progress),
         preview: None,
         preview_every_seconds: 0.0,
+        set_up: None,
     }
 }
 
@@ -244,6 +245,7 @@ fn previews_come_between_rounds_at_the_asked_pace() {
             progress: None,
             preview: Some(keep_preview),
             preview_every_seconds: every,
+            set_up: None,
         };
         let mut film = null_mut();
         let status = strata_render(&oracle(uniform), settings, &observer, &mut film);
@@ -555,6 +557,65 @@ fn recursive_tracers_fit_the_default_stack() {
         strata_render(&oracle(deep), settings, null(), &mut film),
         StrataStatus::Ok
     );
+    strata_film_free(film);
+    strata_settings_free(settings);
+}
+
+type SetUpLog = Vec<(StrataSetUpStage, u64, u64)>;
+
+extern "C" fn log_set_up(user: *mut c_void, stage: StrataSetUpStage, done: u64, total: u64) -> i32 {
+    // SAFETY: the test passes its live log as `user`.
+    let log = unsafe { &mut *(user as *mut SetUpLog) };
+    log.push((stage, done, total));
+    0
+}
+
+extern "C" fn stop_set_up(_: *mut c_void, _: StrataSetUpStage, _: u64, _: u64) -> i32 {
+    1
+}
+
+/// The set-up before the first round (here PSSMLT's bootstrap) reports its
+/// blocks to the observer's `set_up`, and a non-zero answer stops the
+/// render before any round: `STRATA_STATUS_CANCELLED`, no path traced.
+#[test]
+fn the_set_up_is_reported_and_can_be_cancelled() {
+    let settings = strata_settings_new(c"pssmlt".as_ptr());
+    assert_eq!(
+        strata_settings_set(settings, c"bootstrap_candidates".as_ptr(), 100_000.0),
+        StrataStatus::Ok
+    );
+    strata_settings_set_samples_per_pixel(settings, 4);
+    let mut log = SetUpLog::new();
+    let observer = StrataObserver {
+        user: &mut log as *mut SetUpLog as *mut c_void,
+        progress: None,
+        preview: None,
+        preview_every_seconds: 0.0,
+        set_up: Some(log_set_up),
+    };
+    let mut film = null_mut();
+    let status = strata_render(&oracle(uniform), settings, &observer, &mut film);
+    assert_eq!(status, StrataStatus::Ok);
+    strata_film_free(film);
+    let bootstrap = StrataSetUpStage::Bootstrap;
+    assert_eq!(
+        log,
+        [
+            (bootstrap, 0, 100_000),
+            (bootstrap, 65_536, 100_000),
+            (bootstrap, 100_000, 100_000)
+        ]
+    );
+
+    let observer = StrataObserver {
+        set_up: Some(stop_set_up),
+        ..observer
+    };
+    let mut film = null_mut();
+    let status = strata_render(&oracle(uniform), settings, &observer, &mut film);
+    assert_eq!(status, StrataStatus::Cancelled);
+    let counted = stats(film);
+    assert_eq!((counted.paths, counted.cancelled), (0, 1));
     strata_film_free(film);
     strata_settings_free(settings);
 }

@@ -53,10 +53,10 @@ pub struct Started<S> {
     pub decisions: crate::rng::Pcg32,
 }
 
-/// Told `(done, total)` candidates before every block and asked whether
-/// the set-up must end now (the observer cancelled, or a time budget ran
-/// out): the candidates traced so far are then the bootstrap (at least one
-/// block of [`BLOCK`]).
+/// Told `(done, total)` candidates before every block (and once at the
+/// end) and asked whether the set-up must end now (the observer cancelled,
+/// or a time budget ran out): the candidates traced so far are then the
+/// bootstrap (at least one block of [`BLOCK`]).
 pub type Halt<'a> = &'a dyn Fn(u64, u64) -> bool;
 
 /// A [`Halt`] that never ends the set-up early (sample budgets, tests).

@@ -38,7 +38,7 @@ use crate::bootstrap::Bootstrap;
 use crate::chain::{Chain, ChainStats, Normalization, PathTarget, Traced, Weights};
 use crate::checkpoint;
 use crate::drive::splat::{RoundBuffers, SplatBands, Worker};
-use crate::drive::{RenderStats, Rounds, SetUpStage, drive};
+use crate::drive::{RenderStats, Rounds, drive};
 use crate::error::Error;
 use crate::film::Film;
 use crate::mutate::{MutationParams, SmallStep};
@@ -152,7 +152,7 @@ where
                 settings.small_step,
                 job.seed,
                 settings.bootstrap_candidates,
-                &|done, total| job.set_up_must_end(SetUpStage::Bootstrap, done, total),
+                &job.bootstrap_halt(),
             )?;
             let saved = Saved {
                 energy: bootstrap.normalization()

@@ -273,6 +273,12 @@ impl<O, I: ?Sized> Job<'_, O, I> {
         self.observer.should_stop() || out_of_time
     }
 
+    /// The bootstrap's [`Halt`](crate::bootstrap::Halt) for this job:
+    /// [`set_up_must_end`](Self::set_up_must_end) of its candidates.
+    pub fn bootstrap_halt(&self) -> impl Fn(u64, u64) -> bool + '_ {
+        move |done, total| self.set_up_must_end(SetUpStage::Bootstrap, done, total)
+    }
+
     /// The round loop of this job, at `resumed` (or at its start).
     pub fn round_loop(&self, resumed: Option<Position>) -> Loop<'_> {
         Loop {

@@ -10,7 +10,7 @@ use alloc::vec::Vec;
 use crate::chain::{Normalization, PathChain, Traced};
 use crate::checkpoint::{self, Position};
 use crate::drive::splat::{RoundBuffers, Runs, Saves, SplatBands, Splatting, Worker};
-use crate::drive::{Driven, RenderStats, Rounds, SetUpStage, drive};
+use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
 use crate::film::Film;
 use crate::mutate::MutationParams;
@@ -122,7 +122,7 @@ where
             settings.mutation.small_step,
             job.seed,
             settings.bootstrap_candidates,
-            &|done, total| job.set_up_must_end(SetUpStage::Bootstrap, done, total),
+            &job.bootstrap_halt(),
         )?;
         let p_large = settings.mutation.large_step_probability;
         let prior = bootstrap.estimate(0);

@@ -124,9 +124,7 @@ where
         return Ok(finish(ensembles, driven, ladder, set_up));
     }
     let mut ensemble = settings.ensemble.clone();
-    let mut bootstrap = ensemble.bootstrap(oracle, importance, job.seed, &|done, total| {
-        job.set_up_must_end(SetUpStage::Bootstrap, done, total)
-    })?;
+    let mut bootstrap = ensemble.bootstrap(oracle, importance, job.seed, &job.bootstrap_halt())?;
     // Under the oracle's tempering the levels may all be one target (an
     // all-diffuse scene for the native tracer); power tempering differs
     // wherever the importance is neither 0 nor 1.
@@ -180,9 +178,7 @@ where
             merged.merge(w.state.ensemble.stats());
         }
         ensemble.ladder = ensemble.ladder.equalized(&merged.neighbor_rejection())?;
-        bootstrap = ensemble.bootstrap(oracle, importance, job.seed, &|done, total| {
-            job.set_up_must_end(SetUpStage::Bootstrap, done, total)
-        })?;
+        bootstrap = ensemble.bootstrap(oracle, importance, job.seed, &job.bootstrap_halt())?;
         set_up.traced += bootstrap.traced().paths;
         set_up.invalid = bootstrap.traced().invalid;
         prior = priors(&bootstrap);

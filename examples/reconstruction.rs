@@ -150,7 +150,14 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
                 alpha,
                 ..Default::default()
             };
-            reconstruct::weighted(&tiles, g, if with_reference { truth } else { mc }, &w, None)
+            reconstruct::weighted(
+                &tiles,
+                g,
+                if with_reference { truth } else { mc },
+                &w,
+                None,
+                &|| false,
+            )
         })
     };
     let fitted = per_channel(&|g, _, truth| {

@@ -90,7 +90,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (mut b, mut check) = (Vec::new(), 0.0);
         for _ in 0..args.repeats.max(1) {
             let start = Instant::now();
-            b = weighted(&tiles, &g, &mc, &settings, None)?;
+            b = weighted(&tiles, &g, &mc, &settings, None, &|| false)?;
             solver = solver.min(start.elapsed().as_secs_f64());
             let start = Instant::now();
             check = laplacian_sweeps(n as usize, args.iterations);

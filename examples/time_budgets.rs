@@ -31,6 +31,9 @@ struct Args {
     /// Time budgets, seconds.
     #[arg(long, value_delimiter = ',', default_value = "2,10")]
     seconds: Vec<f64>,
+    /// Methods (default: all).
+    #[arg(long, value_delimiter = ',')]
+    methods: Vec<String>,
     /// CSV output.
     #[arg(long, default_value = "out/bench/time_budgets.csv")]
     out: PathBuf,
@@ -51,11 +54,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let tracer = native_tracer(scene);
     let r = tracer.resolution();
-    let mut csv = String::from("scene,width,height,method,budget_s,elapsed_s,overrun_s,paths\n");
+    let mut csv = String::from(
+        "scene,width,height,method,budget_s,elapsed_s,overrun_s,paths,reconstruction_cut\n",
+    );
     println!("| method | budget (s) | wall time (s) | overrun (s) |\n|---|---|---|---|");
     for &seconds in &args.seconds {
         for method in Method::all() {
             let name = method.name();
+            if !args.methods.is_empty() && !args.methods.iter().any(|m| m == name) {
+                continue;
+            }
             let settings = Settings {
                 seed: 1,
                 budget: Budget::Time(Duration::from_secs_f64(seconds)),
@@ -65,12 +73,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let out = render(&tracer, &MaxChannel, &settings, &Silent)?;
             let elapsed = start.elapsed().as_secs_f64();
             let overrun = elapsed - seconds;
+            let cut = out
+                .extras
+                .stratified()
+                .is_some_and(|s| s.reconstruction_cut);
             writeln!(
                 csv,
-                "{},{},{},{name},{seconds},{elapsed:.3},{overrun:.3},{}",
+                "{},{},{},{name},{seconds},{elapsed:.3},{overrun:.3},{},{cut}",
                 args.scene, r.width, r.height, out.stats.samples
             )?;
-            println!("| {name} | {seconds} | {elapsed:.2} | {overrun:+.2} |");
+            println!(
+                "| {name} | {seconds} | {elapsed:.2} | {overrun:+.2} |{}",
+                if cut { " solver cut" } else { "" }
+            );
         }
     }
     if let Some(dir) = args.out.parent() {

@@ -57,9 +57,16 @@ fn render_writes_png_and_exr_and_exit_codes_say_how_it_went() {
 /// `--path-sampler bidirectional` renders a scene with every method; it is
 /// refused, with a reason, on an analytic target and as an unknown name.
 /// `strata render SCENE --path-sampler SAMPLER --method METHOD` on a 16x16
-/// film at 8 spp into `out`; asserts it succeeded and wrote the EXR, and
-/// returns its standard error.
+/// film at 8 spp into `out` (at least the method's smallest budget: ERPT's
+/// pass of start paths with chains of 100 steps is 101, multi-stage MLT's
+/// first stage takes a step of every chain with 1/115 of the budget);
+/// asserts it succeeded and wrote the EXR, and returns its standard error.
 fn render_small(scene: &str, sampler: &str, method: &str, out: &std::path::Path) -> String {
+    let spp = match method {
+        "erpt" => "101",
+        "multistage" => "115",
+        _ => "8",
+    };
     let run = strata(&[
         "render",
         scene,
@@ -72,7 +79,7 @@ fn render_small(scene: &str, sampler: &str, method: &str, out: &std::path::Path)
         "--height",
         "16",
         "--spp",
-        "8",
+        spp,
         "--out",
         out.to_str().unwrap(),
     ]);
@@ -146,7 +153,7 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
     }
     // An output directory that cannot be made: an error naming it, before
     // any work (issue 36: it came after the whole render).
-    let refused = run(&["--spp", "2", "--out", "/proc/strata-no-such-dir/r"]);
+    let refused = run(&["--spp", "4", "--out", "/proc/strata-no-such-dir/r"]);
     let stderr = String::from_utf8_lossy(&refused.stderr);
     assert_eq!(refused.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("/proc/strata-no-such-dir"), "{stderr}");
@@ -159,7 +166,7 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
     std::fs::write(&target, b"old").unwrap();
     let link = dir.join("linked.png");
     std::os::unix::fs::symlink(&target, &link).unwrap();
-    let linked = run(&["--spp", "2", "--out", link.to_str().unwrap()]);
+    let linked = run(&["--spp", "4", "--out", link.to_str().unwrap()]);
     assert_eq!(linked.status.code(), Some(0));
     assert!(
         std::fs::symlink_metadata(&link)
@@ -169,7 +176,7 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
     );
     assert!(std::fs::read(&target).unwrap().starts_with(b"\x89PNG"));
     std::fs::create_dir_all(dir.join("folder.png")).unwrap();
-    let folder = run(&["--spp", "2", "--out", dir.join("folder").to_str().unwrap()]);
+    let folder = run(&["--spp", "4", "--out", dir.join("folder").to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&folder.stderr);
     assert_eq!(folder.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("not a regular file"), "{stderr}");
@@ -178,7 +185,7 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
     let args: Vec<&str> = tiny
         .iter()
         .copied()
-        .chain(["--spp", "2", "--out", out_arg])
+        .chain(["--spp", "4", "--out", out_arg])
         .collect();
     let status = Command::new(env!("CARGO_BIN_EXE_strata"))
         .args(&args)
@@ -187,14 +194,14 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
         .unwrap();
     assert_eq!(status.code(), Some(0));
 
-    let ok = run(&["--spp", "2", "--out", out_arg]);
+    let ok = run(&["--spp", "4", "--out", out_arg]);
     assert_eq!(ok.status.code(), Some(0));
     for ext in ["png", "exr"] {
         assert!(dir.join(format!("name.with.dots.{ext}")).is_file(), "{ext}");
     }
     // A final .png names both files.
     let png = dir.join("named.png");
-    let ok = run(&["--spp", "2", "--out", png.to_str().unwrap()]);
+    let ok = run(&["--spp", "4", "--out", png.to_str().unwrap()]);
     assert_eq!(ok.status.code(), Some(0));
     assert!(png.is_file() && dir.join("named.exr").is_file());
     std::fs::remove_dir_all(&dir).ok();

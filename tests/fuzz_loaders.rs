@@ -27,11 +27,11 @@ use strata::native::{native_tracer, pbrt, ply};
 /// The largest single allocation a case may make.
 const MAX_ALLOCATION: usize = 1 << 30;
 
-mod largest;
-use largest::Largest;
+mod allocations;
+use allocations::Tracking;
 
 #[global_allocator]
-static ALLOCATOR: Largest = Largest::new();
+static ALLOCATOR: Tracking = Tracking::new();
 
 /// Numbers a hostile file may hold.
 const HOSTILE: [&str; 12] = [

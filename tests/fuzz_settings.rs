@@ -33,11 +33,11 @@ const MAX_ALLOCATION: usize = 1 << 30;
 const BUDGET: Duration = Duration::from_millis(100);
 const SLACK: Duration = Duration::from_secs(1);
 
-mod largest;
-use largest::Largest;
+mod allocations;
+use allocations::Tracking;
 
 #[global_allocator]
-static ALLOCATOR: Largest = Largest::new();
+static ALLOCATOR: Tracking = Tracking::new();
 
 /// One setting to set: the row (an index into the method's table, wrapped),
 /// where in or around its range the value falls, and a fraction.

@@ -44,7 +44,7 @@ int main(int argc, char **argv) {
         return 1;
     }
     strata_settings_set_seed(settings.get(), 7);
-    strata_settings_set_samples_per_pixel(settings.get(), 16);
+    strata_settings_set_samples_per_pixel(settings.get(), 160);
     strata_settings_set_threads(settings.get(), 2);
     StrataFilm *raw = nullptr;
     if (strata_render(&oracle.oracle, settings.get(), nullptr, &raw) != STRATA_STATUS_OK) {

@@ -445,7 +445,8 @@ fn methods_take_their_choices_by_name_and_refuse_unknown_ones() {
         StrataStatus::InvalidArgument
     );
     let mut film = null_mut();
-    strata_settings_set_samples_per_pixel(stratified, 8);
+    // A sweep of 3x3 tiles: about 9 paths per pixel, the smallest budget.
+    strata_settings_set_samples_per_pixel(stratified, 16);
     assert_eq!(
         strata_render(&oracle(uniform), stratified, null(), &mut film),
         StrataStatus::Ok
@@ -509,7 +510,8 @@ extern "C" fn streams(
 fn streams_beyond_the_last_are_refused() {
     use std::sync::atomic::Ordering::Relaxed;
     let settings = strata_settings_new(c"pssmlt".as_ptr());
-    strata_settings_set_samples_per_pixel(settings, 4);
+    // 8x6 pixels at 8 spp: one step of each of the 256 chains at least.
+    strata_settings_set_samples_per_pixel(settings, 8);
     let mut film = null_mut();
     assert_eq!(
         strata_render(&oracle(streams), settings, null(), &mut film),
@@ -584,7 +586,7 @@ fn the_set_up_is_reported_and_can_be_cancelled() {
         strata_settings_set(settings, c"bootstrap_candidates".as_ptr(), 100_000.0),
         StrataStatus::Ok
     );
-    strata_settings_set_samples_per_pixel(settings, 4);
+    strata_settings_set_samples_per_pixel(settings, 8);
     let mut log = SetUpLog::new();
     let observer = StrataObserver {
         user: &mut log as *mut SetUpLog as *mut c_void,

@@ -68,7 +68,7 @@ fn rust_film(method: &Method) -> Vec<u8> {
     );
     let settings = Settings {
         seed: 7,
-        budget: Budget::samples_per_pixel(16, Resolution::new(16, 12)),
+        budget: Budget::samples_per_pixel(160, Resolution::new(16, 12)),
         method: method.clone(),
     };
     let film = render(&oracle, &MaxChannel, &settings, &Silent)

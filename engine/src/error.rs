@@ -48,6 +48,19 @@ pub enum Error {
         /// Its options.
         choices: &'static [&'static str],
     },
+    /// A sample budget smaller than one unit of the method's work
+    /// ([`Method::smallest_budget`](crate::Method::smallest_budget)): it
+    /// would be overrun, not kept.
+    BudgetTooSmall {
+        /// The budget asked for (paths).
+        budget: u64,
+        /// The smallest budget this method and film take (paths).
+        smallest: u64,
+        /// The film's pixels (for the budgets per pixel).
+        pixels: u64,
+        /// What one unit of the method's work is.
+        unit: &'static str,
+    },
     /// The oracle reported a resolution with zero pixels.
     EmptyResolution,
     /// Every bootstrap candidate had zero importance: the start-up normalization
@@ -163,6 +176,18 @@ impl fmt::Display for Error {
             Error::UnknownChoice { name, choices } => {
                 write!(f, "`{name}` is one of {choices:?}")
             }
+            Error::BudgetTooSmall {
+                budget,
+                smallest,
+                pixels,
+                unit,
+            } => write!(
+                f,
+                "a budget of {budget} paths is less than one unit of this method's work \
+                 ({unit}): the smallest budget for this film is {smallest} paths ({} per \
+                 pixel)",
+                smallest.div_ceil((*pixels).max(1))
+            ),
             Error::EmptyResolution => write!(f, "the oracle's resolution has no pixels"),
             Error::AllCandidatesBlack {
                 candidates,

@@ -307,6 +307,14 @@ pub trait PathOracle: Sync {
         temperature: Temperature,
         splats: &mut dyn SplatSink<Self::Radiance>,
     ) -> PathSample<Self::Radiance>;
+
+    /// About how many splats a path hands to `splats` on average (light
+    /// tracing: one a light-subpath vertex), for the memory a render
+    /// reserves before any work ([`Method::memory_bound`](crate::Method::memory_bound)).
+    /// An oracle that never splats keeps the default, 0.
+    fn splats_per_path(&self) -> f64 {
+        0.0
+    }
 }
 
 /// A closure as an oracle: `trace(film, sampler, temperature, splats)` over a

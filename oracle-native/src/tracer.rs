@@ -271,6 +271,18 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
         self.scene.camera.resolution
     }
 
+    /// Bidirectional paths splat their light subpath's vertices joined to
+    /// the camera (about 3 a path on the built-in Cornell box); a
+    /// multiplexed path or a single strategy at most one.
+    fn splats_per_path(&self) -> f64 {
+        match self.sampler {
+            PathSampler::Unidirectional => 0.0,
+            PathSampler::Bidirectional => 3.0,
+            PathSampler::Multiplexed => 1.0,
+            PathSampler::Strategy { camera, .. } => f64::from(u8::from(camera == 1)),
+        }
+    }
+
     fn trace<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,

@@ -386,14 +386,18 @@ fn read_checkpoint(path: &Path, most: u64) -> AnyResult<Vec<u8>> {
     Ok(std::fs::read(path).map_err(|e| cannot(&e))?)
 }
 
-/// The largest checkpoint a render of `method` on `resolution` can write:
+/// The largest checkpoint a render of `settings` on `oracle` can write:
 /// four times its memory bound, and 256 MiB for its chains (measured at
 /// 128x128: stratified MCMC's checkpoint is a fifth of its bound, the other
 /// methods' less).
-fn checkpoint_limit(method: &Method, resolution: Resolution, channels: usize) -> u64 {
-    let bound = method
-        .bytes_per_pixel(channels, rayon::current_num_threads())
-        .saturating_mul(resolution.pixel_count() as u64);
+fn checkpoint_limit<O: PathOracle>(settings: &Settings, oracle: &O) -> u64 {
+    let bound = settings.method.memory_bound(
+        oracle.resolution(),
+        O::Radiance::CHANNELS,
+        oracle.splats_per_path(),
+        rayon::current_num_threads(),
+        settings.budget,
+    );
     bound.saturating_mul(4).saturating_add(256 << 20)
 }
 
@@ -781,7 +785,7 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, End
     };
     let resumed = match &args.resume {
         Some(path) => {
-            let most = checkpoint_limit(&settings.method, resolution, O::Radiance::CHANNELS);
+            let most = checkpoint_limit(&settings, oracle);
             let bytes = read_checkpoint(path, most)?;
             let checkpoint = Checkpoint::from_bytes(bytes)
                 .map_err(|e| format!("in checkpoint {}: {e}", path.display()))?;

@@ -170,7 +170,7 @@ pub(crate) struct Driven {
 }
 
 /// Splat buffers are bounded by capping a round at about this many traces.
-const MAX_ROUND_SAMPLES: u64 = 1 << 21;
+pub(crate) const MAX_ROUND_SAMPLES: u64 = 1 << 21;
 
 /// A time budget grows rounds while they take less than this (seconds).
 const MIN_ROUND_SECONDS: f64 = 0.05;
@@ -300,6 +300,16 @@ impl Clock {
     /// Whether the time budget is spent (always, without one).
     pub(crate) fn expired(&self) -> bool {
         self.fraction() >= 1.0
+    }
+
+    /// This clock (the same start) with its time budget ending `by` earlier
+    /// (at the start at the earliest).
+    #[cfg(feature = "std")]
+    pub(crate) fn ending_early(&self, by: core::time::Duration) -> Clock {
+        Clock {
+            start: self.start,
+            limit: self.limit.map(|l| l.saturating_sub(by)),
+        }
     }
 
     /// `share` of the time left of `limit` (a time budget started with

@@ -161,7 +161,15 @@ impl SplatBands {
                 visits[p as usize] += 1;
             }
             buffers.visited.clear();
-            buffers.splats.iter_mut().for_each(Vec::clear);
+            // Each band keeps room for what it took this round, no more: a
+            // worker that moves across the film (a chain, a block of start
+            // paths) would otherwise end up holding, in every band, the most
+            // it ever took there.
+            for band in &mut buffers.splats {
+                let used = band.len();
+                band.clear();
+                band.shrink_to(used);
+            }
         }
     }
 }

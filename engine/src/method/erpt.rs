@@ -118,6 +118,32 @@ impl ErptSettings {
     }
 }
 
+/// Start paths of a pass over `resolution`: every pixel, at least
+/// [`MIN_STARTS`] in all.
+fn starts(resolution: Resolution) -> usize {
+    resolution.pixel_count() * MIN_STARTS.div_ceil(resolution.pixel_count())
+}
+
+/// The smallest sample budget of ERPT on `resolution`: one pass.
+pub(crate) fn smallest_budget(settings: &ErptSettings, resolution: Resolution) -> u64 {
+    libm::ceil(starts(resolution) as f64 * settings.paths_per_pixel()) as u64
+}
+
+/// Chain steps run between two merges at most (by whole chains, at least
+/// one a task): about a block's expected steps with the default settings,
+/// whatever the chains' length and count.
+pub(crate) const WAVE_STEPS: u64 = 1 << 17;
+
+/// The most chains run between two merges.
+fn wave_chains(settings: &ErptSettings) -> u64 {
+    WAVE_STEPS / settings.chain_length.max(1) as u64
+}
+
+/// Expected paths of a block of start paths and their chains.
+pub(crate) fn block_paths(settings: &ErptSettings) -> u64 {
+    libm::ceil(BLOCK as f64 * settings.paths_per_pixel()) as u64
+}
+
 /// ERPT under `job`.
 pub(crate) fn render<O, I>(settings: &ErptSettings, job: &Job<'_, O, I>) -> Result<Output, Error>
 where
@@ -163,7 +189,7 @@ where
                 film: Film::try_new(resolution, O::Radiance::CHANNELS)?,
                 visits: alloc::vec![0; resolution.pixel_count()],
                 totals: alloc::vec![Totals::default(); TASKS],
-                starts: resolution.pixel_count() * MIN_STARTS.div_ceil(resolution.pixel_count()),
+                starts: starts(resolution),
                 passes: 0,
                 done: 0,
                 rotation: 0,
@@ -303,6 +329,8 @@ const TASKS: usize = 16;
 const PIXELS_PER_TASK: usize = 64;
 /// Start paths per unit of work.
 const BLOCK: usize = TASKS * PIXELS_PER_TASK;
+/// Start paths per unit of work, as a count of paths.
+pub(crate) const BLOCK_PATHS: u64 = BLOCK as u64;
 /// The fewest start paths of a pass.
 const MIN_STARTS: usize = 16;
 
@@ -441,26 +469,41 @@ where
                 self.block_starts.push(start);
             }
         }
+        // The chains run in waves of at most `WAVE_STEPS` steps, each merged
+        // before the next, so that a block whose few bright start paths
+        // start many chains (or whose chains are long) holds no more splats
+        // than an average one.
+        // A wave's tasks take consecutive chains: every pixel receives the
+        // chains' splats in chain order whatever the waves.
         let tasks = self.work.len() as u64;
-        for (t, w) in (0..).zip(&mut self.work) {
-            w.chains = chains * t / tasks..chains * (t + 1) / tasks;
-        }
+        let wave = wave_chains(settings).max(tasks);
         let (block_starts, chain_ends) = (&self.block_starts, &self.chain_ends);
-        parallel::for_each(&mut self.work, |w| {
-            let mut chain = w.chains.start;
-            let mut s = chain_ends.partition_point(|&end| end <= chain);
-            while chain < w.chains.end {
-                let start = &block_starts[s];
-                let number = chain - (chain_ends[s] - start.chains);
-                redistribute(&scene, settings, energy, start, number, w);
-                chain += 1;
-                if chain == chain_ends[s] {
-                    s += 1;
-                }
+        let mut first = 0;
+        loop {
+            let count = wave.min(chains - first);
+            for (t, w) in (0..).zip(&mut self.work) {
+                w.chains = first + count * t / tasks..first + count * (t + 1) / tasks;
             }
-        });
-        self.bands
-            .merge(&mut self.work, &mut self.film, &mut self.visits);
+            parallel::for_each(&mut self.work, |w| {
+                let mut chain = w.chains.start;
+                let mut s = chain_ends.partition_point(|&end| end <= chain);
+                while chain < w.chains.end {
+                    let start = &block_starts[s];
+                    let number = chain - (chain_ends[s] - start.chains);
+                    redistribute(&scene, settings, energy, start, number, w);
+                    chain += 1;
+                    if chain == chain_ends[s] {
+                        s += 1;
+                    }
+                }
+            });
+            self.bands
+                .merge(&mut self.work, &mut self.film, &mut self.visits);
+            first += count;
+            if first >= chains {
+                break;
+            }
+        }
     }
 }
 
@@ -470,7 +513,7 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     fn unit_cost(&self) -> u64 {
-        libm::ceil(BLOCK as f64 * self.settings.paths_per_pixel()) as u64
+        block_paths(self.settings)
     }
 
     fn planned_units(&self, samples: u64) -> u64 {

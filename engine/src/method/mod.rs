@@ -149,21 +149,137 @@ impl Method {
         }
     }
 
-    /// An upper bound on the bytes a render with this method keeps per
-    /// pixel, for `channels` channels and `workers` threads: films, per-worker
-    /// buffers and, for stratified MCMC, every tile's chain, estimates and the
-    /// solver's planes (measured ~2.9 KB per pixel at 512², with paths of the
-    /// native tracer's depth; docs/RESULTS.md, hostile input).
-    pub fn bytes_per_pixel(&self, channels: usize, workers: usize) -> u64 {
-        let film = 8 * (channels as u64 + 1);
-        let buffers = workers as u64 + 3;
-        match self {
-            Method::Mc | Method::Pssmlt(_) | Method::Erpt(_) => buffers * film,
-            Method::Replica(s) => {
-                (buffers + s.ensembles as u64 * s.ensemble.ladder.len() as u64) * film
+    /// The bytes a render of `resolution` with this method holds at most:
+    /// the reservation [`render`] makes before any work (a render that
+    /// cannot have it is [`Error::AllocationFailed`], not an abort half
+    /// way). `channels` are the radiance's, `splats_per_path` the oracle's
+    /// ([`PathOracle::splats_per_path`]), `workers` the threads.
+    ///
+    /// Counted: the films and per-pixel counts; the bootstrap's candidates
+    /// (let go before the first round); every chain's state (its primary sample and path); stratified MCMC's
+    /// tile chains, per pixel a part of its own and one per tile pixel (the
+    /// state evaluated there, with its splats); and the contributions
+    /// waiting to be merged: a round's (PSSMLT and replica exchange: a
+    /// round is a 64th of a sample budget, at most 2^21 paths, each with
+    /// its proposal and state), a block's start paths and a wave of its
+    /// chains' steps (ERPT, which merges a block's chains in waves of 2^17
+    /// steps), a pass's splats (MC).
+    /// The sizes were measured with the native tracer, unidirectional and
+    /// bidirectional, by `examples/memory_peaks` (docs/BENCHMARKS.md), and
+    /// `tests/memory.rs` checks the bound within 1.5x of the measured peak.
+    pub fn memory_bound(
+        &self,
+        resolution: Resolution,
+        channels: usize,
+        splats_per_path: f64,
+        workers: usize,
+        budget: Budget,
+    ) -> u64 {
+        use memory::*;
+        // In u128: a film of u32::MAX x u32::MAX pixels is still a number.
+        let pixels = resolution.pixel_count() as u128;
+        let film = 8 * channels as u128 * pixels;
+        let counted = film + 8 * pixels;
+        // A queued contribution: pixel, weight and radiance.
+        let queued = (12 + 4 * channels as u128).next_multiple_of(8);
+        // Splats per path, in hundredths (a fraction of one counts).
+        let splats = if splats_per_path.is_finite() {
+            (splats_per_path.clamp(0.0, 1e6) * 100.0) as u128
+        } else {
+            0
+        };
+        // The contributions of `paths` paths, each with `per_path` states
+        // (proposal and current) and their splats.
+        let contributions =
+            |paths: u64, per_path: u128| paths as u128 * per_path * (100 + splats) * queued / 100;
+        let round = |unit: u64| {
+            let most = match budget {
+                Budget::Samples(n) => (n / 64).saturating_add(unit),
+                #[cfg(feature = "std")]
+                Budget::Time(_) => ROUND_PATHS,
+            };
+            contributions(most.min(ROUND_PATHS.max(unit)), 2)
+        };
+        let workers = workers as u128;
+        let bytes = match self {
+            Method::Mc => film + pixels * splats * queued / 100,
+            // The bootstrap's candidates are let go before the first round.
+            Method::Pssmlt(s) => {
+                counted
+                    + s.chains as u128 * CHAIN
+                    + (s.bootstrap_candidates as u128 * CANDIDATE).max(round(s.chains as u64))
             }
-            Method::MultiStage(_) => (buffers + 8) * film,
-            Method::Stratified(_) => 4096 + buffers * film,
+            Method::Replica(s) => {
+                let levels = s.ensemble.ladder.len() as u128;
+                let sweep = s.traces_per_sweep().saturating_mul(s.ensembles as u64);
+                counted
+                    + s.ensembles as u128 * levels * CHAIN
+                    + (s.ensemble.bootstrap_candidates as u128 * levels * CANDIDATE)
+                        .max(round(sweep))
+            }
+            Method::Stratified(s) => {
+                let tile = match s.shape {
+                    crate::tiles::TileShape::Cross => 5,
+                    crate::tiles::TileShape::Square { radius } => {
+                        (2 * radius as u128 + 1) * (2 * radius as u128 + 1)
+                    }
+                };
+                let per_tile_pixel = TILE_PIXEL + splats * queued / 100;
+                counted + pixels * (TILE_CHAIN + tile * per_tile_pixel) + workers * CHAIN
+            }
+            Method::Erpt(s) => {
+                // A block's start paths and a wave's proposals and states,
+                // in vectors that grew by doubling while it ran: half as
+                // much again.
+                let wave = contributions(erpt::BLOCK_PATHS + erpt::WAVE_STEPS, 3);
+                counted + workers * CHAIN + (s.bootstrap_candidates as u128 * CANDIDATE).max(wave)
+            }
+            Method::MultiStage(s) => {
+                // One PSSMLT stage, and beside it the estimate so far, the
+                // stages' sums and per pixel its luminance, deviation,
+                // importance and adaptation.
+                let stage = Method::Pssmlt(s.pssmlt).memory_bound(
+                    resolution,
+                    channels,
+                    splats_per_path,
+                    workers as usize,
+                    budget,
+                );
+                stage as u128 + 2 * film + 4 * 8 * pixels
+            }
+        };
+        u64::try_from(bytes.max(film)).unwrap_or(u64::MAX)
+    }
+
+    /// The smallest sample budget a render of `resolution` with this method
+    /// takes: one unit of its work (a pass over the film for MC, a step of
+    /// every chain for PSSMLT, a sweep of every ensemble or tile, a pass of
+    /// ERPT's start paths, one step of every chain in every stage of
+    /// multi-stage MLT). [`render`] refuses a smaller sample budget with
+    /// [`Error::BudgetTooSmall`] naming this number; above it a method rounds
+    /// its budget to whole units, at most one unit over.
+    pub fn smallest_budget(&self, resolution: Resolution) -> Result<u64, Error> {
+        let pixels = resolution.pixel_count() as u64;
+        Ok(match self {
+            Method::Mc => pixels,
+            Method::Pssmlt(s) => s.chains as u64,
+            Method::Replica(s) => s.traces_per_sweep().saturating_mul(s.ensembles as u64),
+            Method::Stratified(s) => stratified::smallest_budget(s, resolution)?,
+            Method::Erpt(s) => erpt::smallest_budget(s, resolution),
+            Method::MultiStage(s) => multistage::smallest_budget(s, resolution),
+        })
+    }
+
+    /// What one unit of this method's work is, for
+    /// [`Error::BudgetTooSmall`].
+    fn unit_of_work(&self) -> &'static str {
+        match self {
+            Method::Mc => "one path per pixel",
+            Method::Pssmlt(_) => "one step of every chain",
+            Method::Replica(_) => "one sweep of every ensemble",
+            Method::Stratified(_) => "one sweep of every tile",
+            Method::Erpt(_) => "one pass of start paths",
+            Method::MultiStage(_) => "one step of every chain in every stage",
         }
     }
 
@@ -180,6 +296,24 @@ impl Method {
             Method::MultiStage(s) => s.validate(),
         }
     }
+}
+
+/// The sizes [`Method::memory_bound`] counts with.
+mod memory {
+    /// A bootstrap candidate's value at one level, and its share of the
+    /// resampling tables.
+    pub const CANDIDATE: u128 = 16;
+    /// A chain's state: its primary sample (values and proposal, per
+    /// stream) and its path with splats.
+    pub const CHAIN: u128 = 4096;
+    /// A tile chain of stratified MCMC: its primary sample, streams and
+    /// counters (measured ~1.4 KB).
+    pub const TILE_CHAIN: u128 = 1536;
+    /// Per pixel of its tile: the state evaluated there and the estimates
+    /// (measured ~180 bytes).
+    pub const TILE_PIXEL: u128 = 192;
+    /// The most paths a round traces.
+    pub const ROUND_PATHS: u64 = crate::drive::MAX_ROUND_SAMPLES;
 }
 
 /// A finished (or cancelled) render.
@@ -281,12 +415,31 @@ impl<O, I: ?Sized> Job<'_, O, I> {
 
     /// The round loop of this job, at `resumed` (or at its start).
     pub fn round_loop(&self, resumed: Option<Position>) -> Loop<'_> {
+        self.round_loop_until(resumed, &self.clock)
+    }
+
+    /// The round loop of this job, at `resumed`, whose time budget runs out
+    /// by `clock` (one that ends before the job's, to leave time for work
+    /// after the rounds).
+    pub fn round_loop_until<'c>(&'c self, resumed: Option<Position>, clock: &'c Clock) -> Loop<'c> {
         Loop {
             budget: self.budget,
-            clock: &self.clock,
+            clock,
             observer: self.observer,
             checkpoints: self.checkpoints,
             resumed,
+        }
+    }
+
+    /// Whether this job's time budget has run out (never, for a sample
+    /// budget): a deadline for work after the rounds.
+    pub fn out_of_time(&self) -> impl Fn() -> bool + '_ {
+        move || {
+            #[cfg(feature = "std")]
+            if matches!(self.budget, Budget::Time(_)) {
+                return self.clock.expired();
+            }
+            false
         }
     }
 
@@ -407,13 +560,32 @@ where
     if resolution.pixel_count() == 0 {
         return Err(Error::EmptyResolution);
     }
-    let per_pixel = settings
-        .method
-        .bytes_per_pixel(O::Radiance::CHANNELS, parallel::threads());
     check_memory(
-        per_pixel.saturating_mul(resolution.pixel_count() as u64),
-        "render's films and buffers (a bound for this method and film size)",
+        settings.method.memory_bound(
+            resolution,
+            O::Radiance::CHANNELS,
+            oracle.splats_per_path(),
+            parallel::threads(),
+            settings.budget,
+        ),
+        "render's films, chains and buffers (a bound for this method, film and budget)",
     )?;
+    let samples = match settings.budget {
+        Budget::Samples(n) => Some(n),
+        #[cfg(feature = "std")]
+        Budget::Time(_) => None,
+    };
+    if let Some(budget) = samples {
+        let smallest = settings.method.smallest_budget(resolution)?;
+        if budget < smallest {
+            return Err(Error::BudgetTooSmall {
+                budget,
+                smallest,
+                pixels: resolution.pixel_count() as u64,
+                unit: settings.method.unit_of_work(),
+            });
+        }
+    }
     let oracle_id = || checkpoint::oracle_id(oracle);
     let checkpoints = Checkpointer::new(settings, O::Radiance::CHANNELS, &oracle_id);
     let job = Job {

@@ -109,6 +109,29 @@ pub fn stage_grids(n: u32, linear: u32) -> Vec<u32> {
     grids
 }
 
+/// The stages' grid sizes on `resolution`.
+fn grids_of(settings: &MultiStageSettings, resolution: Resolution) -> Vec<u32> {
+    let n = resolution.width.max(resolution.height).max(1);
+    stage_grids(n, settings.linear_stages)
+}
+
+/// The paths of a sample budget `total` that the stage of grid `k` gets
+/// (its share `k / weight_sum`, rounded down, at least one).
+fn stage_share(total: u64, k: u32, weight_sum: u64) -> u64 {
+    ((total as u128 * k as u128 / weight_sum.max(1) as u128) as u64).max(1)
+}
+
+/// The smallest sample budget of multi-stage MLT on `resolution`: the
+/// first stage (the smallest share) gets one step of every chain.
+pub(crate) fn smallest_budget(settings: &MultiStageSettings, resolution: Resolution) -> u64 {
+    let grids = grids_of(settings, resolution);
+    let weight_sum: u64 = grids.iter().map(|&k| k as u64).sum();
+    let smallest = grids.iter().copied().min().unwrap_or(1).max(1) as u64;
+    (settings.pssmlt.chains as u64)
+        .saturating_mul(weight_sum)
+        .div_ceil(smallest)
+}
+
 /// The mean luminance of `film` over a `k x k` grid of regions (clamped to
 /// the film size), with a floor so that no region has zero importance.
 struct RegionMeans {
@@ -367,8 +390,7 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let resolution = job.resolution;
-    let n = resolution.width.max(resolution.height).max(1);
-    let grids = stage_grids(n, settings.linear_stages);
+    let grids = grids_of(settings, resolution);
     let weight_sum: u64 = grids.iter().map(|&k| k as u64).sum();
     let channels = O::Radiance::CHANNELS;
     let pixels = resolution.pixel_count();
@@ -411,7 +433,7 @@ where
         let weight_done = done.weight_done;
         let stats = done.stats;
         let budget = match job.budget {
-            Budget::Samples(total) => Budget::Samples((total * k as u64 / weight_sum).max(1)),
+            Budget::Samples(total) => Budget::Samples(stage_share(total, k, weight_sum)),
             #[cfg(feature = "std")]
             Budget::Time(limit) => Budget::Time(
                 job.clock

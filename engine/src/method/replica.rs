@@ -58,6 +58,11 @@ impl Default for ReplicaSettings {
 const MAX_BOOTSTRAP_VALUES: u64 = 1 << 26;
 
 impl ReplicaSettings {
+    /// Paths one sweep of one ensemble traces (every level proposes once).
+    pub(crate) fn traces_per_sweep(&self) -> u64 {
+        self.ensemble.ladder.len() as u64 * self.ensemble.traces_per_proposal()
+    }
+
     /// Checks every parameter.
     pub fn validate(&self) -> Result<(), Error> {
         if self.ensembles == 0 {
@@ -98,8 +103,7 @@ where
 {
     let (oracle, importance) = (job.oracle, job.importance);
     let bands = SplatBands::new(job.resolution);
-    let traces_per_sweep =
-        settings.ensemble.ladder.len() as u64 * settings.ensemble.traces_per_proposal();
+    let traces_per_sweep = settings.traces_per_sweep();
     let work = |state, prior| EnsembleWork {
         oracle,
         importance,

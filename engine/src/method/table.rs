@@ -8,7 +8,7 @@
 //!
 //! The ranges are what a render on this machine class can carry: a value
 //! inside them renders (memory is checked before any work, see
-//! [`Method::bytes_per_pixel`]), a value outside is
+//! [`Method::memory_bound`]), a value outside is
 //! [`Error::OutOfRange`](crate::Error::OutOfRange).
 
 use crate::error::Error;

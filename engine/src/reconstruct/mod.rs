@@ -162,7 +162,17 @@ mod tests {
     fn bad_estimates_are_typed_errors() {
         let (tiles, mut g, intensity, _) = synthetic(Resolution::new(5, 4), TileShape::Cross);
         g[3] = f64::NAN;
-        assert!(weighted(&tiles, &g, &intensity, &WeightedSettings::default(), None).is_err());
+        assert!(
+            weighted(
+                &tiles,
+                &g,
+                &intensity,
+                &WeightedSettings::default(),
+                None,
+                &|| false
+            )
+            .is_err()
+        );
         assert!(log_domain(&tiles, &g, &intensity, &LogSettings::default()).is_err());
         assert!(
             weighted(
@@ -170,7 +180,8 @@ mod tests {
                 &g[..4],
                 &intensity,
                 &WeightedSettings::default(),
-                None
+                None,
+                &|| false
             )
             .is_err()
         );

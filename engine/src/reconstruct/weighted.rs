@@ -68,7 +68,10 @@ fn lesser(a: f64, b: f64) -> f64 {
 }
 
 /// The weighted iterative solver (eq. 13-16): one `b_s` per tile, from
-/// `initial` or [`initial_normalizations`]. It runs on f32 planes, with `g`
+/// `initial` or [`initial_normalizations`]. `stop` is asked before every
+/// block of iterations between weight refreshes; when it says so, the
+/// solver returns the normalizations it has (a deadline: fewer iterations,
+/// a coarser reconstruction, never a wrong one). It runs on f32 planes, with `g`
 /// and `mc` scaled by powers of two to a largest value in [0.5, 1) (exact;
 /// relative rounding ~1e-7, far below any estimate's noise); the weights
 /// of eq. 15-16 stay f64, whose range their floor `β1 β2^n` needs.
@@ -78,6 +81,7 @@ pub fn weighted(
     mc: &[f64],
     settings: &WeightedSettings,
     initial: Option<&[f64]>,
+    stop: &dyn Fn() -> bool,
 ) -> Result<Vec<f64>, Error> {
     check_shapes(tiles, g, mc)?;
     settings.validate()?;
@@ -106,7 +110,7 @@ pub fn weighted(
     let mut weights = vec![0.0; planes.len()];
     let every = settings.reweight_every.max(1);
     let mut iteration = 0;
-    while iteration < settings.iterations {
+    while iteration < settings.iterations && !stop() {
         // Eq. 15-16: w(s) = 1 / (e(s) + β1 β2^n).
         let floor = (settings.beta1 * libm::pow(settings.beta2, iteration as f64)).max(1e-300);
         problem.weights(&b, floor, &mut weights);
@@ -556,7 +560,7 @@ mod tests {
                     iterations,
                     ..Default::default()
                 };
-                let b = weighted(&tiles, &g, &mc, &settings, Some(&start)).unwrap();
+                let b = weighted(&tiles, &g, &mc, &settings, Some(&start), &|| false).unwrap();
                 for (s, (got, want)) in b.iter().zip(&b_true).enumerate() {
                     let ratio = got / want;
                     assert!(
@@ -584,11 +588,11 @@ mod tests {
     fn estimates_beyond_the_range_of_f32_are_solved_alike() {
         let (tiles, g, intensity, _) = synthetic(Resolution::new(17, 11), TileShape::Cross);
         let settings = WeightedSettings::default();
-        let plain = weighted(&tiles, &g, &intensity, &settings, None).unwrap();
+        let plain = weighted(&tiles, &g, &intensity, &settings, None, &|| false).unwrap();
         let (up, down) = (1e60, 1e-60);
         let g_up: Vec<f64> = g.iter().map(|v| v * up).collect();
         let mc_down: Vec<f64> = intensity.iter().map(|v| v * down).collect();
-        let scaled = weighted(&tiles, &g_up, &mc_down, &settings, None).unwrap();
+        let scaled = weighted(&tiles, &g_up, &mc_down, &settings, None, &|| false).unwrap();
         for (s, (got, want)) in scaled.iter().zip(&plain).enumerate() {
             let ratio = got / (want * down / up);
             assert!((ratio - 1.0).abs() < 1e-5, "tile {s}: ratio {ratio}");
@@ -631,6 +635,30 @@ mod tests {
         }
     }
 
+    /// A solver told to stop after `k` blocks of iterations returns exactly
+    /// what `k` blocks give: the deadline ends the iterations, it changes
+    /// none of them.
+    #[test]
+    fn a_stopped_solver_returns_the_iterate_it_reached() {
+        let (tiles, g, intensity, _) = synthetic(Resolution::new(13, 9), TileShape::Cross);
+        let settings = WeightedSettings::default();
+        let blocks = 3;
+        let short = WeightedSettings {
+            iterations: blocks * settings.reweight_every,
+            ..settings
+        };
+        let expected = weighted(&tiles, &g, &intensity, &short, None, &|| false).unwrap();
+        let asked = core::cell::Cell::new(0);
+        let stop = || {
+            asked.set(asked.get() + 1);
+            asked.get() > blocks
+        };
+        let stopped = weighted(&tiles, &g, &intensity, &settings, None, &stop).unwrap();
+        assert_eq!(stopped, expected);
+        let full = weighted(&tiles, &g, &intensity, &settings, None, &|| false).unwrap();
+        assert_ne!(stopped, full);
+    }
+
     /// A tile without an estimate (its chain never found `T_s > 0`) is left
     /// out: with noise-free estimates elsewhere, every pixel is recovered,
     /// those of the empty tile from the other tiles holding them (counted
@@ -647,7 +675,7 @@ mod tests {
             iterations: 20_000,
             ..Default::default()
         };
-        let b = weighted(&tiles, &g, &intensity, &settings, None).unwrap();
+        let b = weighted(&tiles, &g, &intensity, &settings, None, &|| false).unwrap();
         let image = super::super::image(&tiles, &g, &b, 1);
         for (j, (got, want)) in image.iter().zip(&intensity).enumerate() {
             assert!(

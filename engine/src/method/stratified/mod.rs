@@ -339,6 +339,10 @@ pub struct StratifiedExtras {
     /// ratios of the pixel values. A tile whose chain never found a state
     /// with `T_s > 0` holds the regularizer's values.
     pub unscaled: Vec<f64>,
+    /// A time budget ran out during the weighted solver, which returned the
+    /// normalizations it had (fewer iterations than
+    /// [`WeightedSettings::iterations`]).
+    pub reconstruction_cut: bool,
 }
 
 /// Stratified MCMC under `job` (see the module docs).
@@ -397,10 +401,13 @@ where
             sweep_cost,
             light,
         };
-        let driven = drive(&mut sweeps, job.round_loop(Some(position)), |s, out| {
-            s.save(bootstrap_traces, out)
-        });
-        return sweeps.finish(driven, bootstrap_traces);
+        let sweeps_clock = reserve_reconstruction(job, &tiles, settings);
+        let driven = drive(
+            &mut sweeps,
+            job.round_loop_until(Some(position), &sweeps_clock),
+            |s, out| s.save(bootstrap_traces, out),
+        );
+        return sweeps.finish(driven, bootstrap_traces, &job.out_of_time());
     }
     let mut chains: Vec<TileChain<O::Radiance>> = (0..n)
         .map(|s| TileChain::new(job.seed, s, n, offsets, &settings.mutation))
@@ -444,10 +451,63 @@ where
         sweep_cost,
         light: new_light(),
     };
-    let driven = drive(&mut sweeps, job.round_loop(None), |s, out| {
-        s.save(initialized.bootstrap, out)
-    });
-    sweeps.finish(driven, initialized.bootstrap)
+    let sweeps_clock = reserve_reconstruction(job, &tiles, settings);
+    let driven = drive(
+        &mut sweeps,
+        job.round_loop_until(None, &sweeps_clock),
+        |s, out| s.save(initialized.bootstrap, out),
+    );
+    sweeps.finish(driven, initialized.bootstrap, &job.out_of_time())
+}
+
+/// Under a time budget, the clock the sweeps stop by: the render's,
+/// ending early by the time the reconstruction is expected to take (at most
+/// half the budget). The expectation is timed, not guessed: the weighted
+/// solver's set-up and one block of its iterations between weight
+/// refreshes, on a problem of this film's size, scaled to the solves and
+/// blocks the reconstruction runs (every channel's, the
+/// cross-validation's), and a quarter more for the work around them. If it
+/// still runs late, the solver stops at the budget's end
+/// ([`reconstruct::weighted`]'s `stop`). Under a sample budget, or with the
+/// log-domain solver (direct, no iterations), the render's own clock.
+fn reserve_reconstruction<O, I: ?Sized>(
+    job: &Job<'_, O, I>,
+    tiles: &Tiles,
+    settings: &StratifiedSettings,
+) -> crate::drive::Clock
+where
+    O: PathOracle,
+{
+    #[cfg(feature = "std")]
+    if let (Budget::Time(limit), Solver::Weighted(w)) = (job.budget, &settings.solver) {
+        let g = vec![1.0; tiles.count() * tiles.offsets().len()];
+        let mc = vec![1.0; tiles.resolution().pixel_count()];
+        let timed = |iterations| {
+            let probe = WeightedSettings { iterations, ..*w };
+            let start = std::time::Instant::now();
+            reconstruct::weighted(tiles, &g, &mc, &probe, None, &|| false)
+                .map(|_| start.elapsed().as_secs_f64())
+        };
+        let every = w.reweight_every.max(1);
+        if let (Ok(set_up), Ok(one_block)) = (timed(0), timed(every)) {
+            let block = (one_block - set_up).max(0.0);
+            let channels = O::Radiance::CHANNELS as f64;
+            let (mut solves, mut blocks) =
+                (channels, channels * w.iterations.div_ceil(every) as f64);
+            if settings.cross_validate_alpha {
+                solves += ALPHAS.len() as f64;
+                blocks += ALPHAS.len() as f64 * (w.iterations / 4).div_ceil(every) as f64;
+            }
+            let expected = 1.25 * (solves * set_up + blocks * block);
+            let reserve = expected.min(0.5 * limit.as_secs_f64());
+            return job
+                .clock
+                .ending_early(core::time::Duration::from_secs_f64(reserve));
+        }
+    }
+    #[cfg(not(feature = "std"))]
+    let _ = (tiles, settings);
+    job.clock.clone()
 }
 
 /// What a checkpoint holds of stratified MCMC: the tile chains, the
@@ -497,8 +557,14 @@ where
         checkpoint::append(&saved, out);
     }
 
-    /// The reconstruction, the fallback and the counters.
-    fn finish(mut self, driven: Driven, bootstrap_traces: u64) -> Result<Output, Error> {
+    /// The reconstruction, the fallback and the counters; the weighted
+    /// solver (and cross-validation) end early when `stop` says so.
+    fn finish(
+        mut self,
+        driven: Driven,
+        bootstrap_traces: u64,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Output, Error> {
         let tiles = self.ctx.tiles;
         let channels = O::Radiance::CHANNELS;
         let (samples, regularizer) = LargeSteps::gather(tiles, &self.chains);
@@ -512,8 +578,9 @@ where
                 } else {
                     &ALPHAS[..]
                 };
-                w.alpha =
-                    cross_validated_alpha(tiles, &unscaled, channels, &halves, w, candidates)?;
+                w.alpha = cross_validated_alpha(
+                    tiles, &unscaled, channels, &halves, w, candidates, stop,
+                )?;
             }
             self.stats.alpha = w.alpha;
         }
@@ -524,7 +591,7 @@ where
             let mc = channel(regularizer.data(), channels, c);
             let values = match &solver {
                 Solver::Weighted(w) => {
-                    let b = reconstruct::weighted(tiles, &g, &mc, w, None)?;
+                    let b = reconstruct::weighted(tiles, &g, &mc, w, None, stop)?;
                     let values = reconstruct::image(tiles, &g, &b, 1);
                     normalizations.push(b);
                     values
@@ -533,6 +600,7 @@ where
             };
             set_channel(&mut film, c, &values);
         }
+        let reconstruction_cut = matches!(solver, Solver::Weighted(_)) && stop();
         // Tile-major, channel-minor.
         let normalizations = (0..normalizations.first().map_or(0, Vec::len))
             .flat_map(|s| normalizations.iter().map(move |b| b[s]))
@@ -584,9 +652,20 @@ where
                 regularizer,
                 normalizations,
                 unscaled,
+                reconstruction_cut,
             }),
         })
     }
+}
+
+/// The smallest sample budget of stratified MCMC on `resolution`: one sweep
+/// (the initialization takes its share of the budget on top).
+pub(crate) fn smallest_budget(
+    settings: &StratifiedSettings,
+    resolution: crate::oracle::Resolution,
+) -> Result<u64, Error> {
+    let tiles = Tiles::new(resolution, settings.shape)?;
+    Ok(libm::ceil(sweep_cost(&tiles, settings)) as u64)
 }
 
 /// Paths a sweep traces if every tile steps (a sweep's local exchanges
@@ -747,6 +826,8 @@ const FEW_SWEEPS: u64 = 8;
 /// The `α` of `candidates` whose channel-mean image, reconstructed with the
 /// first half of the large steps as regularizer (at `α / 2`), is closest to
 /// the second half's mean over the pixels it sampled (the first on ties).
+/// When `stop` says so, the best of the candidates scored so far (the
+/// settings' `α` if none).
 fn cross_validated_alpha(
     tiles: &Tiles,
     unscaled: &[f64],
@@ -754,6 +835,7 @@ fn cross_validated_alpha(
     halves: &Halves,
     settings: &WeightedSettings,
     candidates: &[f64],
+    stop: &dyn Fn() -> bool,
 ) -> Result<f64, Error> {
     let g: Vec<f64> = unscaled
         .chunks(channels)
@@ -761,12 +843,15 @@ fn cross_validated_alpha(
         .collect();
     let mut best = (f64::INFINITY, settings.alpha);
     for &alpha in candidates {
+        if stop() {
+            break;
+        }
         let half = WeightedSettings {
             alpha: alpha / 2.0,
             iterations: settings.iterations / 4,
             ..*settings
         };
-        let b = reconstruct::weighted(tiles, &g, &halves.first, &half, None)?;
+        let b = reconstruct::weighted(tiles, &g, &halves.first, &half, None, stop)?;
         let image = reconstruct::image(tiles, &g, &b, 1);
         let error: f64 = image
             .iter()

@@ -1,0 +1,133 @@
+//! A global allocator for the tests that bound memory: the system's,
+//! remembering the largest single request and the peak of the bytes live,
+//! so that a case can prove it asked for no more than a bound. A test binary
+//! installs it with
+//! `#[global_allocator] static ALLOCATOR: Tracking = Tracking::new();`.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// The system allocator, remembering the largest request since the last
+/// [`Tracking::take`] and the most bytes live since the last
+/// [`Tracking::reset_peak`].
+pub struct Tracking {
+    largest: AtomicUsize,
+    /// The size of the next allocation not to count live (0: none), and
+    /// the address of the one left out, until it is freed.
+    unseen: AtomicUsize,
+    unseen_at: AtomicUsize,
+    live: AtomicUsize,
+    peak: AtomicUsize,
+}
+
+impl Tracking {
+    fn grew(&self, by: usize) {
+        let live = self.live.fetch_add(by, Ordering::Relaxed) + by;
+        self.peak.fetch_max(live, Ordering::Relaxed);
+    }
+}
+
+impl Tracking {
+    fn shrank(&self, by: usize) {
+        self.live.fetch_sub(by, Ordering::Relaxed);
+    }
+
+    /// Whether the allocation of `size` bytes at `at` is the one to leave
+    /// out (then remembered until freed).
+    fn leaves_out(&self, size: usize, at: *mut u8) -> bool {
+        size != 0
+            && self
+                .unseen
+                .compare_exchange(size, 0, Ordering::Relaxed, Ordering::Relaxed)
+                .is_ok()
+            && {
+                self.unseen_at.store(at as usize, Ordering::Relaxed);
+                true
+            }
+    }
+
+    /// Whether `at` is the allocation left out (then forgotten).
+    fn left_out(&self, at: *mut u8) -> bool {
+        at as usize != 0
+            && self
+                .unseen_at
+                .compare_exchange(at as usize, 0, Ordering::Relaxed, Ordering::Relaxed)
+                .is_ok()
+    }
+}
+
+// SAFETY: every call is forwarded to `System` unchanged.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for Tracking {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        self.largest.fetch_max(layout.size(), Ordering::Relaxed);
+        // SAFETY: the caller's contract is `System`'s.
+        let p = unsafe { System.alloc(layout) };
+        if !p.is_null() && !self.leaves_out(layout.size(), p) {
+            self.grew(layout.size());
+        }
+        p
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        if !self.left_out(ptr) {
+            self.shrank(layout.size());
+        }
+        // SAFETY: the caller's contract is `System`'s.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        self.largest.fetch_max(new_size, Ordering::Relaxed);
+        // SAFETY: the caller's contract is `System`'s.
+        let p = unsafe { System.realloc(ptr, layout, new_size) };
+        if !p.is_null() {
+            // Both blocks are live while the bytes move.
+            self.grew(new_size);
+            self.shrank(layout.size());
+        }
+        p
+    }
+}
+
+impl Tracking {
+    pub const fn new() -> Self {
+        Self {
+            largest: AtomicUsize::new(0),
+            unseen: AtomicUsize::new(0),
+            unseen_at: AtomicUsize::new(0),
+            live: AtomicUsize::new(0),
+            peak: AtomicUsize::new(0),
+        }
+    }
+
+    /// The largest request since the last call.
+    #[allow(dead_code)]
+    pub fn take(&self) -> usize {
+        self.largest.swap(0, Ordering::Relaxed)
+    }
+
+    /// Leaves the next allocation of exactly `size` bytes out of the live
+    /// count (0: none), e.g. a reservation that is made and let go before
+    /// any page is touched.
+    #[allow(dead_code)]
+    pub fn leave_out(&self, size: usize) {
+        self.unseen.store(size, Ordering::Relaxed);
+    }
+
+    /// Bytes live now.
+    #[allow(dead_code)]
+    pub fn live(&self) -> usize {
+        self.live.load(Ordering::Relaxed)
+    }
+
+    /// Starts a new peak from the bytes live now.
+    #[allow(dead_code)]
+    pub fn reset_peak(&self) {
+        self.peak.store(self.live(), Ordering::Relaxed);
+    }
+
+    /// The most bytes live since the last [`reset_peak`](Self::reset_peak).
+    #[allow(dead_code)]
+    pub fn peak(&self) -> usize {
+        self.peak.load(Ordering::Relaxed)
+    }
+}

@@ -1,0 +1,63 @@
+//! The memory bound (issue 36): every method's [`Method::memory_bound`],
+//! the reservation a render makes before any work, within 1.5x of the peak
+//! of the bytes the render really holds (a tracking allocator, the
+//! reservation itself left out), on the Cornell box with unidirectional and
+//! bidirectional paths, at a preview budget and a longer one.
+
+mod allocations;
+mod threads;
+
+use allocations::Tracking;
+use strata::engine::target::MaxChannel;
+use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
+use strata::native::{PathSampler, builtin, native_tracer};
+
+#[global_allocator]
+static ALLOCATOR: Tracking = Tracking::new();
+
+/// How far the bound may be from the peak, either way.
+const WITHIN: f64 = 1.5;
+
+#[test]
+fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
+    let resolution = Resolution::new(96, 72);
+    let mut tracer = native_tracer(builtin::cornell(resolution));
+    let threads = 2;
+    for sampler in [PathSampler::Unidirectional, PathSampler::Bidirectional] {
+        tracer.sampler = sampler;
+        for method in Method::all() {
+            let name = method.name();
+            for spp in [1, 32] {
+                let smallest = method.smallest_budget(resolution).unwrap();
+                let budget = Budget::Samples((spp * resolution.pixel_count() as u64).max(smallest));
+                let settings = Settings {
+                    seed: 1,
+                    budget,
+                    method: method.clone(),
+                };
+                let bound =
+                    method.memory_bound(resolution, 3, tracer.splats_per_path(), threads, budget);
+                let peak = threads::in_pool(threads, || {
+                    ALLOCATOR.leave_out(bound as usize);
+                    ALLOCATOR.reset_peak();
+                    let before = ALLOCATOR.live();
+                    let out = render(&tracer, &MaxChannel, &settings, &Silent).unwrap();
+                    let peak = ALLOCATOR.peak() - before;
+                    drop(out);
+                    ALLOCATOR.leave_out(0);
+                    peak
+                });
+                let ratio = bound as f64 / peak as f64;
+                eprintln!(
+                    "{} {name} {spp} spp: peak {peak} bound {bound} ({ratio:.2}x)",
+                    sampler.name()
+                );
+                assert!(
+                    (1.0 / WITHIN..=WITHIN).contains(&ratio),
+                    "{} {name} {spp} spp: bound {bound} bytes, peak {peak} ({ratio:.2}x)",
+                    sampler.name()
+                );
+            }
+        }
+    }
+}

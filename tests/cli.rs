@@ -145,6 +145,8 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
         (&["--time", "nan"], 2, "time budget"),
         (&["--exposure", "nan"], 2, "exposure"),
         (&["--exposure", "1e30"], 2, "exposure"),
+        (&["--stack-size", "0"], 2, "stack-size"),
+        (&["--stack-size", "2048"], 2, "stack-size"),
     ] {
         let refused = run(&[extra, &["--out", out_arg]].concat());
         let stderr = String::from_utf8_lossy(&refused.stderr);
@@ -194,7 +196,7 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
         .unwrap();
     assert_eq!(status.code(), Some(0));
 
-    let ok = run(&["--spp", "4", "--out", out_arg]);
+    let ok = run(&["--spp", "4", "--stack-size", "16", "--out", out_arg]);
     assert_eq!(ok.status.code(), Some(0));
     for ext in ["png", "exr"] {
         assert!(dir.join(format!("name.with.dots.{ext}")).is_file(), "{ext}");

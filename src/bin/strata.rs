@@ -114,6 +114,10 @@ struct Args {
     /// Worker threads (0: all cores). The image does not depend on it.
     #[arg(long, default_value_t = 0)]
     threads: usize,
+    /// Each worker thread's stack, MiB (1 to 1024; OpenMP's usual 8 by
+    /// default): room for an oracle that recurses deeply.
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    stack_size: u32,
     /// Ray backend.
     #[arg(long, value_enum, default_value = "native")]
     backend: Backend,
@@ -551,6 +555,7 @@ fn run(args: &Args) -> AnyResult<Ended> {
     }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
+        .stack_size(args.stack_size as usize * (1 << 20))
         .build()?;
     let resolution = Resolution::new(args.width.unwrap_or(256), args.height.unwrap_or(256));
     let analytic = matches!(args.scene.as_str(), "procedural" | "mixture");

@@ -285,3 +285,63 @@ pub(crate) fn does_not_fit() -> Error {
         reason: "its state does not fit this render",
     }
 }
+
+#[cfg(all(test, feature = "std"))]
+mod tests {
+    use super::*;
+    use crate::analytic::ProceduralImage;
+    use crate::drive::{Budget, Observer};
+    use crate::method::{Method, render, resume};
+    use crate::target::MaxChannel;
+    use std::sync::Mutex;
+
+    /// Keeps the checkpoint after the first round.
+    #[derive(Default)]
+    struct First(Mutex<Option<Checkpoint>>);
+
+    impl Observer for First {
+        fn wants_checkpoint(&self) -> bool {
+            self.0.lock().unwrap().is_none()
+        }
+        fn checkpoint(&self, checkpoint: Checkpoint) {
+            *self.0.lock().unwrap() = Some(checkpoint);
+        }
+    }
+
+    /// A checkpoint whose loop position is forged (CRC recomputed) so that
+    /// it says more or fewer units than its state holds is refused: resumed,
+    /// `done` = 0 ran the whole budget again on top of the saved work.
+    #[test]
+    fn a_position_that_does_not_match_the_state_is_refused() {
+        let image = ProceduralImage::showcase(Resolution::new(8, 6));
+        let settings = Settings {
+            seed: 1,
+            budget: Budget::Samples(64 * 48),
+            method: Method::Mc,
+        };
+        let first = First::default();
+        render(&image, &MaxChannel, &settings, &first).unwrap();
+        let saved = first.0.into_inner().unwrap().unwrap();
+        let bytes = saved.as_bytes();
+        let body = &bytes[MAGIC.len() + 4..bytes.len() - 4];
+        let (header, rest) = take::<Header>(body).unwrap();
+        let (position, state) = take::<Position>(rest).unwrap();
+        let forge = |done: u64| {
+            let mut forged = bytes[..MAGIC.len() + 4].to_vec();
+            append(&header, &mut forged);
+            append(&Position { done, ..position }, &mut forged);
+            forged.extend_from_slice(state);
+            let crc = crc32fast::hash(&forged);
+            forged.extend_from_slice(&crc.to_le_bytes());
+            Checkpoint::from_bytes(forged).unwrap()
+        };
+        let again = |c: &Checkpoint| resume(&image, &MaxChannel, &settings, c, &crate::Silent);
+        assert!(again(&forge(position.done)).is_ok());
+        for done in [0, position.done + 1, u64::MAX] {
+            assert!(
+                matches!(again(&forge(done)), Err(Error::CheckpointCorrupted { .. })),
+                "done = {done}"
+            );
+        }
+    }
+}

@@ -24,6 +24,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::chain::ChainStats;
 use crate::checkpoint::{Checkpoint, Checkpoints, Position, append};
+use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::Resolution;
 
@@ -156,6 +157,8 @@ pub(crate) trait Rounds {
     fn planned_units(&self, samples: u64) -> u64;
     /// Runs `units` more units, deterministically.
     fn run(&mut self, units: u64);
+    /// Units done so far (a resumed loop's position must say as many).
+    fn units(&self) -> u64;
     /// Paths traced so far that count toward the budget.
     fn samples(&self) -> u64;
     /// The normalized image now (for previews).
@@ -190,12 +193,14 @@ pub(crate) struct Loop<'a> {
 /// After a round, if the observer wants one, a checkpoint holds the loop's
 /// position followed by what `save` writes (the method's state). A resumed
 /// loop continues from its position with the same rounds an uninterrupted
-/// one would run (for the same sample budget).
+/// one would run (for the same sample budget); a position that does not
+/// say as many units as the resumed state holds (a forged checkpoint) is
+/// `Error::CheckpointCorrupted`.
 pub(crate) fn drive<W: Rounds>(
     work: &mut W,
     at: Loop<'_>,
     save: impl Fn(&W, &mut Vec<u8>),
-) -> Driven {
+) -> Result<Driven, Error> {
     let Loop {
         budget,
         clock,
@@ -203,6 +208,11 @@ pub(crate) fn drive<W: Rounds>(
         checkpoints,
         resumed,
     } = at;
+    if resumed.is_some_and(|p| p.done != work.units()) {
+        return Err(Error::CheckpointCorrupted {
+            reason: "its loop position does not match the work its state holds",
+        });
+    }
     let planned = match budget {
         Budget::Samples(n) => Some(work.planned_units(n).max(1)),
         #[cfg(feature = "std")]
@@ -247,7 +257,7 @@ pub(crate) fn drive<W: Rounds>(
             break;
         }
     }
-    Driven { cancelled }
+    Ok(Driven { cancelled })
 }
 
 /// Wall clock for time budgets; a no-op for sample budgets or without `std`.

@@ -274,6 +274,10 @@ impl<W: Runs> Rounds for Splatting<W> {
         self.units += units;
     }
 
+    fn units(&self) -> u64 {
+        self.units
+    }
+
     fn samples(&self) -> u64 {
         self.units * self.unit_cost()
     }

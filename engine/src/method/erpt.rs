@@ -235,7 +235,7 @@ where
             ),
             out,
         )
-    });
+    })?;
     let scale = run.scale();
     let mut film = run.film;
     film.scale(scale);
@@ -536,6 +536,10 @@ where
                 self.passes += 1;
             }
         }
+    }
+
+    fn units(&self) -> u64 {
+        self.passes * self.blocks() as u64 + self.done as u64
     }
 
     fn samples(&self) -> u64 {

@@ -44,7 +44,7 @@ where
     };
     let driven = drive(&mut run, job.round_loop(position), |run, out| {
         checkpoint::append(&(&run.film, run.passes, run.invalid), out)
-    });
+    })?;
     let pixels = job.resolution.pixel_count() as u64;
     let mut film = run.film;
     film.scale(1.0 / run.passes.max(1) as f64);
@@ -84,6 +84,10 @@ impl<O: PathOracle> Rounds for Passes<'_, O> {
             self.invalid += pass(self.oracle, self.seed, self.passes, &mut self.film);
             self.passes += 1;
         }
+    }
+
+    fn units(&self) -> u64 {
+        self.passes
     }
 
     fn samples(&self) -> u64 {

@@ -494,7 +494,7 @@ where
         };
         let (mut run, position) = Pssmlt::start(&settings.pssmlt, &stage_job)?;
         let saver = run.saver();
-        let driven = drive(&mut run.chains, stage_job.round_loop(position), saver);
+        let driven = drive(&mut run.chains, stage_job.round_loop(position), saver)?;
         let out = run.finish(driven);
         done.add(&out, k);
         done.estimate(&mut estimate, &mut luminance, &mut variance);

@@ -63,7 +63,7 @@ where
 {
     let (mut run, position) = Pssmlt::start(settings, job)?;
     let saver = run.saver();
-    let driven = drive(&mut run.chains, job.round_loop(position), saver);
+    let driven = drive(&mut run.chains, job.round_loop(position), saver)?;
     Ok(run.finish(driven))
 }
 

@@ -124,7 +124,7 @@ where
             .collect();
         let mut ensembles = Splatting::resumed(work, bands, traces_per_sweep, splatted)?;
         let saver = saver(set_up, &ladder, &priors);
-        let driven = drive(&mut ensembles, job.round_loop(Some(position)), saver);
+        let driven = drive(&mut ensembles, job.round_loop(Some(position)), saver)?;
         return Ok(finish(ensembles, driven, ladder, set_up));
     }
     let mut ensemble = settings.ensemble.clone();
@@ -204,7 +204,7 @@ where
 
     let mut ensembles = Splatting::new(work, bands, traces_per_sweep)?;
     let saver = saver(set_up, &ensemble.ladder, &prior);
-    let driven = drive(&mut ensembles, job.round_loop(None), saver);
+    let driven = drive(&mut ensembles, job.round_loop(None), saver)?;
     Ok(finish(ensembles, driven, ensemble.ladder, set_up))
 }
 

@@ -406,7 +406,7 @@ where
             &mut sweeps,
             job.round_loop_until(Some(position), &sweeps_clock),
             |s, out| s.save(bootstrap_traces, out),
-        );
+        )?;
         return sweeps.finish(driven, bootstrap_traces, &job.out_of_time());
     }
     let mut chains: Vec<TileChain<O::Radiance>> = (0..n)
@@ -456,7 +456,7 @@ where
         &mut sweeps,
         job.round_loop_until(None, &sweeps_clock),
         |s, out| s.save(initialized.bootstrap, out),
-    );
+    )?;
     sweeps.finish(driven, initialized.bootstrap, &job.out_of_time())
 }
 
@@ -732,6 +732,10 @@ where
                 self.invalid += c.invalid;
             }
         }
+    }
+
+    fn units(&self) -> u64 {
+        self.stats.sweeps
     }
 
     fn samples(&self) -> u64 {

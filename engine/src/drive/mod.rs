@@ -186,6 +186,10 @@ pub(crate) struct Loop<'a> {
     pub observer: &'a dyn Observer,
     pub checkpoints: &'a dyn Checkpoints,
     pub resumed: Option<Position>,
+    /// Under a time budget, start no round expected to end past the
+    /// clock's limit (each unit expected to take as long as the last
+    /// round's did): for work that must follow the rounds within the budget.
+    pub ends_within: bool,
 }
 
 /// The round loop: runs `work` round after round until the budget is spent
@@ -207,6 +211,7 @@ pub(crate) fn drive<W: Rounds>(
         observer,
         checkpoints,
         resumed,
+        ends_within,
     } = at;
     if resumed.is_some_and(|p| p.done != work.units()) {
         return Err(Error::CheckpointCorrupted {
@@ -235,6 +240,7 @@ pub(crate) fn drive<W: Rounds>(
         let round_clock = Clock::start(budget);
         work.run(units);
         done += units;
+        let unit_seconds = round_clock.seconds() / units as f64;
         let fraction = planned.map_or_else(|| clock.fraction(), |n| done as f64 / n as f64);
         observer.progress(&Progress {
             samples: work.samples(),
@@ -253,7 +259,8 @@ pub(crate) fn drive<W: Rounds>(
                 save(work, out);
             }));
         }
-        if planned.is_none() && clock.expired() {
+        let next_overruns = ends_within && clock.expires_within(unit_seconds * round as f64);
+        if planned.is_none() && (clock.expired() || next_overruns) {
             break;
         }
     }
@@ -310,6 +317,17 @@ impl Clock {
     /// Whether the time budget is spent (always, without one).
     pub(crate) fn expired(&self) -> bool {
         self.fraction() >= 1.0
+    }
+
+    /// Whether the time budget will be spent `seconds` from now (always,
+    /// without one).
+    pub(crate) fn expires_within(&self, seconds: f64) -> bool {
+        #[cfg(feature = "std")]
+        if let Some(limit) = self.limit {
+            return self.seconds() + seconds >= limit.as_secs_f64();
+        }
+        let _ = seconds;
+        true
     }
 
     /// This clock (the same start) with its time budget ending `by` earlier

@@ -415,19 +415,24 @@ impl<O, I: ?Sized> Job<'_, O, I> {
 
     /// The round loop of this job, at `resumed` (or at its start).
     pub fn round_loop(&self, resumed: Option<Position>) -> Loop<'_> {
-        self.round_loop_until(resumed, &self.clock)
+        Loop {
+            budget: self.budget,
+            clock: &self.clock,
+            observer: self.observer,
+            checkpoints: self.checkpoints,
+            resumed,
+            ends_within: false,
+        }
     }
 
     /// The round loop of this job, at `resumed`, whose time budget runs out
     /// by `clock` (one that ends before the job's, to leave time for work
-    /// after the rounds).
+    /// after the rounds), and which starts no round expected to end past it.
     pub fn round_loop_until<'c>(&'c self, resumed: Option<Position>, clock: &'c Clock) -> Loop<'c> {
         Loop {
-            budget: self.budget,
             clock,
-            observer: self.observer,
-            checkpoints: self.checkpoints,
-            resumed,
+            ends_within: true,
+            ..self.round_loop(resumed)
         }
     }
 

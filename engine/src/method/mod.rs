@@ -156,15 +156,15 @@ impl Method {
     /// ([`PathOracle::splats_per_path`]), `workers` the threads.
     ///
     /// Counted: the films and per-pixel counts; the bootstrap's candidates
-    /// (let go before the first round); every chain's state (its primary sample and path); stratified MCMC's
-    /// tile chains, per pixel a part of its own and one per tile pixel (the
-    /// state evaluated there, with its splats); and the contributions
-    /// waiting to be merged: a round's (PSSMLT and replica exchange: a
-    /// round is a 64th of a sample budget, at most 2^21 paths, each with
-    /// its proposal and state), a block's start paths and a wave of its
-    /// chains' steps (ERPT, which merges a block's chains in waves of 2^17
-    /// steps), a pass's splats (MC).
-    /// The sizes were measured with the native tracer, unidirectional and
+    /// (let go before the first round); every chain's state (its primary
+    /// sample and path); stratified MCMC's tile chains, per pixel a part of
+    /// its own and one per tile pixel (the state evaluated there, with its
+    /// splats); and the contributions waiting to be merged: a round's
+    /// (PSSMLT and replica exchange: a round is a 64th of a sample budget,
+    /// at most 2^21 paths, each with its proposal and state), a block's
+    /// start paths and a wave of its chains' steps (ERPT, which merges a
+    /// block's chains in waves of 2^17 steps), a pass's splats (MC). The
+    /// sizes were measured with the native tracer, unidirectional and
     /// bidirectional, by `examples/memory_peaks` (docs/BENCHMARKS.md), and
     /// `tests/memory.rs` checks the bound within 1.5x of the measured peak.
     pub fn memory_bound(

@@ -368,3 +368,37 @@ fn ctrl_c_saves_a_checkpoint_and_resume_finishes_the_same_image() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A time budget shorter than one unit of the method's work cannot be kept
+/// (the unit runs whatever the budget): the command says so, and that the
+/// reconstruction was cut, instead of overrunning silently (issue 36).
+#[test]
+fn a_time_budget_below_one_unit_of_work_is_reported() {
+    let dir = std::env::temp_dir().join(format!("strata-cli-overrun-{}", std::process::id()));
+    let out = dir.join("o");
+    let run = strata(&[
+        "render",
+        "cornell",
+        "--width",
+        "128",
+        "--height",
+        "96",
+        "--method",
+        "stratified",
+        "--time",
+        "0.001",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("one unit of its work (one sweep of every tile)"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("ran out during the reconstruction"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

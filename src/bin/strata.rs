@@ -853,6 +853,19 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, End
         settings.method.name(),
         start.elapsed().as_secs_f64()
     );
+    if let Budget::Time(limit) = settings.budget {
+        let took = start.elapsed();
+        if took > limit.mul_f64(1.1) + Duration::from_millis(200) {
+            warn!(
+                "note: the render took {:.2} s of a {:.2} s time budget: one unit of its work \
+                 ({}) runs whatever the budget, and took longer here; give more time or a \
+                 smaller film",
+                took.as_secs_f64(),
+                limit.as_secs_f64(),
+                settings.method.unit_of_work()
+            );
+        }
+    }
     report_extras(&output.extras);
     let ended = if output.cancelled {
         Ended::Stopped(
@@ -896,8 +909,14 @@ fn report_extras(extras: &Extras) {
                 Ladder::barrier(&x.neighbor_rejection())
             );
         }
-        Extras::Stratified(s) => {
-            let s = &s.counters;
+        Extras::Stratified(extras) => {
+            if extras.reconstruction_cut {
+                warn!(
+                    "note: the time budget ran out during the reconstruction, which kept the \
+                     normalizations it had reached (fewer solver iterations)"
+                );
+            }
+            let s = &extras.counters;
             say!(
                 "{} sweeps; paths: tiles {}, exchanges {}, initialization {}; tiles started by \
                  global chains {}, borrowing {}, uniform draws {}, never {}; exchanges \

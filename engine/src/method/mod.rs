@@ -270,9 +270,9 @@ impl Method {
         })
     }
 
-    /// What one unit of this method's work is, for
-    /// [`Error::BudgetTooSmall`].
-    fn unit_of_work(&self) -> &'static str {
+    /// What one unit of this method's work is (as [`Error::BudgetTooSmall`]
+    /// names it): the least a render does, whatever its budget.
+    pub fn unit_of_work(&self) -> &'static str {
         match self {
             Method::Mc => "one path per pixel",
             Method::Pssmlt(_) => "one step of every chain",

@@ -538,8 +538,10 @@ fn observers_see_progress_previews_and_can_cancel() {
 
 /// A time budget ends the render on time, set-up included, and not early;
 /// stratified MCMC's reconstruction included too: its sweeps stop early by
-/// the reconstruction's timed estimate, which may be up to ~2x its cost on
-/// a film this small, so it may end up to a quarter of the budget early.
+/// the reconstruction's timed estimate (at most half the budget), which on
+/// a film this small is up to ~2-3x its cost (its probe is mostly fixed
+/// overhead, and grows on a loaded machine), so it may end early, but not
+/// before half the budget.
 #[test]
 fn time_budgets_are_kept() {
     let image = ProceduralImage::showcase(Resolution::new(64, 48));
@@ -555,7 +557,7 @@ fn time_budgets_are_kept() {
         let elapsed = start.elapsed();
         assert!(out.stats.samples > 0, "{}", method.name());
         let earliest = match method {
-            Method::Stratified(_) => budget.mul_f64(0.75),
+            Method::Stratified(_) => budget / 2,
             _ => budget,
         };
         assert!(

@@ -10,7 +10,7 @@
 //! and prints the mean and spread per sampler and budget.
 //!
 //! ```text
-//! cargo run --release --example caustic_energy -- --seeds 4
+//! cargo run --release --features studies --example caustic_energy -- --seeds 4
 //! ```
 
 mod common;

@@ -17,8 +17,8 @@
 //! lines). Writes `channels.csv` and each method's last image.
 //!
 //! ```text
-//! cargo run --release --example channels -- --scene saturated --spp 16,64,256 --seeds 6
-//! cargo run --release --example channels -- --scene cornell --time 2,8 --seeds 3
+//! cargo run --release --features studies --example channels -- --scene saturated --spp 16,64,256 --seeds 6
+//! cargo run --release --features studies --example channels -- --scene cornell --time 2,8 --seeds 3
 //! ```
 //! Scenes: the built-ins or a directory of `$STRATA_SCENES`.
 
@@ -155,10 +155,7 @@ fn main() -> AnyResult<()> {
             for set in &args.sets {
                 let (setting, value) = set.split_once('=').ok_or("--set NAME=VALUE")?;
                 if method.setting(setting).is_some() {
-                    match value.parse::<f64>() {
-                        Ok(v) => method.set(setting, v)?,
-                        Err(_) => method.set_choice(setting, value)?,
-                    }
+                    method.set_text(setting, value)?;
                 }
             }
             let mut films = Vec::new();

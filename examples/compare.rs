@@ -14,8 +14,8 @@
 //! plot from an existing `metrics.csv` without rendering.
 //!
 //! ```text
-//! cargo run --release --example compare -- --scene veach-ajar --width 160 --height 90 --time 60
-//! cargo run --release --example compare -- --scene envplane --time 10
+//! cargo run --release --features studies --example compare -- --scene veach-ajar --width 160 --height 90 --time 60
+//! cargo run --release --features studies --example compare -- --scene envplane --time 10
 //! ```
 //!
 //! Scenes: the built-ins (`cornell`, `door`, `envplane`, `caustic`, `saturated`) or a

@@ -4,7 +4,7 @@
 //! a built-in scene at several film sizes and budgets. Writes a CSV.
 //!
 //! ```text
-//! cargo run --release --example memory_peaks -- --sizes 320x240,1280x720 --spp 1,32
+//! cargo run --release --features studies --example memory_peaks -- --sizes 320x240,1280x720 --spp 1,32
 //! ```
 
 #[path = "../tests/allocations/mod.rs"]
@@ -71,11 +71,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             for assignment in &args.set {
                 let (key, value) = assignment.split_once('=').ok_or("--set takes NAME=VALUE")?;
-                if method.settings().iter().any(|row| row.name == key) {
-                    match value.parse() {
-                        Ok(number) => method.set(key, number)?,
-                        Err(_) => method.set_choice(key, value)?,
-                    }
+                if method.setting(key).is_some() {
+                    method.set_text(key, value)?;
                 }
             }
             for &spp in &args.spp {

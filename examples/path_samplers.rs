@@ -7,8 +7,8 @@
 //! method, the mean relMSE of each sampler and their ratio.
 //!
 //! ```text
-//! cargo run --release --example path_samplers -- --scene caustic --time 4 --seeds 3
-//! cargo run --release --example path_samplers -- --scene veach-ajar --width 128 --height 72
+//! cargo run --release --features studies --example path_samplers -- --scene caustic --time 4 --seeds 3
+//! cargo run --release --features studies --example path_samplers -- --scene veach-ajar --width 128 --height 72
 //! ```
 //!
 //! Scenes: the built-ins (`cornell`, `caustic`, `pool`, ...) or a directory
@@ -103,11 +103,8 @@ fn main() -> AnyResult<()> {
         let mut method = Method::from_name(name).expect("a method name");
         for assignment in &args.set {
             let (key, value) = assignment.split_once('=').ok_or("--set takes NAME=VALUE")?;
-            if method.settings().iter().any(|row| row.name == key) {
-                match value.parse() {
-                    Ok(number) => method.set(key, number)?,
-                    Err(_) => method.set_choice(key, value)?,
-                }
+            if method.setting(key).is_some() {
+                method.set_text(key, value)?;
             }
         }
         let mut means = Vec::new();

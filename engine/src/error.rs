@@ -34,6 +34,11 @@ pub enum Error {
         /// The setting's name.
         name: &'static str,
     },
+    /// Text given for a numeric setting that is not a number.
+    NotANumber {
+        /// The setting's name.
+        name: &'static str,
+    },
     /// A name the method's settings table does not have.
     UnknownSetting {
         /// The method.
@@ -128,6 +133,7 @@ impl Error {
             Error::InvalidParameter { name, .. }
             | Error::OutOfRange { name, .. }
             | Error::NotApplicable { name }
+            | Error::NotANumber { name }
             | Error::UnknownChoice { name, .. } => Some(name),
             _ => None,
         }
@@ -166,6 +172,7 @@ impl fmt::Display for Error {
                 "`{name}` does not apply here (wrong kind of value, or not used with \
                  the method's current choices)"
             ),
+            Error::NotANumber { name } => write!(f, "`{name}` takes a number"),
             Error::UnknownSetting { method, settings } => {
                 write!(f, "{method} has no such setting; it has:")?;
                 for s in settings.iter() {

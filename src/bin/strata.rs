@@ -37,7 +37,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use strata::embree::EmbreeIntersector;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
 use strata::engine::exchange::{ExchangeKind, Ladder, Tempering};
-use strata::engine::method::{Kind, Solver};
+use strata::engine::method::Solver;
 use strata::engine::metrics;
 use strata::engine::mutate::SmallStep;
 use strata::engine::target::MaxChannel;
@@ -727,22 +727,9 @@ fn method(args: &Args) -> AnyResult<Method> {
         let (name, value) = set
             .split_once('=')
             .ok_or_else(|| format!("--set {set}: expected NAME=VALUE"))?;
-        let row = method.setting(name).ok_or_else(|| {
-            let unknown = Error::UnknownSetting {
-                method: method.name(),
-                settings: method.settings(),
-            };
-            format!("--set {set}: {unknown}")
-        })?;
-        match row.kind {
-            Kind::Choice(_) => method.set_choice(name, value)?,
-            _ => {
-                let number: f64 = value
-                    .parse()
-                    .map_err(|e| format!("--set {set}: {value} is not a number ({e})"))?;
-                method.set(name, number)?;
-            }
-        }
+        method
+            .set_text(name, value)
+            .map_err(|e| format!("--set {set}: {e}"))?;
     }
     Ok(method)
 }

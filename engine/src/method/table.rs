@@ -438,6 +438,20 @@ impl Method {
         Ok(())
     }
 
+    /// Sets the setting `name` from text, as `strata render --set NAME=VALUE`
+    /// does: a choice by its option's name, any other setting by its number.
+    pub fn set_text(&mut self, name: &str, value: &str) -> Result<(), Error> {
+        match self.known(name)?.kind {
+            Kind::Choice(_) => self.set_choice(name, value),
+            _ => match value.trim().parse::<f64>() {
+                Ok(number) => self.set(name, number),
+                Err(_) => Err(Error::NotANumber {
+                    name: self.known(name)?.name,
+                }),
+            },
+        }
+    }
+
     /// Sets the choice `name` (a kernel, an exchange move, a tempering, a
     /// solver) to the option called `value`, with that option's defaults.
     pub fn set_choice(&mut self, name: &str, value: &str) -> Result<(), Error> {
@@ -730,6 +744,28 @@ mod tests {
         assert!(matches!(
             pssmlt.set("small_step_min", 0.001),
             Err(Error::NotApplicable { .. })
+        ));
+    }
+
+    /// Text settings go to a choice by name and to a number by its value.
+    #[test]
+    fn set_text_parses_numbers_and_names_choices() {
+        let mut replica = Method::from_name("replica").unwrap();
+        replica.set_text("replicas", "6").unwrap();
+        replica.set_text("exchange", "neighbor").unwrap();
+        assert_eq!(replica.get("replicas"), Some(Value::Number(6.0)));
+        assert_eq!(replica.get("exchange"), Some(Value::Choice("neighbor")));
+        assert_eq!(
+            replica.set_text("replicas", "six"),
+            Err(Error::NotANumber { name: "replicas" })
+        );
+        assert!(matches!(
+            replica.set_text("t_max", "0"),
+            Err(Error::OutOfRange { .. })
+        ));
+        assert!(matches!(
+            replica.set_text("no_such", "1"),
+            Err(Error::UnknownSetting { .. })
         ));
     }
 

@@ -65,10 +65,12 @@
 //! | `local.rs` | local replica exchange and state borrowing |
 //! | `init.rs` | the global chains' initialization |
 //! | `regularizer.rs` | the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the total it anchors |
-//! | this file | settings, the sweeps, the reconstruction |
+//! | `reconstruction.rs` | the normalizations, the image, the choice of `α`, the time reserved for them |
+//! | this file | settings, the sweeps, the render's output |
 
 mod init;
 mod local;
+mod reconstruction;
 mod regularizer;
 mod tile;
 
@@ -78,7 +80,7 @@ use serde::{Deserialize, Serialize};
 
 use self::init::initialize;
 use self::local::{exchange_all, exchange_cost};
-use self::regularizer::{Halves, LargeSteps, anchor_total, fall_back, take_known};
+use self::reconstruction::{preview, reconstruct_image, reserve_reconstruction};
 use self::tile::{Context, LightTracing, Start, TileChain};
 use super::{Extras, Job, Output};
 use crate::chain::{ChainStats, Traced};
@@ -89,7 +91,7 @@ use crate::film::Film;
 use crate::mutate::MutationParams;
 use crate::oracle::{PathOracle, Radiance};
 use crate::parallel;
-use crate::reconstruct::{self, LogSettings, WeightedSettings};
+use crate::reconstruct::{LogSettings, WeightedSettings};
 use crate::target::Importance;
 use crate::tiles::{TileShape, Tiles};
 
@@ -460,56 +462,6 @@ where
     sweeps.finish(driven, initialized.bootstrap, &job.out_of_time())
 }
 
-/// Under a time budget, the clock the sweeps stop by: the render's,
-/// ending early by the time the reconstruction is expected to take (at most
-/// half the budget). The expectation is timed, not guessed: the weighted
-/// solver's set-up and one block of its iterations between weight
-/// refreshes, on a problem of this film's size, scaled to the solves and
-/// blocks the reconstruction runs (every channel's, the
-/// cross-validation's), and a quarter more for the work around them. If it
-/// still runs late, the solver stops at the budget's end
-/// ([`reconstruct::weighted`]'s `stop`). Under a sample budget, or with the
-/// log-domain solver (direct, no iterations), the render's own clock.
-fn reserve_reconstruction<O, I: ?Sized>(
-    job: &Job<'_, O, I>,
-    tiles: &Tiles,
-    settings: &StratifiedSettings,
-) -> crate::drive::Clock
-where
-    O: PathOracle,
-{
-    #[cfg(feature = "std")]
-    if let (Budget::Time(limit), Solver::Weighted(w)) = (job.budget, &settings.solver) {
-        let g = vec![1.0; tiles.count() * tiles.offsets().len()];
-        let mc = vec![1.0; tiles.resolution().pixel_count()];
-        let timed = |iterations| {
-            let probe = WeightedSettings { iterations, ..*w };
-            let start = std::time::Instant::now();
-            reconstruct::weighted(tiles, &g, &mc, &probe, None, &|| false)
-                .map(|_| start.elapsed().as_secs_f64())
-        };
-        let every = w.reweight_every.max(1);
-        if let (Ok(set_up), Ok(one_block)) = (timed(0), timed(every)) {
-            let block = (one_block - set_up).max(0.0);
-            let channels = O::Radiance::CHANNELS as f64;
-            let (mut solves, mut blocks) =
-                (channels, channels * w.iterations.div_ceil(every) as f64);
-            if settings.cross_validate_alpha {
-                solves += ALPHAS.len() as f64;
-                blocks += ALPHAS.len() as f64 * (w.iterations / 4).div_ceil(every) as f64;
-            }
-            let expected = 1.25 * (solves * set_up + blocks * block);
-            let reserve = expected.min(0.5 * limit.as_secs_f64());
-            return job
-                .clock
-                .ending_early(core::time::Duration::from_secs_f64(reserve));
-        }
-    }
-    #[cfg(not(feature = "std"))]
-    let _ = (tiles, settings);
-    job.clock.clone()
-}
-
 /// What a checkpoint holds of stratified MCMC: the tile chains, the
 /// counters, the exchange rounds, the invalid traces outside the chains,
 /// the bootstrap's traces and the light-tracing sums ([`Sweeps::save`]'s
@@ -566,58 +518,21 @@ where
         stop: &dyn Fn() -> bool,
     ) -> Result<Output, Error> {
         let tiles = self.ctx.tiles;
-        let channels = O::Radiance::CHANNELS;
-        let (samples, regularizer) = LargeSteps::gather(tiles, &self.chains);
-        let unscaled = unscaled(tiles, &self.chains, self.stats.sweeps.max(1), &regularizer);
-        let mut solver = self.settings.solver;
-        if let Solver::Weighted(w) = &mut solver {
-            if self.settings.cross_validate_alpha {
-                let halves = Halves::gather(tiles, &self.chains, &samples);
-                let candidates = if self.stats.sweeps < FEW_SWEEPS {
-                    &ALPHAS[2..]
-                } else {
-                    &ALPHAS[..]
-                };
-                w.alpha = cross_validated_alpha(
-                    tiles, &unscaled, channels, &halves, w, candidates, stop,
-                )?;
-            }
-            self.stats.alpha = w.alpha;
-        }
-        let mut normalizations = Vec::new();
-        let mut film = Film::new(tiles.resolution(), channels);
-        for c in 0..channels {
-            let g = channel(&unscaled, channels, c);
-            let mc = channel(regularizer.data(), channels, c);
-            let values = match &solver {
-                Solver::Weighted(w) => {
-                    let b = reconstruct::weighted(tiles, &g, &mc, w, None, stop)?;
-                    let values = reconstruct::image(tiles, &g, &b, 1);
-                    normalizations.push(b);
-                    values
-                }
-                Solver::LogDomain(l) => reconstruct::log_domain(tiles, &g, &mc, l)?,
-            };
-            set_channel(&mut film, c, &values);
-        }
-        let reconstruction_cut = matches!(solver, Solver::Weighted(_)) && stop();
-        // Tile-major, channel-minor.
-        let normalizations = (0..normalizations.first().map_or(0, Vec::len))
-            .flat_map(|s| normalizations.iter().map(move |b| b[s]))
-            .collect();
+        let image = reconstruct_image(
+            tiles,
+            &self.chains,
+            self.settings,
+            self.stats.sweeps,
+            &self.light,
+            stop,
+        )?;
         let stats = &mut self.stats;
-        let mut taken = vec![false; tiles.count()];
-        stats.known_pixels = take_known(&mut film, &regularizer, &samples, &mut taken);
-        if let Some(sigmas) = self.settings.fallback_sigmas {
-            stats.fallback_pixels =
-                fall_back(&mut film, &regularizer, &samples, sigmas, &mut taken);
+        if let Some(alpha) = image.alpha {
+            stats.alpha = alpha;
         }
-        stats.total_scale = 1.0;
-        if self.settings.anchor_total {
-            stats.total_scale = anchor_total(&mut film, &regularizer, &taken);
-        }
-        film.add_scaled(&self.light.sums, 1.0 / self.stats.sweeps.max(1) as f64);
-        let stats = &mut self.stats;
+        stats.known_pixels = image.known_pixels;
+        stats.fallback_pixels = image.fallback_pixels;
+        stats.total_scale = image.total_scale;
         let mut chain_stats = ChainStats::default();
         let mut visits = vec![0u64; tiles.count()];
         for (s, c) in self.chains.iter().enumerate() {
@@ -637,7 +552,7 @@ where
             + stats.regularizer_samples
             + stats.exchange_samples;
         Ok(Output {
-            film,
+            film: image.film,
             stats: RenderStats {
                 samples: traced - bootstrap_traces,
                 bootstrap_samples: bootstrap_traces,
@@ -649,10 +564,10 @@ where
             visits,
             extras: Extras::Stratified(StratifiedExtras {
                 counters: self.stats,
-                regularizer,
-                normalizations,
-                unscaled,
-                reconstruction_cut,
+                regularizer: image.regularizer,
+                normalizations: image.normalizations,
+                unscaled: image.unscaled,
+                reconstruction_cut: image.cut,
             }),
         })
     }
@@ -746,22 +661,13 @@ where
     /// Eq. 12 with the initial normalizations, channel by channel (a quick
     /// reconstruction).
     fn preview(&self) -> Film {
-        let tiles = self.ctx.tiles;
-        let channels = O::Radiance::CHANNELS;
-        let (_, regularizer) = LargeSteps::gather(tiles, &self.chains);
-        let unscaled = unscaled(tiles, &self.chains, self.stats.sweeps, &regularizer);
-        let mut film = Film::new(tiles.resolution(), channels);
-        for c in 0..channels {
-            let g = channel(&unscaled, channels, c);
-            let mc = channel(regularizer.data(), channels, c);
-            let b = reconstruct::initial_normalizations(tiles, &g, &mc);
-            set_channel(&mut film, c, &reconstruct::image(tiles, &g, &b, 1));
-        }
-        if self.settings.anchor_total {
-            anchor_total(&mut film, &regularizer, &[]);
-        }
-        film.add_scaled(&self.light.sums, 1.0 / self.stats.sweeps.max(1) as f64);
-        film
+        preview(
+            self.ctx.tiles,
+            &self.chains,
+            self.settings,
+            self.stats.sweeps,
+            &self.light,
+        )
     }
 }
 
@@ -779,107 +685,5 @@ impl core::ops::Add for SweepTraces {
             steps: self.steps + other.steps,
             regularizer: self.regularizer + other.regularizer,
         }
-    }
-}
-
-/// Per tile, offset and channel `G_s(k)` (eq. 10, over `sweeps` steps). A
-/// tile whose chain never found a state with `T_s > 0` (at low budgets, one
-/// sweep leaves some) has no estimate of its own; it takes the regularizer's
-/// values `Î(k)` instead (an unscaled estimate whose normalization is 1), so
-/// that in eq. 12 and in the solver's overlaps it stands for the Monte
-/// Carlo estimate of its pixels, not for zeros: counted as zeros, such tiles
-/// made stratified MCMC ~25 % dark at one sweep; left out, they left some
-/// pixels to one weakly constrained tile. A tile black for the regularizer
-/// too stays without an estimate and is left out
-/// ([`reconstruct::informative`]).
-fn unscaled<R: Radiance>(
-    tiles: &Tiles,
-    chains: &[TileChain<R>],
-    sweeps: u64,
-    regularizer: &Film,
-) -> Vec<f64> {
-    let channels = R::CHANNELS;
-    let per_tile = tiles.offsets().len() * channels;
-    let mut g: Vec<f64> = chains
-        .iter()
-        .flat_map(|c| c.unscaled.iter().map(move |v| v / sweeps as f64))
-        .collect();
-    for (s, tile) in g.chunks_mut(per_tile).enumerate() {
-        if tile.iter().all(|&v| v == 0.0) {
-            for (o, pixel) in tiles.pixels(s) {
-                tile[o * channels..(o + 1) * channels]
-                    .copy_from_slice(&regularizer.data()[pixel * channels..(pixel + 1) * channels]);
-            }
-        }
-    }
-    g
-}
-
-/// The weights `α` of the regularizer that cross-validation chooses from
-/// ([`StratifiedSettings::cross_validate_alpha`]).
-const ALPHAS: [f64; 4] = [0.05, 0.2, 1.0, 5.0];
-
-/// Below this many sweeps cross-validation chooses from `α >= 1` only. Its
-/// held-out large steps are also the tile chains' states, and after a few
-/// sweeps the chains are little else, so the score favours the smallest
-/// `α` (it chose 0.05 at 16 paths per pixel, ~3 sweeps, on every built-in
-/// scene, where `α` = 5 halves the MSE: saturated 4.99x MC's -> 2.67x, the
-/// Cornell box 6.23x -> 3.63x; docs/RESULTS.md).
-const FEW_SWEEPS: u64 = 8;
-
-/// The `α` of `candidates` whose channel-mean image, reconstructed with the
-/// first half of the large steps as regularizer (at `α / 2`), is closest to
-/// the second half's mean over the pixels it sampled (the first on ties).
-/// When `stop` says so, the best of the candidates scored so far (the
-/// settings' `α` if none).
-fn cross_validated_alpha(
-    tiles: &Tiles,
-    unscaled: &[f64],
-    channels: usize,
-    halves: &Halves,
-    settings: &WeightedSettings,
-    candidates: &[f64],
-    stop: &dyn Fn() -> bool,
-) -> Result<f64, Error> {
-    let g: Vec<f64> = unscaled
-        .chunks(channels)
-        .map(|v| v.iter().sum::<f64>() / channels as f64)
-        .collect();
-    let mut best = (f64::INFINITY, settings.alpha);
-    for &alpha in candidates {
-        if stop() {
-            break;
-        }
-        let half = WeightedSettings {
-            alpha: alpha / 2.0,
-            iterations: settings.iterations / 4,
-            ..*settings
-        };
-        let b = reconstruct::weighted(tiles, &g, &halves.first, &half, None, stop)?;
-        let image = reconstruct::image(tiles, &g, &b, 1);
-        let error: f64 = image
-            .iter()
-            .zip(&halves.second)
-            .zip(&halves.second_counts)
-            .filter(|(_, n)| **n > 0)
-            .map(|((i, m), _)| (i - m) * (i - m))
-            .sum();
-        if error < best.0 {
-            best = (error, alpha);
-        }
-    }
-    Ok(best.1)
-}
-
-/// Channel `c` of values stored `channels` to an item.
-fn channel(values: &[f64], channels: usize, c: usize) -> Vec<f64> {
-    values.iter().skip(c).step_by(channels).copied().collect()
-}
-
-/// Sets channel `c` of every pixel of `film` from `values` (one per pixel).
-fn set_channel(film: &mut Film, c: usize, values: &[f64]) {
-    let channels = film.channels();
-    for (pixel, v) in film.data_mut().chunks_mut(channels).zip(values) {
-        pixel[c] = *v;
     }
 }

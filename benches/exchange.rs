@@ -1,5 +1,5 @@
 //! Replica-exchange benchmarks: importance-sampled permutations by the subset
-//! recursion of seed 002 App. 5.C against enumerating all `M!` permutations,
+//! recursion of Šik 2018, App. 5.C against enumerating all `M!` permutations,
 //! and the cost of one ensemble sweep with each exchange move.
 //! `cargo bench --bench exchange`; summary in docs/BENCHMARKS.md.
 

@@ -95,7 +95,7 @@ struct Row {
     mse_trimmed: f64,
     max_ratio: f64,
     seams: f64,
-    /// Mean over the seeds of MAPE and relMSE on luminance (seed 001's metrics).
+    /// Mean over the seeds of MAPE and relMSE on luminance (Gruson et al.'s (2020) metrics).
     mape: f64,
     rel_mse: f64,
 }

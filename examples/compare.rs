@@ -1,5 +1,5 @@
 //! Equal-time comparison of MC, PSSMLT, ERPT, stratified MCMC and
-//! replica-exchange MLT (seed 001 sec. 4, Table 1 and Fig. 8).
+//! replica-exchange MLT (Gruson et al. 2020, sec. 4, Table 1 and Fig. 8).
 //!
 //! Every method renders the scene with the same time budget, at several
 //! checkpoints (fractions of the budget, each a separate render), and is
@@ -9,7 +9,7 @@
 //! cached) estimates the reference's own error, which every method's error
 //! against it includes.
 //! Writes every final image (EXR + PNG), `metrics.csv` (MAPE with ε = 0.01,
-//! relMSE, L1, L2 on luminance, seed 001's metrics, and the energy ratio on
+//! relMSE, L1, L2 on luminance, Gruson et al.'s (2020) metrics, and the energy ratio on
 //! the brightest pixels) and `error_vs_time.png`; `--replot` redraws the
 //! plot from an existing `metrics.csv` without rendering.
 //!
@@ -71,7 +71,7 @@ struct Args {
     #[arg(long)]
     regularizer_paths: Option<u32>,
     /// Stratified MCMC: weight α of the regularizer in the weighted solver
-    /// (seed 001: 0.05).
+    /// (Gruson et al. 2020: 0.05).
     #[arg(long)]
     alpha: Option<f64>,
     /// Paths per pixel of the MC reference.
@@ -295,7 +295,7 @@ fn reference_error(reference: &Film, check: &Film) -> ImageErrors {
     }
 }
 
-/// The method called `name` as seed 001 sec. 4 compares it: Kelemen small
+/// The method called `name` as Gruson et al. 2020, sec. 4 compares it: Kelemen small
 /// steps from 1/1024 to 1/32, large steps 0.3 (stratified MCMC: its own
 /// default, 0.8); replica exchange with 4 chains up to T = 100.
 fn compared(name: &str, args: &Args) -> AnyResult<Method> {

@@ -154,7 +154,7 @@ fn prediction(args: &Args, dir: &Path) -> Result<(), Box<dyn std::error::Error>>
 }
 
 /// A roughened target for the parabola: `g ∝ sqrt(f) + 0.05`, flatter than
-/// `f` and never zero (seed 003 sec. 6's roughening as a change of target).
+/// `f` and never zero (Yu et al. 2025, sec. 6's roughening as a change of target).
 struct Rough;
 
 impl Importance<f32> for Rough {

@@ -1,5 +1,5 @@
-//! Where each method puts its samples (seed 004 Fig. 4): PSSMLT, multi-stage
-//! MLT, noise-aware MLT and stratified MCMC (seed 001, whose density is flat
+//! Where each method puts its samples (Hoberock and Hart 2010, Fig. 4): PSSMLT, multi-stage
+//! MLT, noise-aware MLT and stratified MCMC (Gruson et al. 2020, whose density is flat
 //! by construction) on the same scene and budget. Writes each image
 //! and its sample-density map (mean 1; brighter = more samples) as PNG, and
 //! prints how even each density is and each image's error when the exact

@@ -1,4 +1,4 @@
-//! Where stratified MCMC's error comes from (seed 001 sec. 3.2): renders a
+//! Where stratified MCMC's error comes from (Gruson et al. 2020, sec. 3.2): renders a
 //! scene once, then rebuilds the image from the same unscaled estimates
 //! `G_s(j)` with different tile normalizations `b_s`, and compares each
 //! with a reference (a cached `compare` reference, say); every variant, as
@@ -16,7 +16,7 @@
 //!   any reconstruction of these `G` (slightly optimistic: one fitted value
 //!   per tile also absorbs a little of the noise of `G`).
 //!
-//! Writes the table as CSV (seed 001's metrics on luminance, and the MSE
+//! Writes the table as CSV (Gruson et al.'s (2020) metrics on luminance, and the MSE
 //! per pixel and channel).
 //!
 //! ```text

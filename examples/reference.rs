@@ -28,7 +28,7 @@ use strata::native::{native_tracer, pbrt};
 /// Render cornell-box and compare with Tungsten's converged image.
 #[derive(Parser, Debug)]
 struct Args {
-    /// The method (its default settings; MCMC methods with seed 001's
+    /// The method (its default settings; MCMC methods with Gruson et al.'s (2020)
     /// mutations, Kelemen 1/1024..1/32).
     #[arg(long, default_value = "mc", value_parser = PossibleValuesParser::new(Method::NAMES))]
     method: String,

@@ -1,4 +1,4 @@
-//! The synthetic study of seed 002 sec. 5.3.7 (Tables 5.1-5.3), rerun with
+//! The synthetic study of Šik 2018, sec. 5.3.7 (Tables 5.1-5.3), rerun with
 //! strata's exchange moves.
 //!
 //! Two targets: 50 Gaussians in [0,1]^2 and 10 Gaussians in [0,1]^6, equal

@@ -1,4 +1,4 @@
-//! Speed of the weighted reconstruction solver (seed 001 eq. 13-16): 1000
+//! Speed of the weighted reconstruction solver (Gruson et al. 2020, eq. 13-16): 1000
 //! iterations on square films, next to a baseline measured in the same run
 //! (each the fastest of `--repeats` runs),
 //! 1000 Jacobi sweeps of a 5-point Laplacian on the same grid, f32 (the

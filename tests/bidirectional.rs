@@ -369,7 +369,7 @@ fn a_point_projects_to_the_film_point_whose_ray_sees_it() {
     }
 }
 
-/// Stratified MCMC over bidirectional paths (seed 001's future work): tile
+/// Stratified MCMC over bidirectional paths (Gruson et al.'s (2020) future work): tile
 /// chains value what lands in their own pixels, light tracing's splats come
 /// from the large steps and are added after the reconstruction. On the
 /// caustic scene (the caustic under the glass sphere is mostly light

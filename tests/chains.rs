@@ -65,7 +65,7 @@ fn worst_z(states: &[usize], expected: &[f64]) -> (f64, usize) {
 
 #[test]
 fn chains_sample_the_one_dimensional_target() {
-    // π(u) = (u - 0.5)^2 of seed 002 sec. 3.3, 16 bins.
+    // π(u) = (u - 0.5)^2 of Šik 2018, sec. 3.3, 16 bins.
     let bins = 16;
     let oracle = Parabola { bins: 1 };
     let expected: Vec<f64> = (0..bins)

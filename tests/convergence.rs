@@ -1,6 +1,6 @@
-//! The convergence constant estimator of seed 003, validated two ways:
+//! The convergence constant estimator of Yu et al. 2025, validated two ways:
 //! against the exact value computed from a Markov matrix on a small discrete
-//! space (seed 003's appendix), and against the measured error of many
+//! space (Yu et al.'s (2025) appendix), and against the measured error of many
 //! independent MCMC runs on an analytic target (agreement within 10 %).
 
 use strata::engine::analytic::Parabola;
@@ -213,7 +213,7 @@ fn measured_nmse(oracle: &Parabola, mutation: MutationParams, n: u64, runs: u64)
 fn predicted_nmse_matches_measured_runs_on_the_parabola() {
     let oracle = Parabola { bins: 8 };
     let reference: Vec<f64> = oracle.reference().data().to_vec();
-    // The sum of R_k converges geometrically (seed 003 appendix); past the
+    // The sum of R_k converges geometrically (Yu et al. 2025 appendix); past the
     // chain's memory more lags only add noise, so k_max follows the mixing.
     for (mutation, lags) in [
         (MutationParams::default(), 50),

@@ -50,7 +50,7 @@ fn pssmlt_matches_a_four_dimensional_gaussian_mixture() {
     check("pssmlt gaussian mixture", &runs, &reference);
 }
 
-/// PSSMLT's normalization pools the large steps with the bootstrap (seed 002
+/// PSSMLT's normalization pools the large steps with the bootstrap (Šik 2018
 /// eq. 3.12 over every uniform sample the render draws), so the image's
 /// brightness error falls with the render time instead of staying at the
 /// bootstrap's. A light reached by 5 % of the paths and a bootstrap of 1024

@@ -1,4 +1,4 @@
-//! Arbitrary importance functions (seed 004): every one must give an unbiased
+//! Arbitrary importance functions (Hoberock and Hart 2010): every one must give an unbiased
 //! image, because splats are weighted by `f / (I / b)`. Checked on the
 //! procedural oracle's closed-form pixels with variance-derived tolerances
 //! (`common::check`, 32 seeds).
@@ -22,7 +22,7 @@ fn pssmlt() -> PssmltSettings {
 
 #[test]
 fn an_importance_shader_weighting_a_region_tenfold_is_unbiased() {
-    // The importance "shader" of seed 004 sec. 4.1: paths through a region
+    // The importance "shader" of Hoberock and Hart 2010, sec. 4.1: paths through a region
     // of interest (here the film's top-left quadrant) weighted x10.
     let image = ProceduralImage::showcase(Resolution::new(24, 16));
     let shader = FnImportance(|s: &PathSample<Rgb>, film: FilmPoint| {

@@ -93,7 +93,7 @@ fn kernels() -> Vec<(&'static str, SmallStep)> {
     ]
 }
 
-/// The discretized 1-D target of seed 002 sec. 3.3, `(u - 0.5)^2`, with an
+/// The discretized 1-D target of Šik 2018, sec. 3.3, `(u - 0.5)^2`, with an
 /// exact zero in one cell, times a bump.
 fn parabola() -> Vec<f64> {
     (0..N)

@@ -1,9 +1,9 @@
-//! Stratified MCMC (seed 001) and its ERPT baseline: exact per-pixel sample
+//! Stratified MCMC (Gruson et al. 2020) and its ERPT baseline: exact per-pixel sample
 //! counts, convergence to closed-form images, the environment plane of seed
 //! 001 fig. 2, determinism, black and NaN scenes.
 //!
 //! Stratified MCMC's pixels are consistent, not unbiased (the reconstruction
-//! trades a vanishing bias for robustness, seed 001 sec. 3.2), so they are
+//! trades a vanishing bias for robustness, Gruson et al. 2020, sec. 3.2), so they are
 //! checked by their error falling with the budget; its image's total is the
 //! large steps' Monte Carlo estimate, so the whole-image mean is checked by
 //! z-scores at every budget. ERPT is unbiased and is checked like MC and
@@ -382,7 +382,7 @@ impl Glint {
 /// Seed 001 sec. 5 (Fig. 9): tiles whose chains start away from a rare bright
 /// path carry start-up bias, and the reconstruction dims the glint. Global
 /// initialization is off so that every tile starts from uniform draws, and
-/// the rest is seed 001's (large steps 0.3, the solver's `α` = 0.05: with the
+/// the rest is Gruson et al.'s (2020) (large steps 0.3, the solver's `α` = 0.05: with the
 /// defaults, large steps at 0.8 and a cross-validated `α`, the reconstruction
 /// alone keeps ~75 % of the glint). The one-sided fallback to the
 /// regularizer restores the glint to within the regularizer's own noise and

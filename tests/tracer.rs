@@ -95,7 +95,7 @@ fn furnace() {
 }
 
 /// An unoccluded diffuse plane under a constant environment reflects exactly
-/// `albedo · L_env` (seed 001 fig. 2's scene).
+/// `albedo · L_env` (Gruson et al. 2020, fig. 2's scene).
 #[test]
 fn environment_plane() {
     let res = Resolution::new(16, 12);
@@ -173,7 +173,7 @@ fn tempering_only_acts_above_temperature_one() {
         };
     assert_eq!(render(&plain, 1.0), render(&regularized, 1.0));
     assert_ne!(render(&plain, 1.0), render(&plain, 50.0));
-    // The bidirectional sampler tempers its joined vertices (seed 002 sec.
+    // The bidirectional sampler tempers its joined vertices (Šik 2018, sec.
     // 5.2): a path through the glass joins where it could not at T = 1.
     let (mut plain, mut regularized) = (plain, regularized);
     plain.sampler = PathSampler::Bidirectional;
@@ -250,7 +250,7 @@ fn pssmlt_and_mc_agree_on_cornell_and_door() {
 }
 
 /// Replica-exchange MLT with the tracer's own tempering (roughened BSDFs at
-/// connecting vertices, seed 002 sec. 5.2) combines all chains by eq. 5.13
+/// connecting vertices, Šik 2018, sec. 5.2) combines all chains by eq. 5.13
 /// and must agree with MC within noise on the caustic scene, on
 /// unidirectional, bidirectional and multiplexed paths. On the
 /// all-diffuse Cornell box the tracer's tempering changes nothing, and the

@@ -46,7 +46,7 @@ fn reference_film<R: Radiance>(
     film
 }
 
-/// The 1-D target `π(u) = (u - 0.5)^2` on `[0, 1]` of seed 002 sec. 3.3
+/// The 1-D target `π(u) = (u - 0.5)^2` on `[0, 1]` of Šik 2018, sec. 3.3
 /// (eq. 3.3), laid out along the film's x axis (`u = x / W`). Its integral is
 /// 1/12; the normalized density is `12 (u - 0.5)^2`.
 #[derive(Clone, Copy, Debug)]
@@ -102,7 +102,7 @@ pub struct Component {
 }
 
 /// A mixture of axis-aligned Gaussians restricted to `[0, 1]^d`, the synthetic
-/// target of seed 002 sec. 5.3.7. At temperature `T` every covariance is
+/// target of Šik 2018, sec. 5.3.7. At temperature `T` every covariance is
 /// scaled by `T` (standard deviations by `sqrt(T)`), which flattens the
 /// target as tempering `π^(1/T)` does. Dimensions 0 and 1 are the film point;
 /// the others are drawn from the sampler.
@@ -176,7 +176,7 @@ impl GaussianMixture {
     /// components and dimension, `N(x; m_a, s_a²) N(x; m_b, s_b²) =
     /// N(m_a; m_b, s_a² + s_b²) N(x; m_c, s_c²)` with `s_c² = s_a² s_b² / (s_a² +
     /// s_b²)` and `m_c = (m_a s_b² + m_b s_a²) / (s_a² + s_b²)`, integrated over
-    /// `[0, 1]` with `Φ`. The quantity seed 002 sec. 5.3.7 estimates.
+    /// `[0, 1]` with `Φ`. The quantity Šik 2018, sec. 5.3.7 estimates.
     pub fn squared_integral(&self, t: f64) -> f64 {
         let mut total = 0.0;
         for a in &self.components {

@@ -1,4 +1,4 @@
-//! Start-up bias elimination (seed 002 sec. 3.6, after Veach and Guibas 1997).
+//! Start-up bias elimination (Šik 2018, sec. 3.6, after Veach and Guibas 1997).
 //!
 //! `N` candidates `u_{0,i}` are drawn uniformly in primary sample space
 //! (`p_0 = 1`). Their mean importance `b* = (1/N) Σ I(u_{0,i}) / p_0(u_{0,i})`
@@ -9,7 +9,7 @@
 //! A candidate may carry several values, one per *level*: replica exchange
 //! evaluates each candidate under every chain's tempered target `π_j` and
 //! gets one `b_j` per temperature, each chain starting from a candidate
-//! chosen in proportion to its own `π_j` (seed 002 sec. 5.4).
+//! chosen in proportion to its own `π_j` (Šik 2018, sec. 5.4).
 //!
 //! Candidates are not stored: candidate `i` is the large step drawn by the
 //! stream `(seed, Candidate, i)`, and a chain started from it replays that

@@ -1,5 +1,5 @@
-//! One Metropolis-Hastings step in primary sample space (seed 002 fig. 3.1,
-//! eq. 3.2) with expected-values splatting (sec. 3.7; seed 004 Alg. 1), for
+//! One Metropolis-Hastings step in primary sample space (Šik 2018, fig. 3.1,
+//! eq. 3.2) with expected-values splatting (sec. 3.7; Hoberock and Hart 2010, Alg. 1), for
 //! every method of the engine.
 //!
 //! A [`Chain`] is a primary sample ([`MltSampler`]) and the state it encodes.
@@ -16,7 +16,7 @@
 //! | replica exchange | a path traced at every temperature, `π_c(x)` | MIS over the ensemble |
 //!
 //! # Kelemen's weights
-//! With normalization `b` (the bootstrap's `b*`, seed 002 eq. 3.12) and large
+//! With normalization `b` (the bootstrap's `b*`, Šik 2018, eq. 3.12) and large
 //! step probability `p`, every step splats the proposal `y` and the current
 //! state `x` (Kelemen et al. 2002, sec. 4):
 //!
@@ -28,7 +28,7 @@
 //! state (Rao-Blackwellization), and the large steps are independent uniform
 //! samples; `1/(I/b + p)` is then the balance heuristic of the two sampling
 //! densities `I/b` and `p`, so each pixel's estimate `(W·H/N) Σ w f` is
-//! unbiased even where `I = 0`. With `p = 0` the weights reduce to seed 004's
+//! unbiased even where `I = 0`. With `p = 0` the weights reduce to Hoberock and Hart's (2010)
 //! Alg. 1 (`a·b/I(y)` and `(1 - a)·b/I(x)`).
 
 use crate::rng::Pcg32;
@@ -274,7 +274,7 @@ impl<S> Chain<S> {
 }
 
 /// The Metropolis-Hastings acceptance probability of a symmetric proposal
-/// (seed 002 eq. 3.2): `min(1, π(y)/π(x))`, and 1 when `π(x) = 0`.
+/// (Šik 2018, eq. 3.2): `min(1, π(y)/π(x))`, and 1 when `π(x) = 0`.
 #[inline]
 pub fn acceptance(current: f64, proposed: f64) -> f64 {
     if current > 0.0 {
@@ -322,7 +322,7 @@ where
 
 /// A running estimate of a normalization `b = ∫ π` from independent uniform
 /// samples of `π` (bootstrap candidates, large-step proposals): their mean
-/// (seed 002 eq. 3.12) and its standard error.
+/// (Šik 2018, eq. 3.12) and its standard error.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Normalization {
     samples: u64,
@@ -434,7 +434,7 @@ pub fn splat_weights(
 
 /// A chain over paths that draws its own large steps and weights its
 /// samples by Kelemen's weights, with its own decisions and counters: the
-/// chain of PSSMLT, of stratified MCMC's global chains and of seed 003's
+/// chain of PSSMLT, of stratified MCMC's global chains and of Yu et al.'s (2025)
 /// predictions. Its large-step proposals are uniform samples of the
 /// importance, summed for the normalization.
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -24,13 +24,12 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
-use crate::method::Settings;
 use crate::oracle::{FilmPoint, PathOracle, Radiance, Resolution, Sampler, Temperature};
 use crate::rng::{self, Domain, mix64};
 use crate::sample::IndependentSampler;
 use crate::target::SplatList;
 
-const MAGIC: [u8; 8] = *b"STRATAck";
+pub(crate) const MAGIC: [u8; 8] = *b"STRATAck";
 
 /// The checkpoint format's version. Bump it whenever a saved type changes
 /// (a field added, removed or reordered in any state a method saves).
@@ -55,14 +54,16 @@ impl core::fmt::Debug for Checkpoint {
 /// Who rendered what: checked on resume. In the file it is followed by the
 /// round loop's [`Position`] and the method's state (for multi-stage MLT, its
 /// own state first, then its current stage's position and state).
+/// `S` is the render's settings ([`method::Settings`](crate::method::Settings)),
+/// which this module only carries.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-struct Header {
+pub(crate) struct Header<S> {
     engine: String,
-    settings: Settings,
-    oracle: OracleId,
-    channels: u32,
+    pub settings: S,
+    pub oracle: OracleId,
+    pub channels: u32,
     /// Paths traced so far (bootstrap excluded).
-    samples: u64,
+    pub samples: u64,
 }
 
 /// Where the round loop is: units done and the current round size.
@@ -76,7 +77,7 @@ pub(crate) struct Position {
 /// it returns on [`PROBES`] fixed paths.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub(crate) struct OracleId {
-    resolution: Resolution,
+    pub resolution: Resolution,
     fingerprint: u64,
 }
 
@@ -87,7 +88,7 @@ impl OracleId {
     /// Traces [`PROBES`] paths with fixed numbers at fixed film points and
     /// hashes their radiance and flags: another scene (or camera, or
     /// material) gives another fingerprint unless it agrees on every probe.
-    fn of<O: PathOracle>(oracle: &O) -> Self {
+    pub fn of<O: PathOracle>(oracle: &O) -> Self {
         let resolution = oracle.resolution();
         let mut hash = mix64(resolution.width as u64) ^ resolution.height as u64;
         for k in 0..PROBES {
@@ -128,16 +129,16 @@ pub(crate) trait Checkpoints {
 
 /// The checkpoints of one render: its settings and (computed on first use)
 /// its oracle's identifier, in front of the state.
-pub(crate) struct Checkpointer<'a> {
-    settings: &'a Settings,
+pub(crate) struct Checkpointer<'a, S> {
+    settings: &'a S,
     channels: u32,
     oracle: &'a dyn Fn() -> OracleId,
     id: OnceCell<OracleId>,
 }
 
-impl<'a> Checkpointer<'a> {
+impl<'a, S> Checkpointer<'a, S> {
     pub(crate) fn new(
-        settings: &'a Settings,
+        settings: &'a S,
         channels: usize,
         oracle: &'a dyn Fn() -> OracleId,
     ) -> Self {
@@ -150,11 +151,11 @@ impl<'a> Checkpointer<'a> {
     }
 }
 
-impl Checkpoints for Checkpointer<'_> {
+impl<S: Serialize> Checkpoints for Checkpointer<'_, S> {
     fn checkpoint(&self, samples: u64, write: &mut dyn FnMut(&mut Vec<u8>)) -> Checkpoint {
         let header = Header {
             engine: ENGINE_VERSION.into(),
-            settings: self.settings.clone(),
+            settings: self.settings,
             oracle: *self.id.get_or_init(self.oracle),
             channels: self.channels,
             samples,
@@ -167,11 +168,6 @@ impl Checkpoints for Checkpointer<'_> {
         bytes.extend_from_slice(&crc.to_le_bytes());
         Checkpoint { bytes }
     }
-}
-
-/// The identifier of `oracle`, for a [`Checkpointer`].
-pub(crate) fn oracle_id<O: PathOracle>(oracle: &O) -> OracleId {
-    OracleId::of(oracle)
 }
 
 impl Checkpoint {
@@ -203,7 +199,9 @@ impl Checkpoint {
             });
         }
         let this = Checkpoint { bytes };
-        if this.header()?.0.engine != ENGINE_VERSION {
+        // The header's first field.
+        let (engine, _) = take::<String>(this.body())?;
+        if engine != ENGINE_VERSION {
             return Err(Error::CheckpointMismatch {
                 what: "engine version",
             });
@@ -211,48 +209,15 @@ impl Checkpoint {
         Ok(this)
     }
 
-    /// The header and the state after it.
-    fn header(&self) -> Result<(Header, &[u8]), Error> {
-        let start = MAGIC.len() + 4;
-        take(&self.bytes[start..self.bytes.len() - 4])
+    /// The header and the state after it (the header's settings are read
+    /// as `S`).
+    pub(crate) fn header<S: DeserializeOwned>(&self) -> Result<(Header<S>, &[u8]), Error> {
+        take(self.body())
     }
 
-    /// The settings the render was started with.
-    pub fn settings(&self) -> Result<Settings, Error> {
-        Ok(self.header()?.0.settings)
-    }
-
-    /// Paths traced up to this checkpoint (bootstrap excluded).
-    pub fn samples(&self) -> Result<u64, Error> {
-        Ok(self.header()?.0.samples)
-    }
-
-    /// The state to continue a render of `oracle` with `settings` from, after
-    /// checking that the checkpoint is of that oracle, method and seed (the
-    /// budget may differ).
-    pub(crate) fn state_for<O: PathOracle>(
-        &self,
-        oracle: &O,
-        settings: &Settings,
-    ) -> Result<&[u8], Error> {
-        let (header, state) = self.header()?;
-        let mismatch = |what| Err(Error::CheckpointMismatch { what });
-        if header.settings.method != settings.method {
-            return mismatch("method or its settings");
-        }
-        if header.settings.seed != settings.seed {
-            return mismatch("seed");
-        }
-        if header.channels != O::Radiance::CHANNELS as u32 {
-            return mismatch("radiance channels");
-        }
-        if header.oracle.resolution != oracle.resolution() {
-            return mismatch("film resolution");
-        }
-        if header.oracle != OracleId::of(oracle) {
-            return mismatch("scene (the oracle returns other values on the probe paths)");
-        }
-        Ok(state)
+    /// Everything between the version and the checksum.
+    fn body(&self) -> &[u8] {
+        &self.bytes[MAGIC.len() + 4..self.bytes.len() - 4]
     }
 }
 
@@ -283,65 +248,5 @@ pub(crate) fn take<T: DeserializeOwned>(bytes: &[u8]) -> Result<(T, &[u8]), Erro
 pub(crate) fn does_not_fit() -> Error {
     Error::CheckpointCorrupted {
         reason: "its state does not fit this render",
-    }
-}
-
-#[cfg(all(test, feature = "std"))]
-mod tests {
-    use super::*;
-    use crate::analytic::ProceduralImage;
-    use crate::drive::{Budget, Observer};
-    use crate::method::{Method, render, resume};
-    use crate::target::MaxChannel;
-    use std::sync::Mutex;
-
-    /// Keeps the checkpoint after the first round.
-    #[derive(Default)]
-    struct First(Mutex<Option<Checkpoint>>);
-
-    impl Observer for First {
-        fn wants_checkpoint(&self) -> bool {
-            self.0.lock().unwrap().is_none()
-        }
-        fn checkpoint(&self, checkpoint: Checkpoint) {
-            *self.0.lock().unwrap() = Some(checkpoint);
-        }
-    }
-
-    /// A checkpoint whose loop position is forged (CRC recomputed) so that
-    /// it says more or fewer units than its state holds is refused: resumed,
-    /// `done` = 0 ran the whole budget again on top of the saved work.
-    #[test]
-    fn a_position_that_does_not_match_the_state_is_refused() {
-        let image = ProceduralImage::showcase(Resolution::new(8, 6));
-        let settings = Settings {
-            seed: 1,
-            budget: Budget::Samples(64 * 48),
-            method: Method::Mc,
-        };
-        let first = First::default();
-        render(&image, &MaxChannel, &settings, &first).unwrap();
-        let saved = first.0.into_inner().unwrap().unwrap();
-        let bytes = saved.as_bytes();
-        let body = &bytes[MAGIC.len() + 4..bytes.len() - 4];
-        let (header, rest) = take::<Header>(body).unwrap();
-        let (position, state) = take::<Position>(rest).unwrap();
-        let forge = |done: u64| {
-            let mut forged = bytes[..MAGIC.len() + 4].to_vec();
-            append(&header, &mut forged);
-            append(&Position { done, ..position }, &mut forged);
-            forged.extend_from_slice(state);
-            let crc = crc32fast::hash(&forged);
-            forged.extend_from_slice(&crc.to_le_bytes());
-            Checkpoint::from_bytes(forged).unwrap()
-        };
-        let again = |c: &Checkpoint| resume(&image, &MaxChannel, &settings, c, &crate::Silent);
-        assert!(again(&forge(position.done)).is_ok());
-        for done in [0, position.done + 1, u64::MAX] {
-            assert!(
-                matches!(again(&forge(done)), Err(Error::CheckpointCorrupted { .. })),
-                "done = {done}"
-            );
-        }
     }
 }

@@ -1,8 +1,8 @@
 //! Predicting an MCMC renderer's error before rendering: the convergence
-//! constant of seed 003 (Yu, Sun, Zhao, Dong 2025).
+//! constant of Yu, Sun, Zhao and Dong 2025.
 //!
 //! A chain with normalized target density `g` estimates pixel `j` by
-//! `Î_j = (1/n) Σ_s w_j(x_s)`, `w_j = h_j f / g` (seed 003 eq. 3; `h_j` is the
+//! `Î_j = (1/n) Σ_s w_j(x_s)`, `w_j = h_j f / g` (Yu et al. 2025, eq. 3; `h_j` is the
 //! pixel's filter, here `W·H` inside the pixel so that `I_j` is its mean).
 //! Its scaled error `n E[(Î_j - I_j)²]` tends to the *convergence constant*
 //!
@@ -23,7 +23,7 @@
 //! chains are only run from starts that contribute. The prediction of a
 //! whole image is `nMSE = mean_j L_j`. [`predict_pssmlt`] runs it with this
 //! engine's chains over any oracle; it predicts the plain state estimator
-//! above (no expected values, no large-step MIS), the estimator seed 003
+//! above (no expected values, no large-step MIS), the estimator Yu et al. 2025
 //! analyses.
 
 use alloc::vec;
@@ -163,7 +163,7 @@ pub fn estimate_constants<C>(
 /// Alg. 1/2 for this engine's Metropolis-Hastings chains over `oracle`, with
 /// target `g = I / b` (`normalization` = `b = ∫ I`, e.g. the bootstrap's `b*`
 /// or an exact value) and the pixel means `reference` (an MC render or a
-/// closed form; seed 003 multiplies two independent renders for `I_j²`).
+/// closed form; Yu et al. 2025 multiplies two independent renders for `I_j²`).
 /// The contribution is the radiance's luminance.
 pub fn predict_pssmlt<O, I>(
     oracle: &O,

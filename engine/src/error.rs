@@ -44,7 +44,7 @@ pub enum Error {
         /// The method.
         method: &'static str,
         /// Its settings.
-        settings: &'static [crate::method::Setting],
+        settings: &'static [crate::setting::Setting],
     },
     /// A choice's value that is not one of its options.
     UnknownChoice {
@@ -69,7 +69,7 @@ pub enum Error {
     /// The oracle reported a resolution with zero pixels.
     EmptyResolution,
     /// Every bootstrap candidate had zero importance: the start-up normalization
-    /// `b*` (seed 002, eq. 3.12) is zero and no chain can be started. The scene is
+    /// `b*` (Šik 2018, eq. 3.12) is zero and no chain can be started. The scene is
     /// black for this importance function (or its light is unreachable by the
     /// candidates drawn); render it with MC instead, or draw more candidates.
     AllCandidatesBlack {

@@ -14,13 +14,13 @@
 //! | layer | module | owns |
 //! |---|---|---|
 //! | contract | [`oracle`] | what a renderer implements: [`PathOracle`], [`Sampler`], [`Radiance`], [`PathSample`], [`SplatSink`]; [`FnOracle`] |
-//! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], [`purity`] | random streams; the small-step kernels whole; the lazily mutated primary sample; importance functions; accumulation buffers; the purity check |
+//! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], [`purity`], `setting` | random streams; the small-step kernels whole; the mutated primary sample; importance functions; accumulation buffers; the purity check; what a setting is ([`method::Setting`]) |
 //! | one step | [`chain`] | the Metropolis-Hastings step with expected-values splatting, over any [`Target`](chain::Target) and [`Weights`](chain::Weights) |
 //! | set-up | [`bootstrap`] | start-up bias elimination: `b*` per level, importance-resampled chain starts |
 //! | one loop | [`drive`], [`checkpoint`] | budgets, clock, observer, the round loop, the deterministic merge, statistics; the render's state saved between rounds and resumed |
 //! | methods | [`method`] | [`Settings`], [`Method`], [`Output`], [`render`]; MC, PSSMLT, replica exchange, stratified MCMC, ERPT, multi-stage MLT |
-//! | method parts | [`exchange`], [`tiles`], [`reconstruct`] | replica exchange's ensembles, ladders and every move of seed 002 ch. 5; stratified MCMC's tiles and the reconstruction of their normalizations (seed 001 sec. 3.2) |
-//! | diagnostics | [`metrics`], [`diagnose`], [`convergence`], [`analytic`] | error metrics; autocorrelation, ESS, R-hat; seed 003's predicted error; targets with known answers |
+//! | method parts | [`exchange`], [`tiles`], [`reconstruct`] | replica exchange's ensembles, ladders and every move of Šik 2018, ch. 5; stratified MCMC's tiles and the reconstruction of their normalizations (Gruson et al. 2020, sec. 3.2) |
+//! | diagnostics | [`metrics`], [`diagnose`], [`convergence`], [`analytic`] | error metrics; autocorrelation, ESS, R-hat; Yu et al.'s (2025) predicted error; targets with known answers |
 //!
 //! Features: `std` (default) adds time budgets; `parallel` runs chains on rayon.
 //! Results never depend on the number of threads.
@@ -50,6 +50,7 @@ pub mod purity;
 pub mod reconstruct;
 pub mod rng;
 pub mod sample;
+mod setting;
 pub mod target;
 pub mod tiles;
 

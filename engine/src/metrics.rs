@@ -1,10 +1,10 @@
 //! Error metrics against a reference image, on per-pixel luminance, as in
-//! seed 001 sec. 4 (Table 1).
+//! Gruson et al. 2020, sec. 4 (Table 1).
 
 use crate::error::Error;
 use crate::film::Film;
 
-/// The `ε` of MAPE and relMSE (seed 001: "ε = 0.01").
+/// The `ε` of MAPE and relMSE (Gruson et al. 2020: "ε = 0.01").
 pub const EPSILON: f64 = 0.01;
 
 /// Image error metrics; each is a mean over pixels of luminance errors.

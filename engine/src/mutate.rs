@@ -1,4 +1,4 @@
-//! Mutation kernels of primary sample space MLT (seed 002, sec. 4.2.1).
+//! Mutation kernels of primary sample space MLT (Šik 2018, sec. 4.2.1).
 //!
 //! Every small step perturbs each coordinate of the primary sample by an
 //! independent offset `d`, symmetric about zero, and wraps the result onto
@@ -13,7 +13,7 @@ use rand_core::Rng;
 use crate::error::{Error, check_positive, check_probability};
 use crate::rng::uniform_f64;
 
-/// Kelemen's exponential small step (Kelemen et al. 2002; seed 002 sec. 4.2.1):
+/// Kelemen's exponential small step (Kelemen et al. 2002; Šik 2018, sec. 4.2.1):
 /// `d = ±s2 · exp(-ln(s2/s1) · ξ)`, so `|d|` is log-uniform in `[s1, s2]`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Kelemen {
@@ -30,7 +30,7 @@ impl Kelemen {
         s2: 1.0 / 64.0,
         log_ratio: 4.0 * core::f64::consts::LN_2,
     };
-    /// The sizes of seed 001 (sec. 4, "minimum 1/1024, maximum 1/32").
+    /// The sizes of Gruson et al. 2020 (sec. 4, "minimum 1/1024, maximum 1/32").
     pub const SEED_001: Kelemen = Kelemen {
         s1: 1.0 / 1024.0,
         s2: 1.0 / 32.0,
@@ -250,7 +250,7 @@ impl<T: Copy> OffsetBatch<T> {
     }
 }
 
-/// The adaptive kernel of seed 002 (app. 6.B, eq. 6.8, after Hachisuka and
+/// The adaptive kernel of Šik 2018 (app. 6.B, eq. 6.8, after Hachisuka and
 /// Jensen 2011): `d = (2ξ)^(1/θ)` if `ξ < 0.5`, else `-(2ξ - 1)^(1/θ)`, so
 /// `P(|d| <= x) = x^θ`. `θ` is adapted toward the acceptance rate
 /// `target_acceptance` by eq. 4.10, `θ_{i+1} = θ_i + (A_i - A*) / i`, whose

@@ -3,7 +3,7 @@
 //! A [`PathOracle`] turns a film point and numbers drawn from a [`Sampler`] into
 //! one path contribution. The engine chooses the film point (so it can stratify
 //! and replay samples in other pixels) and owns every random number (so it can
-//! mutate them: primary sample space MLT, seed 002 sec. 4.2.1).
+//! mutate them: primary sample space MLT, Šik 2018, sec. 4.2.1).
 //!
 //! A path may also contribute at film points the engine did not choose: a
 //! bidirectional path tracer's light-tracing connections (`t = 1`, Veach 1997
@@ -88,7 +88,7 @@ pub struct FilmPoint {
 
 /// Temperature handed to the oracle. `1` is the untempered, exact target; larger
 /// values ask the oracle for a smoother one (e.g. roughened BSDFs at the
-/// connecting vertex, seed 002 sec. 5.2, eq. 5.5).
+/// connecting vertex, Šik 2018, sec. 5.2, eq. 5.5).
 #[derive(Clone, Copy, Debug, PartialEq, PartialOrd)]
 pub struct Temperature(pub f32);
 
@@ -105,7 +105,7 @@ impl Default for Temperature {
 
 /// Bits an oracle may set on a path (which object it touched, which lobe it
 /// used...), so importance functions can weight paths without a second trace
-/// (seed 004 sec. 4, importance "shaders").
+/// (Hoberock and Hart 2010, sec. 4, importance "shaders").
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct PathFlags(pub u32);
 
@@ -168,7 +168,7 @@ pub trait SplatSink<R> {
 }
 
 /// A sink that drops every splat: for callers that use only the radiance at
-/// the traced film point (stratified MCMC's tile chains, seed 001, stratify
+/// the traced film point (stratified MCMC's tile chains, Gruson et al. 2020, stratify
 /// only what lands on their own pixels).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct DropSplats;
@@ -194,7 +194,7 @@ pub trait Radiance:
     fn channel(&self, i: usize) -> f32;
     /// Photometric luminance (Rec. 709 weights for RGB).
     fn luminance(&self) -> f32;
-    /// The largest channel (the importance of seed 001's experiments).
+    /// The largest channel (the importance of Gruson et al.'s (2020) experiments).
     fn max_channel(&self) -> f32 {
         (0..Self::CHANNELS)
             .map(|i| self.channel(i))

@@ -1,7 +1,7 @@
 //! What an embedder needs: `use strata_engine::prelude::*;` (or
 //! `strata::prelude::*`) brings in the oracle contract, the one entry point
 //! with its settings and output, budgets and observers, and the importance
-//! functions.
+//! functions, and the purity check an oracle should pass.
 
 pub use crate::checkpoint::Checkpoint;
 pub use crate::drive::{Budget, Observer, Progress, RenderStats, Silent};
@@ -15,4 +15,5 @@ pub use crate::oracle::{
     DropSplats, FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb,
     Sampler, Splat, SplatSink, Temperature,
 };
+pub use crate::purity::check_purity;
 pub use crate::target::{FnImportance, Importance, Luminance, MaxChannel};

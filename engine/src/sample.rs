@@ -1,6 +1,6 @@
 //! Primary sample space: the samplers behind the oracle's [`Sampler`]: the
 //! independent sampler of plain Monte Carlo, and the mutated
-//! [`MltSampler`] of primary sample space MLT (seed 002 sec. 4.2.1; the design
+//! [`MltSampler`] of primary sample space MLT (Šik 2018, sec. 4.2.1; the design
 //! follows pbrt-v4's `MLTSampler`).
 //!
 //! A primary sample is an unbounded vector of numbers in `[0, 1)`, split into
@@ -8,7 +8,7 @@
 //! the oracle's streams hold everything the oracle draws.
 //!
 //! Only the coordinates the current state read are kept; the others are
-//! forgotten. Under the target `π(u) ∝ C*(u)` (seed 002 eq.
+//! forgotten. Under the target `π(u) ∝ C*(u)` (Šik 2018, eq.
 //! 4.2-4.3) the path depends only on the coordinates its trace read, and
 //! which ones it reads is decided by the values read before them, so given
 //! those the unread coordinates are independent and uniform. Redrawing them
@@ -16,7 +16,7 @@
 //! reversible with respect to `π`: if `v` agrees with `u` where `u` was read,
 //! the trace of `v` reads the same coordinates, `π(v) = π(u)`, and `G(u → v)
 //! = G(v → u) = 1`. The chain applies `G` after every iteration, then the
-//! small step (seed 002 sec. 4.2.1) to what the state read: each
+//! small step (Šik 2018, sec. 4.2.1) to what the state read: each
 //! coordinate is either one the current state read, which a small step moves
 //! by one offset (all of them at once, when the proposal opens), or a
 //! forgotten one, drawn uniformly when it is read. Both kernels leave `π`

@@ -1,6 +1,6 @@
 //! Importance functions: the scalar target `I(x)` a chain samples in
 //! proportion to. Any `I` that is positive wherever the contribution is gives
-//! an unbiased estimate (seed 004, sec. 3 and Alg. 1); with Kelemen's
+//! an unbiased estimate (Hoberock and Hart 2010, sec. 3 and Alg. 1); with Kelemen's
 //! large-step weights even regions where `I = 0` are covered by large steps.
 
 use alloc::vec::Vec;
@@ -17,7 +17,7 @@ pub trait Importance<R: Radiance>: Sync {
     fn importance(&self, sample: &PathSample<R>, film: FilmPoint) -> f64;
 }
 
-/// The largest channel, as in seed 001's experiments.
+/// The largest channel, as in Gruson et al.'s (2020) experiments.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MaxChannel;
 
@@ -27,7 +27,7 @@ impl<R: Radiance> Importance<R> for MaxChannel {
     }
 }
 
-/// Luminance, the classical MLT target (seed 002, eq. 4.3: `C*` is the scalar
+/// Luminance, the classical MLT target (Šik 2018, eq. 4.3: `C*` is the scalar
 /// luminosity of `C`).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Luminance;
@@ -38,7 +38,7 @@ impl<R: Radiance> Importance<R> for Luminance {
     }
 }
 
-/// A user "importance shader" (seed 004, sec. 4): any closure of the sample
+/// A user "importance shader" (Hoberock and Hart 2010, sec. 4): any closure of the sample
 /// and its film point, e.g. weighting paths flagged by the oracle.
 #[derive(Clone, Copy, Debug)]
 pub struct FnImportance<F>(pub F);

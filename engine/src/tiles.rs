@@ -1,10 +1,10 @@
-//! Overlapping tiles of stratified MCMC (seed 001 sec. 3, fig. 3): one tile
+//! Overlapping tiles of stratified MCMC (Gruson et al. 2020, sec. 3, fig. 3): one tile
 //! per pixel, centred on it, clipped at the image border.
 //!
 //! The default tile is the cross of the pixel and its four neighbours, "the
 //! simplest and smallest domain that still has uniform overlap with its
 //! neighbours in all directions"; square tiles (`(2r+1)²` pixels) are the
-//! other shape seed 001 leaves for future work. Tile `s` is centred on pixel
+//! other shape Gruson et al. 2020 leaves for future work. Tile `s` is centred on pixel
 //! `s`; its pixels are `s + offset` for every offset that stays on the film.
 
 use alloc::vec::Vec;
@@ -16,7 +16,7 @@ use crate::oracle::{FilmPoint, Resolution};
 /// The shape of every tile.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub enum TileShape {
-    /// The pixel and its 4 neighbours (seed 001's choice).
+    /// The pixel and its 4 neighbours (Gruson et al.'s (2020) choice).
     #[default]
     Cross,
     /// The `(2 radius + 1)²` pixels around the centre.
@@ -115,7 +115,7 @@ impl Tiles {
 
     /// The point at `jitter` (in `[0, 1)²`) inside pixel `pixel`: the same
     /// jitter in every pixel of a tile replays one primary sample across it
-    /// (seed 001 sec. 3.1, coherent sampling). Always inside the pixel, even
+    /// (Gruson et al. 2020, sec. 3.1, coherent sampling). Always inside the pixel, even
     /// where `x + jitter` would round up to the next pixel.
     #[inline]
     pub fn pixel_point(&self, pixel: usize, jitter: FilmPoint) -> FilmPoint {

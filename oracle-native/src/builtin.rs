@@ -287,7 +287,7 @@ pub fn cornell(resolution: Resolution) -> Scene {
 }
 
 /// A room lit only through a narrow opening in its back wall: the light
-/// hangs in a second room behind it (the kind of visibility of seed 001's
+/// hangs in a second room behind it (the kind of visibility of Gruson et al.'s (2020)
 /// "Veach-door").
 pub fn door(resolution: Resolution) -> Scene {
     let camera = Camera::look_at(
@@ -390,7 +390,7 @@ pub fn door(resolution: Resolution) -> Scene {
     s
 }
 
-/// A diffuse plane under a constant environment (seed 001 fig. 2).
+/// A diffuse plane under a constant environment (Gruson et al. 2020, fig. 2).
 pub fn envplane(resolution: Resolution) -> Scene {
     let camera = Camera::look_at(
         Vec3::new(0.0, 2.0, 4.0),
@@ -418,7 +418,7 @@ pub fn envplane(resolution: Resolution) -> Scene {
 
 /// A glass sphere on a floor under a small light, casting a caustic, with a
 /// mirror behind it in which the caustic is seen again (the specular paths
-/// that tempering, seed 002 sec. 5.2, is for).
+/// that tempering, Šik 2018, sec. 5.2, is for).
 pub fn caustic(resolution: Resolution) -> Scene {
     let camera = Camera::look_at(
         Vec3::new(0.0, 1.6, 4.0),

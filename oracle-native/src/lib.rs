@@ -11,6 +11,7 @@ pub mod obj;
 pub mod pbrt;
 pub mod ply;
 pub mod scene;
+mod strategies;
 pub mod tracer;
 
 pub use bvh::BvhIntersector;

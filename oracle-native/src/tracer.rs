@@ -7,7 +7,7 @@
 //! direction, Russian roulette), so a coordinate of the primary sample keeps
 //! its meaning from one path to the next: mutations stay local.
 //!
-//! Tempering (seed 002 sec. 5.2): at temperature `T > 1` the BSDF at each
+//! Tempering (Šik 2018, sec. 5.2): at temperature `T > 1` the BSDF at each
 //! connecting vertex — where next-event estimation joins the camera subpath
 //! to a light — is roughened to `sqrt(T)·max(ρ, 1e-4)` (eq. 5.5), and at
 //! least to the regularization floor `ρ0·γ^n` (sec. 5.4). Paths are still
@@ -20,7 +20,7 @@ use strata_engine::{
     FilmPoint, PathFlags, PathOracle, PathSample, Resolution, Rgb, Sampler, SplatSink, Temperature,
 };
 
-use crate::bidirectional::{Lengths, Strategies};
+use crate::strategies::{Lengths, Strategies};
 use crate::geometry::{Frame, Intersector, Ray, power_heuristic, uniform_triangle};
 use crate::scene::{NO_LIGHT, Projection, Scene};
 
@@ -32,7 +32,7 @@ pub const DIRECT_EMITTER: PathFlags = PathFlags(2);
 /// Russian roulette starts after this many bounces.
 pub(crate) const ROULETTE_DEPTH: u32 = 3;
 
-/// The declining regularization of seed 002 sec. 5.4: a roughness floor
+/// The declining regularization of Šik 2018, sec. 5.4: a roughness floor
 /// `initial·decay^step` at connecting vertices.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Regularization {

@@ -151,7 +151,7 @@ struct Args {
     /// Large-step probability (`large_step_probability`).
     #[arg(long)]
     large_step: Option<f64>,
-    /// Replica exchange: the exchange move (`exchange`; seed 002 sec. 5.3).
+    /// Replica exchange: the exchange move (`exchange`; Šik 2018, sec. 5.3).
     #[arg(long, value_parser = PossibleValuesParser::new(ExchangeKind::NAMES))]
     exchange: Option<String>,
     /// Replica exchange: tempering (`tempering`; power: pi^(1/T), any
@@ -170,7 +170,7 @@ struct Args {
     /// Replica exchange: sweeps equalizing the ladder first (`ladder_tuning_sweeps`).
     #[arg(long)]
     tune_ladder: Option<u64>,
-    /// Stratified MCMC: tile radius (`tile_radius`; 0: the cross of seed 001).
+    /// Stratified MCMC: tile radius (`tile_radius`; 0: the cross of Gruson et al. 2020).
     #[arg(long)]
     tile_radius: Option<u32>,
     /// Stratified MCMC: local exchange every this many sweeps (`exchange_every`).
@@ -185,7 +185,7 @@ struct Args {
     /// ERPT: steps per chain (`chain_length`).
     #[arg(long)]
     chain_length: Option<u32>,
-    /// Multi-stage MLT: noise-aware importance (`noise_aware`; seed 004 sec. 4.3).
+    /// Multi-stage MLT: noise-aware importance (`noise_aware`; Hoberock and Hart 2010, sec. 4.3).
     #[arg(long)]
     noise_aware: bool,
     /// Exposure (stops) of the PNG, from -64 to 64.

@@ -73,11 +73,11 @@ pub struct SetUp {
 #[non_exhaustive]
 pub enum SetUpStage {
     /// Tracing bootstrap candidates for the normalization and the chains'
-    /// starts (seed 002 sec. 3.6); units: candidates.
+    /// starts (Šik 2018, sec. 3.6); units: candidates.
     Bootstrap,
     /// Equalizing replica exchange's temperature ladder; units: sweeps.
     LadderTuning,
-    /// Stratified MCMC's global chains starting the tile chains (seed 001
+    /// Stratified MCMC's global chains starting the tile chains (Gruson et al. 2020
     /// sec. 4.4); units: tiles started, of those wanted.
     Initialization,
 }

@@ -1,4 +1,4 @@
-//! An ensemble of tempered chains over an oracle (seed 002 sec. 5.4): the
+//! An ensemble of tempered chains over an oracle (Šik 2018, sec. 5.4): the
 //! chains at the ladder's temperatures, swept from the hottest down with an
 //! exchange move's hooks around every mutation.
 
@@ -27,14 +27,14 @@ pub struct EnsembleSettings {
     pub ladder: Ladder,
     /// How targets are tempered.
     pub tempering: Tempering,
-    /// Small step and large step probability (seed 002 sec. 5.4: Kelemen, 0.3).
+    /// Small step and large step probability (Šik 2018, sec. 5.4: Kelemen, 0.3).
     pub mutation: MutationParams,
     /// Uniform candidates for the per-chain normalizations `b_j` and starts.
     pub bootstrap_candidates: u64,
 }
 
 impl EnsembleSettings {
-    /// `chains` chains, geometric ladder to `t_max`, power tempering, seed 002's
+    /// `chains` chains, geometric ladder to `t_max`, power tempering, Šik's (2018)
     /// mutations (Kelemen, large steps 0.3).
     pub fn geometric(chains: usize, t_max: f64) -> Result<Self, Error> {
         Ok(Self {

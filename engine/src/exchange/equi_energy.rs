@@ -1,6 +1,6 @@
-//! Equi-energy moves (Baragatti et al. 2012; seed 002 sec. 5.3.4-5.3.5) and
+//! Equi-energy moves (Baragatti et al. 2012; Šik 2018, sec. 5.3.4-5.3.5) and
 //! the equi-energy sampler (Kou et al. 2006, adaptive levels after Schreck
-//! et al. 2013; seed 002 sec. 5.3.6).
+//! et al. 2013; Šik 2018, sec. 5.3.6).
 //!
 //! Energy levels `H_1 < ... < H_{d+1}` split the target values into rings
 //! `D_i = {u : π(u) ∈ [H_i, H_{i+1})}` (eq. 5.12); states in the same ring
@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use super::{Exchange, Jump, Move, Tempered};
 use crate::error::Error;
 
-/// Ring boundaries `H_2 < ... < H_d`, evenly spaced on a log scale (seed 002
+/// Ring boundaries `H_2 < ... < H_d`, evenly spaced on a log scale (Šik 2018
 /// sec. 5.3.4); ring 0 holds everything below `H_2` (zero included), ring
 /// `d - 1` everything from `H_d` up.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -55,12 +55,12 @@ impl EnergyLevels {
 
 /// The equi-energy move: swap two chains whose states lie in the same ring.
 ///
-/// * **Original** (Baragatti et al. 2012, seed 002 sec. 5.3.4): after all
+/// * **Original** (Baragatti et al. 2012, Šik 2018, sec. 5.3.4): after all
 ///   chains mutate, rings are judged by the exact target `π_0`; pick uniformly
 ///   a ring holding at least two states, then two of its chains, and swap with
 ///   the usual acceptance (eq. 4.11). A swap keeps every ring's occupancy, so
 ///   the proposal is symmetric.
-/// * **Frequent** (seed 002 sec. 5.3.5, App. 5.B.3): before chain `j`
+/// * **Frequent** (Šik 2018, sec. 5.3.5, App. 5.B.3): before chain `j`
 ///   mutates, find the ring of `u_j`, pick uniformly another chain whose state
 ///   lies in the same ring and attempt the swap. Rings are those of chain
 ///   `j`'s own target `π_j` (sec. 5.3.6, footnote 3); the swap keeps the count
@@ -165,7 +165,7 @@ struct Reservoir<S> {
     seen: u64,
 }
 
-/// The equi-energy sampler (Kou et al. 2006; seed 002 sec. 5.3.6).
+/// The equi-energy sampler (Kou et al. 2006; Šik 2018, sec. 5.3.6).
 ///
 /// After `burn_in` sweeps, every chain `j >= 1` records its states. Chain
 /// `j - 1` then replaces a small step, with probability `p_jump` (the thesis

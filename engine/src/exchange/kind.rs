@@ -56,7 +56,7 @@ pub enum ExchangeKind {
 }
 
 impl ExchangeKind {
-    /// Every move of seed 002 sec. 5.3 with the thesis' settings, plus
+    /// Every move of Šik 2018, sec. 5.3 with the thesis' settings, plus
     /// non-reversible PT, after the no-exchange baseline.
     pub fn all(burn_in: u64) -> [ExchangeKind; 8] {
         [
@@ -71,7 +71,7 @@ impl ExchangeKind {
         ]
     }
 
-    /// The adaptive equi-energy sampler with seed 002 sec. 5.3.7's settings
+    /// The adaptive equi-energy sampler with Šik 2018, sec. 5.3.7's settings
     /// (`p_EEJ = 0.1`, 16 rings), 4096 recorded states per chain, recording
     /// after `burn_in` sweeps.
     pub fn thesis_equi_energy_sampler(burn_in: u64) -> ExchangeKind {

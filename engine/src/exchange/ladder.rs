@@ -23,7 +23,7 @@ pub struct Ladder {
 
 impl Ladder {
     /// `chains` temperatures evenly spaced on a log scale from 1 to `t_max`
-    /// (seed 002 sec. 5.4: 8 chains, `t_max = 2500`).
+    /// (Šik 2018, sec. 5.4: 8 chains, `t_max = 2500`).
     pub fn geometric(chains: usize, t_max: f64) -> Result<Self, Error> {
         if chains == 0 {
             return Err(Error::invalid("chains", 0.0, "at least 1"));

@@ -95,7 +95,7 @@ pub trait Move<S: Tempered + Clone> {
 }
 
 /// No exchange: `M` independent tempered chains (plain Metropolis-Hastings
-/// when `M = 1`). The baseline of seed 002 Tables 5.1-5.2.
+/// when `M = 1`). The baseline of Šik 2018, Tables 5.1-5.2.
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 pub struct NoExchange;
 

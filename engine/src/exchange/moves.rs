@@ -1,4 +1,4 @@
-//! The exchange moves of seed 002 sec. 5.3 and non-reversible parallel
+//! The exchange moves of Šik 2018, sec. 5.3 and non-reversible parallel
 //! tempering, each a [`Move`]. Equi-energy moves and the equi-energy sampler
 //! live in [`equi_energy`](super::equi_energy).
 
@@ -10,7 +10,7 @@ use super::permutation::PermutationSampler;
 use super::{Exchange, Move, Tempered};
 use crate::error::Error;
 
-/// Neighbor swapping (seed 002 sec. 5.3.1, fig. 5.6, after Gruson et al.
+/// Neighbor swapping (Šik 2018, sec. 5.3.1, fig. 5.6, after Gruson et al.
 /// 2016): right after chain `i >= 1` mutates, swap states with chain `i - 1`
 /// with the usual acceptance `min(1, π_i(u_{i-1}) π_{i-1}(u_i) / (π_i(u_i)
 /// π_{i-1}(u_{i-1})))` (eq. 4.11). Chains mutate from the hottest down, so a
@@ -47,7 +47,7 @@ impl<S: Tempered + Clone> Move<S> for NonReversible {
     }
 }
 
-/// Importance-sampled permutations (seed 002 sec. 5.3.2, eq. 5.7-5.8): after
+/// Importance-sampled permutations (Šik 2018, sec. 5.3.2, eq. 5.7-5.8): after
 /// all chains mutate, draw a permutation of the states from all `M!` with
 /// probability `Π π_i(u_{o(i)}) / b_O`, in `O(M 2^M)` (App. 5.C; from the
 /// listed `M!` products for at most 4 chains, see [`PermutationSampler`]).
@@ -88,7 +88,7 @@ impl<S: Tempered + Clone> Move<S> for IsPermutation {
     }
 }
 
-/// Importance-sampled swaps (seed 002 sec. 5.3.3, eq. 5.9-5.11): before chain
+/// Importance-sampled swaps (Šik 2018, sec. 5.3.3, eq. 5.9-5.11): before chain
 /// `i` mutates, pick a partner `j` (possibly `i` itself) with probability
 /// `p(i, j) ∝ π_i(u_j) π_j(u_i)` and swap with acceptance
 /// `min(1, Σ_k π_i(u_k) π_k(u_i) / Σ_k π_i(u'_k) π_k(u'_i))` (eq. 5.10, proved

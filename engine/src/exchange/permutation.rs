@@ -1,4 +1,4 @@
-//! Importance sampling of permutations in `O(M 2^M)` (seed 002 sec. 5.3.2,
+//! Importance sampling of permutations in `O(M 2^M)` (Šik 2018, sec. 5.3.2,
 //! eq. 5.7, and App. 5.C, figs. 5.26-5.27).
 //!
 //! A permutation `o` gives chain `i` the state `u_{o(i)}`, with probability

@@ -99,7 +99,7 @@ impl ExchangeStats {
 
     /// The fraction of sweeps in which `chain` ended with a state another
     /// chain held at the start of the sweep (or took a past state by an
-    /// equi-energy jump): its chance to change state by exchange (seed 002
+    /// equi-energy jump): its chance to change state by exchange (Šik 2018
     /// Table 5.3 reports the mean over chains).
     pub fn change_probability(&self, chain: usize) -> f64 {
         if self.sweeps == 0 {

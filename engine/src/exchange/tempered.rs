@@ -1,11 +1,11 @@
 //! The tempered targets of an ensemble and the weights that combine its
-//! chains (seed 002 sec. 4.5, 5.2 and 5.4).
+//! chains (Šik 2018, sec. 4.5, 5.2 and 5.4).
 //!
 //! # Tempering
 //! * [`Tempering::Power`]: `π_i(u) = I(u)^(1/T_i)`, computed by the engine from
 //!   one trace at `T = 1`. Works with any oracle.
 //! * [`Tempering::Oracle`]: the oracle is asked for the tempered target
-//!   (`π_i(u) = I(trace(u, T_i))`, e.g. roughened BSDFs, seed 002 sec. 5.2).
+//!   (`π_i(u) = I(trace(u, T_i))`, e.g. roughened BSDFs, Šik 2018, sec. 5.2).
 //!   Every proposal is traced at every temperature once and the row of values
 //!   is kept with the state, so exchange moves, which need `π_i(u_j)` for all
 //!   pairs, never trace: `M` traces per proposal, none per exchange.
@@ -44,7 +44,7 @@ pub enum Tempering {
     #[default]
     Power,
     /// The oracle traces at temperature `T_i` and `π_i` is the importance of
-    /// that trace (the native path tracer roughens BSDFs, seed 002 sec. 5.2).
+    /// that trace (the native path tracer roughens BSDFs, Šik 2018, sec. 5.2).
     Oracle,
 }
 
@@ -173,7 +173,7 @@ impl Levels<'_> {
     }
 }
 
-/// The bootstrap of an ensemble (seed 002 sec. 3.6, per temperature as in
+/// The bootstrap of an ensemble (Šik 2018, sec. 3.6, per temperature as in
 /// sec. 5.4): every candidate is valued under every chain's target, `b_j` is
 /// the mean of `π_j`, chain `j` starts from a candidate drawn in proportion
 /// to `π_j`, and the range of the positive values gives each chain's energy

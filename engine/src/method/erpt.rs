@@ -1,5 +1,5 @@
 //! Energy redistribution path tracing (Cline, Talbot and Egbert 2005) in
-//! primary sample space: the baseline of seed 001 sec. 4 ("a version of ERPT
+//! primary sample space: the baseline of Gruson et al. 2020, sec. 4 ("a version of ERPT
 //! that uses primary sample space mutations", chain length 100).
 //!
 //! Every pass traces one path per pixel, uniform in the pixel, like MC (on
@@ -54,7 +54,7 @@ use crate::target::{Evaluated, Importance};
 /// smaller than that.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ErptSettings {
-    /// Steps per chain `N` (100 in seed 001).
+    /// Steps per chain `N` (100 in Gruson et al. 2020).
     pub chain_length: u32,
     /// Expected chains started per MC path `r`.
     pub chains_per_path: f64,

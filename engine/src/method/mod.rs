@@ -38,11 +38,11 @@ pub use replica::{ReplicaExtras, ReplicaSettings};
 pub use stratified::{
     Initialization, Solver, StratifiedExtras, StratifiedSettings, StratifiedStats,
 };
-pub use table::{Kind, Setting, Value};
+pub use crate::setting::{Kind, Setting, Value};
 
 use serde::de::DeserializeOwned;
 
-use crate::checkpoint::{self, Checkpoint, Checkpointer, Checkpoints, Position};
+use crate::checkpoint::{self, Checkpoint, Checkpointer, Checkpoints, OracleId, Position};
 use crate::drive::{Budget, Clock, Loop, Observer, RenderStats, SetUp, SetUpStage};
 use crate::error::Error;
 use crate::film::Film;
@@ -477,6 +477,44 @@ where
     run(oracle, importance, settings, observer, None)
 }
 
+/// What a checkpoint's header says of the render: the settings are
+/// [`Settings`] (the checkpoint module carries them without knowing them).
+impl Checkpoint {
+    /// The settings the render was started with.
+    pub fn settings(&self) -> Result<Settings, Error> {
+        Ok(self.header::<Settings>()?.0.settings)
+    }
+
+    /// Paths traced up to this checkpoint (bootstrap excluded).
+    pub fn samples(&self) -> Result<u64, Error> {
+        Ok(self.header::<Settings>()?.0.samples)
+    }
+
+    /// The state to continue a render of `oracle` with `settings` from, after
+    /// checking that the checkpoint is of that oracle, method and seed (the
+    /// budget may differ).
+    fn state_for<O: PathOracle>(&self, oracle: &O, settings: &Settings) -> Result<&[u8], Error> {
+        let (header, state) = self.header::<Settings>()?;
+        let mismatch = |what| Err(Error::CheckpointMismatch { what });
+        if header.settings.method != settings.method {
+            return mismatch("method or its settings");
+        }
+        if header.settings.seed != settings.seed {
+            return mismatch("seed");
+        }
+        if header.channels != O::Radiance::CHANNELS as u32 {
+            return mismatch("radiance channels");
+        }
+        if header.oracle.resolution != oracle.resolution() {
+            return mismatch("film resolution");
+        }
+        if header.oracle != OracleId::of(oracle) {
+            return mismatch("scene (the oracle returns other values on the probe paths)");
+        }
+        Ok(state)
+    }
+}
+
 /// Continues the render saved in `checkpoint` (see
 /// [`checkpoint`]). `settings` must have the checkpoint's
 /// method, method settings and seed ([`Checkpoint::settings`] gives them),
@@ -591,7 +629,7 @@ where
             });
         }
     }
-    let oracle_id = || checkpoint::oracle_id(oracle);
+    let oracle_id = || OracleId::of(oracle);
     let checkpoints = Checkpointer::new(settings, O::Radiance::CHANNELS, &oracle_id);
     let job = Job {
         oracle,
@@ -622,4 +660,64 @@ fn check_memory(bytes: u64, what: &'static str) -> Result<(), Error> {
     let len = usize::try_from(bytes).map_err(|_| failed.clone())?;
     let mut trial: Vec<u8> = Vec::new();
     trial.try_reserve_exact(len).map_err(|_| failed)
+}
+
+#[cfg(all(test, feature = "std"))]
+mod tests {
+    use super::*;
+    use crate::analytic::ProceduralImage;
+    use crate::checkpoint::{Header, MAGIC, append, take};
+    use crate::drive::Observer;
+    use crate::target::MaxChannel;
+    use std::sync::Mutex;
+
+    /// Keeps the checkpoint after the first round.
+    #[derive(Default)]
+    struct First(Mutex<Option<Checkpoint>>);
+
+    impl Observer for First {
+        fn wants_checkpoint(&self) -> bool {
+            self.0.lock().unwrap().is_none()
+        }
+        fn checkpoint(&self, checkpoint: Checkpoint) {
+            *self.0.lock().unwrap() = Some(checkpoint);
+        }
+    }
+
+    /// A checkpoint whose loop position is forged (CRC recomputed) so that
+    /// it says more or fewer units than its state holds is refused: resumed,
+    /// `done` = 0 ran the whole budget again on top of the saved work.
+    #[test]
+    fn a_position_that_does_not_match_the_state_is_refused() {
+        let image = ProceduralImage::showcase(Resolution::new(8, 6));
+        let settings = Settings {
+            seed: 1,
+            budget: Budget::Samples(64 * 48),
+            method: Method::Mc,
+        };
+        let first = First::default();
+        render(&image, &MaxChannel, &settings, &first).unwrap();
+        let saved = first.0.into_inner().unwrap().unwrap();
+        let bytes = saved.as_bytes();
+        let (header, rest) = saved.header::<Settings>().unwrap();
+        let (position, state) = take::<Position>(rest).unwrap();
+        let forge = |done: u64| {
+            let mut forged = bytes[..MAGIC.len() + 4].to_vec();
+            let header: &Header<Settings> = &header;
+            append(header, &mut forged);
+            append(&Position { done, ..position }, &mut forged);
+            forged.extend_from_slice(state);
+            let crc = crc32fast::hash(&forged);
+            forged.extend_from_slice(&crc.to_le_bytes());
+            Checkpoint::from_bytes(forged).unwrap()
+        };
+        let again = |c: &Checkpoint| resume(&image, &MaxChannel, &settings, c, &crate::Silent);
+        assert!(again(&forge(position.done)).is_ok());
+        for done in [0, position.done + 1, u64::MAX] {
+            assert!(
+                matches!(again(&forge(done)), Err(Error::CheckpointCorrupted { .. })),
+                "done = {done}"
+            );
+        }
+    }
 }

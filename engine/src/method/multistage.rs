@@ -1,8 +1,8 @@
-//! Multi-stage MLT (seed 004 sec. 4.2, Alg. 2): importance functions that
+//! Multi-stage MLT (Hoberock and Hart 2010, sec. 4.2, Alg. 2): importance functions that
 //! equalize the sampling density across the image, refined stage by stage.
 //!
 //! Any importance function gives an unbiased MLT image, because every splat
-//! is weighted by `f / (I / b)` (seed 004 sec. 3, Alg. 1; [`chain`](crate::chain)).
+//! is weighted by `f / (I / b)` (Hoberock and Hart 2010, sec. 3, Alg. 1; [`chain`](crate::chain)).
 //! Multi-stage MLT uses `I_k(x) = I(x) / E_k(region of x)`, where `E_k` is the
 //! current image estimate averaged over a `k x k` grid of regions: the chain
 //! then spends about as many samples on a dark region as on a bright one
@@ -51,9 +51,9 @@ use crate::target::{FnImportance, Importance};
 pub struct MultiStageSettings {
     /// Chains, mutations and bootstrap candidates of every stage.
     pub pssmlt: PssmltSettings,
-    /// Stages from half to full resolution (seed 004: 10).
+    /// Stages from half to full resolution (Hoberock and Hart 2010: 10).
     pub linear_stages: u32,
-    /// Noise-aware MLT (seed 004 sec. 4.3.4-4.3.5): also target the
+    /// Noise-aware MLT (Hoberock and Hart 2010, sec. 4.3.4-4.3.5): also target the
     /// estimated visual noise of each pixel.
     pub noise_aware: bool,
 }
@@ -296,7 +296,7 @@ fn quantile(values: &[f64], q: f64) -> f64 {
     v[((v.len() - 1) as f64 * q) as usize]
 }
 
-/// The noise target of seed 004 sec. 4.3.5 per pixel (see the module docs).
+/// The noise target of Hoberock and Hart 2010, sec. 4.3.5 per pixel (see the module docs).
 /// `mean` is the luminance estimate, `variance` the deviation estimate per
 /// pixel, `adaptation` the region-averaged luminance. Luminance is scaled so
 /// that the image mean is 100 cd/m², a display-like adaptation level (the
@@ -378,7 +378,7 @@ fn noise_target(
     out
 }
 
-/// Multi-stage MLT (seed 004 Alg. 2) over `job`'s importance (the base
+/// Multi-stage MLT (Hoberock and Hart 2010, Alg. 2) over `job`'s importance (the base
 /// importance, e.g. [`MaxChannel`](crate::target::MaxChannel)); see the
 /// module docs. The image is the sample-weighted mean of every stage's.
 pub(crate) fn render<O, I>(

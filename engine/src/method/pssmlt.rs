@@ -1,4 +1,4 @@
-//! Primary sample space MLT (Kelemen et al. 2002; seed 002 sec. 4.2.1) with
+//! Primary sample space MLT (Kelemen et al. 2002; Šik 2018, sec. 4.2.1) with
 //! start-up bias elimination, expected-values splatting and Kelemen's large
 //! step weights (see [`chain`](crate::chain)): `chains` chains run in
 //! parallel, each a unit of work one step.
@@ -26,7 +26,7 @@ pub struct PssmltSettings {
     /// Number of independent chains (pbrt uses 1000; more chains explore more
     /// independently, fewer mix longer).
     pub chains: u32,
-    /// Bootstrap candidates `N` (seed 002 sec. 3.6).
+    /// Bootstrap candidates `N` (Šik 2018, sec. 3.6).
     pub bootstrap_candidates: u64,
     /// Small step and large step probability.
     pub mutation: MutationParams,

@@ -1,4 +1,4 @@
-//! Replica-exchange MLT (seed 002 sec. 5.4): `ensembles` independent
+//! Replica-exchange MLT (Šik 2018, sec. 5.4): `ensembles` independent
 //! ensembles of tempered chains with the chosen exchange move, all chains'
 //! samples combined by eq. 5.13's MIS weights (see
 //! [`exchange`](crate::exchange)). A unit of work is a sweep of every

@@ -17,69 +17,7 @@ use crate::mutate::{Kelemen, MutationParams, SmallStep};
 use crate::tiles::TileShape;
 
 use super::{Method, Solver};
-
-/// What a setting takes.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Kind {
-    /// A whole number from `min` to `max`.
-    Whole {
-        /// The smallest value.
-        min: u64,
-        /// The largest value.
-        max: u64,
-    },
-    /// A finite number from `min` to `max`.
-    Real {
-        /// The smallest value.
-        min: f64,
-        /// The largest value.
-        max: f64,
-    },
-    /// 0 (off) or 1 (on).
-    Flag,
-    /// One of these names.
-    Choice(&'static [&'static str]),
-}
-
-/// A setting's value: a number (whole numbers and flags too) or a choice's name.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Value {
-    /// A [`Kind::Whole`], [`Kind::Real`] or [`Kind::Flag`] value.
-    Number(f64),
-    /// A [`Kind::Choice`] value.
-    Choice(&'static str),
-}
-
-/// One row of the table.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Setting {
-    /// Its name, as [`Method::set`] takes it.
-    pub name: &'static str,
-    /// What it takes.
-    pub kind: Kind,
-    /// One line for `--help` and the C header.
-    pub help: &'static str,
-}
-
-impl core::fmt::Display for Kind {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            Kind::Whole { min, max } => write!(f, "whole, {min} to {max}"),
-            Kind::Real { min, max } => write!(f, "{min} to {max}"),
-            Kind::Flag => write!(f, "0 or 1"),
-            Kind::Choice(names) => write!(f, "{}", names.join(" | ")),
-        }
-    }
-}
-
-impl core::fmt::Display for Value {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            Value::Number(v) => write!(f, "{v}"),
-            Value::Choice(name) => write!(f, "{name}"),
-        }
-    }
-}
+use crate::setting::{Kind, Setting, Value, choice, flag, real, whole};
 
 impl Method {
     /// The table as text, a line per setting: name, current value, what it
@@ -106,38 +44,6 @@ impl Method {
             );
         }
         text
-    }
-}
-
-const fn whole(name: &'static str, min: u64, max: u64, help: &'static str) -> Setting {
-    Setting {
-        name,
-        kind: Kind::Whole { min, max },
-        help,
-    }
-}
-
-const fn real(name: &'static str, min: f64, max: f64, help: &'static str) -> Setting {
-    Setting {
-        name,
-        kind: Kind::Real { min, max },
-        help,
-    }
-}
-
-const fn choice(name: &'static str, names: &'static [&'static str], help: &'static str) -> Setting {
-    Setting {
-        name,
-        kind: Kind::Choice(names),
-        help,
-    }
-}
-
-const fn flag(name: &'static str, help: &'static str) -> Setting {
-    Setting {
-        name,
-        kind: Kind::Flag,
-        help,
     }
 }
 
@@ -176,13 +82,13 @@ const STEP_MIN: Setting = real(
     "small_step_min",
     1e-9,
     0.5,
-    "Kelemen's smallest step s1 (kelemen kernel; seed 001: 1/1024)",
+    "Kelemen's smallest step s1 (kelemen kernel; Gruson et al. 2020: 1/1024)",
 );
 const STEP_MAX: Setting = real(
     "small_step_max",
     1e-9,
     0.5,
-    "Kelemen's largest step s2 (kelemen kernel; seed 001: 1/32)",
+    "Kelemen's largest step s2 (kelemen kernel; Gruson et al. 2020: 1/32)",
 );
 
 const PSSMLT: &[Setting] = &[
@@ -211,7 +117,7 @@ const REPLICA: &[Setting] = &[
     choice(
         "exchange",
         &ExchangeKind::NAMES,
-        "the exchange move (seed 002 sec. 5.3)",
+        "the exchange move (Šik 2018, sec. 5.3)",
     ),
     choice(
         "tempering",
@@ -229,7 +135,7 @@ const STRATIFIED: &[Setting] = &[
         "tile_radius",
         0,
         4,
-        "tile shape: 0 the cross of seed 001, r a (2r+1)^2 square (the reconstruction's cost grows with it)",
+        "tile shape: 0 the cross of Gruson et al. 2020, r a (2r+1)^2 square (the reconstruction's cost grows with it)",
     ),
     whole(
         "exchange_every",
@@ -240,7 +146,7 @@ const STRATIFIED: &[Setting] = &[
     choice(
         "solver",
         &Solver::NAMES,
-        "weighted: seed 001 eq. 13-16; log: eq. 17-20",
+        "weighted: Gruson et al. 2020, eq. 13-16; log: eq. 17-20",
     ),
     real(
         "alpha",
@@ -287,9 +193,9 @@ const MULTISTAGE: &[Setting] = &[
         "linear_stages",
         0,
         1024,
-        "stages from half to full resolution (seed 004: 10)",
+        "stages from half to full resolution (Hoberock and Hart 2010: 10)",
     ),
-    flag("noise_aware", "noise-aware importance (seed 004 sec. 4.3)"),
+    flag("noise_aware", "noise-aware importance (Hoberock and Hart 2010, sec. 4.3)"),
     STAGE_CHAINS,
     BOOTSTRAP,
     LARGE_STEP,

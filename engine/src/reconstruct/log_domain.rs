@@ -1,4 +1,4 @@
-//! The ratio-based (log-domain) solver of seed 001 (eq. 17-20).
+//! The ratio-based (log-domain) solver of Gruson et al. 2020 (eq. 17-20).
 
 use alloc::vec;
 use alloc::vec::Vec;

@@ -1,4 +1,4 @@
-//! Reconstruction of the tile normalizations of stratified MCMC (seed 001
+//! Reconstruction of the tile normalizations of stratified MCMC (Gruson et al. 2020
 //! sec. 3.2).
 //!
 //! Each tile's chain estimates only *unscaled* pixel values `G_s(j)` (eq. 9-10);
@@ -7,7 +7,7 @@
 //! `Î(j)` from the large steps regularizes the whole (eq. 11).
 //!
 //! * [`weighted`]: the weighted iterative (Jacobi / IRLS) solver of eq. 13-16,
-//!   the one seed 001 uses. Every iteration computes all `b^{n+1}` from `b^n`,
+//!   the one Gruson et al. 2020 uses. Every iteration computes all `b^{n+1}` from `b^n`,
 //!   so it is deterministic whatever the thread count.
 //! * [`log_domain`]: the ratio-based solver of eq. 17-20: log pixel values
 //!   whose differences match `log G_c(i) / G_c(j)` inside every tile `c`, a

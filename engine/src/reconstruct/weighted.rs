@@ -1,4 +1,4 @@
-//! The weighted iterative solver of seed 001 (eq. 13-16): IRLS weights
+//! The weighted iterative solver of Gruson et al. 2020 (eq. 13-16): IRLS weights
 //! refreshed every 50 iterations, and between refreshes the (then linear)
 //! update as a stencil ([`Linear`]) on zero-padded f32 planes.
 
@@ -13,7 +13,7 @@ use crate::error::Error;
 use crate::parallel::{self, map_indices, threads};
 use crate::tiles::Tiles;
 
-/// Parameters of the weighted iterative solver (seed 001 sec. 3.2 and 4).
+/// Parameters of the weighted iterative solver (Gruson et al. 2020, sec. 3.2 and 4).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WeightedSettings {
     /// Weight `α` of the MC regularization (0.05).

@@ -1,5 +1,5 @@
 //! A BSDF at one shading point: evaluation, density and sampling in the
-//! local shading frame, and tempering (seed 002 eq. 5.5).
+//! local shading frame, and tempering (Šik 2018, eq. 5.5).
 
 use std::f32::consts::FRAC_1_PI;
 
@@ -57,7 +57,7 @@ pub struct BsdfSample {
 }
 
 impl Bsdf {
-    /// The tempered BSDF (seed 002 eq. 5.5): at `temperature > 1` every
+    /// The tempered BSDF (Šik 2018, eq. 5.5): at `temperature > 1` every
     /// roughness becomes `sqrt(T)·max(α, 1e-4)`, then at least `floor` (the
     /// declining regularization of sec. 5.4). At `T = 1` and `floor = 0` it is
     /// unchanged.

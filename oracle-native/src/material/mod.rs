@@ -3,7 +3,7 @@
 //! Microfacet lobes use the GGX (Trowbridge-Reitz) distribution with
 //! height-correlated Smith masking (Walter et al. 2007); rough dielectrics
 //! follow Walter et al.'s generalized half vector. Every BSDF can be
-//! *tempered* (seed 002 sec. 5.2, eq. 5.5): its roughness `ρ` becomes
+//! *tempered* (Šik 2018, sec. 5.2, eq. 5.5): its roughness `ρ` becomes
 //! `sqrt(T)·max(ρ, ρ_min)` with `ρ_min = 1e-4` for specular surfaces, so
 //! specular lobes widen into glossy ones as the temperature rises.
 //!
@@ -24,7 +24,7 @@ pub use bsdf::{Bsdf, BsdfSample};
 pub use microfacet::fr_dielectric;
 pub use texture::Texture;
 
-/// Smallest roughness a tempered specular surface gets (seed 002 eq. 5.5).
+/// Smallest roughness a tempered specular surface gets (Šik 2018, eq. 5.5).
 pub const MIN_TEMPERED_ROUGHNESS: f32 = 1e-4;
 
 /// What a conductor reflects.

@@ -1,4 +1,4 @@
-//! Initialization of the tile chains by global chains (seed 001 sec. 3.3):
+//! Initialization of the tile chains by global chains (Gruson et al. 2020, sec. 3.3):
 //! PSSMLT over the union of the tile targets, whose film position picks the
 //! tile and whose fraction is the jitter; a tile takes the state of the first
 //! global chain that visits it, until enough tiles are initialized or the

@@ -1,4 +1,4 @@
-//! Local replica exchange between neighbouring tiles (seed 001 sec. 3.4,
+//! Local replica exchange between neighbouring tiles (Gruson et al. 2020, sec. 3.4,
 //! eq. 21): disjoint pairs, alternating horizontal and vertical, even and odd
 //! offsets, accepted with `min(1, T_s(x_t) T_t(x_s) / (T_s(x_s) T_t(x_t)))`;
 //! a tile without a state borrows its neighbour's instead (sec. 3.3).
@@ -104,7 +104,7 @@ where
 }
 
 /// The pairs of sweep `sweep`: horizontal on even exchange rounds, vertical on
-/// odd ones, starting at even or odd columns/rows in turn (seed 001 fig. 7).
+/// odd ones, starting at even or odd columns/rows in turn (Gruson et al. 2020, fig. 7).
 fn pairing(round: u64) -> (bool, usize) {
     (round.is_multiple_of(2), ((round / 2) % 2) as usize)
 }

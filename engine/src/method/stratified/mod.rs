@@ -1,4 +1,4 @@
-//! Stratified MCMC (seed 001, Gruson, West and Hachisuka 2020): one Markov
+//! Stratified MCMC (Gruson, West and Hachisuka 2020): one Markov
 //! chain per pixel-centred tile, so that every pixel receives exactly the same
 //! number of samples, followed by the reconstruction of the tiles' unknown
 //! normalizations.
@@ -16,7 +16,7 @@
 //!   sample of each tile pixel. Pooled over the tiles containing a pixel, they
 //!   give the regularizer `Î(j)` of eq. 11 (with, optionally, plain MC paths
 //!   traced for it alone: [`StratifiedSettings::regularizer_paths`]). Their
-//!   probability is 0.8 by default, seed 001's is 0.3 (ours, measured: see
+//!   probability is 0.8 by default, Gruson et al.'s (2020) is 0.3 (ours, measured: see
 //!   [`StratifiedSettings::mutation`]).
 //! * **Initialization** (sec. 3.3). Global chains run PSSMLT over the union of
 //!   the tile targets (the film position picks the tile, its fraction the
@@ -43,12 +43,12 @@
 //! * **Known pixels** (ours): a pixel whose large steps all saw the same
 //!   radiance (an emitter or a constant environment seen directly) takes
 //!   it; Monte Carlo knows it exactly, the reconstruction to its noise.
-//! * **Fallback to the regularizer** (ours, not in seed 001): a pixel whose
+//! * **Fallback to the regularizer** (ours, not in Gruson et al. 2020): a pixel whose
 //!   reconstruction lies more than [`StratifiedSettings::fallback_sigmas`]
 //!   standard errors below its Monte Carlo estimate takes that estimate, so
 //!   rare bright paths that the tile chains found too late (start-up bias,
-//!   seed 001 sec. 5 and Fig. 9) are not dimmed.
-//! * **The image's total** (ours, not in seed 001): each channel of the
+//!   Gruson et al. 2020, sec. 5 and Fig. 9) are not dimmed.
+//! * **The image's total** (ours, not in Gruson et al. 2020): each channel of the
 //!   reconstructed pixels is scaled so that the channel's total over the
 //!   image is the regularizer's ([`StratifiedSettings::anchor_total`]), which
 //!   makes every channel's image mean unbiased at every budget.
@@ -98,7 +98,7 @@ use crate::tiles::{TileShape, Tiles};
 /// How the tile normalizations are reconstructed.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Solver {
-    /// The weighted iterative solver, eq. 13-16 (seed 001's choice).
+    /// The weighted iterative solver, eq. 13-16 (Gruson et al.'s (2020) choice).
     Weighted(WeightedSettings),
     /// The log-domain solver, eq. 17-20.
     LogDomain(LogSettings),
@@ -134,7 +134,7 @@ impl Solver {
     }
 }
 
-/// Global-chain initialization of the tile chains (seed 001 sec. 3.3 and 4).
+/// Global-chain initialization of the tile chains (Gruson et al. 2020, sec. 3.3 and 4).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Initialization {
     /// Number of global chains (0 disables global initialization: tiles then
@@ -142,7 +142,7 @@ pub struct Initialization {
     pub global_chains: u32,
     /// Stop once this fraction of the tiles is initialized (0.3).
     pub coverage: f64,
-    /// At most this many paths per pixel (seed 001: an effective 32).
+    /// At most this many paths per pixel (Gruson et al. 2020: an effective 32).
     pub max_samples_per_pixel: f64,
     /// And at most this fraction of the render's budget (samples or time).
     pub max_budget_fraction: f64,
@@ -171,7 +171,7 @@ impl Default for Initialization {
 pub struct StratifiedSettings {
     /// The tile shape (cross by default).
     pub shape: TileShape,
-    /// Small steps and the large step probability: 0.8 by default (seed 001
+    /// Small steps and the large step probability: 0.8 by default (Gruson et al. 2020
     /// uses 0.3). Every large step is also a Monte Carlo sample of the
     /// tile's pixels (the regularizer, the known pixels, the fallback), and
     /// a tile whose target is flat or nearly so (an emitter, a diffuse wall)
@@ -186,7 +186,7 @@ pub struct StratifiedSettings {
     /// The reconstruction.
     pub solver: Solver,
     /// The weighted solver's `α` chosen from 0.05, 0.2, 1 and 5 by cross-validation
-    /// (true by default; false: the solver's own). Ours, not seed 001's: the
+    /// (true by default; false: the solver's own). Ours, not Gruson et al.'s (2020): the
     /// best weight of the regularizer against the overlaps depends on how
     /// noisy each is, which depends on the scene and the budget (`α` = 1
     /// halved the error on the Cornell box's light, 0.05-0.2 kept veach-ajar
@@ -212,14 +212,14 @@ pub struct StratifiedSettings {
     pub fallback_sigmas: Option<f64>,
     /// Scale the image so that its total is the regularizer's, the large
     /// steps' unbiased Monte Carlo estimate of it (true by default). Our
-    /// addition, not in seed 001: the reconstruction anchors the
+    /// addition, not in Gruson et al. 2020: the reconstruction anchors the
     /// normalizations with IRLS weights, close to a weighted *median* of the
     /// tiles' MC means, which is not their mean when few large steps make
     /// those means skewed; see `regularizer.rs` for what it cost and why the
     /// scaled image is unbiased.
     pub anchor_total: bool,
     /// Plain MC paths per pixel and sweep traced for the regularizer alone,
-    /// one tile at a time at its centre pixel (0 by default: seed 001's large
+    /// one tile at a time at its centre pixel (0 by default: Gruson et al.'s (2020) large
     /// steps only). Ours, issue 18: the regularizer is the reconstruction's
     /// one absolute anchor, and its noise is what limits the image on
     /// veach-ajar (docs/RESULTS.md).

@@ -1,5 +1,5 @@
-//! The large steps' Monte Carlo estimate, the regularizer `Î` of seed 001
-//! eq. 11, and four uses of it that are ours, not seed 001's: the two
+//! The large steps' Monte Carlo estimate, the regularizer `Î` of Gruson et al. 2020
+//! eq. 11, and four uses of it that are ours, not Gruson et al.'s (2020): the two
 //! halves that choose the solver's `α` ([`Halves`]), the known pixels
 //! ([`take_known`]), the fallback to it and the image's total.
 //!
@@ -10,7 +10,7 @@
 //! they give an unbiased estimate of it. Tile chains that start far from a rare bright path (a
 //! caustic, a glint) carry start-up bias in their within-tile ratios, and
 //! the reconstruction, which treats such tiles as outliers, then dims the
-//! brightest pixels (seed 001 sec. 5 and Fig. 9 report the same loss):
+//! brightest pixels (Gruson et al. 2020, sec. 5 and Fig. 9 report the same loss):
 //! [`fall_back`] gives a pixel more than `sigmas` standard errors *below* its
 //! Monte Carlo estimate that estimate. The test is one-sided: a regularizer
 //! that missed a rare path is low and never replaces anything, and one that
@@ -20,7 +20,7 @@
 //!
 //! **The image's total.** The reconstruction anchors the normalizations
 //! `b_s` with the tiles' mean MC estimates `Î_s` under IRLS weights `1 /
-//! (|e_s - Î_s| + ...)` (seed 001 eq. 13-16): once the overlaps agree, the
+//! (|e_s - Î_s| + ...)` (Gruson et al. 2020, eq. 13-16): once the overlaps agree, the
 //! common scale of a region is close to a weighted *median* of its `Î_s`.
 //! With few large steps per pixel those are skewed, and their median is not
 //! their mean: a light reached by 30 % of paths came out 3 % dark at 8 spp

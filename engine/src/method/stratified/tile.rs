@@ -1,4 +1,4 @@
-//! A tile's Markov chain (seed 001 sec. 3.1, eq. 6-10): its state is a
+//! A tile's Markov chain (Gruson et al. 2020, sec. 3.1, eq. 6-10): its state is a
 //! primary sample whose film coordinates are a jitter inside a pixel,
 //! replayed in every pixel of the tile (coherent sampling); its target is the
 //! largest importance of those evaluations; its steps splat into the tile's
@@ -50,7 +50,7 @@ pub(super) struct TileState<R> {
 }
 
 /// Light tracing in stratified MCMC. Its splats land anywhere on the film,
-/// so it "cannot be stratified in the image space" (seed 001 sec. 5): the
+/// so it "cannot be stratified in the image space" (Gruson et al. 2020, sec. 5): the
 /// tile chains value and accumulate only the radiance at their own pixels,
 /// and the splats are estimated apart, by Monte Carlo, from the traces that
 /// are independent uniform samples: the coin-chosen large steps (each a

@@ -1,0 +1,134 @@
+//! Which strategies of bidirectional path tracing a path joins: all of them
+//! (MIS-weighted), one alone, or one chosen by the path's own numbers
+//! (multiplexed MLT, Hachisuka et al. 2014): the length table and the choice.
+
+use strata_engine::{HELD_STREAM, Sampler};
+
+/// Which strategies a bidirectional path joins.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Strategies {
+    /// Every one, weighted by MIS.
+    All,
+    /// `(light, camera)` alone, unweighted.
+    One { light: usize, camera: usize },
+    /// One chosen by the path's own numbers (Hachisuka et al. 2014): a path
+    /// length uniformly, then one of its strategies uniformly, weighted by
+    /// MIS over the probability of the choice.
+    Multiplexed,
+}
+
+/// Whether strategy `(s, t)` joins paths of at most `longest` vertices:
+/// not `t = 0`, not `(0, 1)`, and a path of one segment only as the camera
+/// sees the light (pbrt skips `s = t = 1` too: `s + t = 2` has weight 1).
+pub(crate) fn joinable(s: usize, t: usize, longest: usize) -> bool {
+    t >= 1 && s + t <= longest && !(t == 1 && s <= 1)
+}
+
+/// Multiplexed MLT's choice of a path length (Hachisuka et al. 2014): `n`
+/// vertices in `2..=longest` with probability proportional to `1/(n-1)²`.
+///
+/// Under MLT the chain spends time on each length in proportion to the
+/// light it carries whatever these probabilities are (the target includes
+/// their inverse); they decide only where large steps propose. A uniform
+/// choice over `max_depth = 65` lengths (the real scenes') puts most large
+/// steps on long paths that carry nothing: `1/(n-1)²` measured best of
+/// uniform and `1/(n-1)^{1, 1.5, 2, 3}` (docs/RESULTS.md, issue 38).
+#[derive(Clone, Debug)]
+pub(crate) struct Lengths {
+    /// `P(n <= k + 2)` at index `k`.
+    cumulative: Vec<f32>,
+    /// `P(n = k + 2)` at index `k`.
+    probability: Vec<f32>,
+}
+
+impl Lengths {
+    /// The choice among paths of 2 to `longest` vertices.
+    pub(crate) fn new(longest: usize) -> Self {
+        let weights: Vec<f64> = (1..longest).map(|k| 1.0 / (k * k) as f64).collect();
+        let total: f64 = weights.iter().sum();
+        let mut sum = 0.0;
+        let cumulative = weights
+            .iter()
+            .map(|w| {
+                sum += w / total;
+                sum as f32
+            })
+            .collect();
+        let probability = weights.iter().map(|w| (w / total) as f32).collect();
+        Self {
+            cumulative,
+            probability,
+        }
+    }
+
+    /// The length `u` in `[0, 1)` selects, and its probability.
+    fn choose(&self, u: f32) -> (usize, f32) {
+        let last = self.cumulative.len() - 1;
+        let k = self.cumulative.partition_point(|&c| c <= u).min(last);
+        (k + 2, self.probability[k])
+    }
+}
+
+/// Multiplexing's choice (Hachisuka et al. 2014, sec. 4): the path's vertex
+/// count `n` by [`Lengths`] from the stream small steps hold (a chain keeps
+/// its length until a large step, as pbrt-v4's `MLTIntegrator` keeps a
+/// chain's depth), then `t` uniformly among the strategies `(n - t, t)` that
+/// can join it, from stream 2 (small steps move it: the chain moves to the
+/// strategies that carry the light). Returns `(s, t)` and one over the
+/// choice's probability.
+pub(crate) fn multiplexed_choice<S: Sampler + ?Sized>(
+    sampler: &mut S,
+    lengths: &Lengths,
+    longest: usize,
+) -> (usize, usize, f32) {
+    sampler.start_stream(HELD_STREAM);
+    let (n, p_length) = lengths.choose(sampler.next_1d());
+    sampler.start_stream(2);
+    let u_strategy = sampler.next_1d();
+    // Two vertices: only `(0, 2)`; more: every `t` in `1..=n`.
+    let (strategies, t) = if n == 2 {
+        (1, 2)
+    } else {
+        (n, 1 + ((u_strategy * n as f32) as usize).min(n - 1))
+    };
+    debug_assert!(joinable(n - t, t, longest));
+    sampler.start_stream(0);
+    (n - t, t, strategies as f32 / p_length)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every length in `2..=longest` has its probability `∝ 1/(n-1)²`, and
+    /// the numbers that select it are an interval of that width.
+    #[test]
+    fn lengths_are_chosen_with_their_probabilities() {
+        for longest in [2, 3, 18, 67] {
+            let lengths = Lengths::new(longest);
+            let total: f64 = (1..longest).map(|k| 1.0 / (k * k) as f64).sum();
+            let mut hits = vec![0u32; longest + 1];
+            let draws = 100_000;
+            for i in 0..draws {
+                let (n, p) = lengths.choose((i as f32 + 0.5) / draws as f32);
+                let expected = 1.0 / ((n - 1) * (n - 1)) as f64 / total;
+                assert!(
+                    (p as f64 - expected).abs() < 1e-6 * expected.max(1e-3),
+                    "n {n}"
+                );
+                hits[n] += 1;
+            }
+            assert_eq!(lengths.choose(0.0).0, 2);
+            assert_eq!(lengths.choose(1.0f32.next_down()).0, longest);
+            for (n, &h) in hits.iter().enumerate().skip(2) {
+                let p = 1.0 / ((n - 1) * (n - 1)) as f64 / total;
+                // A regular grid of `draws` numbers: within one draw.
+                let share = h as f64 / draws as f64;
+                assert!(
+                    (share - p).abs() <= 1.5 / draws as f64,
+                    "n {n}: {share} vs {p}"
+                );
+            }
+        }
+    }
+}

@@ -137,11 +137,7 @@ pub(crate) struct Checkpointer<'a, S> {
 }
 
 impl<'a, S> Checkpointer<'a, S> {
-    pub(crate) fn new(
-        settings: &'a S,
-        channels: usize,
-        oracle: &'a dyn Fn() -> OracleId,
-    ) -> Self {
+    pub(crate) fn new(settings: &'a S, channels: usize, oracle: &'a dyn Fn() -> OracleId) -> Self {
         Self {
             settings,
             channels: channels as u32,

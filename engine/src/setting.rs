@@ -37,7 +37,7 @@ pub enum Value {
 /// One row of the table.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Setting {
-    /// Its name, as [`Method::set`] takes it.
+    /// Its name, as [`Method::set`](crate::Method::set) takes it.
     pub name: &'static str,
     /// What it takes.
     pub kind: Kind,
@@ -84,7 +84,11 @@ pub(crate) const fn real(name: &'static str, min: f64, max: f64, help: &'static 
 }
 
 /// A row taking one of `names`.
-pub(crate) const fn choice(name: &'static str, names: &'static [&'static str], help: &'static str) -> Setting {
+pub(crate) const fn choice(
+    name: &'static str,
+    names: &'static [&'static str],
+    help: &'static str,
+) -> Setting {
     Setting {
         name,
         kind: Kind::Choice(names),
@@ -100,4 +104,3 @@ pub(crate) const fn flag(name: &'static str, help: &'static str) -> Setting {
         help,
     }
 }
-

@@ -49,8 +49,8 @@ use strata_engine::{FilmPoint, PathFlags, Rgb, Sampler, SplatSink};
 use crate::geometry::{Frame, Intersector, Ray, cosine_hemisphere, uniform_triangle};
 use crate::material::Bsdf;
 use crate::scene::{NO_LIGHT, Projection, Scene};
-use crate::tracer::{DIRECT_EMITTER, PathTracer, ROULETTE_DEPTH, SPECULAR_PATH, offset};
 use crate::strategies::{Strategies, joinable, multiplexed_choice};
+use crate::tracer::{DIRECT_EMITTER, PathTracer, ROULETTE_DEPTH, SPECULAR_PATH, offset};
 
 /// What a subpath vertex is.
 #[derive(Clone, Copy, Debug, PartialEq)]

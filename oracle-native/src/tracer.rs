@@ -20,9 +20,9 @@ use strata_engine::{
     FilmPoint, PathFlags, PathOracle, PathSample, Resolution, Rgb, Sampler, SplatSink, Temperature,
 };
 
-use crate::strategies::{Lengths, Strategies};
 use crate::geometry::{Frame, Intersector, Ray, power_heuristic, uniform_triangle};
 use crate::scene::{NO_LIGHT, Projection, Scene};
+use crate::strategies::{Lengths, Strategies};
 
 /// Set on paths with at least one specular scattering event.
 pub const SPECULAR_PATH: PathFlags = PathFlags(1);

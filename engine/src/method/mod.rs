@@ -31,6 +31,7 @@ mod table;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
+pub use crate::setting::{Kind, Setting, Value};
 pub use erpt::ErptSettings;
 pub use multistage::{MultiStageSettings, Probed, Stage, stage_grids, tvi};
 pub use pssmlt::PssmltSettings;
@@ -38,7 +39,6 @@ pub use replica::{ReplicaExtras, ReplicaSettings};
 pub use stratified::{
     Initialization, Solver, StratifiedExtras, StratifiedSettings, StratifiedStats,
 };
-pub use crate::setting::{Kind, Setting, Value};
 
 use serde::de::DeserializeOwned;
 

@@ -195,7 +195,10 @@ const MULTISTAGE: &[Setting] = &[
         1024,
         "stages from half to full resolution (Hoberock and Hart 2010: 10)",
     ),
-    flag("noise_aware", "noise-aware importance (Hoberock and Hart 2010, sec. 4.3)"),
+    flag(
+        "noise_aware",
+        "noise-aware importance (Hoberock and Hart 2010, sec. 4.3)",
+    ),
     STAGE_CHAINS,
     BOOTSTRAP,
     LARGE_STEP,

@@ -905,13 +905,16 @@ fn report_extras(extras: &Extras) {
             }
             let s = &extras.counters;
             say!(
-                "{} sweeps; paths: tiles {}, exchanges {}, initialization {}; tiles started by \
+                "{} sweeps; paths: tiles {}, exchanges {}, regularizer {}, the budget's \
+                 remainder {}, initialization {}; tiles started by \
                  global chains {}, borrowing {}, uniform draws {}, never {}; exchanges \
                  accepted {}/{}; pixels that took their MC estimate {}; image scaled by {:.4} \
                  to the MC total",
                 s.sweeps,
                 s.tile_samples,
                 s.exchange_samples,
+                s.regularizer_samples,
+                s.remainder_samples,
                 s.initialization_samples,
                 s.initialized_by_global_chains,
                 s.initialized_by_borrowing,

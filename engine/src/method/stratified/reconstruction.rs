@@ -104,7 +104,7 @@ pub(super) fn reconstruct_image<R: Radiance>(
     } else {
         1.0
     };
-    film.add_scaled(&light.sums, 1.0 / sweeps.max(1) as f64);
+    light.add_to(&mut film, sweeps);
     Ok(Reconstructed {
         film,
         regularizer,
@@ -140,7 +140,7 @@ pub(super) fn preview<R: Radiance>(
     if settings.anchor_total {
         anchor_total(&mut film, &regularizer, &[]);
     }
-    film.add_scaled(&light.sums, 1.0 / sweeps.max(1) as f64);
+    light.add_to(&mut film, sweeps);
     film
 }
 

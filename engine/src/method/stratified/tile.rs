@@ -61,12 +61,22 @@ pub(super) struct TileState<R> {
 /// sweeps and divided by their number, is an unbiased estimate of the light
 /// tracing image for one camera path per pixel; it is added to the
 /// reconstructed image.
+///
+/// A sample budget's remainder after its last whole sweep is spent on `e`
+/// more regularizer paths at every tile's centre
+/// ([`StratifiedSettings`](super::StratifiedSettings)); their splats,
+/// summed and divided by `e`, are a second unbiased estimate of the same
+/// image, and the two are mixed with one constant weight (so the mix is
+/// unbiased too), the extra paths' share of the samples.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(super) struct LightTracing {
     /// `1 / m_p` per pixel (0 where `m_p = 0`).
     pub weights: Vec<f64>,
     /// The weighted splats so far.
     pub sums: Film,
+    /// The splats of the remainder's paths, and how many each tile traced.
+    pub remainder: Film,
+    pub remainder_paths: u64,
 }
 
 impl LightTracing {
@@ -80,7 +90,36 @@ impl LightTracing {
         Self {
             weights,
             sums: Film::new(tiles.resolution(), channels),
+            remainder: Film::new(tiles.resolution(), channels),
+            remainder_paths: 0,
         }
+    }
+
+    /// Adds the splats of the remainder's paths (emptying the list).
+    pub fn add_remainder<R: Radiance>(&mut self, sampled: &mut Vec<TileSplat<R>>) {
+        let resolution = self.remainder.resolution();
+        for s in sampled.drain(..) {
+            let pixel = resolution.pixel_index(s.splat.film);
+            self.remainder.add(pixel, 1.0, &s.splat.radiance);
+        }
+    }
+
+    /// Adds the light-tracing image after `sweeps` sweeps to `film`.
+    pub fn add_to(&self, film: &mut Film, sweeps: u64) {
+        let sweeps = sweeps.max(1) as f64;
+        if self.remainder_paths == 0 {
+            film.add_scaled(&self.sums, 1.0 / sweeps);
+            return;
+        }
+        let per_sweep = self
+            .weights
+            .iter()
+            .map(|w| if *w > 0.0 { 1.0 / w } else { 0.0 });
+        let mean = per_sweep.sum::<f64>() / self.weights.len().max(1) as f64;
+        let extra = self.remainder_paths as f64;
+        let share = extra / (sweeps * mean + extra);
+        film.add_scaled(&self.sums, (1.0 - share) / sweeps);
+        film.add_scaled(&self.remainder, share / extra);
     }
 
     /// Adds a tile chain's sampled splats (emptying its list).

@@ -516,10 +516,11 @@ where
     /// Cornell box a third of it was left before). Returns the last sweep
     /// and the budget; a time budget has no remainder.
     fn remainder(&self, budget: Budget) -> Option<(u64, u64)> {
-        let Budget::Samples(total) = budget else {
-            return None;
-        };
-        Some((self.planned_units(total), total))
+        match budget {
+            Budget::Samples(total) => Some((self.planned_units(total), total)),
+            #[cfg(feature = "std")]
+            Budget::Time(_) => None,
+        }
     }
 
     /// Traces `paths` regularizer paths at every tile's centre: the budget's

@@ -23,6 +23,7 @@
 mod erpt;
 mod mc;
 mod multistage;
+mod noise_aware;
 mod pssmlt;
 mod replica;
 mod stratified;
@@ -33,7 +34,8 @@ use serde::{Deserialize, Serialize};
 
 pub use crate::setting::{Kind, Setting, Value};
 pub use erpt::ErptSettings;
-pub use multistage::{MultiStageSettings, Probed, Stage, stage_grids, tvi};
+pub use multistage::{MultiStageSettings, Probed, Stage, stage_grids};
+pub use noise_aware::tvi;
 pub use pssmlt::PssmltSettings;
 pub use replica::{ReplicaExtras, ReplicaSettings};
 pub use stratified::{

@@ -34,6 +34,7 @@ use serde::{Deserialize, Serialize};
 
 use core::sync::atomic::{AtomicU64, Ordering};
 
+use super::noise_aware::noise_target;
 use super::pssmlt::{Pssmlt, PssmltSettings};
 use super::{Extras, Job, Output};
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
@@ -268,114 +269,6 @@ impl<O: PathOracle> SplatSink<O::Radiance> for ProbedSplats<'_, '_, O> {
     fn splat(&mut self, film: FilmPoint, radiance: O::Radiance) {
         self.splats.splat(film, self.probe.probed(film, radiance));
     }
-}
-
-/// Ward, Rushmeier and Piatko's (1997) piecewise threshold-versus-intensity
-/// function: the just-noticeable luminance difference at adaptation
-/// luminance `la` (cd/m²).
-pub fn tvi(la: f64) -> f64 {
-    let l = libm::log10(la.max(1e-10));
-    let log_threshold = if l < -3.94 {
-        -2.86
-    } else if l < -1.44 {
-        libm::pow(0.405 * l + 1.6, 2.18) - 2.86
-    } else if l < -0.0184 {
-        l - 0.395
-    } else if l < 1.9 {
-        libm::pow(0.249 * l + 0.65, 2.7) - 0.72
-    } else {
-        l - 1.255
-    };
-    libm::pow(10.0, log_threshold)
-}
-
-/// The `q`-quantile of `values` (sorted copy; nearest rank).
-fn quantile(values: &[f64], q: f64) -> f64 {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * q) as usize]
-}
-
-/// The noise target of Hoberock and Hart 2010, sec. 4.3.5 per pixel (see the module docs).
-/// `mean` is the luminance estimate, `variance` the deviation estimate per
-/// pixel, `adaptation` the region-averaged luminance. Luminance is scaled so
-/// that the image mean is 100 cd/m², a display-like adaptation level (the
-/// seed does not say how scene units map to `tvi`'s).
-fn noise_target(
-    resolution: Resolution,
-    mean: &[f64],
-    variance: &[f64],
-    adaptation: &[f64],
-) -> Vec<f64> {
-    let image_mean = mean.iter().sum::<f64>() / mean.len().max(1) as f64;
-    let to_cd = if image_mean > 0.0 {
-        100.0 / image_mean
-    } else {
-        1.0
-    };
-    let error: Vec<f64> = variance
-        .iter()
-        .zip(adaptation)
-        .map(|(v, la)| libm::sqrt(v.max(0.0)) * to_cd / tvi(la * to_cd))
-        .collect();
-    let sampled: Vec<f64> = error
-        .iter()
-        .zip(mean)
-        .filter(|(e, m)| **m > 0.0 && **e > 0.0)
-        .map(|(e, _)| *e)
-        .collect();
-    if sampled.is_empty() {
-        return vec![1.0; error.len()];
-    }
-    let (p5, p95) = (quantile(&sampled, 0.05), quantile(&sampled, 0.95));
-    // Step 1: contrast p95/p5 at most 2, by a power law around p5.
-    let gamma = if p95 > 2.0 * p5 {
-        core::f64::consts::LN_2 / libm::log(p95 / p5)
-    } else {
-        1.0
-    };
-    let compress = |e: f64| p5 * libm::pow(e / p5, gamma);
-    let (low, high) = (p5, compress(p95));
-    // Step 2: clamp; unsampled pixels get the 95th percentile.
-    let target: Vec<f64> = error
-        .iter()
-        .zip(mean)
-        .map(|(&e, &m)| {
-            if m > 0.0 && e > 0.0 {
-                compress(e).clamp(low, high)
-            } else {
-                high
-            }
-        })
-        .collect();
-    // Step 3: bilateral filter (5x5, spatial sigma 1.5 px, range sigma 0.25
-    // in log target).
-    let (w, h) = (resolution.width as i64, resolution.height as i64);
-    let mut out = vec![0.0; target.len()];
-    for y in 0..h {
-        for x in 0..w {
-            let centre = libm::log(target[(y * w + x) as usize]);
-            let (mut sum, mut weights) = (0.0, 0.0);
-            for dy in -2..=2i64 {
-                for dx in -2..=2i64 {
-                    let (nx, ny) = (x + dx, y + dy);
-                    if nx < 0 || ny < 0 || nx >= w || ny >= h {
-                        continue;
-                    }
-                    let t = target[(ny * w + nx) as usize];
-                    let dr = libm::log(t) - centre;
-                    let weight = libm::exp(
-                        -((dx * dx + dy * dy) as f64) / (2.0 * 1.5 * 1.5)
-                            - dr * dr / (2.0 * 0.0625),
-                    );
-                    sum += weight * t;
-                    weights += weight;
-                }
-            }
-            out[(y * w + x) as usize] = sum / weights;
-        }
-    }
-    out
 }
 
 /// Multi-stage MLT (Hoberock and Hart 2010, Alg. 2) over `job`'s importance (the base
@@ -649,46 +542,6 @@ impl Observer for StageObserver<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn tvi_is_nearly_continuous_and_increasing() {
-        let mut previous = 0.0;
-        for i in 0..=800 {
-            let la = libm::pow(10.0, -5.0 + i as f64 * 0.01);
-            let t = tvi(la);
-            // The published pieces meet within 3 % (at log La = -1.44 the
-            // threshold drops by 2.8 %).
-            assert!(t >= previous * 0.97, "tvi decreases at {la}");
-            if i > 0 {
-                // No jumps: a 0.01-decade step changes the threshold by < 5 %.
-                assert!(t < previous * 1.05, "tvi jumps at {la}: {previous} -> {t}");
-            }
-            previous = t;
-        }
-    }
-
-    #[test]
-    fn the_noise_target_has_limited_contrast_and_covers_unsampled_pixels() {
-        let res = Resolution::new(8, 8);
-        let n = 64;
-        let variance: Vec<f64> = (0..n).map(|i| 1e-4 * (1.0 + i as f64).powi(3)).collect();
-        let sampled = noise_target(res, &vec![1.0; n], &variance, &vec![1.0; n]);
-        let (lo, hi) = sampled
-            .iter()
-            .fold((f64::INFINITY, 0.0f64), |(a, b), &t| (a.min(t), b.max(t)));
-        // The raw visual error spans 64^1.5 = 512x; the target at most 2x.
-        assert!(lo > 0.0 && hi / lo <= 2.0 + 1e-9, "{lo} .. {hi}");
-        // Pixel 0 has the least noise; unsampled, it is raised to the top.
-        let mut mean = vec![1.0; n];
-        mean[0] = 0.0;
-        let unsampled = noise_target(res, &mean, &variance, &vec![1.0; n]);
-        assert!(
-            unsampled[0] > 1.3 * sampled[0],
-            "{} vs {}",
-            unsampled[0],
-            sampled[0]
-        );
-    }
 
     #[test]
     fn stage_grids_follow_algorithm_2() {

@@ -1,0 +1,97 @@
+//! A path tracer written in C behind the engine's `PathOracle`.
+
+use std::ffi::c_void;
+
+use strata_engine::{
+    FilmPoint, PathOracle, PathSample, Resolution, Rgb, Sampler, SplatSink, Temperature,
+};
+
+use crate::*;
+
+/// A path tracer written in C: the film's size and `trace`, which traces one
+/// path through the film point (`x`, `y` in pixels), drawing every other
+/// decision from `sampler`, at `temperature` (1 is the exact target; higher
+/// values may flatten it, see replica exchange), writes its radiance
+/// (linear RGB) to `rgb[0..3]` and hands contributions landing elsewhere on
+/// the film to `strata_sampler_splat`. Called from several threads at once;
+/// must be a pure function of its inputs.
+#[repr(C)]
+pub struct StrataOracle {
+    pub width: u32,
+    pub height: u32,
+    /// Passed to `trace` unchanged.
+    pub user: *mut c_void,
+    pub trace: Option<
+        extern "C" fn(
+            user: *mut c_void,
+            x: f32,
+            y: f32,
+            sampler: *mut StrataSampler,
+            temperature: f32,
+            rgb: *mut f32,
+        ),
+    >,
+}
+
+/// The engine's view of a [`StrataOracle`].
+pub(crate) struct COracle {
+    pub(crate) resolution: Resolution,
+    pub(crate) user: usize,
+    pub(crate) trace: extern "C" fn(*mut c_void, f32, f32, *mut StrataSampler, f32, *mut f32),
+}
+
+impl COracle {
+    /// The engine's view of the caller's oracle, or the error for a null
+    /// pointer or a missing `trace`.
+    pub(crate) fn new(oracle: *const StrataOracle) -> Result<Self, StrataStatus> {
+        if oracle.is_null() {
+            return Err(fail(StrataStatus::InvalidArgument, "null oracle"));
+        }
+        // SAFETY: a non-null pointer to the caller's live oracle.
+        let oracle = unsafe { &*oracle };
+        let Some(trace) = oracle.trace else {
+            return Err(fail(
+                StrataStatus::InvalidArgument,
+                "the oracle has no trace callback",
+            ));
+        };
+        Ok(Self {
+            resolution: Resolution::new(oracle.width, oracle.height),
+            user: oracle.user as usize,
+            trace,
+        })
+    }
+}
+
+impl PathOracle for COracle {
+    type Radiance = Rgb;
+
+    fn resolution(&self) -> Resolution {
+        self.resolution
+    }
+
+    fn trace<S: Sampler + ?Sized>(
+        &self,
+        film: FilmPoint,
+        sampler: &mut S,
+        temperature: Temperature,
+        splats: &mut dyn SplatSink<Rgb>,
+    ) -> PathSample<Rgb> {
+        let mut dynamic: &mut dyn Sampler = &mut &mut *sampler;
+        let mut sink: &mut dyn SplatSink<Rgb> = splats;
+        let mut handle = StrataSampler {
+            inner: &mut dynamic as *mut &mut dyn Sampler as *mut c_void,
+            splats: &mut sink as *mut &mut dyn SplatSink<Rgb> as *mut c_void,
+        };
+        let mut rgb = [0.0f32; 3];
+        (self.trace)(
+            self.user as *mut c_void,
+            film.x,
+            film.y,
+            &mut handle,
+            temperature.0,
+            rgb.as_mut_ptr(),
+        );
+        PathSample::new(Rgb(rgb))
+    }
+}

@@ -378,51 +378,71 @@ where
             O::Radiance::CHANNELS,
         )
     };
-    if let Some((position, saved)) = job.resumed::<Saved<O::Radiance>>()? {
-        let (chains, stats, exchange_rounds, invalid, bootstrap_traces, light) = saved;
-        let per_tile = offsets * O::Radiance::CHANNELS;
-        let sound = |v: &[f64]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
-        let fits = chains.len() == n
-            && chains.iter().all(|c| {
-                c.unscaled.len() == per_tile
-                    && c.uniform.len() == per_tile
-                    && c.uniform_squares.len() == offsets
-                    && c.odd_sums.len() == offsets
-                    && [&c.unscaled, &c.uniform, &c.uniform_squares, &c.odd_sums]
-                        .iter()
-                        .all(|v| sound(v))
-            });
-        let light_fits = light.weights == new_light().weights
-            && light.sums.fits(job.resolution, O::Radiance::CHANNELS)
-            && light.remainder.fits(job.resolution, O::Radiance::CHANNELS);
-        if !fits || !light_fits {
-            return Err(checkpoint::does_not_fit());
+    let (position, saved) = match job.resumed::<Saved<O::Radiance>>()? {
+        Some((position, saved)) => {
+            let (chains, _, _, _, _, light) = &saved;
+            let per_tile = offsets * O::Radiance::CHANNELS;
+            let sound = |v: &[f64]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
+            let fits = chains.len() == n
+                && chains.iter().all(|c| {
+                    c.unscaled.len() == per_tile
+                        && c.uniform.len() == per_tile
+                        && c.uniform_squares.len() == offsets
+                        && c.odd_sums.len() == offsets
+                        && [&c.unscaled, &c.uniform, &c.uniform_squares, &c.odd_sums]
+                            .iter()
+                            .all(|v| sound(v))
+                });
+            let light_fits = light.weights == new_light().weights
+                && light.sums.fits(job.resolution, O::Radiance::CHANNELS)
+                && light.remainder.fits(job.resolution, O::Radiance::CHANNELS);
+            if !fits || !light_fits {
+                return Err(checkpoint::does_not_fit());
+            }
+            (Some(position), saved)
         }
-        let mut sweeps = Sweeps {
-            ctx: &ctx,
-            settings,
-            chains,
-            stats,
-            exchange_rounds,
-            invalid,
-            sweep_cost,
-            light,
-            remainder: None,
-        };
-        sweeps.remainder = sweeps.remainder(job.budget);
-        let sweeps_clock = reserve_reconstruction(job, &tiles, settings);
-        let driven = drive(
-            &mut sweeps,
-            job.round_loop_until(Some(position), &sweeps_clock),
-            |s, out| s.save(bootstrap_traces, out),
-        )?;
-        return sweeps.finish(driven, bootstrap_traces, &job.out_of_time());
-    }
+        None => (None, start(&ctx, job, settings, new_light())?),
+    };
+    let (chains, stats, exchange_rounds, invalid, bootstrap_traces, light) = saved;
+    let mut sweeps = Sweeps {
+        ctx: &ctx,
+        settings,
+        chains,
+        stats,
+        exchange_rounds,
+        invalid,
+        sweep_cost,
+        light,
+        remainder: None,
+    };
+    sweeps.remainder = sweeps.remainder(job.budget);
+    let sweeps_clock = reserve_reconstruction(job, &tiles, settings);
+    let driven = drive(
+        &mut sweeps,
+        job.round_loop_until(position, &sweeps_clock),
+        |s, out| s.save(bootstrap_traces, out),
+    )?;
+    sweeps.finish(driven, bootstrap_traces, &job.out_of_time())
+}
+
+/// A fresh render's state before its first sweep: a chain per tile,
+/// initialized by the global chains within their share of the budget
+/// (Gruson et al. 2020, sec. 3.3).
+fn start<O, I>(
+    ctx: &Context<'_, O, I>,
+    job: &Job<'_, O, I>,
+    settings: &StratifiedSettings,
+    light: LightTracing,
+) -> Result<Saved<O::Radiance>, Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let n = ctx.tiles.count();
+    let offsets = ctx.tiles.offsets().len();
     let mut chains: Vec<TileChain<O::Radiance>> = (0..n)
         .map(|s| TileChain::new(job.seed, s, n, offsets, &settings.mutation))
         .collect();
-
-    // Initialization, within its share of the budget.
     let init = &settings.initialization;
     let (init_traces, init_clock) = match job.budget {
         Budget::Samples(total) => {
@@ -439,7 +459,7 @@ where
         ),
     };
     let initialized = initialize(
-        &ctx,
+        ctx,
         &mut chains,
         settings,
         job.seed,
@@ -447,28 +467,18 @@ where
         init_clock.as_ref(),
         &|stage, done, total| job.set_up_must_end(stage, done, total),
     )?;
-    let mut sweeps = Sweeps {
-        ctx: &ctx,
-        settings,
-        chains,
-        stats: StratifiedStats {
-            initialization_samples: initialized.traced,
-            ..Default::default()
-        },
-        exchange_rounds: 0,
-        invalid: initialized.invalid,
-        sweep_cost,
-        light: new_light(),
-        remainder: None,
+    let stats = StratifiedStats {
+        initialization_samples: initialized.traced,
+        ..Default::default()
     };
-    sweeps.remainder = sweeps.remainder(job.budget);
-    let sweeps_clock = reserve_reconstruction(job, &tiles, settings);
-    let driven = drive(
-        &mut sweeps,
-        job.round_loop_until(None, &sweeps_clock),
-        |s, out| s.save(initialized.bootstrap, out),
-    )?;
-    sweeps.finish(driven, initialized.bootstrap, &job.out_of_time())
+    Ok((
+        chains,
+        stats,
+        0,
+        initialized.invalid,
+        initialized.bootstrap,
+        light,
+    ))
 }
 
 /// What a checkpoint holds of stratified MCMC: the tile chains, the

@@ -111,22 +111,57 @@ where
         buffers: RoundBuffers::new(bands),
         prior,
     };
-    if let Some((position, saved)) = job.resumed::<Saved<O::Radiance>>()? {
-        let (set_up, ladder, priors, splatted, states) = saved;
-        if states.len() != settings.ensembles as usize
-            || ladder.len() != settings.ensemble.ladder.len()
-        {
-            return Err(checkpoint::does_not_fit());
-        }
-        let work = states
-            .into_iter()
-            .map(|state| work(state, priors.clone()))
-            .collect();
-        let mut ensembles = Splatting::resumed(work, bands, traces_per_sweep, splatted)?;
-        let saver = saver(set_up, &ladder, &priors);
-        let driven = drive(&mut ensembles, job.round_loop(Some(position)), saver)?;
-        return Ok(finish(ensembles, driven, ladder, set_up));
-    }
+    let (mut ensembles, position, set_up, ladder, priors) =
+        match job.resumed::<Saved<O::Radiance>>()? {
+            Some((position, saved)) => {
+                let (set_up, ladder, priors, splatted, states) = saved;
+                if states.len() != settings.ensembles as usize
+                    || ladder.len() != settings.ensemble.ladder.len()
+                {
+                    return Err(checkpoint::does_not_fit());
+                }
+                let work = states
+                    .into_iter()
+                    .map(|state| work(state, priors.clone()))
+                    .collect();
+                let ensembles = Splatting::resumed(work, bands, traces_per_sweep, splatted)?;
+                (ensembles, Some(position), set_up, ladder, priors)
+            }
+            None => {
+                let (work, set_up, ladder, priors) = start(settings, job, &work)?;
+                let ensembles = Splatting::new(work, bands, traces_per_sweep)?;
+                (ensembles, None, set_up, ladder, priors)
+            }
+        };
+    let saver = saver(set_up, &ladder, &priors);
+    let driven = drive(&mut ensembles, job.round_loop(position), saver)?;
+    Ok(finish(ensembles, driven, ladder, set_up))
+}
+
+/// The ensembles' work, the set-up's paths, the ladder and the levels'
+/// priors, as [`start`] leaves them.
+type Started<'a, O, I> = (
+    Vec<EnsembleWork<'a, O, I>>,
+    SetUp,
+    Ladder,
+    Vec<Normalization>,
+);
+
+/// A fresh render's ensembles before the first round: the bootstrap, a
+/// start for every ensemble, and ladder tuning (rounds of 16, 32, ...
+/// sweeps, not splatted, each followed by a new bootstrap for the new
+/// ladder); with the set-up's paths, the ladder and the levels' priors.
+fn start<'a, O, I>(
+    settings: &ReplicaSettings,
+    job: &Job<'a, O, I>,
+    work: &dyn Fn(EnsembleState<O::Radiance>, Vec<Normalization>) -> EnsembleWork<'a, O, I>,
+) -> Result<Started<'a, O, I>, Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    let (oracle, importance) = (job.oracle, job.importance);
+    let traces_per_sweep = settings.traces_per_sweep();
     let mut ensemble = settings.ensemble.clone();
     let mut bootstrap = ensemble.bootstrap(oracle, importance, job.seed, &job.bootstrap_halt())?;
     // Under the oracle's tempering the levels may all be one target (an
@@ -155,8 +190,8 @@ where
         .map(start)
         .collect::<Result<Vec<_>, Error>>()?;
 
-    // Ladder tuning: rounds of 16, 32, ... sweeps, not splatted; it ends
-    // early (with the ladder so far) on cancel or when a time budget runs out.
+    // Ladder tuning ends early (with the ladder so far) on cancel or when a
+    // time budget runs out.
     let mut tuned = 0;
     let mut round_length = 16u64;
     while tuned < settings.ladder_tuning_sweeps
@@ -202,10 +237,7 @@ where
         );
     }
 
-    let mut ensembles = Splatting::new(work, bands, traces_per_sweep)?;
-    let saver = saver(set_up, &ensemble.ladder, &prior);
-    let driven = drive(&mut ensembles, job.round_loop(None), saver)?;
-    Ok(finish(ensembles, driven, ensemble.ladder, set_up))
+    Ok((work, set_up, ensemble.ladder, prior))
 }
 
 /// Paths traced before the render (bootstraps and ladder tuning), and the

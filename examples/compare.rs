@@ -322,6 +322,7 @@ fn compared(name: &str, args: &Args) -> AnyResult<Method> {
             s.ensemble = EnsembleSettings::geometric(4, 100.0)?;
             s.ensemble.mutation = mutation;
         }
+        _ => return Err(format!("compare has no settings for method {name}").into()),
     }
     Ok(method)
 }

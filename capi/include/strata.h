@@ -62,10 +62,13 @@ typedef struct StrataSettings StrataSettings;
 // the film to `strata_sampler_splat`. Called from several threads at once;
 // must be a pure function of its inputs.
 typedef struct StrataOracle {
+  // The film's width in pixels.
   uint32_t width;
+  // The film's height in pixels.
   uint32_t height;
   // Passed to `trace` unchanged.
   void *user;
+  // Traces one path (see above); required.
   void (*trace)(void *user,
                 float x,
                 float y,

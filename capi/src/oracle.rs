@@ -17,10 +17,13 @@ use crate::*;
 /// must be a pure function of its inputs.
 #[repr(C)]
 pub struct StrataOracle {
+    /// The film's width in pixels.
     pub width: u32,
+    /// The film's height in pixels.
     pub height: u32,
     /// Passed to `trace` unchanged.
     pub user: *mut c_void,
+    /// Traces one path (see above); required.
     pub trace: Option<
         extern "C" fn(
             user: *mut c_void,

@@ -367,6 +367,7 @@ impl AdaptiveState {
 
 /// Which small step a chain uses.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[non_exhaustive]
 pub enum SmallStep {
     /// Kelemen's exponential step.
     Kelemen(Kelemen),

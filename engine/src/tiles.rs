@@ -15,6 +15,7 @@ use crate::oracle::{FilmPoint, Resolution};
 
 /// The shape of every tile.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[non_exhaustive]
 pub enum TileShape {
     /// The pixel and its 4 neighbours (Gruson et al.'s (2020) choice).
     #[default]

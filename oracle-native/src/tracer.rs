@@ -53,6 +53,7 @@ impl Regularization {
 
 /// How a [`PathTracer`] samples paths.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum PathSampler {
     /// Camera paths with next-event estimation (this module).
     #[default]

@@ -930,6 +930,8 @@ fn report_extras(extras: &Extras) {
             let grids: Vec<u32> = stages.iter().map(|s| s.grid).collect();
             say!("{} stages, grids {grids:?}", stages.len());
         }
+        // A method this command does not know reports nothing more.
+        _ => {}
     }
 }
 

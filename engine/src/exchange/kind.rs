@@ -16,6 +16,7 @@ use crate::oracle::Radiance;
 
 /// Which exchange move an ensemble runs (a [`Move`] built per ensemble).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[non_exhaustive]
 pub enum ExchangeKind {
     /// Independent tempered chains (chain 0 is plain MH).
     None,
@@ -176,14 +177,20 @@ impl ExchangeKind {
 /// one variant per [`ExchangeKind`]; a value, so that a checkpoint can save
 /// it.
 #[derive(Clone, Debug, Serialize, Deserialize)]
-#[allow(missing_docs)]
 pub enum ExchangeMove<R> {
+    /// [`ExchangeKind::None`].
     None(NoExchange),
+    /// [`ExchangeKind::NeighborSwap`].
     NeighborSwap(NeighborSwap),
+    /// [`ExchangeKind::IsPermutation`].
     IsPermutation(IsPermutation),
+    /// [`ExchangeKind::IsSwap`].
     IsSwap(IsSwap),
+    /// [`ExchangeKind::EquiEnergy`].
     EquiEnergy(EquiEnergy),
+    /// [`ExchangeKind::EquiEnergySampler`].
     EquiEnergySampler(EquiEnergySampler<Replica<R>>),
+    /// [`ExchangeKind::NonReversible`].
     NonReversible(NonReversible),
 }
 

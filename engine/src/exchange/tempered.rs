@@ -39,6 +39,7 @@ use crate::target::{Evaluated, Importance, SplatList};
 
 /// How the chains' targets are tempered.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[non_exhaustive]
 pub enum Tempering {
     /// `π_i = I^(1/T_i)`, computed by the engine (any oracle).
     #[default]

@@ -95,6 +95,7 @@ impl Settings {
 
 /// A rendering method with its settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[non_exhaustive]
 pub enum Method {
     /// Independent path sampling (MC): the reference estimator.
     Mc,
@@ -337,6 +338,7 @@ pub struct Output {
 
 /// What a method returns beyond the image.
 #[derive(Clone, Debug)]
+#[non_exhaustive]
 pub enum Extras {
     /// Nothing more (MC, PSSMLT, ERPT).
     None,

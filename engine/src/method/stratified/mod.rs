@@ -97,6 +97,7 @@ use crate::tiles::{TileShape, Tiles};
 
 /// How the tile normalizations are reconstructed.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[non_exhaustive]
 pub enum Solver {
     /// The weighted iterative solver, eq. 13-16 (Gruson et al.'s (2020) choice).
     Weighted(WeightedSettings),

@@ -186,7 +186,7 @@ pub enum ExchangeMove<R> {
     IsPermutation(IsPermutation),
     /// [`ExchangeKind::IsSwap`].
     IsSwap(IsSwap),
-    /// [`ExchangeKind::EquiEnergy`].
+    /// [`ExchangeKind::OriginalEquiEnergy`] and [`ExchangeKind::FrequentEquiEnergy`].
     EquiEnergy(EquiEnergy),
     /// [`ExchangeKind::EquiEnergySampler`].
     EquiEnergySampler(EquiEnergySampler<Replica<R>>),

@@ -143,6 +143,12 @@ const STRATIFIED: &[Setting] = &[
         1 << 20,
         "local replica exchange every this many sweeps (0: never)",
     ),
+    whole(
+        "exchange_after",
+        0,
+        1 << 20,
+        "sweeps before the first local exchange (their paths go to tile steps)",
+    ),
     choice(
         "solver",
         &Solver::NAMES,
@@ -250,6 +256,7 @@ impl Method {
                 TileShape::Square { radius } => radius.into(),
             }),
             (Method::Stratified(s), "exchange_every") => number(s.exchange_every.into()),
+            (Method::Stratified(s), "exchange_after") => number(s.exchange_after.into()),
             (Method::Stratified(s), "solver") => Some(Choice(s.solver.name())),
             (Method::Stratified(s), "alpha") => match s.solver {
                 Solver::Weighted(w) => number(w.alpha),
@@ -316,6 +323,7 @@ impl Method {
                 }
             }
             (Method::Stratified(s), "exchange_every") => s.exchange_every = n as u32,
+            (Method::Stratified(s), "exchange_after") => s.exchange_after = n as u32,
             (Method::Stratified(s), "alpha") => match &mut s.solver {
                 Solver::Weighted(w) => w.alpha = value,
                 Solver::LogDomain(_) => return Err(Error::NotApplicable { name: row.name }),

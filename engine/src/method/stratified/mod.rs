@@ -698,7 +698,8 @@ impl SweepCosts {
 
     /// The first `sweeps` sweeps' cost.
     fn of(&self, sweeps: u64) -> f64 {
-        sweeps as f64 * self.plain + sweeps.saturating_sub(self.exchange_after) as f64 * self.exchange
+        sweeps as f64 * self.plain
+            + sweeps.saturating_sub(self.exchange_after) as f64 * self.exchange
     }
 
     /// The whole number of sweeps whose cost is nearest to `paths` (at

@@ -171,8 +171,9 @@ const EXCHANGE_AFTER: u32 = 8;
 
 /// Settings of stratified MCMC. The budget counts every path traced
 /// (initialization, tile steps and exchanges); a sample budget is turned
-/// into the nearest whole number of sweeps (at least one) at the cost of a
-/// sweep whose exchanges all trace; when that rounds down, what is left is
+/// into the nearest whole number of sweeps (at least one), each at the cost
+/// of its tile steps and, once they have begun, its exchanges as if all
+/// traced; when that rounds down, what is left is
 /// traced as regularizer paths after the last sweep (`Sweeps::remainder`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StratifiedSettings {
@@ -535,8 +536,8 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     /// Where a sample budget's remainder goes: the budget buys the nearest
-    /// whole number of sweeps ([`Rounds::planned_units`], at the cost of
-    /// sweeps whose exchanges all trace); after the last, the paths the
+    /// whole number of sweeps ([`Rounds::planned_units`], [`SweepCosts`]:
+    /// exchanges counted as if all traced); after the last, the paths the
     /// budget still has are traced as regularizer paths at every tile's
     /// centre, so the budget is spent (at 16 paths per pixel on a 96²
     /// Cornell box a third of it was left before). Returns the last sweep

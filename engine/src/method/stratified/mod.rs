@@ -68,31 +68,30 @@
 //! | `init.rs` | the global chains' initialization |
 //! | `regularizer.rs` | the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the total it anchors |
 //! | `reconstruction.rs` | the normalizations, the image, the choice of `α`, the time reserved for them |
-//! | this file | settings, the sweeps, the render's output |
+//! | `sweeps.rs` | the state between rounds, a sweep (steps, exchanges from `exchange_after` on), what sweeps cost, the budget's remainder, the checkpoint, the output |
+//! | this file | settings, counters, a fresh start or a resumed state, the smallest budget |
 
 mod init;
 mod local;
 mod reconstruction;
 mod regularizer;
+mod sweeps;
 mod tile;
 
-use alloc::vec;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
 use self::init::initialize;
-use self::local::{exchange_all, exchange_cost};
-use self::reconstruction::{preview, reconstruct_image, reserve_reconstruction};
-use self::tile::{Context, LightTracing, Start, TileChain};
-use super::{Extras, Job, Output};
-use crate::chain::{ChainStats, Traced};
+use self::reconstruction::reserve_reconstruction;
+use self::sweeps::{Saved, SweepCosts, Sweeps};
+use self::tile::{Context, LightTracing, TileChain};
+use super::{Job, Output};
 use crate::checkpoint;
-use crate::drive::{Budget, Driven, RenderStats, Rounds, drive};
+use crate::drive::{Budget, drive};
 use crate::error::{Error, check_probability};
 use crate::film::Film;
 use crate::mutate::MutationParams;
 use crate::oracle::{PathOracle, Radiance};
-use crate::parallel;
 use crate::reconstruct::{LogSettings, WeightedSettings};
 use crate::target::Importance;
 use crate::tiles::{TileShape, Tiles};
@@ -345,7 +344,7 @@ pub struct StratifiedStats {
     pub alpha: f64,
 }
 
-/// What stratified MCMC returns beyond the image ([`Extras::Stratified`]).
+/// What stratified MCMC returns beyond the image ([`Extras::Stratified`](super::Extras::Stratified)).
 /// The render's `visits` count, per pixel, the tile-chain states evaluated
 /// in it (every tile containing the pixel, once per sweep).
 #[derive(Clone, Debug)]
@@ -498,157 +497,6 @@ where
     ))
 }
 
-/// What a checkpoint holds of stratified MCMC: the tile chains, the
-/// counters, the exchange rounds, the invalid traces outside the chains,
-/// the bootstrap's traces and the light-tracing sums ([`Sweeps::save`]'s
-/// order).
-type Saved<R> = (
-    Vec<TileChain<R>>,
-    StratifiedStats,
-    u64,
-    u64,
-    u64,
-    LightTracing,
-);
-
-/// Stratified MCMC's state between rounds: the tile chains and their counters.
-struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
-    ctx: &'a Context<'b, O, I>,
-    settings: &'a StratifiedSettings,
-    chains: Vec<TileChain<O::Radiance>>,
-    stats: StratifiedStats,
-    exchange_rounds: u64,
-    /// Invalid traces outside the tile chains' counters (initialization,
-    /// exchanges).
-    invalid: u64,
-    /// What its sweeps cost.
-    costs: SweepCosts,
-    /// The splats' estimate.
-    light: LightTracing,
-    /// A sample budget's last sweep and the budget, whose remainder is
-    /// traced after that sweep ([`Self::remainder`]).
-    remainder: Option<(u64, u64)>,
-}
-
-impl<O, I> Sweeps<'_, '_, O, I>
-where
-    O: PathOracle,
-    I: Importance<O::Radiance> + ?Sized,
-{
-    /// Where a sample budget's remainder goes: the budget buys the nearest
-    /// whole number of sweeps ([`Rounds::planned_units`], [`SweepCosts`]:
-    /// exchanges counted as if all traced); after the last, the paths the
-    /// budget still has are traced as regularizer paths at every tile's
-    /// centre, so the budget is spent (at 16 paths per pixel on a 96²
-    /// Cornell box a third of it was left before). Returns the last sweep
-    /// and the budget; a time budget has no remainder.
-    fn remainder(&self, budget: Budget) -> Option<(u64, u64)> {
-        match budget {
-            Budget::Samples(total) => Some((self.planned_units(total), total)),
-            #[cfg(feature = "std")]
-            Budget::Time(_) => None,
-        }
-    }
-
-    /// Traces `paths` regularizer paths at every tile's centre: the budget's
-    /// remainder ([`Self::remainder`]).
-    fn trace_remainder(&mut self, paths: u32) {
-        let ctx = self.ctx;
-        let width = ctx.tiles.resolution().width as usize;
-        let traced = parallel::sum_chunks(&mut self.chains, width, |y, row| {
-            let mut traced = Traced::default();
-            for (x, chain) in row.iter_mut().enumerate() {
-                let (paths, invalid) = chain.trace_regularizer(ctx, y * width + x, paths);
-                traced += Traced { paths, invalid };
-            }
-            traced
-        });
-        for chain in &mut self.chains {
-            self.light.add_remainder(&mut chain.sampled);
-        }
-        self.light.remainder_paths += u64::from(paths);
-        self.invalid += traced.invalid;
-        self.stats.remainder_samples += traced.paths;
-    }
-
-    /// Appends the state to a checkpoint (read back as [`Saved`]).
-    fn save(&self, bootstrap_traces: u64, out: &mut Vec<u8>) {
-        let saved = (
-            &self.chains,
-            self.stats,
-            self.exchange_rounds,
-            self.invalid,
-            bootstrap_traces,
-            &self.light,
-        );
-        checkpoint::append(&saved, out);
-    }
-
-    /// The reconstruction, the fallback and the counters; the weighted
-    /// solver (and cross-validation) end early when `stop` says so.
-    fn finish(
-        mut self,
-        driven: Driven,
-        bootstrap_traces: u64,
-        stop: &dyn Fn() -> bool,
-    ) -> Result<Output, Error> {
-        let tiles = self.ctx.tiles;
-        let image = reconstruct_image(
-            tiles,
-            &self.chains,
-            self.settings,
-            self.stats.sweeps,
-            &self.light,
-            stop,
-        )?;
-        let stats = &mut self.stats;
-        if let Some(alpha) = image.alpha {
-            stats.alpha = alpha;
-        }
-        stats.known_pixels = image.known_pixels;
-        stats.fallback_pixels = image.fallback_pixels;
-        stats.total_scale = image.total_scale;
-        let mut chain_stats = ChainStats::default();
-        let mut visits = vec![0u64; tiles.count()];
-        for (s, c) in self.chains.iter().enumerate() {
-            chain_stats.merge(&c.stats);
-            for (_, q) in tiles.pixels(s) {
-                visits[q] += c.stats.proposals;
-            }
-            match c.start {
-                Start::None => stats.never_initialized += 1,
-                Start::Global => stats.initialized_by_global_chains += 1,
-                Start::Borrowed => stats.initialized_by_borrowing += 1,
-                Start::Uniform => stats.initialized_by_uniform_draws += 1,
-            }
-        }
-        let traced = stats.initialization_samples
-            + stats.tile_samples
-            + stats.regularizer_samples
-            + stats.remainder_samples
-            + stats.exchange_samples;
-        Ok(Output {
-            film: image.film,
-            stats: RenderStats {
-                samples: traced - bootstrap_traces,
-                bootstrap_samples: bootstrap_traces,
-                invalid_samples: chain_stats.invalid + self.invalid,
-                chains: chain_stats,
-                ..Default::default()
-            },
-            cancelled: driven.cancelled,
-            visits,
-            extras: Extras::Stratified(StratifiedExtras {
-                counters: self.stats,
-                regularizer: image.regularizer,
-                normalizations: image.normalizations,
-                unscaled: image.unscaled,
-                reconstruction_cut: image.cut,
-            }),
-        })
-    }
-}
-
 /// The smallest sample budget of stratified MCMC on `resolution`: one sweep
 /// with its exchanges (the initialization takes its share of the budget on
 /// top).
@@ -658,164 +506,4 @@ pub(crate) fn smallest_budget(
 ) -> Result<u64, Error> {
     let tiles = Tiles::new(resolution, settings.shape)?;
     Ok(libm::ceil(SweepCosts::new(&tiles, settings).full()) as u64)
-}
-
-/// What sweeps cost in paths, if every tile steps.
-#[derive(Clone, Copy, Debug)]
-struct SweepCosts {
-    /// A sweep's tile steps and regularizer paths.
-    plain: f64,
-    /// A sweep's share of the local exchanges (their mean cost), once they
-    /// have begun.
-    exchange: f64,
-    /// [`StratifiedSettings::exchange_after`].
-    exchange_after: u64,
-}
-
-impl SweepCosts {
-    /// The costs of `settings`' sweeps over `tiles` (it visits every
-    /// tile's pairs: compute it once).
-    fn new(tiles: &Tiles, settings: &StratifiedSettings) -> Self {
-        let step_cost: u64 = (0..tiles.count())
-            .map(|s| tiles.pixels(s).count() as u64)
-            .sum();
-        let regularizer = settings.regularizer_paths as u64 * tiles.count() as u64;
-        let exchange = if settings.exchange_every > 0 {
-            exchange_cost(tiles) / settings.exchange_every as f64
-        } else {
-            0.0
-        };
-        Self {
-            plain: (step_cost + regularizer) as f64,
-            exchange,
-            exchange_after: settings.exchange_after.into(),
-        }
-    }
-
-    /// A sweep's cost once the exchanges have begun (the most a sweep costs).
-    fn full(&self) -> f64 {
-        self.plain + self.exchange
-    }
-
-    /// The first `sweeps` sweeps' cost.
-    fn of(&self, sweeps: u64) -> f64 {
-        sweeps as f64 * self.plain
-            + sweeps.saturating_sub(self.exchange_after) as f64 * self.exchange
-    }
-
-    /// The whole number of sweeps whose cost is nearest to `paths` (at
-    /// least one).
-    fn sweeps_for(&self, paths: u64) -> u64 {
-        let paths = paths as f64;
-        let warm_up = self.of(self.exchange_after);
-        let sweeps = if paths <= warm_up {
-            paths / self.plain
-        } else {
-            self.exchange_after as f64 + (paths - warm_up) / self.full()
-        };
-        (libm::round(sweeps) as u64).max(1)
-    }
-}
-
-impl<O, I> Rounds for Sweeps<'_, '_, O, I>
-where
-    O: PathOracle,
-    I: Importance<O::Radiance> + ?Sized,
-{
-    fn unit_cost(&self) -> u64 {
-        libm::ceil(self.costs.full()) as u64
-    }
-
-    fn planned_units(&self, samples: u64) -> u64 {
-        let remaining = samples.saturating_sub(self.stats.initialization_samples);
-        self.costs.sweeps_for(remaining)
-    }
-
-    fn run(&mut self, units: u64) {
-        let ctx = self.ctx;
-        let width = ctx.tiles.resolution().width as usize;
-        let every = self.settings.exchange_every as u64;
-        let after = self.costs.exchange_after;
-        for _ in 0..units {
-            let paths = self.settings.regularizer_paths;
-            let traced = parallel::sum_chunks(&mut self.chains, width, |y, row| {
-                let mut traced = SweepTraces::default();
-                for (x, chain) in row.iter_mut().enumerate() {
-                    traced.steps += chain.step(ctx, y * width + x);
-                    if paths > 0 {
-                        let (paths, invalid) = chain.trace_regularizer(ctx, y * width + x, paths);
-                        traced.regularizer += Traced { paths, invalid };
-                    }
-                }
-                traced
-            });
-            self.invalid += traced.regularizer.invalid;
-            for chain in &mut self.chains {
-                self.light.add(&mut chain.sampled);
-            }
-            let stats = &mut self.stats;
-            stats.tile_samples += traced.steps;
-            stats.regularizer_samples += traced.regularizer.paths;
-            stats.sweeps += 1;
-            if every > 0 && stats.sweeps > after && (stats.sweeps - after).is_multiple_of(every) {
-                let c = exchange_all(ctx, &mut self.chains, width, self.exchange_rounds);
-                self.exchange_rounds += 1;
-                stats.exchange_samples += c.traces;
-                stats.exchange_attempts += c.attempts;
-                stats.exchange_accepted += c.accepted;
-                self.invalid += c.invalid;
-            }
-            if let Some((last, budget)) = self.remainder
-                && self.stats.sweeps == last
-            {
-                let left = budget.saturating_sub(self.samples());
-                let per_tile = left / self.chains.len().max(1) as u64;
-                if per_tile > 0 {
-                    self.trace_remainder(u32::try_from(per_tile).unwrap_or(u32::MAX));
-                }
-            }
-        }
-    }
-
-    fn units(&self) -> u64 {
-        self.stats.sweeps
-    }
-
-    fn samples(&self) -> u64 {
-        let s = &self.stats;
-        s.initialization_samples
-            + s.tile_samples
-            + s.regularizer_samples
-            + s.remainder_samples
-            + s.exchange_samples
-    }
-
-    /// Eq. 12 with the initial normalizations, channel by channel (a quick
-    /// reconstruction).
-    fn preview(&self) -> Film {
-        preview(
-            self.ctx.tiles,
-            &self.chains,
-            self.settings,
-            self.stats.sweeps,
-            &self.light,
-        )
-    }
-}
-
-/// Paths a sweep's tile steps and regularizer paths traced.
-#[derive(Clone, Copy, Debug, Default)]
-struct SweepTraces {
-    steps: u64,
-    regularizer: Traced,
-}
-
-impl core::ops::Add for SweepTraces {
-    type Output = Self;
-    fn add(self, other: Self) -> Self {
-        Self {
-            steps: self.steps + other.steps,
-            regularizer: self.regularizer + other.regularizer,
-        }
-    }
 }

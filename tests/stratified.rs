@@ -764,3 +764,38 @@ fn a_sample_budget_is_spent() {
         );
     }
 }
+
+/// Local exchanges begin after `exchange_after` sweeps: none before, every
+/// sweep's after (`exchange_every` 1), each costing paths; and a sample
+/// budget buys its sweeps at that cost (more sweeps than if every sweep
+/// exchanged).
+#[test]
+fn local_exchanges_wait_for_exchange_after_sweeps() {
+    let image = ProceduralImage::showcase(Resolution::new(32, 24));
+    let pixels = 32 * 24;
+    let counters = |after: u32, spp: u64| {
+        let settings = Settings {
+            seed: 5,
+            budget: Budget::Samples(spp * pixels),
+            method: Method::Stratified(StratifiedSettings {
+                exchange_after: after,
+                ..Default::default()
+            }),
+        };
+        extras(&render(&image, &MaxChannel, &settings, &Silent).unwrap()).counters
+    };
+    let waiting = counters(8, 32);
+    assert!(waiting.sweeps <= 8, "{} sweeps", waiting.sweeps);
+    assert_eq!(waiting.exchange_attempts, 0);
+    assert_eq!(waiting.exchange_samples, 0);
+    let at_once = counters(0, 32);
+    assert!(at_once.exchange_attempts > 0);
+    assert!(
+        waiting.sweeps > at_once.sweeps,
+        "{} sweeps waiting, {} exchanging from the first",
+        waiting.sweeps,
+        at_once.sweeps
+    );
+    let later = counters(2, 64);
+    assert!(later.sweeps > 2 && later.exchange_attempts > 0);
+}

@@ -402,3 +402,77 @@ fn a_time_budget_below_one_unit_of_work_is_reported() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A render split into 3 tasks run by `jobs/task.sh` through `xargs -P 2`
+/// (as a scheduler would run them) and merged by `strata merge` writes the
+/// PNG and EXR of the render unsplit, byte for byte; a merge with a task
+/// missing is refused naming it, and done with `--partial`.
+#[test]
+fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
+    let dir = std::env::temp_dir().join(format!("strata-tasks-{}", std::process::id()));
+    let render_args = "--method pssmlt --spp 16 --seed 3 --width 40 --height 30 --set chains=24";
+    let whole = dir.join("whole");
+    let mut line: Vec<&str> = vec!["render", "cornell"];
+    line.extend(render_args.split(' '));
+    line.extend(["--out", whole.to_str().unwrap()]);
+    let ok = strata(&line);
+    assert_eq!(
+        ok.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let tasks = Command::new("sh")
+        .args(["-c", "seq 0 2 | xargs -P 2 -I{} jobs/task.sh {} 3"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("STRATA", env!("CARGO_BIN_EXE_strata"))
+        .env("SCENE", "cornell")
+        .env("DIR", &dir)
+        .env("RENDER_ARGS", render_args)
+        .env("THREADS", "1")
+        .output()
+        .unwrap();
+    assert!(
+        tasks.status.success(),
+        "{}",
+        String::from_utf8_lossy(&tasks.stderr)
+    );
+    let part = |i: u32| dir.join(format!("part-{i}.part"));
+    let merged = dir.join("merged");
+    let merge = |parts: &[u32], extra: &[&str]| {
+        let mut line = vec!["merge".to_string()];
+        line.extend(parts.iter().map(|&i| part(i).to_str().unwrap().to_string()));
+        line.extend(["--out".to_string(), merged.to_str().unwrap().to_string()]);
+        line.extend(extra.iter().map(|s| s.to_string()));
+        let line: Vec<&str> = line.iter().map(String::as_str).collect();
+        strata(&line)
+    };
+    let done = merge(&[2, 0, 1], &[]);
+    assert_eq!(
+        done.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&done.stderr)
+    );
+    for ext in ["png", "exr"] {
+        let read = |p: &std::path::Path| std::fs::read(p.with_extension(ext)).unwrap();
+        assert!(read(&merged) == read(&whole), "{ext} differs");
+    }
+    let missing = merge(&[0, 2], &[]);
+    assert_eq!(missing.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&missing.stderr);
+    assert!(stderr.contains("tasks [1] of 3 are missing"), "{stderr}");
+    let partial = merge(&[0, 2], &["--partial"]);
+    assert_eq!(partial.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&partial.stderr).contains("merged 2 of 3 tasks"));
+    // A task run again finds its part and does nothing.
+    let again = Command::new("jobs/task.sh")
+        .args(["1", "3"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("STRATA", "/nonexistent")
+        .env("DIR", &dir)
+        .status()
+        .unwrap();
+    assert!(again.success());
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -47,6 +47,10 @@ typedef enum StrataSetUpStage {
 // A rendered film: linear RGB, `width · height · 3` doubles, row by row.
 typedef struct StrataFilm StrataFilm;
 
+// A task's partial result ([`strata_render_task`]), or the checkpoint of a
+// task the progress callback stopped.
+typedef struct StrataPart StrataPart;
+
 // The sampler a `trace` callback draws its random numbers from and hands
 // its splats to (opaque; valid only during that call).
 typedef struct StrataSampler StrataSampler;
@@ -249,6 +253,46 @@ enum StrataStatus strata_settings_set_stack_size(struct StrataSettings *settings
 // The message of the last failed call on this thread ("" if none); valid
 // until the next failing call on this thread.
 const char *strata_last_error(void);
+
+// Makes `settings` render task `index` (from 0) of `count`: each task
+// renders its share of the whole render's budget (MC's passes, PSSMLT's
+// chains `index`, `index + count`, ...) with [`strata_render_task`].
+enum StrataStatus strata_settings_set_task(struct StrataSettings *settings,
+                                           uint32_t index,
+                                           uint32_t count);
+
+// Renders the task `settings` name ([`strata_settings_set_task`]) into a
+// new part at `*part` (free it with [`strata_part_free`]; its bytes with
+// [`strata_part_bytes`]). A method that cannot be split, or a task count
+// above the render's units of work, is `STRATA_STATUS_RENDER_FAILED`; if
+// the progress callback stopped it, `STRATA_STATUS_CANCELLED` and the part
+// is an unfinished task, which [`strata_merge`] refuses.
+enum StrataStatus strata_render_task(const struct StrataOracle *oracle,
+                                     const struct StrataSettings *settings,
+                                     const struct StrataObserver *observer,
+                                     struct StrataPart **part);
+
+// The part's bytes (`*size` of them), to write to a file: valid until the
+// part is freed.
+const uint8_t *strata_part_bytes(const struct StrataPart *part, uintptr_t *size);
+
+// A part read back from `size` bytes at `bytes` into `*part`: damaged
+// bytes or another format version are `STRATA_STATUS_INVALID_ARGUMENT`.
+enum StrataStatus strata_part_read(const uint8_t *bytes, uintptr_t size, struct StrataPart **part);
+
+// Frees a part (null is ignored).
+void strata_part_free(struct StrataPart *part);
+
+// Merges the `count` parts at `parts` (in any order) into a new film at
+// `*film`: the film and counters the render unsplit gives. Every task of
+// the render must be there once, unless `subset` is nonzero (then the
+// film of the tasks given); parts of another render, repeated, missing or
+// unfinished tasks are `STRATA_STATUS_INVALID_ARGUMENT`, with a message
+// naming them.
+enum StrataStatus strata_merge(const struct StrataPart *const *parts,
+                               uintptr_t count,
+                               int32_t subset,
+                               struct StrataFilm **film);
 
 #ifdef __cplusplus
 }  // extern "C"

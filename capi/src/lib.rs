@@ -26,6 +26,7 @@ mod render;
 mod sampler;
 mod settings;
 mod status;
+mod tasks;
 
 pub use observer::*;
 pub use oracle::*;
@@ -33,3 +34,4 @@ pub use render::*;
 pub use sampler::*;
 pub use settings::*;
 pub use status::*;
+pub use tasks::*;

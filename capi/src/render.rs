@@ -42,6 +42,16 @@ pub struct StrataStats {
     pub cancelled: i32,
 }
 
+impl StrataFilm {
+    /// A film for C to own.
+    pub(crate) fn boxed(output: Output) -> *mut StrataFilm {
+        Box::into_raw(Box::new(StrataFilm {
+            stats: StrataStats::new(&output),
+            film: output.film,
+        }))
+    }
+}
+
 impl StrataStats {
     fn new(output: &Output) -> Self {
         let s = &output.stats;
@@ -69,20 +79,50 @@ pub extern "C" fn strata_render(
     observer: *const StrataObserver,
     film: *mut *mut StrataFilm,
 ) -> StrataStatus {
-    if oracle.is_null() || settings.is_null() || film.is_null() {
-        return fail(
+    if film.is_null() {
+        return fail(StrataStatus::InvalidArgument, "null film pointer");
+    }
+    // SAFETY: checked non-null; the caller passes room for a pointer.
+    unsafe { *film = std::ptr::null_mut() };
+    let rendered = with_render(oracle, settings, observer, |oracle, run, observer| {
+        render(oracle, &MaxChannel, run, observer)
+    });
+    match rendered {
+        Ok(output) => {
+            let cancelled = output.cancelled;
+            // SAFETY: checked non-null above.
+            unsafe { *film = StrataFilm::boxed(output) };
+            if cancelled {
+                fail(
+                    StrataStatus::Cancelled,
+                    "cancelled by the progress callback",
+                )
+            } else {
+                StrataStatus::Ok
+            }
+        }
+        Err(status) => status,
+    }
+}
+
+/// Runs `f` on the C oracle with the engine's settings and the C observer,
+/// on a pool of the settings' threads; a null argument, an engine error or
+/// a panic is the status (and message) to return.
+pub(crate) fn with_render<T: Send>(
+    oracle: *const StrataOracle,
+    settings: *const StrataSettings,
+    observer: *const StrataObserver,
+    f: impl FnOnce(&COracle, &Settings, &CObserver) -> Result<T, Error> + Send,
+) -> Result<T, StrataStatus> {
+    if oracle.is_null() || settings.is_null() {
+        return Err(fail(
             StrataStatus::InvalidArgument,
-            "null oracle, settings or film pointer",
-        );
+            "null oracle or settings pointer",
+        ));
     }
     // SAFETY: a non-null pointer to the caller's live settings.
     let settings = unsafe { &*settings };
-    // SAFETY: checked non-null; the caller passes room for a pointer.
-    unsafe { *film = std::ptr::null_mut() };
-    let c_oracle = match COracle::new(oracle) {
-        Ok(o) => o,
-        Err(e) => return e,
-    };
+    let c_oracle = COracle::new(oracle)?;
     let budget = match settings.budget {
         RequestedBudget::SamplesPerPixel(spp) => {
             Budget::samples_per_pixel(spp, c_oracle.resolution)
@@ -94,10 +134,7 @@ pub extern "C" fn strata_render(
         budget,
         method: settings.method.clone(),
     };
-    let observer = match CObserver::new(observer) {
-        Ok(o) => o,
-        Err(e) => return e,
-    };
+    let observer = CObserver::new(observer)?;
     let (threads, stack) = (settings.threads, settings.stack_bytes);
     let rendered = catch_unwind(AssertUnwindSafe(|| -> Result<_, String> {
         let pool = rayon::ThreadPoolBuilder::new()
@@ -105,29 +142,16 @@ pub extern "C" fn strata_render(
             .stack_size(stack)
             .build()
             .map_err(|e| e.to_string())?;
-        pool.install(|| render(&c_oracle, &MaxChannel, &run, &observer))
+        pool.install(|| f(&c_oracle, &run, &observer))
             .map_err(|e: Error| e.to_string())
     }));
     match rendered {
-        Ok(Ok(output)) => {
-            let cancelled = output.cancelled;
-            let out = Box::new(StrataFilm {
-                stats: StrataStats::new(&output),
-                film: output.film,
-            });
-            // SAFETY: checked non-null above.
-            unsafe { *film = Box::into_raw(out) };
-            if cancelled {
-                fail(
-                    StrataStatus::Cancelled,
-                    "cancelled by the progress callback",
-                )
-            } else {
-                StrataStatus::Ok
-            }
-        }
-        Ok(Err(message)) => fail(StrataStatus::RenderFailed, message),
-        Err(_) => fail(StrataStatus::Panic, "a panic inside the engine (caught)"),
+        Ok(Ok(value)) => Ok(value),
+        Ok(Err(message)) => Err(fail(StrataStatus::RenderFailed, message)),
+        Err(_) => Err(fail(
+            StrataStatus::Panic,
+            "a panic inside the engine (caught)",
+        )),
     }
 }
 

@@ -15,6 +15,8 @@ pub struct StrataSettings {
     pub(crate) budget: RequestedBudget,
     pub(crate) threads: usize,
     pub(crate) stack_bytes: usize,
+    /// The task [`strata_render_task`] renders (the whole render by default).
+    pub(crate) task: strata_engine::prelude::Task,
 }
 
 /// The worker threads' stack by default: 8 MiB, OpenMP's usual, room for a
@@ -55,6 +57,7 @@ pub extern "C" fn strata_settings_new(method: *const c_char) -> *mut StrataSetti
         budget: RequestedBudget::SamplesPerPixel(16),
         threads: 0,
         stack_bytes: DEFAULT_STACK_BYTES,
+        task: strata_engine::prelude::Task::WHOLE,
     }))
 }
 

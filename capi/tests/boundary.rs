@@ -621,3 +621,85 @@ fn the_set_up_is_reported_and_can_be_cancelled() {
     strata_film_free(film);
     strata_settings_free(settings);
 }
+
+/// The film of `film`, as bits.
+fn film_bits(film: *const StrataFilm) -> Vec<u64> {
+    let n = strata_film_width(film) as usize * strata_film_height(film) as usize * 3;
+    // SAFETY: width · height · 3 doubles, alive while `film` is.
+    let data = unsafe { std::slice::from_raw_parts(strata_film_data(film), n) };
+    data.iter().map(|v| v.to_bits()).collect()
+}
+
+#[test]
+fn tasks_merge_to_the_film_of_the_unsplit_render() {
+    let settings = strata_settings_new(c"pssmlt".as_ptr());
+    strata_settings_set(settings, c"chains".as_ptr(), 12.0);
+    strata_settings_set_samples_per_pixel(settings, 32);
+    let mut whole = null_mut();
+    assert_eq!(
+        strata_render(&oracle(uniform), settings, null(), &mut whole),
+        StrataStatus::Ok
+    );
+    // Three tasks, each written to bytes and read back, merged out of order.
+    let mut parts = Vec::new();
+    for index in [2, 0, 1] {
+        assert_eq!(
+            strata_settings_set_task(settings, index, 3),
+            StrataStatus::Ok
+        );
+        let mut part = null_mut();
+        assert_eq!(
+            strata_render_task(&oracle(uniform), settings, null(), &mut part),
+            StrataStatus::Ok
+        );
+        let mut size = 0;
+        let bytes = strata_part_bytes(part, &mut size);
+        let mut read = null_mut();
+        assert_eq!(strata_part_read(bytes, size, &mut read), StrataStatus::Ok);
+        strata_part_free(part);
+        parts.push(read as *const StrataPart);
+    }
+    let mut merged = null_mut();
+    assert_eq!(
+        strata_merge(parts.as_ptr(), 3, 0, &mut merged),
+        StrataStatus::Ok
+    );
+    assert_eq!(film_bits(merged), film_bits(whole));
+    assert_eq!(stats(merged), stats(whole));
+    // A task missing: refused, unless a subset is asked for.
+    let mut film = null_mut();
+    assert_eq!(
+        strata_merge(parts.as_ptr(), 2, 0, &mut film),
+        StrataStatus::InvalidArgument
+    );
+    assert!(last_error().contains("missing"), "{}", last_error());
+    assert_eq!(
+        strata_merge(parts.as_ptr(), 2, 1, &mut film),
+        StrataStatus::Ok
+    );
+    strata_film_free(film);
+    // Bad tasks and methods that do not split.
+    assert_eq!(
+        strata_settings_set_task(settings, 3, 3),
+        StrataStatus::InvalidArgument
+    );
+    let stratified = strata_settings_new(c"stratified".as_ptr());
+    strata_settings_set_task(stratified, 0, 2);
+    let mut part = null_mut();
+    assert_eq!(
+        strata_render_task(&oracle(uniform), stratified, null(), &mut part),
+        StrataStatus::RenderFailed
+    );
+    assert!(last_error().contains("cannot be split"), "{}", last_error());
+    assert_eq!(
+        strata_part_read([1u8, 2].as_ptr(), 2, &mut part),
+        StrataStatus::InvalidArgument
+    );
+    for p in parts {
+        strata_part_free(p as *mut StrataPart);
+    }
+    strata_film_free(merged);
+    strata_film_free(whole);
+    strata_settings_free(settings);
+    strata_settings_free(stratified);
+}

@@ -341,6 +341,7 @@ impl Bootstrap {
         let weights = KelemenWeights {
             normalization: self.normalization(),
             large_step_probability,
+            large_steps_apart: false,
         };
         PathChain::new(started.chain, weights, started.decisions)
     }

@@ -34,6 +34,7 @@
 use crate::rng::Pcg32;
 use serde::{Deserialize, Serialize};
 
+use crate::exact::ExactSum;
 use crate::mutate::SmallStep;
 use crate::oracle::{PathOracle, Radiance, Temperature};
 use crate::rng::uniform_f64;
@@ -347,6 +348,23 @@ impl Normalization {
         self.squares += other.squares;
     }
 
+    /// The estimates pooled, their sums added exactly
+    /// ([`ExactSum`]): the same bits in any order
+    /// and grouping of the same estimates.
+    pub fn pooled<'a>(estimates: impl IntoIterator<Item = &'a Normalization>) -> Normalization {
+        let (mut samples, mut sum, mut squares) = (0, ExactSum::default(), ExactSum::default());
+        for e in estimates {
+            samples += e.samples;
+            sum.add(e.sum);
+            squares.add(e.squares);
+        }
+        Normalization {
+            samples,
+            sum: sum.value(),
+            squares: squares.value(),
+        }
+    }
+
     /// Samples so far.
     pub fn samples(&self) -> u64 {
         self.samples
@@ -386,6 +404,10 @@ pub struct KelemenWeights {
     pub normalization: f64,
     /// `p`.
     pub large_step_probability: f64,
+    /// Leave the large-step part `[large]/(I(y)/b + p)` out of the
+    /// proposal's weight: the method splats it apart (PSSMLT, whose chain
+    /// part and large-step part are scaled apart at the end).
+    pub large_steps_apart: bool,
 }
 
 impl<R: Radiance> Weights<Evaluated<R>> for KelemenWeights {
@@ -398,7 +420,7 @@ impl<R: Radiance> Weights<Evaluated<R>> for KelemenWeights {
     ) -> [f64; 2] {
         splat_weights(
             acceptance,
-            large_step,
+            large_step && !self.large_steps_apart,
             current.importance,
             proposed.importance,
             self.normalization,
@@ -463,9 +485,14 @@ impl<R: Radiance> PathChain<R> {
         &self.large_steps
     }
 
-    /// Weights the next steps' samples with normalization `b`.
-    pub fn set_normalization(&mut self, b: f64) {
-        self.weights.normalization = b;
+    /// The weights of its samples.
+    pub fn weights(&self) -> &KelemenWeights {
+        &self.weights
+    }
+
+    /// The weights of its next samples, to change.
+    pub fn weights_mut(&mut self) -> &mut KelemenWeights {
+        &mut self.weights
     }
 
     /// The current path.

@@ -28,12 +28,13 @@ use crate::oracle::{FilmPoint, PathOracle, Radiance, Resolution, Sampler, Temper
 use crate::rng::{self, Domain, mix64};
 use crate::sample::IndependentSampler;
 use crate::target::SplatList;
+use crate::task::Task;
 
 pub(crate) const MAGIC: [u8; 8] = *b"STRATAck";
 
 /// The checkpoint format's version. Bump it whenever a saved type changes
 /// (a field added, removed or reordered in any state a method saves).
-pub const FORMAT_VERSION: u32 = 9;
+pub const FORMAT_VERSION: u32 = 10;
 
 /// The engine's version, also saved: a checkpoint is read only by the
 /// engine that wrote it.
@@ -64,6 +65,11 @@ pub(crate) struct Header<S> {
     pub channels: u32,
     /// Paths traced so far (bootstrap excluded).
     pub samples: u64,
+    /// Which task of a render split into tasks this is (0 of 1: the whole).
+    pub task: Task,
+    /// Whether the task's budget is spent: the checkpoint is then its
+    /// partial result, which [`merge`](crate::method::merge) combines.
+    pub finished: bool,
 }
 
 /// Where the round loop is: units done and the current round size.
@@ -123,23 +129,36 @@ impl OracleId {
 
 /// Makes a render's checkpoints around the state its round loop writes.
 pub(crate) trait Checkpoints {
-    /// The checkpoint after `samples` paths of the state `write` appends.
-    fn checkpoint(&self, samples: u64, write: &mut dyn FnMut(&mut Vec<u8>)) -> Checkpoint;
+    /// The checkpoint after `samples` paths of the state `write` appends;
+    /// `finished` once the budget is spent.
+    fn checkpoint(
+        &self,
+        samples: u64,
+        finished: bool,
+        write: &mut dyn FnMut(&mut Vec<u8>),
+    ) -> Checkpoint;
 }
 
 /// The checkpoints of one render: its settings and (computed on first use)
 /// its oracle's identifier, in front of the state.
 pub(crate) struct Checkpointer<'a, S> {
     settings: &'a S,
+    task: Task,
     channels: u32,
     oracle: &'a dyn Fn() -> OracleId,
     id: OnceCell<OracleId>,
 }
 
 impl<'a, S> Checkpointer<'a, S> {
-    pub(crate) fn new(settings: &'a S, channels: usize, oracle: &'a dyn Fn() -> OracleId) -> Self {
+    pub(crate) fn new(
+        settings: &'a S,
+        task: Task,
+        channels: usize,
+        oracle: &'a dyn Fn() -> OracleId,
+    ) -> Self {
         Self {
             settings,
+            task,
             channels: channels as u32,
             oracle,
             id: OnceCell::new(),
@@ -148,13 +167,20 @@ impl<'a, S> Checkpointer<'a, S> {
 }
 
 impl<S: Serialize> Checkpoints for Checkpointer<'_, S> {
-    fn checkpoint(&self, samples: u64, write: &mut dyn FnMut(&mut Vec<u8>)) -> Checkpoint {
+    fn checkpoint(
+        &self,
+        samples: u64,
+        finished: bool,
+        write: &mut dyn FnMut(&mut Vec<u8>),
+    ) -> Checkpoint {
         let header = Header {
             engine: ENGINE_VERSION.into(),
             settings: self.settings,
             oracle: *self.id.get_or_init(self.oracle),
             channels: self.channels,
             samples,
+            task: self.task,
+            finished,
         };
         let mut bytes = Vec::from(MAGIC);
         bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());

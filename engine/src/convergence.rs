@@ -197,6 +197,7 @@ where
     let weights = KelemenWeights {
         normalization,
         large_step_probability: mutation.large_step_probability,
+        large_steps_apart: false,
     };
     let observe = |chain: &PathChain<O::Radiance>| {
         let s = chain.current();
@@ -257,6 +258,7 @@ where
     let weights = KelemenWeights {
         normalization,
         large_step_probability: mutation.large_step_probability,
+        large_steps_apart: false,
     };
     let mut chain = PathChain::new(started.chain, weights, started.decisions);
     let mut sums = vec![0.0; pixels];

@@ -116,6 +116,42 @@ pub enum Error {
         /// What differs.
         what: &'static str,
     },
+    /// A render split into tasks with a method whose units of work are
+    /// coupled while they run ([`Method::splits`](crate::Method::splits)).
+    NotSplittable {
+        /// The method.
+        method: &'static str,
+    },
+    /// A part given to [`merge`](crate::method::merge) is of another render
+    /// than the first part.
+    PartMismatch {
+        /// The part's position in the list given (from 0).
+        part: usize,
+        /// What differs.
+        what: &'static str,
+    },
+    /// A part given to [`merge`](crate::method::merge) is the checkpoint of
+    /// a task that has not finished.
+    PartUnfinished {
+        /// The part's position in the list given (from 0).
+        part: usize,
+        /// Its task's index.
+        task: u32,
+    },
+    /// Two parts given to [`merge`](crate::method::merge) are of the same
+    /// task.
+    TaskRepeated {
+        /// The task's index.
+        task: u32,
+    },
+    /// Tasks missing from a [`merge`](crate::method::merge) of the whole
+    /// render.
+    TasksMissing {
+        /// Their indices.
+        missing: alloc::vec::Vec<u32>,
+        /// The render's task count.
+        count: u32,
+    },
     /// Two films or images that must have the same shape do not.
     ShapeMismatch {
         /// Shape of the left operand (width, height, channels).
@@ -233,6 +269,32 @@ impl fmt::Display for Error {
             Error::CheckpointMismatch { what } => write!(
                 f,
                 "the checkpoint is of another render: its {what} differs from this one's"
+            ),
+            Error::NotSplittable { method } => write!(
+                f,
+                "{method} cannot be split into tasks (mc and pssmlt can: the units of \
+                 {method}'s work are coupled while they run)"
+            ),
+            Error::PartMismatch { part, what } => write!(
+                f,
+                "part {} is of another render than the first: its {what} differ",
+                part + 1
+            ),
+            Error::PartUnfinished { part, task } => write!(
+                f,
+                "part {} (task {task}) is the checkpoint of an unfinished task: resume it \
+                 to the end first",
+                part + 1
+            ),
+            Error::TaskRepeated { task } => write!(f, "task {task} is given twice"),
+            Error::TasksMissing { missing, count } if *count == 0 => {
+                let _ = missing;
+                write!(f, "no part to merge")
+            }
+            Error::TasksMissing { missing, count } => write!(
+                f,
+                "tasks {missing:?} of {count} are missing (a merge of fewer tasks must be \
+                 asked for: it is the image of those tasks only)"
             ),
             Error::ShapeMismatch { left, right } => {
                 write!(

@@ -14,7 +14,7 @@
 //! | layer | module | owns |
 //! |---|---|---|
 //! | contract | [`oracle`] | what a renderer implements: [`PathOracle`], [`Sampler`], [`Radiance`], [`PathSample`], [`SplatSink`]; [`FnOracle`] |
-//! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], [`purity`], `setting` | random streams; the small-step kernels whole; the mutated primary sample; importance functions; accumulation buffers; the purity check; what a setting is ([`method::Setting`]) |
+//! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], [`exact`], [`task`], [`purity`], `setting` | random streams; the small-step kernels whole; the mutated primary sample; importance functions; films; sums that do not depend on the order of their terms; the units of work a task of a split render owns; the purity check; what a setting is ([`method::Setting`]) |
 //! | one step | [`chain`] | the Metropolis-Hastings step with expected-values splatting, over any [`Target`](chain::Target) and [`Weights`](chain::Weights) |
 //! | set-up | [`bootstrap`] | start-up bias elimination: `b*` per level, importance-resampled chain starts |
 //! | one loop | [`drive`], [`checkpoint`] | budgets, clock, observer, the round loop, the deterministic merge, statistics; the render's state saved between rounds and resumed |
@@ -38,6 +38,7 @@ pub mod convergence;
 pub mod diagnose;
 pub mod drive;
 pub mod error;
+pub mod exact;
 pub mod exchange;
 pub mod film;
 pub mod method;
@@ -52,6 +53,7 @@ pub mod rng;
 pub mod sample;
 mod setting;
 pub mod target;
+pub mod task;
 pub mod tiles;
 
 pub use checkpoint::Checkpoint;

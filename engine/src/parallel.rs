@@ -123,30 +123,6 @@ pub(crate) fn sum_chunks_init<T: Send, S, C: Default + Add<Output = C> + Send>(
     }
 }
 
-/// `f(index, chunk)` for the consecutive `chunk`-long pieces of `values`,
-/// collected in index order.
-pub(crate) fn map_chunks<T: Send, U: Send>(
-    values: &mut [T],
-    chunk: usize,
-    f: impl Fn(usize, &mut [T]) -> U + Sync + Send,
-) -> Vec<U> {
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        values
-            .par_chunks_mut(chunk)
-            .enumerate()
-            .map(|(i, c)| f(i, c))
-            .collect()
-    }
-    #[cfg(not(feature = "parallel"))]
-    values
-        .chunks_mut(chunk)
-        .enumerate()
-        .map(|(i, c)| f(i, c))
-        .collect()
-}
-
 /// `f(item)` for every item, collected in item order.
 pub(crate) fn map_each<T: Send, U: Send>(
     items: &mut [T],

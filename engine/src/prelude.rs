@@ -9,7 +9,7 @@ pub use crate::error::Error;
 pub use crate::film::Film;
 pub use crate::method::{
     ErptSettings, Extras, Method, MultiStageSettings, Output, PssmltSettings, ReplicaSettings,
-    Settings, StratifiedSettings, render, resume,
+    Settings, StratifiedSettings, Task, merge, render, render_task, resume, resume_task,
 };
 pub use crate::oracle::{
     DropSplats, FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb,

@@ -19,6 +19,12 @@
 //! `--spp`, the image is the one an uninterrupted render gives, bit for bit).
 //! `--preview-every SECONDS` rewrites the PNG and EXR while rendering.
 //!
+//! On several machines (MC and PSSMLT): `strata render ... --task-index I
+//! --task-count N --out part-I` renders task I of N and writes its partial
+//! result `part-I.part`; `strata merge part-*.part --out image` writes the
+//! image the render unsplit gives, byte for byte (README, "Rendering on a
+//! cluster").
+//!
 //! Scenes: the path tracer's built-ins (`cornell`, `door`, `envplane`,
 //! `caustic`), a pbrt-v3 file (`path/to/scene.pbrt`), or the engine's analytic
 //! oracles `procedural` (an RGB image with closed-form pixel values) and
@@ -46,6 +52,7 @@ use strata::engine::{
     Radiance, Resolution, SetUp, SetUpStage, Settings, render, resume,
 };
 use strata::native::{PathSampler, PathTracer, builtin, native_tracer};
+use strata::prelude::{Task, merge, render_task, resume_task};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum Backend {
@@ -91,6 +98,28 @@ enum Command {
         #[arg(value_parser = PossibleValuesParser::new(Method::NAMES))]
         method: Option<String>,
     },
+    /// Merge the partial results of a render's tasks (`render --task-index I
+    /// --task-count N` wrote them) into its image: the bytes the render
+    /// unsplit gives.
+    Merge(MergeArgs),
+}
+
+/// What `strata merge` takes.
+#[derive(clap::Args, Debug)]
+struct MergeArgs {
+    /// The tasks' partial results (OUT.part files), in any order.
+    #[arg(required = true)]
+    parts: Vec<PathBuf>,
+    /// Output path: writes OUT.png and OUT.exr.
+    #[arg(long, default_value = "out/render")]
+    out: PathBuf,
+    /// Merge the parts given even if tasks are missing: the image of those
+    /// tasks only (fewer paths), said so.
+    #[arg(long)]
+    partial: bool,
+    /// Exposure (stops) of the PNG, from -64 to 64.
+    #[arg(long, default_value_t = 0.0, value_parser = stops)]
+    exposure: f32,
 }
 
 /// What `strata render` takes.
@@ -211,6 +240,24 @@ struct Args {
     /// with --resume; --spp or --time may change).
     #[arg(long, value_name = "FILE")]
     resume: Option<PathBuf>,
+    /// Render only task I (from 0) of --task-count tasks and write its
+    /// partial result to OUT.part, for `strata merge` (MC and PSSMLT; a
+    /// sample budget is the whole render's, a time budget each task's).
+    #[arg(long, value_name = "I", requires = "task_count")]
+    task_index: Option<u32>,
+    /// The number of tasks the render is split into.
+    #[arg(long, value_name = "N", requires = "task_index", value_parser = clap::value_parser!(u32).range(1..))]
+    task_count: Option<u32>,
+}
+
+impl Args {
+    /// The task this command renders, if it renders one.
+    fn task(&self) -> Option<Task> {
+        Some(Task {
+            index: self.task_index?,
+            count: self.task_count?,
+        })
+    }
 }
 
 type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
@@ -301,7 +348,7 @@ impl Observer for Watch<'_> {
         self.previews.as_ref().is_some_and(Every::due)
     }
     fn preview(&self, film: &Film) {
-        if let Err(e) = write(film, self.args, true) {
+        if let Err(e) = write(film, &self.args.out, self.args.exposure, true) {
             self.warn("preview", e);
         }
     }
@@ -411,6 +458,7 @@ fn prepare_outputs(args: &Args) -> AnyResult<()> {
     let files = [
         output(&args.out, "png"),
         output(&args.out, "exr"),
+        output(&args.out, "part"),
         checkpoint_path(args),
     ];
     for file in &files {
@@ -453,6 +501,15 @@ enum Saved {
 fn main() -> ExitCode {
     let args = match Cli::parse().command {
         Command::Render(args) => *args,
+        Command::Merge(merge) => {
+            return match merge_parts(&merge) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    warn!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            };
+        }
         Command::Settings { method } => {
             for m in Method::all() {
                 if method.as_deref().is_none_or(|name| name == m.name()) {
@@ -509,7 +566,7 @@ fn checkpoint_path(args: &Args) -> PathBuf {
 /// `out` with the extension `ext` appended (after dropping one of the
 /// command's own extensions, so `--out a.png` writes `a.png`, not `a.png.png`).
 fn output(out: &Path, ext: &str) -> PathBuf {
-    let own = ["png", "exr", "ckpt"];
+    let own = ["png", "exr", "ckpt", "part"];
     let base = match out.extension().and_then(|e| e.to_str()) {
         Some(e) if own.contains(&e) => out.with_extension(""),
         _ => out.to_path_buf(),
@@ -631,7 +688,10 @@ fn run(args: &Args) -> AnyResult<Ended> {
         })
     })?;
     let (output, ended) = rendered;
-    write(&output.film, args, false)?;
+    let Some(output) = output else {
+        return Ok(ended);
+    };
+    write(&output.film, &args.out, args.exposure, false)?;
     let s = &output.stats;
     say!(
         "paths: {} (+{} bootstrap), invalid: {}",
@@ -764,7 +824,9 @@ fn applies(method: &Method, flag: &str, name: &str) -> AnyResult<()> {
     }
 }
 
-fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, Ended)> {
+/// Renders `oracle` as `args` say: the image, or for a task (`--task-index`)
+/// no image and its partial result written to OUT.part.
+fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Option<Output>, Ended)> {
     let resolution = oracle.resolution();
     let budget = match args.time {
         Some(t) => Budget::Time(Duration::try_from_secs_f64(t)?),
@@ -817,6 +879,9 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, End
         spent: AtomicBool::new(false),
     };
     let start = Instant::now();
+    if let Some(task) = args.task() {
+        return render_task_with(oracle, &settings, task, resumed.as_ref(), &observer, start);
+    }
     let run = |settings: &Settings| match &resumed {
         Some(checkpoint) => resume(oracle, &MaxChannel, settings, checkpoint, &observer),
         None => render(oracle, &MaxChannel, settings, &observer),
@@ -868,7 +933,97 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Output, End
     } else {
         Ended::Finished
     };
-    Ok((output, ended))
+    Ok((Some(output), ended))
+}
+
+/// Renders (or resumes) task `task` of the render `settings` describes and
+/// writes its partial result to OUT.part once it has finished.
+fn render_task_with<O: PathOracle>(
+    oracle: &O,
+    settings: &Settings,
+    task: Task,
+    resumed: Option<&Checkpoint>,
+    observer: &Watch<'_>,
+    start: Instant,
+) -> AnyResult<(Option<Output>, Ended)> {
+    let args = observer.args;
+    let checkpoint = match resumed {
+        Some(saved) => {
+            if saved.task()? != task {
+                return Err(format!(
+                    "the checkpoint is of task {} of {}, not of --task-index {} --task-count {}",
+                    saved.task()?.index,
+                    saved.task()?.count,
+                    task.index,
+                    task.count
+                )
+                .into());
+            }
+            resume_task(oracle, &MaxChannel, settings, saved, observer)?
+        }
+        None => render_task(oracle, &MaxChannel, settings, task, observer)?,
+    };
+    observer.bar.finish_and_clear();
+    if !checkpoint.finished()? {
+        let saved = if observer.saved.load(Ordering::Relaxed) {
+            Saved::Yes
+        } else if observer.failed.load(Ordering::Relaxed) {
+            Saved::Failed
+        } else {
+            Saved::NothingYet
+        };
+        return Ok((None, Ended::Stopped(saved)));
+    }
+    let part = output(&args.out, "part");
+    replace(&part, |path| std::fs::write(path, checkpoint.as_bytes()))?;
+    say!(
+        "{} {}, task {} of {}: {} paths in {:.2} s; wrote {} ({:.1} MB)",
+        args.scene,
+        settings.method.name(),
+        task.index,
+        task.count,
+        checkpoint.samples()?,
+        start.elapsed().as_secs_f64(),
+        part.display(),
+        checkpoint.as_bytes().len() as f64 / 1e6
+    );
+    Ok((None, Ended::Finished))
+}
+
+/// `strata merge`: the parts read, checked and merged into OUT.png and
+/// OUT.exr.
+fn merge_parts(args: &MergeArgs) -> AnyResult<()> {
+    let start = Instant::now();
+    let mut parts = Vec::with_capacity(args.parts.len());
+    for path in &args.parts {
+        let bytes = read_checkpoint(path, u64::MAX)?;
+        let part = Checkpoint::from_bytes(bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+        parts.push(part);
+    }
+    let merged = merge(&parts, args.partial).map_err(|e| match e {
+        Error::PartMismatch { part, .. } | Error::PartUnfinished { part, .. } => {
+            format!("{}: {e}", args.parts[part].display())
+        }
+        e => e.to_string(),
+    })?;
+    let settings = parts[0].settings()?;
+    let count = parts[0].task()?.count;
+    write(&merged.film, &args.out, args.exposure, false)?;
+    if parts.len() < count as usize {
+        warn!(
+            "note: merged {} of {count} tasks: the image of those tasks only, with fewer paths than the whole render",
+            parts.len()
+        );
+    }
+    say!(
+        "{} of {count} tasks ({}), paths: {} (+{} bootstrap per task), merged in {:.2} s",
+        parts.len(),
+        settings.method.name(),
+        merged.stats.samples,
+        merged.stats.bootstrap_samples,
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
 }
 
 /// What the method says beyond the image.
@@ -937,15 +1092,13 @@ fn report_extras(extras: &Extras) {
 
 /// Writes OUT.png and OUT.exr (each whole, then renamed over the old one);
 /// says so unless it is a `preview`.
-fn write(film: &Film, args: &Args, preview: bool) -> AnyResult<()> {
-    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+fn write(film: &Film, out: &Path, exposure: f32, preview: bool) -> AnyResult<()> {
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
     }
-    let png = output(&args.out, "png");
-    let exr = output(&args.out, "exr");
-    replace(&png, |path| {
-        strata::io::write_png(film, args.exposure, path)
-    })?;
+    let png = output(out, "png");
+    let exr = output(out, "exr");
+    replace(&png, |path| strata::io::write_png(film, exposure, path))?;
     replace(&exr, |path| strata::io::write_exr(film, path))?;
     if !preview {
         say!("wrote {} and {}", png.display(), exr.display());
@@ -961,7 +1114,7 @@ mod tests {
         let full: Vec<&str> = ["strata", "render"].iter().chain(line).copied().collect();
         match Cli::try_parse_from(full).unwrap().command {
             Command::Render(args) => *args,
-            Command::Settings { .. } => unreachable!(),
+            _ => unreachable!(),
         }
     }
 

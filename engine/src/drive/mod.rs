@@ -19,6 +19,7 @@
 pub(crate) mod splat;
 
 use alloc::vec::Vec;
+use core::cell::OnceCell;
 
 use serde::{Deserialize, Serialize};
 
@@ -190,6 +191,9 @@ pub(crate) struct Loop<'a> {
     /// clock's limit (each unit expected to take as long as the last
     /// round's did): for work that must follow the rounds within the budget.
     pub ends_within: bool,
+    /// Where to put a checkpoint of the state after the last round (a
+    /// task's partial result, or its checkpoint if it was stopped).
+    pub last: Option<&'a OnceCell<Checkpoint>>,
 }
 
 /// The round loop: runs `work` round after round until the budget is spent
@@ -212,6 +216,7 @@ pub(crate) fn drive<W: Rounds>(
         checkpoints,
         resumed,
         ends_within,
+        last,
     } = at;
     if resumed.is_some_and(|p| p.done != work.units()) {
         return Err(Error::CheckpointCorrupted {
@@ -219,7 +224,7 @@ pub(crate) fn drive<W: Rounds>(
         });
     }
     let planned = match budget {
-        Budget::Samples(n) => Some(work.planned_units(n).max(1)),
+        Budget::Samples(n) => Some(work.planned_units(n)),
         #[cfg(feature = "std")]
         Budget::Time(_) => None,
     };
@@ -254,7 +259,7 @@ pub(crate) fn drive<W: Rounds>(
         }
         if observer.wants_checkpoint() {
             let position = Position { done, round };
-            observer.checkpoint(checkpoints.checkpoint(work.samples(), &mut |out| {
+            observer.checkpoint(checkpoints.checkpoint(work.samples(), false, &mut |out| {
                 append(&position, out);
                 save(work, out);
             }));
@@ -263,6 +268,15 @@ pub(crate) fn drive<W: Rounds>(
         if planned.is_none() && (clock.expired() || next_overruns) {
             break;
         }
+    }
+    if let Some(cell) = last {
+        let position = Position { done, round };
+        let _ = cell.set(
+            checkpoints.checkpoint(work.samples(), !cancelled, &mut |out| {
+                append(&position, out);
+                save(work, out);
+            }),
+        );
     }
     Ok(Driven { cancelled })
 }

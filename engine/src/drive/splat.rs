@@ -2,9 +2,11 @@
 //! ensembles, rows of start paths).
 //!
 //! Workers run in parallel and push their contributions into per-band
-//! buffers; after each round the buffers are added to the film band by band
-//! (bands in parallel), and within a band worker by worker in a fixed order,
-//! so the order of additions to every pixel never depends on the thread count.
+//! buffers; after each round the buffers are added to the films band by band
+//! (bands in parallel). The films hold exact sums ([`ExactFilm`]), so the
+//! image depends neither on the thread count nor on how the workers are
+//! grouped (into rounds, or into tasks on several machines). A method may
+//! splat into several films (*layers*: PSSMLT keeps its large steps apart).
 
 use alloc::vec;
 use alloc::vec::Vec;
@@ -14,6 +16,7 @@ use serde::Serialize;
 use super::Rounds;
 use crate::checkpoint;
 use crate::error::Error;
+use crate::exact::ExactFilm;
 use crate::film::Film;
 use crate::oracle::{FilmPoint, Radiance, Resolution};
 use crate::parallel;
@@ -27,8 +30,8 @@ struct Splat<R> {
     radiance: R,
 }
 
-/// What one worker produced in a round: splats bucketed by band, and the
-/// pixels of its states (for sample-density maps).
+/// What one worker produced in a round: splats bucketed by band and layer,
+/// and the pixels of its states (for sample-density maps).
 pub(crate) struct RoundBuffers<R> {
     bands: SplatBands,
     splats: Vec<Vec<Splat<R>>>,
@@ -39,16 +42,19 @@ impl<R> RoundBuffers<R> {
     pub fn new(bands: SplatBands) -> Self {
         Self {
             bands,
-            splats: (0..bands.count).map(|_| Vec::new()).collect(),
+            splats: (0..bands.count * bands.layers)
+                .map(|_| Vec::new())
+                .collect(),
             visited: Vec::new(),
         }
     }
 
-    /// Queues `radiance · weight` at film point `p`.
+    /// Queues `radiance · weight` at film point `p` of layer `layer`.
     #[inline]
-    pub fn splat(&mut self, p: FilmPoint, radiance: R, weight: f64) {
+    pub fn splat(&mut self, layer: usize, p: FilmPoint, radiance: R, weight: f64) {
         let pixel = self.bands.resolution.pixel_index(p);
-        self.splats[self.bands.band_of(pixel)].push(Splat {
+        let bucket = self.bands.band_of(pixel) * self.bands.layers + layer;
+        self.splats[bucket].push(Splat {
             pixel: pixel as u32,
             weight,
             radiance,
@@ -56,15 +62,15 @@ impl<R> RoundBuffers<R> {
     }
 
     /// Queues every contribution of `path` (its radiance and its splats)
-    /// with `weight`.
+    /// with `weight`, in layer `layer`.
     #[inline]
-    pub fn splat_path(&mut self, path: &Evaluated<R>, weight: f64)
+    pub fn splat_path(&mut self, layer: usize, path: &Evaluated<R>, weight: f64)
     where
         R: Radiance,
     {
-        self.splat(path.film, path.sample.radiance, weight);
+        self.splat(layer, path.film, path.sample.radiance, weight);
         for s in path.splats.as_slice() {
-            self.splat(s.film, s.radiance, weight);
+            self.splat(layer, s.film, s.radiance, weight);
         }
     }
 
@@ -98,6 +104,17 @@ pub(crate) trait Runs: Worker + Send + Sync {
     {
         let _ = workers;
     }
+
+    /// The image from the layers' sums, each multiplied by `scale` (one
+    /// estimate of the image per unit of every worker's work): by default
+    /// the one layer.
+    fn image(layers: &[ExactFilm], scale: f64, workers: &[Self]) -> Film
+    where
+        Self: Sized,
+    {
+        let _ = workers;
+        layers[0].scaled(scale)
+    }
 }
 
 /// A worker whose state a checkpoint holds.
@@ -107,12 +124,14 @@ pub(crate) trait Saves {
     fn state(&self) -> &Self::State;
 }
 
-/// Horizontal bands of the film.
+/// Horizontal bands of the film, and how many films (layers) a worker
+/// splats into.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SplatBands {
     resolution: Resolution,
     pixels_per_band: usize,
     count: usize,
+    layers: usize,
 }
 
 impl SplatBands {
@@ -126,6 +145,15 @@ impl SplatBands {
             resolution,
             pixels_per_band: width * rows_per_band,
             count: height.div_ceil(rows_per_band),
+            layers: 1,
+        }
+    }
+
+    /// These bands over `layers` films.
+    pub fn with_layers(self, layers: usize) -> Self {
+        Self {
+            layers: layers.max(1),
+            ..self
         }
     }
 
@@ -134,27 +162,26 @@ impl SplatBands {
         pixel / self.pixels_per_band
     }
 
-    /// Adds every worker's splats to `film` in worker order and its visits to
-    /// `visits` (integer counts: order does not matter), then clears them.
+    /// Adds every worker's splats to its layer's film in `films` and its
+    /// visits to `visits` (exact sums and integer counts: order does not
+    /// matter), then clears them.
     pub fn merge<W: Worker + Sync + Send>(
         &self,
         work: &mut [W],
-        film: &mut Film,
+        films: &mut [ExactFilm],
         visits: &mut [u64],
     ) {
-        let channels = film.channels();
-        let band_len = self.pixels_per_band * channels;
-        parallel::for_each_chunk(film.data_mut(), band_len, |band, values| {
-            let base = band * self.pixels_per_band;
-            for w in work.iter() {
-                for s in &w.buffers().splats[band] {
-                    let at = (s.pixel as usize - base) * channels;
-                    for (c, v) in values[at..at + channels].iter_mut().enumerate() {
-                        *v += s.weight * s.radiance.channel(c) as f64;
+        for (layer, film) in films.iter_mut().enumerate() {
+            let mut bands = film.bands_mut(self.pixels_per_band);
+            parallel::for_each(&mut bands, |values| {
+                let bucket = values.first / self.pixels_per_band * self.layers + layer;
+                for w in work.iter() {
+                    for s in &w.buffers().splats[bucket] {
+                        values.add(s.pixel as usize - values.first, s.weight, &s.radiance);
                     }
                 }
-            }
-        });
+            });
+        }
         for w in work.iter_mut() {
             let buffers = w.buffers_mut();
             for &p in &buffers.visited {
@@ -174,51 +201,77 @@ impl SplatBands {
     }
 }
 
-/// Workers that splat into one film, each unit of work (a chain step, an
-/// ensemble sweep) estimating the image once: the rounds of PSSMLT and
-/// replica exchange. After `u` units of `n` workers the image is the film
-/// scaled by `W·H / (u n)`.
+/// Workers that splat into films (one per layer), each unit of work (a
+/// chain step, an ensemble sweep) estimating the image once: the rounds of
+/// PSSMLT and replica exchange. After `u` units of `n` workers the image is
+/// the films scaled by `W·H / (u n)` ([`Runs::image`]).
 pub(crate) struct Splatting<W> {
     /// The workers, in merge order.
     pub work: Vec<W>,
     bands: SplatBands,
-    film: Film,
+    films: Vec<ExactFilm>,
     visits: Vec<u64>,
     units: u64,
     unit_samples: u64,
+    /// The workers a sample budget is planned for: all of the render's,
+    /// when these are one task's share of them.
+    planned_workers: u64,
 }
 
+/// What a checkpoint holds of [`Splatting`] besides its workers: the
+/// layers' films, the visits and the units done.
+pub(crate) type SplatSums = (Vec<ExactFilm>, Vec<u64>, u64);
+
 impl<W: Runs> Splatting<W> {
-    /// `work` splatting into a black film; a unit costs each worker
-    /// `unit_samples` traces.
-    pub fn new(work: Vec<W>, bands: SplatBands, unit_samples: u64) -> Result<Self, Error> {
+    /// `work` splatting into black films; a unit costs each worker
+    /// `unit_samples` traces; a sample budget is planned for
+    /// `planned_workers` workers (more than `work` holds when it is one
+    /// task's share).
+    pub fn new(
+        work: Vec<W>,
+        bands: SplatBands,
+        unit_samples: u64,
+        planned_workers: u64,
+    ) -> Result<Self, Error> {
         let resolution = bands.resolution;
-        Ok(Self {
+        let films = (0..bands.layers)
+            .map(|_| ExactFilm::try_new(resolution, W::Radiance::CHANNELS))
+            .collect::<Result<_, _>>()?;
+        Self::resumed(
             work,
             bands,
-            film: Film::try_new(resolution, W::Radiance::CHANNELS)?,
-            visits: vec![0; resolution.pixel_count()],
-            units: 0,
             unit_samples,
-        })
+            planned_workers,
+            (films, vec![0; resolution.pixel_count()], 0),
+        )
     }
 
+    /// `W·H / (u n)`: one estimate of the image per unit of every worker
+    /// (1 before any unit).
     fn scale(&self) -> f64 {
-        self.bands.resolution.pixel_count() as f64 / (self.units * self.work.len() as u64) as f64
+        let estimates = self.units * self.work.len() as u64;
+        if estimates == 0 {
+            return 1.0;
+        }
+        self.bands.resolution.pixel_count() as f64 / estimates as f64
     }
 
-    /// Workers resumed from a checkpoint with the film, visits and units
+    /// Workers resumed from a checkpoint with the films, visits and units
     /// they had (see [`save`](Self::save)); a film or visit count of another
     /// size, or no worker, is an error.
     pub fn resumed(
         work: Vec<W>,
         bands: SplatBands,
         unit_samples: u64,
-        (film, visits, units): (Film, Vec<u64>, u64),
+        planned_workers: u64,
+        (films, visits, units): SplatSums,
     ) -> Result<Self, Error> {
         let resolution = bands.resolution;
         if work.is_empty()
-            || !film.fits(resolution, W::Radiance::CHANNELS)
+            || films.len() != bands.layers
+            || !films
+                .iter()
+                .all(|f| f.fits(resolution, W::Radiance::CHANNELS))
             || visits.len() != resolution.pixel_count()
         {
             return Err(checkpoint::does_not_fit());
@@ -226,31 +279,49 @@ impl<W: Runs> Splatting<W> {
         Ok(Self {
             work,
             bands,
-            film,
+            films,
             visits,
             units,
             unit_samples,
+            planned_workers,
         })
     }
 
-    /// Appends the film, the visits, the units done and every worker's
+    /// Appends the films, the visits, the units done and every worker's
     /// state (its buffers are empty between rounds) to a checkpoint; read
-    /// back as `((Film, Vec<u64>, u64), Vec<W::State>)`.
+    /// back as `(SplatSums, Vec<W::State>)`.
     pub fn save(&self, out: &mut Vec<u8>)
     where
         W: Saves,
     {
+        self.save_sums(out);
+        self.save_states(out);
+    }
+
+    /// Appends the films, the visits and the units done (read back as
+    /// [`SplatSums`]).
+    pub fn save_sums(&self, out: &mut Vec<u8>) {
+        checkpoint::append(&(&self.films, &self.visits, self.units), out);
+    }
+
+    /// Appends every worker's state (read back as `Vec<W::State>`).
+    pub fn save_states(&self, out: &mut Vec<u8>)
+    where
+        W: Saves,
+    {
         let states: Vec<&W::State> = self.work.iter().map(Saves::state).collect();
-        checkpoint::append(&((&self.film, &self.visits, self.units), states), out);
+        checkpoint::append(&states, out);
     }
 
     /// The normalized image and the states per pixel.
-    pub fn finish(mut self) -> (Film, Vec<u64>, Vec<W>) {
-        if self.units > 0 {
-            let scale = self.scale();
-            self.film.scale(scale);
-        }
-        (self.film, self.visits, self.work)
+    pub fn finish(self) -> (Film, Vec<u64>, Vec<W>) {
+        let image = W::image(&self.films, self.scale(), &self.work);
+        (image, self.visits, self.work)
+    }
+
+    /// The sums (films, visits, units), and the workers.
+    pub fn into_parts(self) -> (SplatSums, Vec<W>) {
+        ((self.films, self.visits, self.units), self.work)
     }
 }
 
@@ -259,17 +330,18 @@ impl<W: Runs> Rounds for Splatting<W> {
         self.work.len().max(1) as u64 * self.unit_samples
     }
 
-    /// Enough units to spend the budget (rounded up).
+    /// Enough units to spend the budget over the planned workers (rounded
+    /// up).
     fn planned_units(&self, samples: u64) -> u64 {
-        samples.div_ceil(self.unit_cost()).max(1)
+        let unit = self.planned_workers.max(1) * self.unit_samples;
+        samples.div_ceil(unit).max(1)
     }
 
-    /// Every worker's units in parallel, then their splats merged in worker
-    /// order.
+    /// Every worker's units in parallel, then their splats merged.
     fn run(&mut self, units: u64) {
         parallel::for_each(&mut self.work, |w| w.run(units));
         self.bands
-            .merge(&mut self.work, &mut self.film, &mut self.visits);
+            .merge(&mut self.work, &mut self.films, &mut self.visits);
         W::after_round(&mut self.work);
         self.units += units;
     }
@@ -283,6 +355,6 @@ impl<W: Runs> Rounds for Splatting<W> {
     }
 
     fn preview(&self) -> Film {
-        self.film.scaled(self.scale())
+        W::image(&self.films, self.scale(), &self.work)
     }
 }

@@ -40,6 +40,7 @@ use crate::checkpoint;
 use crate::drive::splat::{RoundBuffers, SplatBands, Worker};
 use crate::drive::{RenderStats, Rounds, drive};
 use crate::error::Error;
+use crate::exact::ExactFilm;
 use crate::film::Film;
 use crate::mutate::{MutationParams, SmallStep};
 use crate::oracle::{PathOracle, Radiance, Resolution, Temperature};
@@ -186,7 +187,7 @@ where
                 bootstrap: bootstrap.traced(),
                 b: bootstrap.normalization(),
                 normalization: bootstrap.estimate(0),
-                film: Film::try_new(resolution, O::Radiance::CHANNELS)?,
+                film: ExactFilm::try_new(resolution, O::Radiance::CHANNELS)?,
                 visits: alloc::vec![0; resolution.pixel_count()],
                 totals: alloc::vec![Totals::default(); TASKS],
                 starts: starts(resolution),
@@ -236,9 +237,7 @@ where
             out,
         )
     })?;
-    let scale = run.scale();
-    let mut film = run.film;
-    film.scale(scale);
+    let film = run.film.scaled(run.scale());
     let mut stats = RenderStats {
         bootstrap_samples: bootstrap.paths,
         normalization: Some(b),
@@ -269,7 +268,7 @@ struct Saved {
     /// The bootstrap's `b*`, and the samples behind it.
     b: f64,
     normalization: Normalization,
-    film: Film,
+    film: ExactFilm,
     visits: Vec<u64>,
     totals: Vec<Totals>,
     starts: usize,
@@ -399,7 +398,7 @@ struct Passes<'a, O: PathOracle, I: ?Sized> {
     energy: f64,
     bands: SplatBands,
     work: Vec<Segment<O::Radiance>>,
-    film: Film,
+    film: ExactFilm,
     visits: Vec<u64>,
     /// Start paths per pass: a whole number of paths per pixel, at least
     /// [`MIN_STARTS`].
@@ -497,8 +496,11 @@ where
                     }
                 }
             });
-            self.bands
-                .merge(&mut self.work, &mut self.film, &mut self.visits);
+            self.bands.merge(
+                &mut self.work,
+                core::slice::from_mut(&mut self.film),
+                &mut self.visits,
+            );
             first += count;
             if first >= chains {
                 break;
@@ -622,7 +624,7 @@ fn redistribute<O, I>(
             false,
             &mut decisions,
             &mut w.totals.chains,
-            |path, weight| buffers.splat_path(path, weight),
+            |path, weight| buffers.splat_path(0, path, weight),
         );
         w.buffers.visit(chain.state().film);
         w.totals.traces += 1;

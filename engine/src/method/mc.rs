@@ -3,8 +3,9 @@
 //!
 //! A unit of work is a pass; a sample budget is rounded down to whole passes
 //! (at least one). Row `y` of pass `k` owns the stream `(seed, Independent,
-//! k·H + y)` and is written by one task, so the image does not depend on the
-//! thread count.
+//! k·H + y)`, and the film's sums are exact, so the image depends neither on
+//! the thread count nor on how the passes are split into tasks (pass `k`
+//! belongs to task `k mod count`).
 
 use alloc::vec::Vec;
 
@@ -12,12 +13,16 @@ use super::{Extras, Job, Output};
 use crate::checkpoint;
 use crate::drive::{Rounds, drive};
 use crate::error::Error;
+use crate::exact::ExactFilm;
 use crate::film::Film;
-use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Sampler, Temperature};
+use crate::oracle::{
+    FilmPoint, PathOracle, PathSample, Radiance, Resolution, Sampler, Temperature,
+};
 use crate::parallel;
 use crate::rng::{self, Domain};
 use crate::sample::IndependentSampler;
 use crate::target::{Evaluated, FnImportance, Importance};
+use crate::task::Task;
 
 /// MC under `job` (the importance function is not used).
 pub(crate) fn render<O, I>(job: &Job<'_, O, I>) -> Result<Output, Error>
@@ -26,18 +31,19 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let channels = O::Radiance::CHANNELS;
-    let (film, passes, invalid, position) = match job.resumed::<(Film, u64, u64)>()? {
+    let (film, passes, invalid, position) = match job.resumed::<Saved>()? {
         Some((position, (film, passes, invalid))) => {
             if !film.fits(job.resolution, channels) {
                 return Err(checkpoint::does_not_fit());
             }
             (film, passes, invalid, Some(position))
         }
-        None => (Film::try_new(job.resolution, channels)?, 0, 0, None),
+        None => (ExactFilm::try_new(job.resolution, channels)?, 0, 0, None),
     };
     let mut run = Passes {
         oracle: job.oracle,
         seed: job.seed,
+        task: job.task,
         film,
         passes,
         invalid,
@@ -45,27 +51,59 @@ where
     let driven = drive(&mut run, job.round_loop(position), |run, out| {
         checkpoint::append(&(&run.film, run.passes, run.invalid), out)
     })?;
-    let pixels = job.resolution.pixel_count() as u64;
-    let mut film = run.film;
-    film.scale(1.0 / run.passes.max(1) as f64);
-    Ok(Output {
-        film,
+    let mut out = finish(run.film, run.passes, run.invalid);
+    out.cancelled = driven.cancelled;
+    Ok(out)
+}
+
+/// What a checkpoint (or a task's partial result) holds of MC: the film's
+/// sums, the passes summed into it, the invalid samples among them.
+type Saved = (ExactFilm, u64, u64);
+
+/// The image of `passes` passes summed into `film`.
+fn finish(film: ExactFilm, passes: u64, invalid: u64) -> Output {
+    let pixels = film.resolution().pixel_count() as u64;
+    Output {
+        film: film.scaled(1.0 / passes.max(1) as f64),
         stats: crate::drive::RenderStats {
-            samples: run.passes * pixels,
-            invalid_samples: run.invalid,
+            samples: passes * pixels,
+            invalid_samples: invalid,
             ..Default::default()
         },
-        cancelled: driven.cancelled,
+        cancelled: false,
         visits: Vec::new(),
         extras: Extras::None,
-    })
+    }
+}
+
+/// The image of the tasks' saved states `parts` (see
+/// [`merge`](super::merge)): their films and counts added.
+pub(crate) fn merge(
+    parts: &[&[u8]],
+    resolution: Resolution,
+    channels: usize,
+) -> Result<Output, Error> {
+    let mut film = ExactFilm::try_new(resolution, channels)?;
+    let (mut passes, mut invalid) = (0u64, 0u64);
+    for part in parts {
+        let (f, p, i): Saved = checkpoint::take(part)?.0;
+        if !f.fits(resolution, channels) {
+            return Err(checkpoint::does_not_fit());
+        }
+        film.merge(&f)?;
+        passes = passes.saturating_add(p);
+        invalid = invalid.saturating_add(i);
+    }
+    Ok(finish(film, passes, invalid))
 }
 
 /// MC's state between rounds: the sums of the passes so far.
 struct Passes<'a, O> {
     oracle: &'a O,
     seed: u64,
-    film: Film,
+    /// The passes of this task: `task.unit(j)` is its `j`-th.
+    task: Task,
+    film: ExactFilm,
     passes: u64,
     invalid: u64,
 }
@@ -75,13 +113,15 @@ impl<O: PathOracle> Rounds for Passes<'_, O> {
         self.film.resolution().pixel_count() as u64
     }
 
+    /// This task's share of the passes the budget buys.
     fn planned_units(&self, samples: u64) -> u64 {
-        (samples / self.unit_cost()).max(1)
+        self.task.share((samples / self.unit_cost()).max(1))
     }
 
     fn run(&mut self, units: u64) {
         for _ in 0..units {
-            self.invalid += pass(self.oracle, self.seed, self.passes, &mut self.film);
+            let k = self.task.unit(self.passes);
+            self.invalid += pass(self.oracle, self.seed, k, &mut self.film);
             self.passes += 1;
         }
     }
@@ -100,13 +140,13 @@ impl<O: PathOracle> Rounds for Passes<'_, O> {
 }
 
 /// One path per pixel, rows in parallel; returns the number of invalid
-/// samples. Each row's splats are kept apart and added after the pass, row
-/// by row, so the film does not depend on the thread count.
-fn pass<O: PathOracle>(oracle: &O, seed: u64, pass: u64, film: &mut Film) -> u64 {
+/// samples. Each row's splats are kept apart and added after the pass (the
+/// film's sums are exact: the order of additions does not matter).
+fn pass<O: PathOracle>(oracle: &O, seed: u64, pass: u64, film: &mut ExactFilm) -> u64 {
     let resolution = film.resolution();
-    let channels = O::Radiance::CHANNELS;
-    let row_len = resolution.width as usize * channels;
-    let rows = parallel::map_chunks(film.data_mut(), row_len, |y, values| {
+    let mut rows = film.bands_mut(resolution.width as usize);
+    let rows = parallel::map_each(&mut rows, |row| {
+        let y = row.first / resolution.width as usize;
         let index = pass * resolution.height as u64 + y as u64;
         let mut sampler = IndependentSampler::new(rng::stream(seed, Domain::Independent, index));
         let mut path = Evaluated::default();
@@ -131,10 +171,7 @@ fn pass<O: PathOracle>(oracle: &O, seed: u64, pass: u64, film: &mut Film) -> u64
                 invalid += 1;
                 continue;
             }
-            let px = &mut values[x * channels..(x + 1) * channels];
-            for (c, p) in px.iter_mut().enumerate() {
-                *p += path.sample.radiance.channel(c) as f64;
-            }
+            row.add(x, 1.0, &path.sample.radiance);
             splats.extend_from_slice(path.splats.as_slice());
         }
         (invalid, splats)

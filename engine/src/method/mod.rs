@@ -28,11 +28,14 @@ mod pssmlt;
 mod replica;
 mod stratified;
 mod table;
+mod tasks;
 
 use alloc::vec::Vec;
+use core::cell::OnceCell;
 use serde::{Deserialize, Serialize};
 
 pub use crate::setting::{Kind, Setting, Value};
+pub use crate::task::Task;
 pub use erpt::ErptSettings;
 pub use multistage::{MultiStageSettings, Probed, Stage, stage_grids};
 pub use noise_aware::tvi;
@@ -41,6 +44,7 @@ pub use replica::{ReplicaExtras, ReplicaSettings};
 pub use stratified::{
     Initialization, Solver, StratifiedExtras, StratifiedSettings, StratifiedStats,
 };
+pub use tasks::{merge, render_task, resume_task};
 
 use serde::de::DeserializeOwned;
 
@@ -158,7 +162,7 @@ impl Method {
     /// way). `channels` are the radiance's, `splats_per_path` the oracle's
     /// ([`PathOracle::splats_per_path`]), `workers` the threads.
     ///
-    /// Counted: the films and per-pixel counts; the bootstrap's candidates
+    /// Counted: the films (exact sums, [`ExactFilm`](crate::exact::ExactFilm), and the image) and per-pixel counts; the bootstrap's candidates
     /// (let go before the first round); every chain's state (its primary
     /// sample and path); stratified MCMC's tile chains, per pixel a part of
     /// its own and one per tile pixel (the state evaluated there, with its
@@ -182,6 +186,9 @@ impl Method {
         // In u128: a film of u32::MAX x u32::MAX pixels is still a number.
         let pixels = resolution.pixel_count() as u128;
         let film = 8 * channels as u128 * pixels;
+        // The exact sums the films of MC, PSSMLT (two layers), replica
+        // exchange and ERPT are, beside the image they finish to.
+        let exact = crate::exact::ExactFilm::VALUE_BYTES as u128 * channels as u128 * pixels;
         let counted = film + 8 * pixels;
         // A queued contribution: pixel, weight and radiance.
         let queued = (12 + 4 * channels as u128).next_multiple_of(8);
@@ -205,10 +212,11 @@ impl Method {
         };
         let workers = workers as u128;
         let bytes = match self {
-            Method::Mc => film + pixels * splats * queued / 100,
+            Method::Mc => exact + film + pixels * splats * queued / 100,
             // The bootstrap's candidates are let go before the first round.
             Method::Pssmlt(s) => {
                 counted
+                    + 2 * exact
                     + s.chains as u128 * CHAIN
                     + (s.bootstrap_candidates as u128 * CANDIDATE).max(round(s.chains as u64))
             }
@@ -216,6 +224,7 @@ impl Method {
                 let levels = s.ensemble.ladder.len() as u128;
                 let sweep = s.traces_per_sweep().saturating_mul(s.ensembles as u64);
                 counted
+                    + exact
                     + s.ensembles as u128 * levels * CHAIN
                     + (s.ensemble.bootstrap_candidates as u128 * levels * CANDIDATE)
                         .max(round(sweep))
@@ -235,7 +244,10 @@ impl Method {
                 // in vectors that grew by doubling while it ran: half as
                 // much again.
                 let wave = contributions(erpt::BLOCK_PATHS + erpt::WAVE_STEPS, 3);
-                counted + workers * CHAIN + (s.bootstrap_candidates as u128 * CANDIDATE).max(wave)
+                counted
+                    + exact
+                    + workers * CHAIN
+                    + (s.bootstrap_candidates as u128 * CANDIDATE).max(wave)
             }
             Method::MultiStage(s) => {
                 // One PSSMLT stage, and beside it the estimate so far, the
@@ -386,11 +398,16 @@ pub(crate) struct Job<'a, O, I: ?Sized> {
     pub budget: Budget,
     pub observer: &'a dyn Observer,
     pub resolution: Resolution,
+    /// The task of the render this job is (the whole render, unsplit).
+    pub task: Task,
     pub clock: Clock,
     pub checkpoints: &'a dyn Checkpoints,
     /// The saved state of a resumed render: the round loop's position and
     /// the method's state, in that order.
     pub resume: Option<&'a [u8]>,
+    /// Where the round loop puts a checkpoint of the state after its last
+    /// round (a task's partial result).
+    pub last: Option<&'a OnceCell<Checkpoint>>,
 }
 
 impl<O, I: ?Sized> Job<'_, O, I> {
@@ -426,6 +443,7 @@ impl<O, I: ?Sized> Job<'_, O, I> {
             checkpoints: self.checkpoints,
             resumed,
             ends_within: false,
+            last: self.last,
         }
     }
 
@@ -478,7 +496,15 @@ where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    run(oracle, importance, settings, observer, None)
+    run(
+        oracle,
+        importance,
+        settings,
+        observer,
+        None,
+        Task::WHOLE,
+        None,
+    )
 }
 
 /// What a checkpoint's header says of the render: the settings are
@@ -497,7 +523,11 @@ impl Checkpoint {
     /// The state to continue a render of `oracle` with `settings` from, after
     /// checking that the checkpoint is of that oracle, method and seed (the
     /// budget may differ).
-    fn state_for<O: PathOracle>(&self, oracle: &O, settings: &Settings) -> Result<&[u8], Error> {
+    fn state_for<O: PathOracle>(
+        &self,
+        oracle: &O,
+        settings: &Settings,
+    ) -> Result<(&[u8], Task), Error> {
         let (header, state) = self.header::<Settings>()?;
         let mismatch = |what| Err(Error::CheckpointMismatch { what });
         if header.settings.method != settings.method {
@@ -515,7 +545,19 @@ impl Checkpoint {
         if header.oracle != OracleId::of(oracle) {
             return mismatch("scene (the oracle returns other values on the probe paths)");
         }
-        Ok(state)
+        Ok((state, header.task))
+    }
+
+    /// Which task of a split render this is ([`Task::WHOLE`] for a render
+    /// not split).
+    pub fn task(&self) -> Result<Task, Error> {
+        Ok(self.header::<Settings>()?.0.task)
+    }
+
+    /// Whether the render's (or task's) budget was spent: a finished task's
+    /// checkpoint is its partial result, for [`merge`].
+    pub fn finished(&self) -> Result<bool, Error> {
+        Ok(self.header::<Settings>()?.0.finished)
     }
 }
 
@@ -540,8 +582,20 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     settings.validate()?;
-    let state = checkpoint.state_for(oracle, settings)?;
-    let output = run_resumed(oracle, importance, settings, observer, state)?;
+    let (state, task) = checkpoint.state_for(oracle, settings)?;
+    if task != Task::WHOLE {
+        return Err(Error::CheckpointMismatch {
+            what: "task (a task's checkpoint is resumed by resume_task)",
+        });
+    }
+    let output = run_resumed(
+        oracle,
+        importance,
+        settings,
+        observer,
+        state,
+        (Task::WHOLE, None),
+    )?;
     // A fresh render's pixels are finite and non-negative (invalid samples
     // are dropped where they are traced); a resumed one's can only be
     // otherwise through a forged state (a chain's saved path, a sum), which
@@ -572,12 +626,23 @@ fn run_resumed<O, I>(
     settings: &Settings,
     observer: &dyn Observer,
     state: &[u8],
+    (task, last): (Task, Option<&OnceCell<Checkpoint>>),
 ) -> Result<Output, Error>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    let go = || run(oracle, importance, settings, observer, Some(state));
+    let go = || {
+        run(
+            oracle,
+            importance,
+            settings,
+            observer,
+            Some(state),
+            task,
+            last,
+        )
+    };
     #[cfg(feature = "std")]
     {
         std::panic::catch_unwind(std::panic::AssertUnwindSafe(go)).unwrap_or(Err(
@@ -590,13 +655,16 @@ where
     go()
 }
 
-/// A render, fresh or resumed from `resume`.
+/// A render, fresh or resumed from `resume`, or task `task` of it; `last`
+/// receives a checkpoint of its state after the last round.
 fn run<O, I>(
     oracle: &O,
     importance: &I,
     settings: &Settings,
     observer: &dyn Observer,
     resume: Option<&[u8]>,
+    task: Task,
+    last: Option<&OnceCell<Checkpoint>>,
 ) -> Result<Output, Error>
 where
     O: PathOracle,
@@ -634,7 +702,7 @@ where
         }
     }
     let oracle_id = || OracleId::of(oracle);
-    let checkpoints = Checkpointer::new(settings, O::Radiance::CHANNELS, &oracle_id);
+    let checkpoints = Checkpointer::new(settings, task, O::Radiance::CHANNELS, &oracle_id);
     let job = Job {
         oracle,
         importance,
@@ -642,9 +710,11 @@ where
         budget: settings.budget,
         observer,
         resolution,
+        task,
         clock: Clock::start(settings.budget),
         checkpoints: &checkpoints,
         resume,
+        last,
     };
     match &settings.method {
         Method::Mc => mc::render(&job),

@@ -381,9 +381,11 @@ where
             budget,
             observer: &observer,
             resolution,
+            task: job.task,
             clock: Clock::start(budget),
             checkpoints: &stage_checkpoints,
             resume: resumed_stage.filter(|_| s == first),
+            last: None,
         };
         let (mut run, position) = Pssmlt::start(&settings.pssmlt, &stage_job)?;
         let saver = run.saver();
@@ -470,9 +472,14 @@ struct StageCheckpoints<'a> {
 }
 
 impl Checkpoints for StageCheckpoints<'_> {
-    fn checkpoint(&self, samples: u64, write: &mut dyn FnMut(&mut Vec<u8>)) -> Checkpoint {
+    fn checkpoint(
+        &self,
+        samples: u64,
+        finished: bool,
+        write: &mut dyn FnMut(&mut Vec<u8>),
+    ) -> Checkpoint {
         let total = self.done.stats.samples + samples;
-        self.outer.checkpoint(total, &mut |out| {
+        self.outer.checkpoint(total, finished, &mut |out| {
             checkpoint::append(self.done, out);
             write(out);
         })

@@ -7,14 +7,15 @@ use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
 use alloc::vec::Vec;
 
-use crate::chain::{Normalization, PathChain, Traced};
+use crate::chain::{ChainStats, Normalization, PathChain, Traced, splat_weights};
 use crate::checkpoint::{self, Position};
-use crate::drive::splat::{RoundBuffers, Runs, Saves, SplatBands, Splatting, Worker};
+use crate::drive::splat::{RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker};
 use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
+use crate::exact::ExactFilm;
 use crate::film::Film;
 use crate::mutate::MutationParams;
-use crate::oracle::PathOracle;
+use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::parallel;
 use crate::target::Importance;
 use serde::{Deserialize, Serialize};
@@ -67,8 +68,13 @@ where
     Ok(run.finish(driven))
 }
 
+/// The layers PSSMLT splats into: the chains' part of every sample's weight,
+/// and the large steps' part (see [`image`]).
+const CHAIN_PART: usize = 0;
+const LARGE_STEP_PART: usize = 1;
+
 /// PSSMLT's state: its bootstrap's counters and estimate, and its chains
-/// with their film.
+/// with their films.
 pub(crate) struct Pssmlt<'a, O: PathOracle, I: ?Sized> {
     bootstrap: Traced,
     prior: Normalization,
@@ -76,26 +82,43 @@ pub(crate) struct Pssmlt<'a, O: PathOracle, I: ?Sized> {
     pub chains: Splatting<ChainWork<'a, O, I>>,
 }
 
-/// What a checkpoint holds of PSSMLT, in [`Pssmlt::save`]'s order.
+/// What a checkpoint holds of PSSMLT, in [`Pssmlt::saver`]'s order: what
+/// [`merge`] reads (the bootstrap, the films, each chain's [`Summary`]),
+/// then the chains.
 type Saved<R> = (
     Traced,
     Normalization,
-    ((Film, Vec<u64>, u64), Vec<PathChain<R>>),
+    SplatSums,
+    Vec<Summary>,
+    Vec<PathChain<R>>,
 );
+
+/// What the image needs of a chain: its counters, its large steps'
+/// normalization samples, and the `b0` of its weights.
+type Summary = (ChainStats, Normalization, f64);
+
+fn summary<R: Radiance>(chain: &PathChain<R>) -> Summary {
+    (
+        *chain.stats(),
+        *chain.large_steps(),
+        chain.weights().normalization,
+    )
+}
 
 impl<'a, O, I> Pssmlt<'a, O, I>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    /// The bootstrap and the chains started from it, or for a resumed job
-    /// the chains as they were, with the round loop's position.
+    /// The bootstrap and the chains started from it (this job's task's
+    /// share of them: chain `c` belongs to task `c mod count`), or for a
+    /// resumed job the chains as they were, with the round loop's position.
     pub(crate) fn start(
         settings: &PssmltSettings,
         job: &Job<'a, O, I>,
     ) -> Result<(Self, Option<Position>), Error> {
         let (oracle, importance) = (job.oracle, job.importance);
-        let bands = SplatBands::new(job.resolution);
+        let bands = SplatBands::new(job.resolution).with_layers(2);
         let work = |chain, prior| ChainWork {
             oracle,
             importance,
@@ -103,16 +126,17 @@ where
             buffers: RoundBuffers::new(bands),
             prior,
         };
+        let chains = settings.chains as u64;
         if let Some((position, saved)) = job.resumed::<Saved<O::Radiance>>()? {
-            let (bootstrap, prior, (splatted, chains)) = saved;
-            if chains.len() != settings.chains as usize {
+            let (bootstrap, prior, splatted, _, states) = saved;
+            if states.len() as u64 != job.task.share(chains) {
                 return Err(checkpoint::does_not_fit());
             }
-            let chains = chains.into_iter().map(|c| work(c, prior)).collect();
+            let work = states.into_iter().map(|c| work(c, prior)).collect();
             let run = Self {
                 bootstrap,
                 prior,
-                chains: Splatting::resumed(chains, bands, 1, splatted)?,
+                chains: Splatting::resumed(work, bands, 1, chains, splatted)?,
             };
             return Ok((run, Some(position)));
         }
@@ -126,15 +150,16 @@ where
         )?;
         let p_large = settings.mutation.large_step_probability;
         let prior = bootstrap.estimate(0);
-        let start = |i: usize| {
-            work(
-                bootstrap.start_path_chain(oracle, importance, i as u64, p_large),
-                prior,
-            )
+        let task = job.task;
+        let start = |j: usize| {
+            let index = task.unit(j as u64);
+            let mut chain = bootstrap.start_path_chain(oracle, importance, index, p_large);
+            chain.weights_mut().large_steps_apart = true;
+            work(chain, prior)
         };
-        let chains = parallel::map_indices(settings.chains as usize, start);
+        let work = parallel::map_indices(job.task.share(chains) as usize, start);
         let run = Self {
-            chains: Splatting::new(chains, bands, 1)?,
+            chains: Splatting::new(work, bands, 1, chains)?,
             bootstrap: bootstrap.traced(),
             prior,
         };
@@ -149,26 +174,21 @@ where
         let (bootstrap, prior) = (self.bootstrap, self.prior);
         move |chains, out| {
             checkpoint::append(&(bootstrap, prior), out);
-            chains.save(out);
+            chains.save_sums(out);
+            let summaries: Vec<Summary> = chains.work.iter().map(|w| summary(&w.chain)).collect();
+            checkpoint::append(&summaries, out);
+            chains.save_states(out);
         }
     }
 
     /// The normalized image and the counters.
     pub(crate) fn finish(self, driven: Driven) -> Output {
         let samples = self.chains.samples();
-        let (film, visits, work) = self.chains.finish();
-        let normalization = ChainWork::pooled(&work);
-        let mut stats = RenderStats {
-            samples,
-            bootstrap_samples: self.bootstrap.paths,
-            normalization: Some(normalization.value()),
-            normalization_error: Some(normalization.relative_error()),
-            ..Default::default()
-        };
-        for w in &work {
-            stats.chains.merge(w.chain.stats());
-        }
-        stats.invalid_samples = stats.chains.invalid + self.bootstrap.invalid;
+        let prior = self.prior;
+        let ((films, visits, units), work) = self.chains.into_parts();
+        let chains: Vec<Summary> = work.iter().map(|w| summary(&w.chain)).collect();
+        let estimates = units * chains.len() as u64;
+        let (film, stats) = finish(self.bootstrap, prior, &films, estimates, &chains, samples);
         Output {
             film,
             stats,
@@ -179,6 +199,121 @@ where
     }
 }
 
+/// The image of the tasks' saved states `parts` (see
+/// [`merge`](super::merge)), in task order: their films and visits added,
+/// their chains in the render's order, the normalization pooled over all.
+pub(crate) fn merge(
+    parts: &[&[u8]],
+    resolution: Resolution,
+    channels: usize,
+) -> Result<Output, Error> {
+    let mut films = Vec::new();
+    for _ in 0..2 {
+        films.push(ExactFilm::try_new(resolution, channels)?);
+    }
+    let mut visits = alloc::vec![0u64; resolution.pixel_count()];
+    let (mut estimates, mut samples) = (0u64, 0u64);
+    let mut tasks = Vec::with_capacity(parts.len());
+    let mut head = None;
+    for part in parts {
+        // Any radiance type with the saved channel count decodes the same
+        // chains; the image needs only their counters and normalizations.
+        let ((bootstrap, prior, (f, v, units)), rest) =
+            checkpoint::take::<(Traced, Normalization, SplatSums)>(part)?;
+        let chains: Vec<Summary> = checkpoint::take(rest)?.0;
+        if f.len() != 2
+            || !f.iter().all(|f| f.fits(resolution, channels))
+            || v.len() != visits.len()
+        {
+            return Err(checkpoint::does_not_fit());
+        }
+        for (a, b) in films.iter_mut().zip(&f) {
+            a.merge(b)?;
+        }
+        visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
+        estimates = estimates.saturating_add(units.saturating_mul(chains.len() as u64));
+        samples = samples.saturating_add(units.saturating_mul(chains.len() as u64));
+        head.get_or_insert((bootstrap, prior));
+        tasks.push(chains);
+    }
+    let (bootstrap, prior) = head.ok_or_else(checkpoint::does_not_fit)?;
+    // The render's chain order: chain c is task (c mod n)'s (c div n)-th.
+    let longest = tasks.iter().map(Vec::len).max().unwrap_or(0);
+    let chains: Vec<Summary> = (0..longest)
+        .flat_map(|j| tasks.iter().filter_map(move |t| t.get(j)))
+        .copied()
+        .collect();
+    let (film, stats) = finish(bootstrap, prior, &films, estimates, &chains, samples);
+    Ok(Output {
+        film,
+        stats,
+        cancelled: false,
+        visits,
+        extras: Extras::None,
+    })
+}
+
+/// The image and counters of PSSMLT's `chains` (all of the render's, in
+/// its order) with their layers `films` summing `estimates` estimates of the
+/// image, `samples` paths traced after a bootstrap that traced `bootstrap`
+/// and estimated `prior`.
+fn finish(
+    bootstrap: Traced,
+    prior: Normalization,
+    films: &[ExactFilm],
+    estimates: u64,
+    chains: &[Summary],
+    samples: u64,
+) -> (Film, RenderStats) {
+    let normalization = pooled(&prior, chains.iter().map(|c| &c.1));
+    let pixels = films[0].resolution().pixel_count() as f64;
+    let scale = pixels / estimates.max(1) as f64;
+    let b0 = chains.first().map_or(1.0, |c| c.2);
+    let mut stats = RenderStats {
+        samples,
+        bootstrap_samples: bootstrap.paths,
+        normalization: Some(normalization.value()),
+        normalization_error: Some(normalization.relative_error()),
+        ..Default::default()
+    };
+    for c in chains {
+        stats.chains.merge(&c.0);
+    }
+    stats.invalid_samples = stats.chains.invalid + bootstrap.invalid;
+    let film = image(films, scale, normalization.value() / b0);
+    (film, stats)
+}
+
+/// The normalization from the bootstrap's samples and every chain's large
+/// steps, pooled exactly (any grouping of the chains gives the same bits).
+fn pooled<'a>(
+    prior: &'a Normalization,
+    large_steps: impl Iterator<Item = &'a Normalization>,
+) -> Normalization {
+    Normalization::pooled(core::iter::once(prior).chain(large_steps))
+}
+
+/// PSSMLT's image from its two layers, each multiplied by `scale`.
+///
+/// Every chain weights its samples with the bootstrap's normalization `b0`
+/// (Kelemen et al. 2002, sec. 4; the module docs of [`chain`](crate::chain)):
+/// the chain part `a/(I/b0 + p)` of each sample, whose chain samples
+/// `I/b`, estimates the image's chain share scaled by `b0/b`, and the large
+/// steps' part `1/(I/b0 + p)` (uniform samples) its large-step share. So
+/// the image is `r · chain part + large-step part` with `r = b̂/b0`, `b̂`
+/// the normalization pooled over the bootstrap and every large step: the
+/// best estimate of `b` enters once, at the end, and no chain's weights
+/// depend on another's (a render split into tasks splats the same).
+fn image(layers: &[ExactFilm], scale: f64, r: f64) -> Film {
+    let (chain, large) = (&layers[CHAIN_PART], &layers[LARGE_STEP_PART]);
+    let mut film = Film::new(chain.resolution(), chain.channels());
+    let sums = chain.values().zip(large.values());
+    for (v, (c, l)) in film.data_mut().iter_mut().zip(sums) {
+        *v = scale * (r * c + l);
+    }
+    film
+}
+
 /// A chain and what it produced in the current round.
 pub(crate) struct ChainWork<'a, O: PathOracle, I: ?Sized> {
     oracle: &'a O,
@@ -187,18 +322,6 @@ pub(crate) struct ChainWork<'a, O: PathOracle, I: ?Sized> {
     buffers: RoundBuffers<O::Radiance>,
     /// The bootstrap's samples of the normalization (the same in every chain).
     prior: Normalization,
-}
-
-impl<O: PathOracle, I: ?Sized> ChainWork<'_, O, I> {
-    /// The normalization from the bootstrap and every chain's large steps,
-    /// pooled in chain order.
-    fn pooled(work: &[Self]) -> Normalization {
-        let mut pooled = work.first().map(|w| w.prior).unwrap_or_default();
-        for w in work {
-            pooled.merge(w.chain.large_steps());
-        }
-        pooled
-    }
 }
 
 impl<O: PathOracle, I: ?Sized> Saves for ChainWork<'_, O, I> {
@@ -223,26 +346,42 @@ where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    /// `steps` steps, each splatting its weighted paths and counting its state.
+    /// `steps` steps, each splatting its weighted paths (the large steps'
+    /// part apart) and counting its state.
     fn run(&mut self, steps: u64) {
         for _ in 0..steps {
             let buffers = &mut self.buffers;
-            self.chain
+            let outcome = self
+                .chain
                 .step(self.oracle, self.importance, |path, weight| {
-                    buffers.splat_path(path, weight);
+                    buffers.splat_path(CHAIN_PART, path, weight);
                 });
+            if outcome.large_step {
+                let w = self.chain.weights();
+                let proposal = self.chain.chain().last_proposal();
+                let [weight, _] = splat_weights(
+                    0.0,
+                    true,
+                    0.0,
+                    proposal.importance,
+                    w.normalization,
+                    w.large_step_probability,
+                );
+                if weight > 0.0 {
+                    self.buffers.splat_path(LARGE_STEP_PART, proposal, weight);
+                }
+            }
             self.buffers.visit(self.chain.current().film);
         }
     }
 
-    /// The chains weight their next samples with the normalization of every
-    /// uniform sample so far, the bootstrap's and the large steps', whose
-    /// error falls as the render runs (the weights are unbiased with the exact
-    /// `b`, see [`chain`](crate::chain)).
-    fn after_round(work: &mut [Self]) {
-        let b = Self::pooled(work).value();
-        for w in work {
-            w.chain.set_normalization(b);
-        }
+    /// The image so far, with the normalization pooled over the bootstrap
+    /// and this render's (or task's) chains.
+    fn image(layers: &[ExactFilm], scale: f64, workers: &[Self]) -> Film {
+        let Some(first) = workers.first() else {
+            return image(layers, scale, 1.0);
+        };
+        let b = pooled(&first.prior, workers.iter().map(|w| w.chain.large_steps())).value();
+        image(layers, scale, b / first.chain.weights().normalization)
     }
 }

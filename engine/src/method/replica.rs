@@ -13,13 +13,12 @@ use crate::bootstrap::Bootstrap;
 use crate::chain::{ChainStats, Normalization};
 
 use crate::checkpoint;
-use crate::drive::splat::{RoundBuffers, Runs, Saves, SplatBands, Splatting, Worker};
+use crate::drive::splat::{RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker};
 use crate::drive::{Driven, RenderStats, Rounds, SetUpStage, drive};
 use crate::error::Error;
 use crate::exchange::{
     Ensemble, EnsembleSettings, ExchangeKind, ExchangeMove, ExchangeStats, Ladder, Tempering,
 };
-use crate::film::Film;
 use crate::oracle::PathOracle;
 use crate::parallel;
 use crate::target::Importance;
@@ -104,6 +103,7 @@ where
     let (oracle, importance) = (job.oracle, job.importance);
     let bands = SplatBands::new(job.resolution);
     let traces_per_sweep = settings.traces_per_sweep();
+    let ensembles = settings.ensembles as u64;
     let work = |state, prior| EnsembleWork {
         oracle,
         importance,
@@ -111,28 +111,29 @@ where
         buffers: RoundBuffers::new(bands),
         prior,
     };
-    let (mut ensembles, position, set_up, ladder, priors) =
-        match job.resumed::<Saved<O::Radiance>>()? {
-            Some((position, saved)) => {
-                let (set_up, ladder, priors, splatted, states) = saved;
-                if states.len() != settings.ensembles as usize
-                    || ladder.len() != settings.ensemble.ladder.len()
-                {
-                    return Err(checkpoint::does_not_fit());
-                }
-                let work = states
-                    .into_iter()
-                    .map(|state| work(state, priors.clone()))
-                    .collect();
-                let ensembles = Splatting::resumed(work, bands, traces_per_sweep, splatted)?;
-                (ensembles, Some(position), set_up, ladder, priors)
+    let (mut ensembles, position, set_up, ladder, priors) = match job
+        .resumed::<Saved<O::Radiance>>()?
+    {
+        Some((position, saved)) => {
+            let (set_up, ladder, priors, splatted, states) = saved;
+            if states.len() != settings.ensembles as usize
+                || ladder.len() != settings.ensemble.ladder.len()
+            {
+                return Err(checkpoint::does_not_fit());
             }
-            None => {
-                let (work, set_up, ladder, priors) = start(settings, job, &work)?;
-                let ensembles = Splatting::new(work, bands, traces_per_sweep)?;
-                (ensembles, None, set_up, ladder, priors)
-            }
-        };
+            let work = states
+                .into_iter()
+                .map(|state| work(state, priors.clone()))
+                .collect();
+            let ensembles = Splatting::resumed(work, bands, traces_per_sweep, ensembles, splatted)?;
+            (ensembles, Some(position), set_up, ladder, priors)
+        }
+        None => {
+            let (work, set_up, ladder, priors) = start(settings, job, &work)?;
+            let ensembles = Splatting::new(work, bands, traces_per_sweep, ensembles)?;
+            (ensembles, None, set_up, ladder, priors)
+        }
+    };
     let saver = saver(set_up, &ladder, &priors);
     let driven = drive(&mut ensembles, job.round_loop(position), saver)?;
     Ok(finish(ensembles, driven, ladder, set_up))
@@ -254,7 +255,7 @@ type Saved<R> = (
     SetUp,
     Ladder,
     Vec<Normalization>,
-    (Film, Vec<u64>, u64),
+    SplatSums,
     Vec<EnsembleState<R>>,
 );
 
@@ -345,7 +346,7 @@ where
             let buffers = &mut self.buffers;
             let EnsembleState { ensemble, exchange } = &mut self.state;
             ensemble.sweep(self.oracle, self.importance, exchange, |path, weight| {
-                buffers.splat_path(path, weight)
+                buffers.splat_path(0, path, weight)
             });
             for r in self.state.ensemble.replicas() {
                 self.buffers.visit(r.state().path.film);

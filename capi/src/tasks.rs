@@ -1,0 +1,171 @@
+//! A render split into tasks (MC and PSSMLT): each task's partial result as
+//! bytes to store where the merge can read them, and the merge into the
+//! film the render unsplit gives, byte for byte (the engine's
+//! `method::merge`).
+
+use std::ptr::null_mut;
+
+use strata_engine::Checkpoint;
+use strata_engine::prelude::{Task, merge, render_task};
+use strata_engine::target::MaxChannel;
+
+use crate::*;
+
+/// A task's partial result ([`strata_render_task`]), or the checkpoint of a
+/// task the progress callback stopped.
+pub struct StrataPart {
+    checkpoint: Checkpoint,
+}
+
+/// Makes `settings` render task `index` (from 0) of `count`: each task
+/// renders its share of the whole render's budget (MC's passes, PSSMLT's
+/// chains `index`, `index + count`, ...) with [`strata_render_task`].
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_settings_set_task(
+    settings: *mut StrataSettings,
+    index: u32,
+    count: u32,
+) -> StrataStatus {
+    let settings = match settings_mut(settings) {
+        Ok(s) => s,
+        Err(status) => return status,
+    };
+    if count == 0 || index >= count {
+        return fail(
+            StrataStatus::InvalidArgument,
+            format!("task {index} of {count}: the count is at least 1, the index below it"),
+        );
+    }
+    settings.task = Task { index, count };
+    StrataStatus::Ok
+}
+
+/// Renders the task `settings` name ([`strata_settings_set_task`]) into a
+/// new part at `*part` (free it with [`strata_part_free`]; its bytes with
+/// [`strata_part_bytes`]). A method that cannot be split, or a task count
+/// above the render's units of work, is `STRATA_STATUS_RENDER_FAILED`; if
+/// the progress callback stopped it, `STRATA_STATUS_CANCELLED` and the part
+/// is an unfinished task, which [`strata_merge`] refuses.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_render_task(
+    oracle: *const StrataOracle,
+    settings: *const StrataSettings,
+    observer: *const StrataObserver,
+    part: *mut *mut StrataPart,
+) -> StrataStatus {
+    if part.is_null() || settings.is_null() {
+        return fail(
+            StrataStatus::InvalidArgument,
+            "null settings or part pointer",
+        );
+    }
+    // SAFETY: checked non-null; the caller passes room for a pointer.
+    unsafe { *part = null_mut() };
+    // SAFETY: a non-null pointer to the caller's live settings.
+    let task = unsafe { &*settings }.task;
+    let rendered = with_render(oracle, settings, observer, |oracle, run, observer| {
+        render_task(oracle, &MaxChannel, run, task, observer)
+    });
+    match rendered {
+        Ok(checkpoint) => {
+            let finished = checkpoint.finished().unwrap_or(false);
+            // SAFETY: checked non-null above.
+            unsafe { *part = Box::into_raw(Box::new(StrataPart { checkpoint })) };
+            if finished {
+                StrataStatus::Ok
+            } else {
+                fail(
+                    StrataStatus::Cancelled,
+                    "cancelled by the progress callback: the task is unfinished",
+                )
+            }
+        }
+        Err(status) => status,
+    }
+}
+
+/// The part's bytes (`*size` of them), to write to a file: valid until the
+/// part is freed.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_part_bytes(part: *const StrataPart, size: *mut usize) -> *const u8 {
+    if part.is_null() || size.is_null() {
+        fail(StrataStatus::InvalidArgument, "null part or size pointer");
+        return std::ptr::null();
+    }
+    // SAFETY: a live part made by this API; `size` checked non-null.
+    let bytes = unsafe { &*part }.checkpoint.as_bytes();
+    unsafe { *size = bytes.len() };
+    bytes.as_ptr()
+}
+
+/// A part read back from `size` bytes at `bytes` into `*part`: damaged
+/// bytes or another format version are `STRATA_STATUS_INVALID_ARGUMENT`.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_part_read(
+    bytes: *const u8,
+    size: usize,
+    part: *mut *mut StrataPart,
+) -> StrataStatus {
+    if bytes.is_null() || part.is_null() {
+        return fail(StrataStatus::InvalidArgument, "null bytes or part pointer");
+    }
+    // SAFETY: checked non-null; the caller passes room for a pointer.
+    unsafe { *part = null_mut() };
+    // SAFETY: the caller's buffer of `size` bytes.
+    let bytes = unsafe { std::slice::from_raw_parts(bytes, size) }.to_vec();
+    match Checkpoint::from_bytes(bytes) {
+        Ok(checkpoint) => {
+            // SAFETY: checked non-null above.
+            unsafe { *part = Box::into_raw(Box::new(StrataPart { checkpoint })) };
+            StrataStatus::Ok
+        }
+        Err(e) => fail(StrataStatus::InvalidArgument, e.to_string()),
+    }
+}
+
+/// Frees a part (null is ignored).
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_part_free(part: *mut StrataPart) {
+    if !part.is_null() {
+        // SAFETY: made by this API, freed once.
+        drop(unsafe { Box::from_raw(part) });
+    }
+}
+
+/// Merges the `count` parts at `parts` (in any order) into a new film at
+/// `*film`: the film and counters the render unsplit gives. Every task of
+/// the render must be there once, unless `subset` is nonzero (then the
+/// film of the tasks given); parts of another render, repeated, missing or
+/// unfinished tasks are `STRATA_STATUS_INVALID_ARGUMENT`, with a message
+/// naming them.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_merge(
+    parts: *const *const StrataPart,
+    count: usize,
+    subset: i32,
+    film: *mut *mut StrataFilm,
+) -> StrataStatus {
+    if parts.is_null() || film.is_null() {
+        return fail(StrataStatus::InvalidArgument, "null parts or film pointer");
+    }
+    // SAFETY: checked non-null; the caller passes room for a pointer.
+    unsafe { *film = null_mut() };
+    // SAFETY: the caller's array of `count` part pointers.
+    let pointers = unsafe { std::slice::from_raw_parts(parts, count) };
+    if pointers.iter().any(|p| p.is_null()) {
+        return fail(StrataStatus::InvalidArgument, "a null part");
+    }
+    // SAFETY: live parts made by this API.
+    let checkpoints: Vec<Checkpoint> = pointers
+        .iter()
+        .map(|&p| unsafe { &*p }.checkpoint.clone())
+        .collect();
+    match merge(&checkpoints, subset != 0) {
+        Ok(output) => {
+            // SAFETY: checked non-null above.
+            unsafe { *film = StrataFilm::boxed(output) };
+            StrataStatus::Ok
+        }
+        Err(e) => fail(StrataStatus::InvalidArgument, e.to_string()),
+    }
+}

@@ -1,0 +1,198 @@
+//! A render split into tasks ([`Task`]) that run anywhere (processes,
+//! machines, a job scheduler's array), and the merge of their partial
+//! results into the image the render unsplit gives, byte for byte.
+//!
+//! A task renders its share of the units of work (MC's passes, PSSMLT's
+//! chains: see [`crate::task`]) under the render's settings and budget;
+//! its partial result is the checkpoint of its state once its budget is
+//! spent (`finished`), so a stopped task resumes like any render
+//! ([`resume_task`]). The films are exact sums ([`crate::exact`]) and
+//! what couples units is pooled exactly too (PSSMLT's normalization), so
+//! [`merge`] adds the parts and finishes once, as the unsplit render does.
+//! Methods whose units are coupled while they run (replica exchange's
+//! normalization refreshed from every ensemble, stratified MCMC's
+//! exchanges between neighbouring tiles, ERPT's passes, multi-stage MLT's
+//! stages) cannot be split yet ([`Method::splits`]).
+
+use alloc::vec::Vec;
+use core::cell::OnceCell;
+
+use super::{Method, Output, Settings, mc, pssmlt, run, run_resumed};
+use crate::checkpoint::{Checkpoint, Header, Position, take};
+use crate::drive::{Budget, Observer};
+use crate::error::Error;
+use crate::oracle::PathOracle;
+use crate::target::Importance;
+use crate::task::Task;
+
+impl Method {
+    /// Whether a render with this method can be split into tasks
+    /// ([`render_task`]): MC and PSSMLT.
+    pub fn splits(&self) -> bool {
+        matches!(self, Method::Mc | Method::Pssmlt(_))
+    }
+}
+
+/// Checks that `settings` can be split into `task`'s tasks: a method that
+/// [splits](Method::splits), an index below the count, and no task without
+/// work (a sample budget's MC passes, PSSMLT's chains).
+fn check_task(settings: &Settings, task: Task, pixels: u64) -> Result<(), Error> {
+    if !settings.method.splits() {
+        return Err(Error::NotSplittable {
+            method: settings.method.name(),
+        });
+    }
+    if task.count == 0 {
+        return Err(Error::invalid("task_count", 0.0, "at least 1"));
+    }
+    if task.index >= task.count {
+        return Err(Error::invalid(
+            "task_index",
+            task.index as f64,
+            "below the task count",
+        ));
+    }
+    let units = match (&settings.method, settings.budget) {
+        (Method::Pssmlt(s), _) => Some(s.chains as u64),
+        (Method::Mc, Budget::Samples(n)) => Some((n / pixels.max(1)).max(1)),
+        _ => None,
+    };
+    if let Some(units) = units
+        && task.count as u64 > units
+    {
+        return Err(Error::invalid(
+            "task_count",
+            task.count as f64,
+            "at most the render's units of work (MC: passes; PSSMLT: chains)",
+        ));
+    }
+    Ok(())
+}
+
+/// Renders task `task` of the render `settings` describes (see the module
+/// docs) and returns its checkpoint: [`finished`](Checkpoint::finished)
+/// once its budget is spent (its partial result, for [`merge`]), or, if the
+/// observer stopped it, a checkpoint to continue from with
+/// [`resume_task`]. A sample budget is the whole render's; a time budget
+/// is each task's. The observer's checkpoints are the task's too.
+pub fn render_task<O, I>(
+    oracle: &O,
+    importance: &I,
+    settings: &Settings,
+    task: Task,
+    observer: &dyn Observer,
+) -> Result<Checkpoint, Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    settings.validate()?;
+    check_task(settings, task, oracle.resolution().pixel_count() as u64)?;
+    let last = OnceCell::new();
+    run(
+        oracle,
+        importance,
+        settings,
+        observer,
+        None,
+        task,
+        Some(&last),
+    )?;
+    last.into_inner().ok_or(Error::CheckpointCorrupted {
+        reason: "the task ended without its state",
+    })
+}
+
+/// Continues the task saved in `checkpoint` (made by [`render_task`] or by
+/// its observer) as [`render_task`] would have; the checks of
+/// [`resume`](super::resume) apply.
+pub fn resume_task<O, I>(
+    oracle: &O,
+    importance: &I,
+    settings: &Settings,
+    checkpoint: &Checkpoint,
+    observer: &dyn Observer,
+) -> Result<Checkpoint, Error>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    settings.validate()?;
+    let (state, task) = checkpoint.state_for(oracle, settings)?;
+    check_task(settings, task, oracle.resolution().pixel_count() as u64)?;
+    let last = OnceCell::new();
+    run_resumed(
+        oracle,
+        importance,
+        settings,
+        observer,
+        state,
+        (task, Some(&last)),
+    )?;
+    last.into_inner().ok_or(Error::CheckpointCorrupted {
+        reason: "the task ended without its state",
+    })
+}
+
+/// The image of a render split into tasks, from the tasks' partial
+/// results: the same bytes (film and counters) as the render unsplit
+/// gives, whatever the parts' order and the threads each task ran on.
+/// Every part must be a finished task of the same render (engine, settings,
+/// scene, task count), each task once, and all of them unless `subset`
+/// (then the image is that of the tasks given: an unbiased render with
+/// fewer units, not the whole one). Otherwise [`Error::PartMismatch`],
+/// [`Error::PartUnfinished`], [`Error::TaskRepeated`] or
+/// [`Error::TasksMissing`], naming the part.
+pub fn merge(parts: &[Checkpoint], subset: bool) -> Result<Output, Error> {
+    let Some(first) = parts.first() else {
+        return Err(Error::TasksMissing {
+            missing: Vec::new(),
+            count: 0,
+        });
+    };
+    let (head, _) = first.header::<Settings>()?;
+    let mut states = Vec::with_capacity(parts.len());
+    let mut seen = Vec::new();
+    for (part, checkpoint) in parts.iter().enumerate() {
+        let (header, rest): (Header<Settings>, _) = checkpoint.header()?;
+        let mismatch = |what| Error::PartMismatch { part, what };
+        if header.settings != head.settings {
+            return Err(mismatch("settings (method, its settings, seed or budget)"));
+        }
+        if header.oracle != head.oracle || header.channels != head.channels {
+            return Err(mismatch("scene, film or channels"));
+        }
+        if header.task.count != head.task.count {
+            return Err(mismatch("task count"));
+        }
+        if !header.finished {
+            return Err(Error::PartUnfinished {
+                part,
+                task: header.task.index,
+            });
+        }
+        if seen.contains(&header.task.index) {
+            return Err(Error::TaskRepeated {
+                task: header.task.index,
+            });
+        }
+        seen.push(header.task.index);
+        let (_, state) = take::<Position>(rest)?;
+        states.push((header.task.index, state));
+    }
+    let count = head.task.count;
+    let missing: Vec<u32> = (0..count).filter(|i| !seen.contains(i)).collect();
+    if !missing.is_empty() && !subset {
+        return Err(Error::TasksMissing { missing, count });
+    }
+    states.sort_by_key(|(index, _)| *index);
+    let states: Vec<&[u8]> = states.into_iter().map(|(_, s)| s).collect();
+    let resolution = head.oracle.resolution;
+    match &head.settings.method {
+        Method::Mc => mc::merge(&states, resolution, head.channels as usize),
+        Method::Pssmlt(_) => pssmlt::merge(&states, resolution, head.channels as usize),
+        method => Err(Error::NotSplittable {
+            method: method.name(),
+        }),
+    }
+}

@@ -1,0 +1,35 @@
+//! A render split into tasks: which units of work each task owns. The
+//! methods that can be split ([`Method::splits`](crate::Method::splits))
+//! give task `index` of `count` the units (chains, passes) whose index `k`
+//! has `k mod count == index`; their films are exact sums
+//! ([`exact`](crate::exact)), so [`merge`](crate::method::merge) of the
+//! tasks' partial results gives the bytes of the render unsplit.
+
+use serde::{Deserialize, Serialize};
+
+/// One of `count` tasks of a render split across processes or machines
+/// ([`render_task`](crate::method::render_task)): the task owns the units of work (chains, passes) whose
+/// index `k` has `k mod count == index`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Task {
+    /// This task's index, `0..count`.
+    pub index: u32,
+    /// The number of tasks.
+    pub count: u32,
+}
+
+impl Task {
+    /// The whole render: task 0 of 1.
+    pub const WHOLE: Task = Task { index: 0, count: 1 };
+
+    /// How many of units `0..units` this task owns.
+    pub fn share(&self, units: u64) -> u64 {
+        let (index, count) = (self.index as u64, self.count.max(1) as u64);
+        units.saturating_sub(index).div_ceil(count)
+    }
+
+    /// The render's index of this task's `j`-th unit.
+    pub fn unit(&self, j: u64) -> u64 {
+        self.index as u64 + j * self.count.max(1) as u64
+    }
+}

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Task INDEX of COUNT of a render split into tasks: what every scheduler's
+# job runs (jobs/slurm-tasks.sbatch, jobs/kubernetes.yaml, or xargs on one
+# machine; README, "Rendering on a cluster"). Writes $DIR/part-INDEX.part;
+# `strata merge $DIR/part-*.part --out IMAGE` then gives the image the
+# render unsplit gives, byte for byte.
+#
+#   jobs/task.sh INDEX COUNT
+#
+# Environment: SCENE (a built-in name or a .pbrt file; default cornell), DIR
+# (shared storage for the parts; default out/tasks), RENDER_ARGS (the
+# render's flags, the same for every task: method, budget, seed, size;
+# default "--method pssmlt --spp 64 --seed 1"), THREADS (default: every
+# core), STRATA (the strata command; default: the one on PATH).
+#
+# A task that is run again finds its finished part and does nothing; one
+# that was stopped (preempted, requeued) continues from its checkpoint,
+# written every 10 minutes.
+set -euo pipefail
+index=${1:?usage: jobs/task.sh INDEX COUNT}
+count=${2:?usage: jobs/task.sh INDEX COUNT}
+scene=${SCENE:-cornell}
+dir=${DIR:-out/tasks}
+strata=${STRATA:-strata}
+read -r -a render_args <<<"${RENDER_ARGS:---method pssmlt --spp 64 --seed 1}"
+threads=${THREADS:-$(nproc)}
+out="$dir/part-$index"
+mkdir -p "$dir"
+[ -f "$out.part" ] && exit 0
+resume=()
+[ -f "$out.ckpt" ] && resume=(--resume "$out.ckpt")
+exec "$strata" render "$scene" "${render_args[@]}" --threads "$threads" \
+  --task-index "$index" --task-count "$count" --out "$out" \
+  --checkpoint-every 600 "${resume[@]}"

@@ -1,0 +1,221 @@
+//! A render split into tasks and merged: the bytes of the render unsplit,
+//! for every method that splits, whatever the task count, the order of the
+//! parts and the threads each task ran on; a stopped task resumes to the
+//! same partial result; parts of other renders, missing, repeated or
+//! unfinished parts are typed errors.
+
+use std::sync::atomic::{AtomicU32, Ordering};
+
+use strata::engine::analytic::ProceduralImage;
+use strata::engine::target::MaxChannel;
+use strata::engine::{
+    Budget, Checkpoint, Error, Method, Observer, Output, Progress, Resolution, Settings, Silent,
+    render,
+};
+use strata::prelude::{PssmltSettings, StratifiedSettings, Task, merge, render_task, resume_task};
+
+mod threads;
+use threads::{bits, in_pool};
+
+fn image() -> ProceduralImage {
+    ProceduralImage::showcase(Resolution::new(48, 32))
+}
+
+/// The methods that split, small: MC and PSSMLT.
+fn methods() -> [Method; 2] {
+    [
+        Method::Mc,
+        Method::Pssmlt(PssmltSettings {
+            chains: 37,
+            bootstrap_candidates: 5_000,
+            ..Default::default()
+        }),
+    ]
+}
+
+fn settings(method: &Method) -> Settings {
+    Settings {
+        seed: 5,
+        budget: Budget::Samples(40 * 48 * 32),
+        method: method.clone(),
+    }
+}
+
+/// Task `index` of `count` on `threads` threads.
+fn task(settings: &Settings, index: u32, count: u32, threads: usize) -> Checkpoint {
+    let task = Task { index, count };
+    in_pool(threads, || {
+        render_task(&image(), &MaxChannel, settings, task, &Silent).unwrap()
+    })
+}
+
+fn assert_same(merged: &Output, whole: &Output, at: &str) {
+    let (a, b) = (bits(&merged.film), bits(&whole.film));
+    let differ = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+    assert!(
+        a.len() == b.len() && differ == 0,
+        "{at}: {differ} values differ"
+    );
+    assert_eq!(merged.stats, whole.stats, "{at}: statistics");
+    assert_eq!(merged.visits, whole.visits, "{at}: visits");
+}
+
+#[test]
+fn tasks_merge_to_the_bytes_of_the_unsplit_render() {
+    for method in methods() {
+        let settings = settings(&method);
+        let whole = in_pool(2, || {
+            render(&image(), &MaxChannel, &settings, &Silent).unwrap()
+        });
+        for count in [1, 2, 3, 8] {
+            // Tasks on alternating thread counts, merged in reverse order.
+            let mut parts: Vec<Checkpoint> = (0..count)
+                .map(|i| task(&settings, i, count, 1 + i as usize % 2))
+                .collect();
+            assert!(parts.iter().all(|p| p.finished().unwrap()));
+            parts.reverse();
+            let read: Vec<Checkpoint> = parts
+                .iter()
+                .map(|p| Checkpoint::from_bytes(p.as_bytes().to_vec()).unwrap())
+                .collect();
+            let merged = merge(&read, false).unwrap();
+            assert_same(
+                &merged,
+                &whole,
+                &format!("{}, {count} tasks", method.name()),
+            );
+        }
+    }
+}
+
+/// Stops a render after its second round.
+#[derive(Default)]
+struct StopAfterTwo(AtomicU32);
+
+impl Observer for StopAfterTwo {
+    fn progress(&self, _: &Progress) {
+        self.0.fetch_add(1, Ordering::Relaxed);
+    }
+    fn should_stop(&self) -> bool {
+        self.0.load(Ordering::Relaxed) >= 2
+    }
+}
+
+#[test]
+fn a_stopped_task_resumes_to_the_same_partial_result() {
+    for method in methods() {
+        let settings = settings(&method);
+        let t = Task { index: 1, count: 3 };
+        let uninterrupted = task(&settings, 1, 3, 2);
+        let stopped = render_task(
+            &image(),
+            &MaxChannel,
+            &settings,
+            t,
+            &StopAfterTwo::default(),
+        )
+        .unwrap();
+        assert!(!stopped.finished().unwrap(), "{}", method.name());
+        assert_eq!(stopped.task().unwrap(), t);
+        // A stopped task is not a partial result, and not a whole render.
+        let parts = [
+            task(&settings, 0, 3, 1),
+            stopped.clone(),
+            task(&settings, 2, 3, 1),
+        ];
+        assert!(matches!(
+            merge(&parts, false),
+            Err(Error::PartUnfinished { part: 1, task: 1 })
+        ));
+        assert!(matches!(
+            strata::engine::resume(&image(), &MaxChannel, &settings, &stopped, &Silent),
+            Err(Error::CheckpointMismatch { .. })
+        ));
+        let resumed = in_pool(1, || {
+            resume_task(&image(), &MaxChannel, &settings, &stopped, &Silent).unwrap()
+        });
+        assert_eq!(
+            resumed.as_bytes(),
+            uninterrupted.as_bytes(),
+            "{}",
+            method.name()
+        );
+    }
+}
+
+#[test]
+fn merges_refuse_missing_repeated_and_foreign_parts() {
+    let settings = settings(&methods()[1]);
+    let parts: Vec<Checkpoint> = (0..3).map(|i| task(&settings, i, 3, 2)).collect();
+    let missing = merge(&parts[..2], false).unwrap_err();
+    assert_eq!(
+        missing,
+        Error::TasksMissing {
+            missing: vec![2],
+            count: 3
+        }
+    );
+    assert!(missing.to_string().contains("[2] of 3 are missing"));
+    let repeated = [parts[0].clone(), parts[1].clone(), parts[1].clone()];
+    assert_eq!(
+        merge(&repeated, false).unwrap_err(),
+        Error::TaskRepeated { task: 1 }
+    );
+    let other_seed = Settings {
+        seed: 6,
+        ..settings.clone()
+    };
+    let foreign = [
+        parts[0].clone(),
+        task(&other_seed, 1, 3, 2),
+        parts[2].clone(),
+    ];
+    assert!(matches!(
+        merge(&foreign, false),
+        Err(Error::PartMismatch { part: 1, .. })
+    ));
+    let other_count = [parts[0].clone(), task(&settings, 1, 2, 2), parts[2].clone()];
+    assert!(matches!(
+        merge(&other_count, false),
+        Err(Error::PartMismatch { part: 1, .. })
+    ));
+    assert!(matches!(merge(&[], false), Err(Error::TasksMissing { .. })));
+    // A subset, when asked for, is the image of the tasks given: task 0's
+    // chains (0, 3, ..., 36: 13 of 37), each with the whole render's steps.
+    let some = merge(&parts[..1], true).unwrap();
+    let all = merge(&parts, false).unwrap();
+    assert_eq!(some.stats.samples * 37, all.stats.samples * 13);
+    assert!(some.film.data().iter().all(|v| v.is_finite() && *v >= 0.0));
+    assert_ne!(bits(&some.film), bits(&all.film));
+}
+
+#[test]
+fn methods_whose_work_is_coupled_and_bad_task_numbers_are_refused() {
+    let image = image();
+    let stratified = settings(&Method::Stratified(StratifiedSettings::default()));
+    let t = Task { index: 0, count: 2 };
+    assert_eq!(
+        render_task(&image, &MaxChannel, &stratified, t, &Silent).unwrap_err(),
+        Error::NotSplittable {
+            method: "stratified"
+        }
+    );
+    let pssmlt = settings(&methods()[1]);
+    for (index, count) in [(2, 2), (0, 0), (0, 38)] {
+        let bad = Task { index, count };
+        assert!(
+            matches!(
+                render_task(&image, &MaxChannel, &pssmlt, bad, &Silent),
+                Err(Error::InvalidParameter { .. })
+            ),
+            "task {index} of {count}"
+        );
+    }
+    // MC: no more tasks than passes.
+    let mc = settings(&Method::Mc);
+    let too_many = Task {
+        index: 0,
+        count: 41,
+    };
+    assert!(render_task(&image, &MaxChannel, &mc, too_many, &Silent).is_err());
+}

@@ -255,8 +255,8 @@ enum StrataStatus strata_settings_set_stack_size(struct StrataSettings *settings
 const char *strata_last_error(void);
 
 // Makes `settings` render task `index` (from 0) of `count`: each task
-// renders its share of the whole render's budget (MC's passes, PSSMLT's
-// chains `index`, `index + count`, ...) with [`strata_render_task`].
+// renders its share of the whole render's budget (MC's and ERPT's passes,
+// PSSMLT's chains `index`, `index + count`, ...) with [`strata_render_task`].
 enum StrataStatus strata_settings_set_task(struct StrataSettings *settings,
                                            uint32_t index,
                                            uint32_t count);

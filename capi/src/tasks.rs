@@ -1,4 +1,4 @@
-//! A render split into tasks (MC and PSSMLT): each task's partial result as
+//! A render split into tasks (MC, PSSMLT, ERPT): each task's partial result as
 //! bytes to store where the merge can read them, and the merge into the
 //! film the render unsplit gives, byte for byte (the engine's
 //! `method::merge`).
@@ -18,8 +18,8 @@ pub struct StrataPart {
 }
 
 /// Makes `settings` render task `index` (from 0) of `count`: each task
-/// renders its share of the whole render's budget (MC's passes, PSSMLT's
-/// chains `index`, `index + count`, ...) with [`strata_render_task`].
+/// renders its share of the whole render's budget (MC's and ERPT's passes,
+/// PSSMLT's chains `index`, `index + count`, ...) with [`strata_render_task`].
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_settings_set_task(
     settings: *mut StrataSettings,

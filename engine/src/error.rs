@@ -272,8 +272,8 @@ impl fmt::Display for Error {
             ),
             Error::NotSplittable { method } => write!(
                 f,
-                "{method} cannot be split into tasks (mc and pssmlt can: the units of \
-                 {method}'s work are coupled while they run)"
+                "{method} cannot be split into tasks (mc, pssmlt and erpt can: the units \
+                 of {method}'s work are coupled while they run)"
             ),
             Error::PartMismatch { part, what } => write!(
                 f,

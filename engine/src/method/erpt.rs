@@ -48,6 +48,7 @@ use crate::parallel;
 use crate::rng::{self, Domain, uniform_f64};
 use crate::sample::MltSampler;
 use crate::target::{Evaluated, Importance};
+use crate::task::Task;
 
 /// Settings of ERPT. The budget counts MC paths and chain steps, rounded to
 /// whole passes (at least one) at the expected cost of a pass; a pass has at
@@ -114,7 +115,7 @@ impl ErptSettings {
 
     /// Expected paths per pixel of a pass: the start path and `r` chains of
     /// `N` steps.
-    fn paths_per_pixel(&self) -> f64 {
+    pub fn paths_per_pixel(&self) -> f64 {
         1.0 + self.chains_per_path * self.chain_length as f64
     }
 }
@@ -128,6 +129,12 @@ fn starts(resolution: Resolution) -> usize {
 /// The smallest sample budget of ERPT on `resolution`: one pass.
 pub(crate) fn smallest_budget(settings: &ErptSettings, resolution: Resolution) -> u64 {
     libm::ceil(starts(resolution) as f64 * settings.paths_per_pixel()) as u64
+}
+
+/// Passes a budget of `samples` paths buys on `resolution` (at least one).
+pub(crate) fn planned_passes(settings: &ErptSettings, resolution: Resolution, samples: u64) -> u64 {
+    let pass = starts(resolution) as f64 * settings.paths_per_pixel();
+    ((samples as f64 / pass) as u64).max(1)
 }
 
 /// Chain steps run between two merges at most (by whole chains, at least
@@ -201,6 +208,7 @@ where
     let mut run = Passes {
         scene,
         settings,
+        task: job.task,
         energy: saved.energy,
         work: saved
             .totals
@@ -237,24 +245,102 @@ where
             out,
         )
     })?;
-    let film = run.film.scaled(run.scale());
+    let totals: Vec<Totals> = run.work.iter().map(|w| w.totals).collect();
+    let passes = run.passes_done();
+    let (film, stats) = finish(
+        &run.film,
+        passes,
+        run.starts,
+        &totals,
+        (bootstrap, b, normalization),
+    );
+    Ok(Output {
+        film,
+        stats,
+        cancelled: driven.cancelled,
+        visits: run.visits,
+        extras: Extras::None,
+    })
+}
+
+/// The image of `film`, summed over `passes` passes (a fraction for a pass
+/// cut short) of `starts` start paths, and the counters of `totals` and the
+/// bootstrap.
+fn finish(
+    film: &ExactFilm,
+    passes: f64,
+    starts: usize,
+    totals: &[Totals],
+    (bootstrap, b, normalization): (Traced, f64, Normalization),
+) -> (Film, RenderStats) {
     let mut stats = RenderStats {
         bootstrap_samples: bootstrap.paths,
         normalization: Some(b),
         normalization_error: Some(normalization.relative_error()),
         ..Default::default()
     };
-    for w in &run.work {
-        stats.samples += w.totals.traces;
-        stats.chains.merge(&w.totals.chains);
-        stats.invalid_samples += w.totals.invalid;
+    for t in totals {
+        stats.samples += t.traces;
+        stats.chains.merge(&t.chains);
+        stats.invalid_samples += t.invalid;
     }
     stats.invalid_samples += bootstrap.invalid;
+    (film.scaled(scale(film, passes, starts)), stats)
+}
+
+/// The film's scale: one over the start paths per pixel done, `passes ·
+/// starts / pixels`.
+fn scale(film: &ExactFilm, passes: f64, starts: usize) -> f64 {
+    let per_pixel = (starts / film.resolution().pixel_count()) as f64;
+    if passes > 0.0 {
+        1.0 / (passes * per_pixel)
+    } else {
+        0.0
+    }
+}
+
+/// The image of the tasks' saved states `parts` (see
+/// [`merge`](super::merge)), in task order: their films, visits, passes and
+/// counters added.
+pub(crate) fn merge(
+    parts: &[&[u8]],
+    resolution: Resolution,
+    channels: usize,
+) -> Result<Output, Error> {
+    let mut film = ExactFilm::try_new(resolution, channels)?;
+    let mut visits = alloc::vec![0u64; resolution.pixel_count()];
+    let mut totals = Vec::new();
+    let mut passes = 0.0;
+    let mut head = None;
+    for part in parts {
+        let saved: Saved = checkpoint::take(part)?.0;
+        let blocks = saved.starts.div_ceil(BLOCK);
+        if !saved.film.fits(resolution, channels)
+            || saved.visits.len() != visits.len()
+            || saved.starts < resolution.pixel_count()
+            || saved.done >= blocks
+        {
+            return Err(checkpoint::does_not_fit());
+        }
+        film.merge(&saved.film)?;
+        visits
+            .iter_mut()
+            .zip(&saved.visits)
+            .for_each(|(a, b)| *a += b);
+        totals.extend_from_slice(&saved.totals);
+        passes += saved.passes as f64 + saved.done as f64 / blocks as f64;
+        head.get_or_insert((
+            saved.starts,
+            (saved.bootstrap, saved.b, saved.normalization),
+        ));
+    }
+    let (starts, bootstrap) = head.ok_or_else(checkpoint::does_not_fit)?;
+    let (film, stats) = finish(&film, passes, starts, &totals, bootstrap);
     Ok(Output {
         film,
         stats,
-        cancelled: driven.cancelled,
-        visits: run.visits,
+        cancelled: false,
+        visits,
         extras: Extras::None,
     })
 }
@@ -395,6 +481,8 @@ impl<R: Radiance> Worker for Segment<R> {
 struct Passes<'a, O: PathOracle, I: ?Sized> {
     scene: Scene<'a, O, I>,
     settings: &'a ErptSettings,
+    /// The passes of this task: `task.unit(k)` is its `k`-th.
+    task: Task,
     energy: f64,
     bands: SplatBands,
     work: Vec<Segment<O::Radiance>>,
@@ -424,16 +512,10 @@ where
         self.starts.div_ceil(BLOCK)
     }
 
-    /// The film's scale: one over the start paths per pixel done,
-    /// `(passes + m / B) · starts / pixels`.
-    fn scale(&self) -> f64 {
-        let passes = self.passes as f64 + self.done as f64 / self.blocks() as f64;
-        let per_pixel = (self.starts / self.scene.resolution.pixel_count()) as f64;
-        if passes > 0.0 {
-            1.0 / (passes * per_pixel)
-        } else {
-            0.0
-        }
+    /// Passes done, `passes + m / B` for a pass cut short after `m` of its
+    /// `B` blocks.
+    fn passes_done(&self) -> f64 {
+        self.passes as f64 + self.done as f64 / self.blocks() as f64
     }
 
     /// The start paths of block `block` of the current pass, then the chains
@@ -445,7 +527,7 @@ where
             w.first = (first + t * PIXELS_PER_TASK).min(starts);
             w.pixels = PIXELS_PER_TASK.min(starts - w.first);
         }
-        let pass = self.passes * starts as u64;
+        let pass = self.task.unit(self.passes) * starts as u64;
         let (scene, settings, energy) = (self.scene, self.settings, self.energy);
         parallel::for_each(&mut self.work, |w| {
             for start in w.first..w.first + w.pixels {
@@ -518,17 +600,18 @@ where
         block_paths(self.settings)
     }
 
+    /// This task's share of the passes the budget buys, in blocks.
     fn planned_units(&self, samples: u64) -> u64 {
-        let pass = self.starts as f64 * self.settings.paths_per_pixel();
-        let passes = ((samples as f64 / pass) as u64).max(1);
-        passes * self.blocks() as u64
+        let passes = planned_passes(self.settings, self.scene.resolution, samples);
+        self.task.share(passes) * self.blocks() as u64
     }
 
     fn run(&mut self, units: u64) {
         let blocks = self.blocks();
         for _ in 0..units {
             if self.done == 0 {
-                let mut order = rng::stream(self.scene.seed, Domain::Pass, self.passes);
+                let pass = self.task.unit(self.passes);
+                let mut order = rng::stream(self.scene.seed, Domain::Pass, pass);
                 self.rotation = (uniform_f64(&mut order) * blocks as f64) as usize % blocks;
             }
             self.run_block((self.rotation + self.done) % blocks);
@@ -549,7 +632,8 @@ where
     }
 
     fn preview(&self) -> Film {
-        self.film.scaled(self.scale())
+        self.film
+            .scaled(scale(&self.film, self.passes_done(), self.starts))
     }
 }
 

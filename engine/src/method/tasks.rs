@@ -2,8 +2,8 @@
 //! machines, a job scheduler's array), and the merge of their partial
 //! results into the image the render unsplit gives, byte for byte.
 //!
-//! A task renders its share of the units of work (MC's passes, PSSMLT's
-//! chains: see [`crate::task`]) under the render's settings and budget;
+//! A task renders its share of the units of work (MC's and ERPT's passes,
+//! PSSMLT's chains: see [`crate::task`]) under the render's settings and budget;
 //! its partial result is the checkpoint of its state once its budget is
 //! spent (`finished`), so a stopped task resumes like any render
 //! ([`resume_task`]). The films are exact sums ([`crate::exact`]) and
@@ -11,32 +11,33 @@
 //! [`merge`] adds the parts and finishes once, as the unsplit render does.
 //! Methods whose units are coupled while they run (replica exchange's
 //! normalization refreshed from every ensemble, stratified MCMC's
-//! exchanges between neighbouring tiles, ERPT's passes, multi-stage MLT's
-//! stages) cannot be split yet ([`Method::splits`]).
+//! exchanges between neighbouring tiles, multi-stage MLT's stages) cannot
+//! be split yet ([`Method::splits`]).
 
 use alloc::vec::Vec;
 use core::cell::OnceCell;
 
-use super::{Method, Output, Settings, mc, pssmlt, run, run_resumed};
+use super::{Method, Output, Settings, erpt, mc, pssmlt, run, run_resumed};
 use crate::checkpoint::{Checkpoint, Header, Position, take};
 use crate::drive::{Budget, Observer};
 use crate::error::Error;
-use crate::oracle::PathOracle;
+use crate::oracle::{PathOracle, Resolution};
 use crate::target::Importance;
 use crate::task::Task;
 
 impl Method {
     /// Whether a render with this method can be split into tasks
-    /// ([`render_task`]): MC and PSSMLT.
+    /// ([`render_task`]): MC, PSSMLT and ERPT.
     pub fn splits(&self) -> bool {
-        matches!(self, Method::Mc | Method::Pssmlt(_))
+        matches!(self, Method::Mc | Method::Pssmlt(_) | Method::Erpt(_))
     }
 }
 
 /// Checks that `settings` can be split into `task`'s tasks: a method that
 /// [splits](Method::splits), an index below the count, and no task without
 /// work (a sample budget's MC passes, PSSMLT's chains).
-fn check_task(settings: &Settings, task: Task, pixels: u64) -> Result<(), Error> {
+fn check_task(settings: &Settings, task: Task, resolution: Resolution) -> Result<(), Error> {
+    let pixels = resolution.pixel_count() as u64;
     if !settings.method.splits() {
         return Err(Error::NotSplittable {
             method: settings.method.name(),
@@ -55,6 +56,7 @@ fn check_task(settings: &Settings, task: Task, pixels: u64) -> Result<(), Error>
     let units = match (&settings.method, settings.budget) {
         (Method::Pssmlt(s), _) => Some(s.chains as u64),
         (Method::Mc, Budget::Samples(n)) => Some((n / pixels.max(1)).max(1)),
+        (Method::Erpt(s), Budget::Samples(n)) => Some(erpt::planned_passes(s, resolution, n)),
         _ => None,
     };
     if let Some(units) = units
@@ -63,7 +65,7 @@ fn check_task(settings: &Settings, task: Task, pixels: u64) -> Result<(), Error>
         return Err(Error::invalid(
             "task_count",
             task.count as f64,
-            "at most the render's units of work (MC: passes; PSSMLT: chains)",
+            "at most the render's units of work (MC and ERPT: passes; PSSMLT: chains)",
         ));
     }
     Ok(())
@@ -87,7 +89,7 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     settings.validate()?;
-    check_task(settings, task, oracle.resolution().pixel_count() as u64)?;
+    check_task(settings, task, oracle.resolution())?;
     let last = OnceCell::new();
     run(
         oracle,
@@ -119,7 +121,7 @@ where
 {
     settings.validate()?;
     let (state, task) = checkpoint.state_for(oracle, settings)?;
-    check_task(settings, task, oracle.resolution().pixel_count() as u64)?;
+    check_task(settings, task, oracle.resolution())?;
     let last = OnceCell::new();
     run_resumed(
         oracle,
@@ -191,6 +193,7 @@ pub fn merge(parts: &[Checkpoint], subset: bool) -> Result<Output, Error> {
     match &head.settings.method {
         Method::Mc => mc::merge(&states, resolution, head.channels as usize),
         Method::Pssmlt(_) => pssmlt::merge(&states, resolution, head.channels as usize),
+        Method::Erpt(_) => erpt::merge(&states, resolution, head.channels as usize),
         method => Err(Error::NotSplittable {
             method: method.name(),
         }),

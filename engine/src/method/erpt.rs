@@ -313,26 +313,20 @@ pub(crate) fn merge(
     let mut passes = 0.0;
     let mut head = None;
     for part in parts {
-        let saved: Saved = checkpoint::take(part)?.0;
-        let blocks = saved.starts.div_ceil(BLOCK);
-        if !saved.film.fits(resolution, channels)
-            || saved.visits.len() != visits.len()
-            || saved.starts < resolution.pixel_count()
-            || saved.done >= blocks
-        {
+        // `Saved`'s fields in order, its film merged as it is read.
+        let ((_, bootstrap, b, normalization), rest) =
+            checkpoint::take::<(f64, Traced, f64, Normalization)>(part)?;
+        let rest = film.merge_serialized(rest)?;
+        type Rest = (Vec<u64>, Vec<Totals>, usize, u64, usize, usize);
+        let (v, t, starts, p, done, _) = checkpoint::take::<Rest>(rest)?.0;
+        let blocks = starts.div_ceil(BLOCK);
+        if v.len() != visits.len() || starts < resolution.pixel_count() || done >= blocks {
             return Err(checkpoint::does_not_fit());
         }
-        film.merge(&saved.film)?;
-        visits
-            .iter_mut()
-            .zip(&saved.visits)
-            .for_each(|(a, b)| *a += b);
-        totals.extend_from_slice(&saved.totals);
-        passes += saved.passes as f64 + saved.done as f64 / blocks as f64;
-        head.get_or_insert((
-            saved.starts,
-            (saved.bootstrap, saved.b, saved.normalization),
-        ));
+        visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
+        totals.extend_from_slice(&t);
+        passes += p as f64 + done as f64 / blocks as f64;
+        head.get_or_insert((starts, (bootstrap, b, normalization)));
     }
     let (starts, bootstrap) = head.ok_or_else(checkpoint::does_not_fit)?;
     let (film, stats) = finish(&film, passes, starts, &totals, bootstrap);

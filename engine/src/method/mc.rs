@@ -86,11 +86,9 @@ pub(crate) fn merge(
     let mut film = ExactFilm::try_new(resolution, channels)?;
     let (mut passes, mut invalid) = (0u64, 0u64);
     for part in parts {
-        let (f, p, i): Saved = checkpoint::take(part)?.0;
-        if !f.fits(resolution, channels) {
-            return Err(checkpoint::does_not_fit());
-        }
-        film.merge(&f)?;
+        // `Saved`, its film merged as it is read.
+        let rest = film.merge_serialized(part)?;
+        let (p, i): (u64, u64) = checkpoint::take(rest)?.0;
         passes = passes.saturating_add(p);
         invalid = invalid.saturating_add(i);
     }

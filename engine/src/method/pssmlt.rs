@@ -216,19 +216,21 @@ pub(crate) fn merge(
     let mut tasks = Vec::with_capacity(parts.len());
     let mut head = None;
     for part in parts {
-        // Any radiance type with the saved channel count decodes the same
-        // chains; the image needs only their counters and normalizations.
-        let ((bootstrap, prior, (f, v, units)), rest) =
-            checkpoint::take::<(Traced, Normalization, SplatSums)>(part)?;
-        let chains: Vec<Summary> = checkpoint::take(rest)?.0;
-        if f.len() != 2
-            || !f.iter().all(|f| f.fits(resolution, channels))
-            || v.len() != visits.len()
-        {
+        // `Saved` up to the chains (the image needs their summaries only),
+        // its films merged as they are read (a vector's length is a usize
+        // in postcard).
+        let ((bootstrap, prior, layers), mut rest) =
+            checkpoint::take::<(Traced, Normalization, usize)>(part)?;
+        if layers != films.len() {
             return Err(checkpoint::does_not_fit());
         }
-        for (a, b) in films.iter_mut().zip(&f) {
-            a.merge(b)?;
+        for film in &mut films {
+            rest = film.merge_serialized(rest)?;
+        }
+        let ((v, units), rest) = checkpoint::take::<(Vec<u64>, u64)>(rest)?;
+        let chains: Vec<Summary> = checkpoint::take(rest)?.0;
+        if v.len() != visits.len() {
+            return Err(checkpoint::does_not_fit());
         }
         visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
         estimates = estimates.saturating_add(units.saturating_mul(chains.len() as u64));

@@ -224,7 +224,7 @@ pub(crate) fn drive<W: Rounds>(
         });
     }
     let planned = match budget {
-        Budget::Samples(n) => Some(work.planned_units(n)),
+        Budget::Samples(n) => Some(work.planned_units(n).max(1)),
         #[cfg(feature = "std")]
         Budget::Time(_) => None,
     };

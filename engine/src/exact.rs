@@ -20,7 +20,7 @@ use serde::de::{self, DeserializeSeed, SeqAccess, Visitor};
 use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::error::Error;
-use crate::film::Film;
+use crate::film::{Film, check_shapes};
 use crate::oracle::{Radiance, Resolution};
 
 /// Bits per bin.
@@ -175,16 +175,10 @@ impl ExactFilm {
 
     /// Adds `other` value by value; films of another size are an error.
     pub fn merge(&mut self, other: &ExactFilm) -> Result<(), Error> {
-        if self.resolution != other.resolution || self.channels != other.channels {
-            return Err(Error::ShapeMismatch {
-                left: (self.resolution.width, self.resolution.height, self.channels),
-                right: (
-                    other.resolution.width,
-                    other.resolution.height,
-                    other.channels,
-                ),
-            });
-        }
+        check_shapes(
+            (self.resolution, self.channels),
+            (other.resolution, other.channels),
+        )?;
         for (a, b) in self.sums.iter_mut().zip(&other.sums) {
             a.merge(b);
         }

@@ -160,18 +160,25 @@ impl Film {
     }
 
     pub(crate) fn check_shape(&self, other: &Film) -> Result<(), Error> {
-        if self.resolution != other.resolution || self.channels != other.channels {
-            return Err(Error::ShapeMismatch {
-                left: (self.resolution.width, self.resolution.height, self.channels),
-                right: (
-                    other.resolution.width,
-                    other.resolution.height,
-                    other.channels,
-                ),
-            });
-        }
-        Ok(())
+        check_shapes(
+            (self.resolution, self.channels),
+            (other.resolution, other.channels),
+        )
     }
+}
+
+/// [`Error::ShapeMismatch`] unless the two (resolution, channels) agree.
+pub(crate) fn check_shapes(
+    (a, a_channels): (Resolution, usize),
+    (b, b_channels): (Resolution, usize),
+) -> Result<(), Error> {
+    if a != b || a_channels != b_channels {
+        return Err(Error::ShapeMismatch {
+            left: (a.width, a.height, a_channels),
+            right: (b.width, b.height, b_channels),
+        });
+    }
+    Ok(())
 }
 
 #[cfg(test)]

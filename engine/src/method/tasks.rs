@@ -90,16 +90,15 @@ where
 {
     settings.validate()?;
     check_task(settings, task, oracle.resolution())?;
+    last_state(|last| run(oracle, importance, settings, observer, None, task, last))
+}
+
+/// The checkpoint the round loop of `render` makes after its last round.
+fn last_state(
+    render: impl FnOnce(Option<&OnceCell<Checkpoint>>) -> Result<Output, Error>,
+) -> Result<Checkpoint, Error> {
     let last = OnceCell::new();
-    run(
-        oracle,
-        importance,
-        settings,
-        observer,
-        None,
-        task,
-        Some(&last),
-    )?;
+    render(Some(&last))?;
     last.into_inner().ok_or(Error::CheckpointCorrupted {
         reason: "the task ended without its state",
     })
@@ -122,17 +121,9 @@ where
     settings.validate()?;
     let (state, task) = checkpoint.state_for(oracle, settings)?;
     check_task(settings, task, oracle.resolution())?;
-    let last = OnceCell::new();
-    run_resumed(
-        oracle,
-        importance,
-        settings,
-        observer,
-        state,
-        (task, Some(&last)),
-    )?;
-    last.into_inner().ok_or(Error::CheckpointCorrupted {
-        reason: "the task ended without its state",
+    last_state(|last| {
+        let job = (task, last);
+        run_resumed(oracle, importance, settings, observer, state, job)
     })
 }
 

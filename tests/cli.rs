@@ -462,6 +462,13 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
     assert_eq!(missing.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&missing.stderr);
     assert!(stderr.contains("tasks [1] of 3 are missing"), "{stderr}");
+    let repeated = merge(&[0, 1, 1, 2], &[]);
+    assert_eq!(repeated.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&repeated.stderr);
+    assert!(
+        stderr.contains("task 1 is given twice") && stderr.contains("part-1.part"),
+        "{stderr}"
+    );
     let partial = merge(&[0, 2], &["--partial"]);
     assert_eq!(partial.status.code(), Some(0));
     assert!(String::from_utf8_lossy(&partial.stderr).contains("merged 2 of 3 tasks"));

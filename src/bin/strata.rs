@@ -1004,6 +1004,15 @@ fn merge_parts(args: &MergeArgs) -> AnyResult<()> {
         Error::PartMismatch { part, .. } | Error::PartUnfinished { part, .. } => {
             format!("{}: {e}", args.parts[part].display())
         }
+        Error::TaskRepeated { task } => {
+            let files: Vec<String> = parts
+                .iter()
+                .zip(&args.parts)
+                .filter(|(p, _)| p.task().is_ok_and(|t| t.index == task))
+                .map(|(_, path)| path.display().to_string())
+                .collect();
+            format!("{e}: {}", files.join(", "))
+        }
         e => e.to_string(),
     })?;
     let settings = parts[0].settings()?;

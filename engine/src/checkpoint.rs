@@ -67,8 +67,9 @@ pub(crate) struct Header<S> {
     pub samples: u64,
     /// Which task of a render split into tasks this is (0 of 1: the whole).
     pub task: Task,
-    /// Whether the task's budget is spent: the checkpoint is then its
-    /// partial result, which [`merge`](crate::method::merge) combines.
+    /// Whether this is the state a task ended with, its budget spent: its
+    /// partial result, which [`merge`](crate::method::merge) combines (the
+    /// checkpoints an observer takes between rounds never are).
     pub finished: bool,
 }
 
@@ -130,7 +131,7 @@ impl OracleId {
 /// Makes a render's checkpoints around the state its round loop writes.
 pub(crate) trait Checkpoints {
     /// The checkpoint after `samples` paths of the state `write` appends;
-    /// `finished` once the budget is spent.
+    /// `finished` for the state a task ends with, its budget spent.
     fn checkpoint(
         &self,
         samples: u64,

@@ -554,8 +554,9 @@ impl Checkpoint {
         Ok(self.header::<Settings>()?.0.task)
     }
 
-    /// Whether the render's (or task's) budget was spent: a finished task's
-    /// checkpoint is its partial result, for [`merge`].
+    /// Whether this is the state a task ended with, its budget spent (what
+    /// [`render_task`] returns unless it was stopped): its partial result,
+    /// for [`merge`]. Checkpoints an observer takes between rounds are not.
     pub fn finished(&self) -> Result<bool, Error> {
         Ok(self.header::<Settings>()?.0.finished)
     }

@@ -2,7 +2,7 @@
 //! that [`resume`](crate::method::resume) continues from. A render of `N`
 //! samples stopped after any round, checkpointed and resumed to `N` gives
 //! the same bytes as the render that was never stopped, for every method and
-//! any thread count (tests/resume.rs).
+//! any thread count (tests/suite/resume.rs).
 //!
 //! What a checkpoint holds: the settings (method, seed, budget), an
 //! identifier of the oracle (its resolution and a fingerprint of what it

@@ -3,7 +3,7 @@
 //! Moves never draw raw numbers: they ask for a weighted choice or a
 //! Bernoulli trial. A random number generator answers at random; a test can
 //! answer every way in turn and weigh each outcome by its probability, which
-//! turns a move into its exact transition matrix (see `tests/exchange.rs`).
+//! turns a move into its exact transition matrix (see `tests/suite/exchange.rs`).
 
 use rand_core::Rng;
 

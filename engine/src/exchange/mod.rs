@@ -17,7 +17,7 @@
 //! # Correctness
 //! Every move is a Metropolis-Hastings move of the *product chain* on `U^M`
 //! with target `Π_i π_i(u_i)` (App. 5.B, eq. 5.18), so it must leave that
-//! product distribution invariant. `tests/exchange.rs` checks this exactly:
+//! product distribution invariant. `tests/suite/exchange.rs` checks this exactly:
 //! a test [`Decisions`] enumerates every outcome of a move with its
 //! probability, on a small discrete product space.
 use serde::{Deserialize, Serialize};

@@ -173,7 +173,7 @@ impl Method {
     /// block's chains in waves of 2^17 steps), a pass's splats (MC). The
     /// sizes were measured with the native tracer, unidirectional and
     /// bidirectional, by `examples/memory_peaks` (docs/BENCHMARKS.md), and
-    /// `tests/memory.rs` checks the bound within 1.5x of the measured peak.
+    /// `tests/bounds/memory.rs` checks the bound within 1.5x of the measured peak.
     pub fn memory_bound(
         &self,
         resolution: Resolution,

@@ -3,7 +3,7 @@
 //! procedural oracle's closed-form pixels with variance-derived tolerances
 //! (`common::check`, 32 seeds).
 
-mod common;
+use crate::common;
 
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::method::{MultiStageSettings, PssmltSettings};

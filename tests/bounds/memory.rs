@@ -4,22 +4,17 @@
 //! reservation itself left out), on the Cornell box with unidirectional and
 //! bidirectional paths, at a preview budget and a longer one.
 
-mod allocations;
-mod threads;
-
-use allocations::Tracking;
+use crate::ALLOCATOR;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::native::{PathSampler, builtin, native_tracer};
-
-#[global_allocator]
-static ALLOCATOR: Tracking = Tracking::new();
 
 /// How far the bound may be from the peak, either way.
 const WITHIN: f64 = 1.5;
 
 #[test]
 fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
+    let _alone = crate::allocations::alone();
     let resolution = Resolution::new(96, 72);
     let mut tracer = native_tracer(builtin::cornell(resolution));
     let threads = 2;
@@ -44,7 +39,11 @@ fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
                 };
                 let bound =
                     method.memory_bound(resolution, 3, tracer.splats_per_path(), threads, budget);
-                let peak = threads::in_pool(threads, || {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let peak = pool.install(|| {
                     ALLOCATOR.leave_out(bound as usize);
                     ALLOCATOR.reset_peak();
                     let before = ALLOCATOR.live();

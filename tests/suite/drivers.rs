@@ -21,7 +21,7 @@ use strata::engine::{
     Temperature, render,
 };
 
-mod threads;
+use crate::threads;
 use threads::{bits, in_pool, small_methods as methods};
 
 fn settings(seed: u64, samples: u64, method: &Method) -> Settings {

@@ -12,7 +12,7 @@
 //! a few seconds); a longer run by hand:
 //!
 //! ```text
-//! FUZZ_CASES=100000 cargo test --release --test fuzz_loaders -- --nocapture
+//! FUZZ_CASES=100000 cargo test --release --test bounds fuzz_loaders -- --nocapture
 //! ```
 
 use std::path::PathBuf;
@@ -27,11 +27,7 @@ use strata::native::{native_tracer, pbrt, ply};
 /// The largest single allocation a case may make.
 const MAX_ALLOCATION: usize = 1 << 30;
 
-mod allocations;
-use allocations::Tracking;
-
-#[global_allocator]
-static ALLOCATOR: Tracking = Tracking::new();
+use crate::ALLOCATOR;
 
 /// Numbers a hostile file may hold.
 const HOSTILE: [&str; 12] = [
@@ -217,6 +213,7 @@ fn scenes() -> PathBuf {
 
 #[test]
 fn hostile_scene_files_give_typed_errors_or_finite_images() {
+    let _alone = crate::allocations::alone();
     // The pbrt parser, end to end.
     let path = scenes().join("cornell-box/scene.pbrt");
     let original = std::fs::read(&path).expect("the shared scenes");
@@ -283,6 +280,7 @@ fn hostile_scene_files_give_typed_errors_or_finite_images() {
 /// nothing).
 #[test]
 fn edits_change_the_files() {
+    let _alone = crate::allocations::alone();
     let text = b"Translate 1 2 3\nScale 4 5 6\n";
     let number = apply(text, &[Edit::Number(0.0, 0)], true);
     assert_eq!(number, b"Translate nan 2 3\nScale 4 5 6\n");

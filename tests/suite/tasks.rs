@@ -16,7 +16,7 @@ use strata::prelude::{
     ErptSettings, PssmltSettings, StratifiedSettings, Task, merge, render_task, resume_task,
 };
 
-mod threads;
+use crate::threads;
 use threads::{bits, in_pool};
 
 fn image() -> ProceduralImage {

@@ -8,9 +8,6 @@
 //! that any of ~1000 values of a correct estimator exceeds 6.5 is below 1e-3),
 //! and each channel's image mean within `Z_TOTAL`.
 
-// Every test crate that includes this module uses some of it.
-#![allow(dead_code)]
-
 use std::ops::Range;
 
 use strata::engine::target::{Importance, MaxChannel};

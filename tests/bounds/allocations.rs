@@ -1,11 +1,18 @@
-//! A global allocator for the tests that bound memory: the system's,
+//! The global allocator of the tests that bound memory: the system's,
 //! remembering the largest single request and the peak of the bytes live,
-//! so that a case can prove it asked for no more than a bound. A test binary
-//! installs it with
-//! `#[global_allocator] static ALLOCATOR: Tracking = Tracking::new();`.
+//! so that a case can prove it asked for no more than a bound; and the lock
+//! that runs those tests one at a time (each counts the whole process's
+//! allocations).
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, MutexGuard};
+
+/// Held by each test of this binary while it runs: none runs beside another.
+pub fn alone() -> MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
 
 /// The system allocator, remembering the largest request since the last
 /// [`Tracking::take`] and the most bytes live since the last
@@ -100,7 +107,6 @@ impl Tracking {
     }
 
     /// The largest request since the last call.
-    #[allow(dead_code)]
     pub fn take(&self) -> usize {
         self.largest.swap(0, Ordering::Relaxed)
     }
@@ -108,25 +114,21 @@ impl Tracking {
     /// Leaves the next allocation of exactly `size` bytes out of the live
     /// count (0: none), e.g. a reservation that is made and let go before
     /// any page is touched.
-    #[allow(dead_code)]
     pub fn leave_out(&self, size: usize) {
         self.unseen.store(size, Ordering::Relaxed);
     }
 
     /// Bytes live now.
-    #[allow(dead_code)]
     pub fn live(&self) -> usize {
         self.live.load(Ordering::Relaxed)
     }
 
     /// Starts a new peak from the bytes live now.
-    #[allow(dead_code)]
     pub fn reset_peak(&self) {
         self.peak.store(self.live(), Ordering::Relaxed);
     }
 
     /// The most bytes live since the last [`reset_peak`](Self::reset_peak).
-    #[allow(dead_code)]
     pub fn peak(&self) -> usize {
         self.peak.load(Ordering::Relaxed)
     }

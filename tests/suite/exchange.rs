@@ -10,8 +10,8 @@
 //! * A bimodal target: plain MH stays in its mode, every move finds the other.
 //! * The driver's images match closed-form pixel values.
 
-mod common;
-mod threads;
+use crate::common;
+use crate::threads;
 use threads::{bits, in_pool};
 
 use strata::engine::analytic::{Component, GaussianMixture, ProceduralImage};

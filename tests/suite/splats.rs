@@ -9,8 +9,8 @@ use strata::engine::{
     Silent, SplatSink, Temperature, render,
 };
 
-mod common;
-mod threads;
+use crate::common;
+use crate::threads;
 use common::{RUNS, check, renders};
 use threads::{bits, in_pool, small_methods};
 

@@ -1,9 +1,6 @@
 //! Shared by the determinism tests: a closure run on a pool of a chosen size,
 //! films compared bit by bit, and every method with small settings.
 
-// Every test crate that includes this module uses some of it.
-#![allow(dead_code)]
-
 use strata::engine::Film;
 use strata::engine::Method;
 use strata::engine::exchange::{EnsembleSettings, ExchangeKind};

@@ -26,9 +26,9 @@ use strata::native::{builtin, native_tracer};
 
 use std::sync::atomic::{AtomicU32, Ordering};
 
-mod common;
+use crate::common;
+use crate::threads;
 use common::{RUNS, binned, check, renders, run};
-mod threads;
 use threads::{bits, in_pool};
 
 /// Stratified MCMC with `settings`.

@@ -10,7 +10,7 @@ use strata::engine::{
     Silent, SplatSink, Temperature, render,
 };
 
-mod common;
+use crate::common;
 use common::{RUNS, check, renders};
 
 fn pssmlt(mutation: MutationParams) -> Method {

@@ -12,8 +12,8 @@ use strata::native::builtin::{by_name, cuboid, quad, sphere};
 use strata::native::material::{Material, Texture};
 use strata::native::{Camera, PathSampler, Scene, native_tracer};
 
-mod common;
-mod threads;
+use crate::common;
+use crate::threads;
 use threads::small_methods;
 
 const SIDE: u32 = 24;

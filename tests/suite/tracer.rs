@@ -17,9 +17,9 @@ use strata::native::material::{Material, Texture};
 use strata::native::tracer::Regularization;
 use strata::native::{Camera, PathSampler, Scene, native_tracer};
 
-mod common;
+use crate::common;
+use crate::threads;
 use common::run;
-mod threads;
 use threads::{bits, in_pool};
 
 /// Mean and standard error over runs of a statistic of each film.

@@ -10,7 +10,7 @@
 //! front end); a longer run by hand:
 //!
 //! ```text
-//! FUZZ_CASES=2000 cargo test --release --test fuzz_settings -- --nocapture
+//! FUZZ_CASES=2000 cargo test --release --test bounds fuzz_settings -- --nocapture
 //! ```
 
 use std::ffi::{CString, c_void};
@@ -33,11 +33,7 @@ const MAX_ALLOCATION: usize = 1 << 30;
 const BUDGET: Duration = Duration::from_millis(100);
 const SLACK: Duration = Duration::from_secs(1);
 
-mod allocations;
-use allocations::Tracking;
-
-#[global_allocator]
-static ALLOCATOR: Tracking = Tracking::new();
+use crate::ALLOCATOR;
 
 /// One setting to set: the row (an index into the method's table, wrapped),
 /// where in or around its range the value falls, and a fraction.
@@ -160,6 +156,7 @@ fn check_render(what: &str, elapsed: Duration, film: Option<&[f64]>) -> Result<(
 
 #[test]
 fn every_accepted_setting_renders_through_the_library() {
+    let _alone = crate::allocations::alone();
     let image = oracle();
     let mut runner = runner();
     let (accepted, refused) = (AtomicUsize::new(0), AtomicUsize::new(0));
@@ -226,6 +223,7 @@ extern "C" fn procedural(
 
 #[test]
 fn every_accepted_setting_renders_through_the_c_api() {
+    let _alone = crate::allocations::alone();
     let size = oracle().resolution();
     let c_oracle = StrataOracle {
         width: size.width,

@@ -16,7 +16,7 @@ use strata::engine::{
     Resolution, Rgb, Sampler, Settings, Silent, SplatSink, Temperature, render, resume,
 };
 
-mod threads;
+use crate::threads;
 use threads::{bits, in_pool, small_methods};
 
 /// Stops a render after `round` rounds, keeping the checkpoint made then

@@ -1,0 +1,23 @@
+//! The integration tests, one binary (one link of the engine, the tracer
+//! and their dependencies instead of one per file). The tests that count
+//! the process's allocations are apart, in `tests/bounds`.
+
+mod common;
+mod threads;
+
+mod bidirectional;
+mod chains;
+mod channels;
+mod cli;
+mod convergence;
+mod drivers;
+mod exchange;
+mod images;
+mod importance;
+mod invariance;
+mod resume;
+mod scenes;
+mod splats;
+mod stratified;
+mod tasks;
+mod tracer;

@@ -1,4 +1,4 @@
-//! A render split into tasks (MC, PSSMLT, ERPT): each task's partial result as
+//! A render split into tasks (MC, PSSMLT, replica exchange, ERPT): each task's partial result as
 //! bytes to store where the merge can read them, and the merge into the
 //! film the render unsplit gives, byte for byte (the engine's
 //! `method::merge`).

@@ -272,7 +272,7 @@ impl fmt::Display for Error {
             ),
             Error::NotSplittable { method } => write!(
                 f,
-                "{method} cannot be split into tasks (mc, pssmlt and erpt can: the units \
+                "{method} cannot be split into tasks (mc, pssmlt, replica and erpt can: the units \
                  of {method}'s work are coupled while they run)"
             ),
             Error::PartMismatch { part, what } => write!(

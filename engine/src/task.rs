@@ -1,6 +1,6 @@
 //! A render split into tasks: which units of work each task owns. The
 //! methods that can be split ([`Method::splits`](crate::Method::splits))
-//! give task `index` of `count` the units (chains, passes) whose index `k`
+//! give task `index` of `count` the units (chains, ensembles, passes) whose index `k`
 //! has `k mod count == index`; their films are exact sums
 //! ([`exact`](crate::exact)), so [`merge`](crate::method::merge) of the
 //! tasks' partial results gives the bytes of the render unsplit.
@@ -8,7 +8,7 @@
 use serde::{Deserialize, Serialize};
 
 /// One of `count` tasks of a render split across processes or machines
-/// ([`render_task`](crate::method::render_task)): the task owns the units of work (chains, passes) whose
+/// ([`render_task`](crate::method::render_task)): the task owns the units of work (chains, ensembles, passes) whose
 /// index `k` has `k mod count == index`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Task {

@@ -19,7 +19,7 @@
 //! `--spp`, the image is the one an uninterrupted render gives, bit for bit).
 //! `--preview-every SECONDS` rewrites the PNG and EXR while rendering.
 //!
-//! On several machines (MC, PSSMLT, ERPT): `strata render ... --task-index I
+//! On several machines (MC, PSSMLT, replica exchange, ERPT): `strata render ... --task-index I
 //! --task-count N --out part-I` renders task I of N and writes its partial
 //! result `part-I.part`; `strata merge part-*.part --out image` writes the
 //! image the render unsplit gives, byte for byte (README, "Rendering on a
@@ -241,7 +241,7 @@ struct Args {
     #[arg(long, value_name = "FILE")]
     resume: Option<PathBuf>,
     /// Render only task I (from 0) of --task-count tasks and write its
-    /// partial result to OUT.part, for `strata merge` (MC, PSSMLT, ERPT; a
+    /// partial result to OUT.part, for `strata merge` (MC, PSSMLT, replica, ERPT; a
     /// sample budget is the whole render's, a time budget each task's).
     #[arg(long, value_name = "I", requires = "task_count")]
     task_index: Option<u32>,

@@ -7,13 +7,15 @@
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use strata::engine::analytic::ProceduralImage;
+use strata::engine::exchange::EnsembleSettings;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Checkpoint, Error, Method, Observer, Output, Progress, Resolution, Settings, Silent,
     render,
 };
 use strata::prelude::{
-    ErptSettings, PssmltSettings, StratifiedSettings, Task, merge, render_task, resume_task,
+    ErptSettings, PssmltSettings, ReplicaSettings, StratifiedSettings, Task, merge, render_task,
+    resume_task,
 };
 
 use crate::threads;
@@ -23,13 +25,23 @@ fn image() -> ProceduralImage {
     ProceduralImage::showcase(Resolution::new(48, 32))
 }
 
-/// The methods that split, small: MC, PSSMLT and ERPT.
-fn methods() -> [Method; 3] {
+/// The methods that split, small: MC, PSSMLT, replica exchange and ERPT.
+fn methods() -> [Method; 4] {
     [
         Method::Mc,
         Method::Pssmlt(PssmltSettings {
             chains: 37,
             bootstrap_candidates: 5_000,
+            ..Default::default()
+        }),
+        // Every task repeats the ladder tuning, over every ensemble.
+        Method::Replica(ReplicaSettings {
+            ensembles: 11,
+            ensemble: EnsembleSettings {
+                bootstrap_candidates: 2_000,
+                ..EnsembleSettings::geometric(4, 100.0).unwrap()
+            },
+            ladder_tuning_sweeps: 16,
             ..Default::default()
         }),
         Method::Erpt(ErptSettings {

@@ -96,15 +96,6 @@ pub(crate) trait Runs: Worker + Send + Sync {
     /// Runs `units` more units.
     fn run(&mut self, units: u64);
 
-    /// After every round, once its splats are merged, with every worker in
-    /// merge order (e.g. to refine a normalization they share).
-    fn after_round(workers: &mut [Self])
-    where
-        Self: Sized,
-    {
-        let _ = workers;
-    }
-
     /// The image from the layers' sums, each multiplied by `scale` (one
     /// estimate of the image per unit of every worker's work): by default
     /// the one layer.
@@ -287,17 +278,6 @@ impl<W: Runs> Splatting<W> {
         })
     }
 
-    /// Appends the films, the visits, the units done and every worker's
-    /// state (its buffers are empty between rounds) to a checkpoint; read
-    /// back as `(SplatSums, Vec<W::State>)`.
-    pub fn save(&self, out: &mut Vec<u8>)
-    where
-        W: Saves,
-    {
-        self.save_sums(out);
-        self.save_states(out);
-    }
-
     /// Appends the films, the visits and the units done (read back as
     /// [`SplatSums`]).
     pub fn save_sums(&self, out: &mut Vec<u8>) {
@@ -342,7 +322,6 @@ impl<W: Runs> Rounds for Splatting<W> {
         parallel::for_each(&mut self.work, |w| w.run(units));
         self.bands
             .merge(&mut self.work, &mut self.films, &mut self.visits);
-        W::after_round(&mut self.work);
         self.units += units;
     }
 

@@ -186,9 +186,15 @@ impl<R: Radiance> Ensemble<R> {
         &self.large_steps
     }
 
-    /// The normalizations `b_j` the next sweeps weight with.
-    pub fn set_normalizations(&mut self, normalizations: &[f64]) {
-        self.normalizations.copy_from_slice(normalizations);
+    /// Sets the normalizations `b_j` the next sweeps weight with to the
+    /// bootstrap's samples `priors` pooled with this ensemble's own large
+    /// steps (Šik 2018, eq. 3.12, each level apart): no other ensemble's
+    /// numbers enter, so ensembles run apart (tasks of a split render).
+    pub fn refresh_normalizations(&mut self, priors: &[Normalization]) {
+        let levels = self.normalizations.iter_mut().zip(priors);
+        for ((b, prior), own) in levels.zip(&self.large_steps) {
+            *b = Normalization::pooled([prior, own]).value();
+        }
     }
 
     /// The states, chain by chain (chain 0 samples the exact target).

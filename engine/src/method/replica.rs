@@ -2,7 +2,10 @@
 //! ensembles of tempered chains with the chosen exchange move, all chains'
 //! samples combined by eq. 5.13's MIS weights (see
 //! [`exchange`](crate::exchange)). A unit of work is a sweep of every
-//! ensemble.
+//! ensemble. The weights' normalizations `b_j` start from the bootstrap's
+//! and each ensemble refines its own after every sweep with its large steps
+//! (eq. 3.12): no number passes between ensembles once they run, so a
+//! render splits into tasks by ensembles ([`crate::task`]).
 
 use alloc::vec;
 use alloc::vec::Vec;
@@ -12,14 +15,16 @@ use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
 use crate::chain::{ChainStats, Normalization};
 
-use crate::checkpoint;
+use crate::checkpoint::{self, Position};
 use crate::drive::splat::{RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker};
 use crate::drive::{Driven, RenderStats, Rounds, SetUpStage, drive};
 use crate::error::Error;
+use crate::exact::ExactFilm;
 use crate::exchange::{
     Ensemble, EnsembleSettings, ExchangeKind, ExchangeMove, ExchangeStats, Ladder, Tempering,
 };
-use crate::oracle::PathOracle;
+use crate::film::Film;
+use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::parallel;
 use crate::target::Importance;
 
@@ -100,23 +105,47 @@ where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    let (oracle, importance) = (job.oracle, job.importance);
-    let bands = SplatBands::new(job.resolution);
-    let traces_per_sweep = settings.traces_per_sweep();
-    let ensembles = settings.ensembles as u64;
-    let work = |state, prior| EnsembleWork {
-        oracle,
-        importance,
-        state,
-        buffers: RoundBuffers::new(bands),
-        prior,
-    };
-    let (mut ensembles, position, set_up, ladder, priors) = match job
-        .resumed::<Saved<O::Radiance>>()?
-    {
-        Some((position, saved)) => {
-            let (set_up, ladder, priors, splatted, states) = saved;
-            if states.len() != settings.ensembles as usize
+    let (mut run, position) = Replica::start(settings, job)?;
+    let saver = run.saver();
+    let driven = drive(&mut run.ensembles, job.round_loop(position), saver)?;
+    Ok(run.finish(driven))
+}
+
+/// Replica exchange's state: the set-up's counters, the ladder, every
+/// level's bootstrap estimate, and the ensembles with their film.
+struct Replica<'a, O: PathOracle, I: ?Sized> {
+    set_up: SetUp,
+    ladder: Ladder,
+    priors: Vec<Normalization>,
+    ensembles: Splatting<EnsembleWork<'a, O, I>>,
+}
+
+impl<'a, O, I> Replica<'a, O, I>
+where
+    O: PathOracle,
+    I: Importance<O::Radiance> + ?Sized,
+{
+    /// The set-up and this job's task's ensembles (ensemble `e` belongs to
+    /// task `e mod count`), or for a resumed job the ensembles as they were,
+    /// with the round loop's position.
+    fn start(
+        settings: &ReplicaSettings,
+        job: &Job<'a, O, I>,
+    ) -> Result<(Self, Option<Position>), Error> {
+        let (oracle, importance) = (job.oracle, job.importance);
+        let bands = SplatBands::new(job.resolution);
+        let traces_per_sweep = settings.traces_per_sweep();
+        let ensembles = settings.ensembles as u64;
+        let work = |state, prior| EnsembleWork {
+            oracle,
+            importance,
+            state,
+            buffers: RoundBuffers::new(bands),
+            prior,
+        };
+        if let Some((position, saved)) = job.resumed::<Saved<O::Radiance>>()? {
+            let (set_up, ladder, priors, splatted, _, states) = saved;
+            if states.len() as u64 != job.task.share(ensembles)
                 || ladder.len() != settings.ensemble.ladder.len()
             {
                 return Err(checkpoint::does_not_fit());
@@ -126,17 +155,127 @@ where
                 .map(|state| work(state, priors.clone()))
                 .collect();
             let ensembles = Splatting::resumed(work, bands, traces_per_sweep, ensembles, splatted)?;
-            (ensembles, Some(position), set_up, ladder, priors)
+            let run = Self {
+                set_up,
+                ladder,
+                priors,
+                ensembles,
+            };
+            return Ok((run, Some(position)));
         }
-        None => {
-            let (work, set_up, ladder, priors) = start(settings, job, &work)?;
-            let ensembles = Splatting::new(work, bands, traces_per_sweep, ensembles)?;
-            (ensembles, None, set_up, ladder, priors)
+        let (all, set_up, ladder, priors) = set_up(settings, job, &work)?;
+        let task = job.task;
+        let mine = all
+            .into_iter()
+            .skip(task.index as usize)
+            .step_by(task.count.max(1) as usize)
+            .collect();
+        let run = Self {
+            set_up,
+            ladder,
+            priors,
+            ensembles: Splatting::new(mine, bands, traces_per_sweep, ensembles)?,
+        };
+        Ok((run, None))
+    }
+
+    /// What appends the state, given the ensembles, to a checkpoint (read
+    /// back as [`Saved`]).
+    fn saver(&self) -> impl Fn(&Splatting<EnsembleWork<'a, O, I>>, &mut Vec<u8>) + use<'a, O, I> {
+        let (set_up, ladder, priors) = (self.set_up, self.ladder.clone(), self.priors.clone());
+        move |ensembles, out| {
+            checkpoint::append(&(set_up, &ladder, &priors), out);
+            ensembles.save_sums(out);
+            let summaries: Vec<Summary> =
+                ensembles.work.iter().map(|w| summary(&w.state)).collect();
+            checkpoint::append(&summaries, out);
+            ensembles.save_states(out);
         }
-    };
-    let saver = saver(set_up, &ladder, &priors);
-    let driven = drive(&mut ensembles, job.round_loop(position), saver)?;
-    Ok(finish(ensembles, driven, ladder, set_up))
+    }
+
+    /// The normalized image, the counters and the extras.
+    fn finish(self, driven: Driven) -> Output {
+        let samples = self.ensembles.samples();
+        let (film, visits, work) = self.ensembles.finish();
+        let summaries: Vec<Summary> = work.iter().map(|w| summary(&w.state)).collect();
+        let image = (film, visits);
+        let mut output = finish(
+            image,
+            self.set_up,
+            self.ladder,
+            &self.priors,
+            &summaries,
+            samples,
+        );
+        output.cancelled = driven.cancelled;
+        output
+    }
+}
+
+/// What the image and the counters need of an ensemble: its exchange
+/// counters, and per level its mutation counters and its large steps'
+/// normalization samples.
+type Summary = (ExchangeStats, Vec<ChainStats>, Vec<Normalization>);
+
+fn summary<R: Radiance>(state: &EnsembleState<R>) -> Summary {
+    let ensemble = &state.ensemble;
+    (
+        ensemble.stats().clone(),
+        ensemble.chain_stats().to_vec(),
+        ensemble.large_steps().to_vec(),
+    )
+}
+
+/// The image of the tasks' saved states `parts` (see
+/// [`merge`](super::merge)), in task order: their films and visits added,
+/// their ensembles' counters in the render's order.
+pub(crate) fn merge(
+    settings: &ReplicaSettings,
+    parts: &[&[u8]],
+    resolution: Resolution,
+    channels: usize,
+) -> Result<Output, Error> {
+    let mut film = ExactFilm::try_new(resolution, channels)?;
+    let mut visits = vec![0u64; resolution.pixel_count()];
+    let mut estimates = 0u64;
+    let mut tasks = Vec::with_capacity(parts.len());
+    let mut head = None;
+    for part in parts {
+        // `Saved` up to the ensembles (the image needs their summaries
+        // only), its film merged as it is read.
+        let ((set_up, ladder, priors, layers), rest) =
+            checkpoint::take::<(SetUp, Ladder, Vec<Normalization>, usize)>(part)?;
+        if layers != 1 {
+            return Err(checkpoint::does_not_fit());
+        }
+        let rest = film.merge_serialized(rest)?;
+        let ((v, units), rest) = checkpoint::take::<(Vec<u64>, u64)>(rest)?;
+        let ensembles: Vec<Summary> = checkpoint::take(rest)?.0;
+        if v.len() != visits.len() {
+            return Err(checkpoint::does_not_fit());
+        }
+        visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
+        estimates = estimates.saturating_add(units.saturating_mul(ensembles.len() as u64));
+        head.get_or_insert((set_up, ladder, priors));
+        tasks.push(ensembles);
+    }
+    let (set_up, ladder, priors) = head.ok_or_else(checkpoint::does_not_fit)?;
+    // The render's order: ensemble e is task (e mod n)'s (e div n)-th.
+    let longest = tasks.iter().map(Vec::len).max().unwrap_or(0);
+    let ensembles: Vec<Summary> = (0..longest)
+        .flat_map(|j| tasks.iter().filter_map(move |t| t.get(j)))
+        .cloned()
+        .collect();
+    let samples = estimates.saturating_mul(settings.traces_per_sweep());
+    let film = film.scaled(resolution.pixel_count() as f64 / estimates.max(1) as f64);
+    Ok(finish(
+        (film, visits),
+        set_up,
+        ladder,
+        &priors,
+        &ensembles,
+        samples,
+    ))
 }
 
 /// The ensembles' work, the set-up's paths, the ladder and the levels'
@@ -148,11 +287,12 @@ type Started<'a, O, I> = (
     Vec<Normalization>,
 );
 
-/// A fresh render's ensembles before the first round: the bootstrap, a
-/// start for every ensemble, and ladder tuning (rounds of 16, 32, ...
+/// A fresh render's ensembles before the first round, all of them (a
+/// task's are the same as the whole render's): the bootstrap, a start for
+/// every ensemble, and ladder tuning (rounds of 16, 32, ...
 /// sweeps, not splatted, each followed by a new bootstrap for the new
 /// ladder); with the set-up's paths, the ladder and the levels' priors.
-fn start<'a, O, I>(
+fn set_up<'a, O, I>(
     settings: &ReplicaSettings,
     job: &Job<'a, O, I>,
     work: &dyn Fn(EnsembleState<O::Radiance>, Vec<Normalization>) -> EnsembleWork<'a, O, I>,
@@ -249,33 +389,18 @@ struct SetUp {
     invalid: u64,
 }
 
-/// What a checkpoint holds of replica exchange: the set-up's counters, the
-/// ladder, every level's bootstrap estimate, the film, and the ensembles.
+/// What a checkpoint holds of replica exchange, in [`Replica::saver`]'s
+/// order: what [`merge`] reads (the set-up's counters, the ladder, every
+/// level's bootstrap estimate, the film, each ensemble's [`Summary`]),
+/// then the ensembles.
 type Saved<R> = (
     SetUp,
     Ladder,
     Vec<Normalization>,
     SplatSums,
+    Vec<Summary>,
     Vec<EnsembleState<R>>,
 );
-
-/// What appends replica exchange's state, given the ensembles, to a
-/// checkpoint (read back as [`Saved`]).
-fn saver<'a, O, I>(
-    set_up: SetUp,
-    ladder: &Ladder,
-    priors: &[Normalization],
-) -> impl Fn(&Splatting<EnsembleWork<'a, O, I>>, &mut Vec<u8>) + use<'a, O, I>
-where
-    O: PathOracle,
-    I: Importance<O::Radiance> + ?Sized,
-{
-    let (ladder, priors) = (ladder.clone(), priors.to_vec());
-    move |ensembles, out| {
-        checkpoint::append(&(set_up, &ladder, &priors), out);
-        ensembles.save(out);
-    }
-}
 
 /// The bootstrap's samples of every level's normalization.
 fn priors(bootstrap: &Bootstrap) -> Vec<Normalization> {
@@ -303,20 +428,6 @@ struct EnsembleWork<'a, O: PathOracle, I: ?Sized> {
     prior: Vec<Normalization>,
 }
 
-impl<O: PathOracle, I: ?Sized> EnsembleWork<'_, O, I> {
-    /// Every level's normalization from the bootstrap and every ensemble's
-    /// large steps, pooled in ensemble order.
-    fn pooled(work: &[Self]) -> Vec<Normalization> {
-        let mut pooled = work.first().map(|w| w.prior.clone()).unwrap_or_default();
-        for w in work {
-            for (level, sums) in pooled.iter_mut().zip(w.state.ensemble.large_steps()) {
-                level.merge(sums);
-            }
-        }
-        pooled
-    }
-}
-
 impl<O: PathOracle, I: ?Sized> Saves for EnsembleWork<'_, O, I> {
     type State = EnsembleState<O::Radiance>;
     fn state(&self) -> &Self::State {
@@ -339,8 +450,10 @@ where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    /// `sweeps` sweeps, each splatting its weighted states and counting every
-    /// chain's state.
+    /// `sweeps` sweeps, each splatting its weighted states, counting every
+    /// chain's state and then weighting the next with its levels'
+    /// normalizations re-estimated from the bootstrap and this ensemble's
+    /// large steps.
     fn run(&mut self, sweeps: u64) {
         for _ in 0..sweeps {
             let buffers = &mut self.buffers;
@@ -351,37 +464,29 @@ where
             for r in self.state.ensemble.replicas() {
                 self.buffers.visit(r.state().path.film);
             }
-        }
-    }
-
-    /// The ensembles weight their next samples with every level's
-    /// normalization from every uniform sample so far (see `ChainWork` of
-    /// PSSMLT).
-    fn after_round(work: &mut [Self]) {
-        let b: Vec<f64> = Self::pooled(work)
-            .iter()
-            .map(Normalization::value)
-            .collect();
-        for w in work {
-            w.state.ensemble.set_normalizations(&b);
+            self.state.ensemble.refresh_normalizations(&self.prior);
         }
     }
 }
 
-/// The normalized image, the counters and the extras.
-fn finish<O, I>(
-    ensembles: Splatting<EnsembleWork<'_, O, I>>,
-    driven: Driven,
-    ladder: Ladder,
+/// The output of a render with image `film` and `visits` whose ensembles
+/// (all of the render's, in its order) are summarized in `ensembles` and
+/// traced `samples` paths after a set-up of `set_up` with bootstrap
+/// estimates `priors`.
+fn finish(
+    (film, visits): (Film, Vec<u64>),
     set_up: SetUp,
-) -> Output
-where
-    O: PathOracle,
-    I: Importance<O::Radiance> + ?Sized,
-{
-    let samples = ensembles.samples();
-    let (film, visits, work) = ensembles.finish();
-    let normalization = EnsembleWork::pooled(&work)[0];
+    ladder: Ladder,
+    priors: &[Normalization],
+    ensembles: &[Summary],
+    samples: u64,
+) -> Output {
+    let normalization = Normalization::pooled(
+        priors
+            .iter()
+            .take(1)
+            .chain(ensembles.iter().filter_map(|e| e.2.first())),
+    );
     let mut exchange = ExchangeStats::default();
     let mut levels = vec![ChainStats::default(); ladder.len()];
     let mut stats = RenderStats {
@@ -391,9 +496,9 @@ where
         normalization_error: Some(normalization.relative_error()),
         ..Default::default()
     };
-    for w in &work {
-        exchange.merge(w.state.ensemble.stats());
-        for (level, s) in levels.iter_mut().zip(w.state.ensemble.chain_stats()) {
+    for (exchanges, chains, _) in ensembles {
+        exchange.merge(exchanges);
+        for (level, s) in levels.iter_mut().zip(chains) {
             level.merge(s);
             stats.chains.merge(s);
         }
@@ -402,7 +507,7 @@ where
     Output {
         film,
         stats,
-        cancelled: driven.cancelled,
+        cancelled: false,
         visits,
         extras: Extras::Replica(ReplicaExtras {
             exchange,

@@ -3,21 +3,23 @@
 //! results into the image the render unsplit gives, byte for byte.
 //!
 //! A task renders its share of the units of work (MC's and ERPT's passes,
-//! PSSMLT's chains: see [`crate::task`]) under the render's settings and budget;
+//! PSSMLT's chains, replica exchange's ensembles: see [`crate::task`])
+//! under the render's settings and budget;
 //! its partial result is the checkpoint of its state once its budget is
 //! spent (`finished`), so a stopped task resumes like any render
 //! ([`resume_task`]). The films are exact sums ([`crate::exact`]) and
 //! what couples units is pooled exactly too (PSSMLT's normalization), so
 //! [`merge`] adds the parts and finishes once, as the unsplit render does.
-//! Methods whose units are coupled while they run (replica exchange's
-//! normalization refreshed from every ensemble, stratified MCMC's
-//! exchanges between neighbouring tiles, multi-stage MLT's stages) cannot
-//! be split yet ([`Method::splits`]).
+//! Every task repeats the render's set-up (bootstraps, replica exchange's
+//! ladder tuning over every ensemble), which is deterministic. Methods
+//! whose units are coupled while they run (stratified MCMC's exchanges
+//! between neighbouring tiles, multi-stage MLT's stages) cannot be split
+//! yet ([`Method::splits`]).
 
 use alloc::vec::Vec;
 use core::cell::OnceCell;
 
-use super::{Method, Output, Settings, erpt, mc, pssmlt, run, run_resumed};
+use super::{Method, Output, Settings, erpt, mc, pssmlt, replica, run, run_resumed};
 use crate::checkpoint::{Checkpoint, Header, Position, take};
 use crate::drive::{Budget, Observer};
 use crate::error::Error;
@@ -27,9 +29,12 @@ use crate::task::Task;
 
 impl Method {
     /// Whether a render with this method can be split into tasks
-    /// ([`render_task`]): MC, PSSMLT and ERPT.
+    /// ([`render_task`]): MC, PSSMLT, replica exchange and ERPT.
     pub fn splits(&self) -> bool {
-        matches!(self, Method::Mc | Method::Pssmlt(_) | Method::Erpt(_))
+        matches!(
+            self,
+            Method::Mc | Method::Pssmlt(_) | Method::Replica(_) | Method::Erpt(_)
+        )
     }
 }
 
@@ -55,6 +60,7 @@ fn check_task(settings: &Settings, task: Task, resolution: Resolution) -> Result
     }
     let units = match (&settings.method, settings.budget) {
         (Method::Pssmlt(s), _) => Some(s.chains as u64),
+        (Method::Replica(s), _) => Some(s.ensembles as u64),
         (Method::Mc, Budget::Samples(n)) => Some((n / pixels.max(1)).max(1)),
         (Method::Erpt(s), Budget::Samples(n)) => Some(erpt::planned_passes(s, resolution, n)),
         _ => None,
@@ -65,7 +71,8 @@ fn check_task(settings: &Settings, task: Task, resolution: Resolution) -> Result
         return Err(Error::invalid(
             "task_count",
             task.count as f64,
-            "at most the render's units of work (MC and ERPT: passes; PSSMLT: chains)",
+            "at most the render's units of work (MC and ERPT: passes; PSSMLT: chains; replica \
+             exchange: ensembles)",
         ));
     }
     Ok(())
@@ -185,6 +192,7 @@ pub fn merge(parts: &[Checkpoint], subset: bool) -> Result<Output, Error> {
         Method::Mc => mc::merge(&states, resolution, head.channels as usize),
         Method::Pssmlt(_) => pssmlt::merge(&states, resolution, head.channels as usize),
         Method::Erpt(_) => erpt::merge(&states, resolution, head.channels as usize),
+        Method::Replica(s) => replica::merge(s, &states, resolution, head.channels as usize),
         method => Err(Error::NotSplittable {
             method: method.name(),
         }),

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # A render split into tasks, simulated on one machine (issue 39's
 # measurements, docs/BENCHMARKS.md "A render split into tasks"): for MC and
-# PSSMLT, the unsplit render and then its N tasks one after another, each
+# PSSMLT (METHODS="mc replica ..." for others), the unsplit render and then its N tasks one after another, each
 # timed with its peak resident memory (/usr/bin/time -v); the partial
 # files' sizes; the merge's time and peak; the slowest task over the mean;
 # and whether the merged PNG and EXR are the unsplit render's bytes.
@@ -37,7 +37,7 @@ timed() { # label index command... -> a csv line
   peak=$(awk -F': ' '/Maximum resident/ {printf "%.1f", $2 / 1024}' "$dir/time.txt")
   echo "$label,$index,$secs,$peak"
 }
-for method in mc pssmlt; do
+for method in ${METHODS:-mc pssmlt}; do
   common=(render "$scene" --method "$method" "${budget[@]}" --seed 1 --width "$width" --height "$height" --threads 2)
   line=$(timed whole 0 "$bin" "${common[@]}" --out "$dir/$method-whole")
   echo "$method,$line," >>"$csv"

@@ -36,9 +36,9 @@ use serde::{Deserialize, Serialize};
 use super::{Extras, Job, Output};
 use crate::bootstrap::Bootstrap;
 use crate::chain::{Chain, ChainStats, Normalization, PathTarget, Traced, Weights};
-use crate::checkpoint;
+use crate::checkpoint::{self, Position};
 use crate::drive::splat::{RoundBuffers, SplatBands, Worker};
-use crate::drive::{RenderStats, Rounds, drive};
+use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
 use crate::exact::ExactFilm;
 use crate::film::Film;
@@ -158,109 +158,9 @@ where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    let resolution = job.resolution;
-    let bands = SplatBands::new(resolution);
-    let scene = Scene {
-        oracle: job.oracle,
-        importance: job.importance,
-        seed: job.seed,
-        resolution,
-    };
-    let (saved, position) = match job.resumed::<Saved>()? {
-        Some((position, saved)) => {
-            let fits = saved.film.fits(resolution, O::Radiance::CHANNELS)
-                && saved.visits.len() == resolution.pixel_count()
-                && saved.totals.len() == TASKS
-                && saved.starts >= resolution.pixel_count()
-                && saved.rotation < saved.starts.div_ceil(BLOCK)
-                && saved.done < saved.starts.div_ceil(BLOCK);
-            if !fits {
-                return Err(checkpoint::does_not_fit());
-            }
-            (saved, Some(position))
-        }
-        None => {
-            let bootstrap = Bootstrap::run(
-                job.oracle,
-                job.importance,
-                settings.small_step,
-                job.seed,
-                settings.bootstrap_candidates,
-                &job.bootstrap_halt(),
-            )?;
-            let saved = Saved {
-                energy: bootstrap.normalization()
-                    / (settings.chain_length as f64 * settings.chains_per_path),
-                bootstrap: bootstrap.traced(),
-                b: bootstrap.normalization(),
-                normalization: bootstrap.estimate(0),
-                film: ExactFilm::try_new(resolution, O::Radiance::CHANNELS)?,
-                visits: alloc::vec![0; resolution.pixel_count()],
-                totals: alloc::vec![Totals::default(); TASKS],
-                starts: starts(resolution),
-                passes: 0,
-                done: 0,
-                rotation: 0,
-            };
-            (saved, None)
-        }
-    };
-    let mut run = Passes {
-        scene,
-        settings,
-        task: job.task,
-        energy: saved.energy,
-        work: saved
-            .totals
-            .iter()
-            .map(|&totals| Segment::new(bands, totals))
-            .collect(),
-        bands,
-        film: saved.film,
-        visits: saved.visits,
-        starts: saved.starts,
-        passes: saved.passes,
-        done: saved.done,
-        rotation: saved.rotation,
-        block_starts: Vec::new(),
-        chain_ends: Vec::new(),
-    };
-    let (bootstrap, b, normalization) = (saved.bootstrap, saved.b, saved.normalization);
-    let driven = drive(&mut run, job.round_loop(position), |run, out| {
-        let totals: Vec<Totals> = run.work.iter().map(|w| w.totals).collect();
-        checkpoint::append(
-            &(
-                run.energy,
-                bootstrap,
-                b,
-                normalization,
-                &run.film,
-                &run.visits,
-                totals,
-                run.starts,
-                run.passes,
-                run.done,
-                run.rotation,
-            ),
-            out,
-        )
-    })?;
-    let totals: Vec<Totals> = run.work.iter().map(|w| w.totals).collect();
-    let passes = run.passes_done();
-    let (film, stats) = finish(
-        &run.film,
-        passes,
-        run.starts,
-        &totals,
-        (bootstrap, b, normalization),
-    );
-    Ok(Output {
-        film,
-        stats,
-        cancelled: driven.cancelled,
-        visits: run.visits,
-        extras: Extras::None,
-    })
+    let (mut run, position) = Passes::start(settings, job)?;
+    let driven = drive(&mut run, job.round_loop(position), Passes::save)?;
+    Ok(run.finish(driven))
 }
 
 /// The image of `film`, summed over `passes` passes (a fraction for a pass
@@ -475,6 +375,8 @@ impl<R: Radiance> Worker for Segment<R> {
 struct Passes<'a, O: PathOracle, I: ?Sized> {
     scene: Scene<'a, O, I>,
     settings: &'a ErptSettings,
+    /// The bootstrap's counters, its `b*` and the samples behind it.
+    set_up: (Traced, f64, Normalization),
     /// The passes of this task: `task.unit(k)` is its `k`-th.
     task: Task,
     energy: f64,
@@ -496,11 +398,128 @@ struct Passes<'a, O: PathOracle, I: ?Sized> {
     chain_ends: Vec<u64>,
 }
 
-impl<O, I> Passes<'_, O, I>
+impl<'a, O, I> Passes<'a, O, I>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
+    /// The bootstrap and a black film, or for a resumed job the passes as
+    /// they were, with the round loop's position.
+    fn start(
+        settings: &'a ErptSettings,
+        job: &Job<'a, O, I>,
+    ) -> Result<(Self, Option<Position>), Error> {
+        let resolution = job.resolution;
+        let (saved, position) = match job.resumed::<Saved>()? {
+            Some((position, saved)) => {
+                let fits = saved.film.fits(resolution, O::Radiance::CHANNELS)
+                    && saved.visits.len() == resolution.pixel_count()
+                    && saved.totals.len() == TASKS
+                    && saved.starts >= resolution.pixel_count()
+                    && saved.rotation < saved.starts.div_ceil(BLOCK)
+                    && saved.done < saved.starts.div_ceil(BLOCK);
+                if !fits {
+                    return Err(checkpoint::does_not_fit());
+                }
+                (saved, Some(position))
+            }
+            None => {
+                let bootstrap = Bootstrap::run(
+                    job.oracle,
+                    job.importance,
+                    settings.small_step,
+                    job.seed,
+                    settings.bootstrap_candidates,
+                    &job.bootstrap_halt(),
+                )?;
+                let saved = Saved {
+                    energy: bootstrap.normalization()
+                        / (settings.chain_length as f64 * settings.chains_per_path),
+                    bootstrap: bootstrap.traced(),
+                    b: bootstrap.normalization(),
+                    normalization: bootstrap.estimate(0),
+                    film: ExactFilm::try_new(resolution, O::Radiance::CHANNELS)?,
+                    visits: alloc::vec![0; resolution.pixel_count()],
+                    totals: alloc::vec![Totals::default(); TASKS],
+                    starts: starts(resolution),
+                    passes: 0,
+                    done: 0,
+                    rotation: 0,
+                };
+                (saved, None)
+            }
+        };
+        let bands = SplatBands::new(resolution);
+        let scene = Scene {
+            oracle: job.oracle,
+            importance: job.importance,
+            seed: job.seed,
+            resolution,
+        };
+        let run = Passes {
+            scene,
+            settings,
+            set_up: (saved.bootstrap, saved.b, saved.normalization),
+            task: job.task,
+            energy: saved.energy,
+            work: saved
+                .totals
+                .iter()
+                .map(|&totals| Segment::new(bands, totals))
+                .collect(),
+            bands,
+            film: saved.film,
+            visits: saved.visits,
+            starts: saved.starts,
+            passes: saved.passes,
+            done: saved.done,
+            rotation: saved.rotation,
+            block_starts: Vec::new(),
+            chain_ends: Vec::new(),
+        };
+        Ok((run, position))
+    }
+
+    /// Appends the state to a checkpoint (read back as [`Saved`]).
+    fn save(&self, out: &mut Vec<u8>) {
+        let (bootstrap, b, normalization) = self.set_up;
+        checkpoint::append(
+            &(
+                self.energy,
+                bootstrap,
+                b,
+                normalization,
+                &self.film,
+                &self.visits,
+                self.totals(),
+                self.starts,
+                self.passes,
+                self.done,
+                self.rotation,
+            ),
+            out,
+        )
+    }
+
+    /// Every task's counters.
+    fn totals(&self) -> Vec<Totals> {
+        self.work.iter().map(|w| w.totals).collect()
+    }
+
+    /// The normalized image and the counters.
+    fn finish(self, driven: Driven) -> Output {
+        let passes = self.passes_done();
+        let totals = self.totals();
+        let (film, stats) = finish(&self.film, passes, self.starts, &totals, self.set_up);
+        Output {
+            film,
+            stats,
+            cancelled: driven.cancelled,
+            visits: self.visits,
+            extras: Extras::None,
+        }
+    }
+
     /// Blocks per pass `B`.
     fn blocks(&self) -> usize {
         self.starts.div_ceil(BLOCK)

@@ -287,32 +287,7 @@ where
     let weight_sum: u64 = grids.iter().map(|&k| k as u64).sum();
     let channels = O::Radiance::CHANNELS;
     let pixels = resolution.pixel_count();
-    // The stages done: sample-weighted sums of their images and deviation
-    // channels, counters (or, resumed, as the checkpoint saved them).
-    let (mut done, resumed_stage) = match job.resume {
-        Some(bytes) => {
-            let (done, rest) = checkpoint::take::<StagesDone>(bytes)?;
-            let fits = done.sum.fits(resolution, channels)
-                && done.deviation_sum.len() == pixels
-                && done.visits.len() == pixels
-                && done.stages.len() < grids.len();
-            if !fits {
-                return Err(checkpoint::does_not_fit());
-            }
-            (done, Some(rest))
-        }
-        None => (
-            StagesDone {
-                sum: Film::try_new(resolution, channels)?,
-                deviation_sum: vec![0.0; pixels],
-                stats: RenderStats::default(),
-                visits: vec![0u64; pixels],
-                stages: Vec::with_capacity(grids.len()),
-                weight_done: 0,
-            },
-            None,
-        ),
-    };
+    let (mut done, resumed_stage) = StagesDone::start(job, channels, grids.len())?;
     // The estimate so far, and its luminance and deviation per pixel.
     let mut estimate = Film::new(resolution, channels);
     let mut luminance = vec![0.0; pixels];
@@ -335,16 +310,7 @@ where
         };
         let regions = RegionMeans::new(&estimate, k);
         let noise = if settings.noise_aware && stats.samples > 0 {
-            let adaptation: Vec<f64> = (0..pixels)
-                .map(|i| {
-                    let (x, y) = (i % resolution.width as usize, i / resolution.width as usize);
-                    regions.at(FilmPoint {
-                        x: x as f32 + 0.5,
-                        y: y as f32 + 0.5,
-                    })
-                })
-                .collect();
-            noise_target(resolution, &luminance, &variance, &adaptation)
+            noise_factors(&regions, &luminance, &variance, resolution)
         } else {
             vec![1.0; pixels]
         };
@@ -407,6 +373,27 @@ where
     })
 }
 
+/// Noise-aware MLT's per-pixel factor of the importance (Hoberock and
+/// Hart 2010, sec. 4.3.4-4.3.5): [`noise_target`] of the estimate's
+/// `luminance` and `variance`, adapted to the region means `regions`.
+fn noise_factors(
+    regions: &RegionMeans,
+    luminance: &[f64],
+    variance: &[f64],
+    resolution: Resolution,
+) -> Vec<f64> {
+    let width = resolution.width as usize;
+    let adaptation: Vec<f64> = (0..resolution.pixel_count())
+        .map(|i| {
+            regions.at(FilmPoint {
+                x: (i % width) as f32 + 0.5,
+                y: (i / width) as f32 + 0.5,
+            })
+        })
+        .collect();
+    noise_target(resolution, luminance, variance, &adaptation)
+}
+
 /// The stages done of a multi-stage render: what the next stages and the
 /// image are made of, and what a checkpoint holds before the current stage's
 /// state.
@@ -423,6 +410,37 @@ struct StagesDone {
 }
 
 impl StagesDone {
+    /// No stage done, or for a resumed job the stages done as the
+    /// checkpoint saved them, with the saved state of the stage that was
+    /// running (of `stages` in all, on a film of `channels`).
+    fn start<'b, O, I: ?Sized>(
+        job: &Job<'b, O, I>,
+        channels: usize,
+        stages: usize,
+    ) -> Result<(Self, Option<&'b [u8]>), Error> {
+        let pixels = job.resolution.pixel_count();
+        let Some(bytes) = job.resume else {
+            let done = StagesDone {
+                sum: Film::try_new(job.resolution, channels)?,
+                deviation_sum: vec![0.0; pixels],
+                stats: RenderStats::default(),
+                visits: vec![0u64; pixels],
+                stages: Vec::with_capacity(stages),
+                weight_done: 0,
+            };
+            return Ok((done, None));
+        };
+        let (done, rest) = checkpoint::take::<StagesDone>(bytes)?;
+        let fits = done.sum.fits(job.resolution, channels)
+            && done.deviation_sum.len() == pixels
+            && done.visits.len() == pixels
+            && done.stages.len() < stages;
+        if !fits {
+            return Err(checkpoint::does_not_fit());
+        }
+        Ok((done, Some(rest)))
+    }
+
     /// Adds the stage of grid `k` that rendered `out`.
     fn add(&mut self, out: &Output, k: u32) {
         let channels = self.sum.channels();

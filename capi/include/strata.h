@@ -256,7 +256,8 @@ const char *strata_last_error(void);
 
 // Makes `settings` render task `index` (from 0) of `count`: each task
 // renders its share of the whole render's budget (MC's and ERPT's passes,
-// PSSMLT's chains `index`, `index + count`, ...) with [`strata_render_task`].
+// PSSMLT's chains and replica exchange's ensembles `index`, `index +
+// count`, ...) with [`strata_render_task`].
 enum StrataStatus strata_settings_set_task(struct StrataSettings *settings,
                                            uint32_t index,
                                            uint32_t count);

@@ -19,7 +19,8 @@ pub struct StrataPart {
 
 /// Makes `settings` render task `index` (from 0) of `count`: each task
 /// renders its share of the whole render's budget (MC's and ERPT's passes,
-/// PSSMLT's chains `index`, `index + count`, ...) with [`strata_render_task`].
+/// PSSMLT's chains and replica exchange's ensembles `index`, `index +
+/// count`, ...) with [`strata_render_task`].
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_settings_set_task(
     settings: *mut StrataSettings,

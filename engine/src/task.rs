@@ -5,6 +5,7 @@
 //! ([`exact`](crate::exact)), so [`merge`](crate::method::merge) of the
 //! tasks' partial results gives the bytes of the render unsplit.
 
+use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
 /// One of `count` tasks of a render split across processes or machines
@@ -32,4 +33,14 @@ impl Task {
     pub fn unit(&self, j: u64) -> u64 {
         self.index as u64 + j * self.count.max(1) as u64
     }
+}
+
+/// The units of a render from its tasks' shares, given in task order:
+/// unit `k` is task `k mod n`'s `(k div n)`-th ([`Task::unit`] inverted).
+pub(crate) fn in_render_order<T: Clone>(shares: &[Vec<T>]) -> Vec<T> {
+    let longest = shares.iter().map(Vec::len).max().unwrap_or(0);
+    (0..longest)
+        .flat_map(|j| shares.iter().filter_map(move |share| share.get(j)))
+        .cloned()
+        .collect()
 }

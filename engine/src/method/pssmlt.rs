@@ -18,6 +18,7 @@ use crate::mutate::MutationParams;
 use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::parallel;
 use crate::target::Importance;
+use crate::task::in_render_order;
 use serde::{Deserialize, Serialize};
 
 /// Settings of PSSMLT. The budget counts the chains' paths, split evenly
@@ -239,12 +240,7 @@ pub(crate) fn merge(
         tasks.push(chains);
     }
     let (bootstrap, prior) = head.ok_or_else(checkpoint::does_not_fit)?;
-    // The render's chain order: chain c is task (c mod n)'s (c div n)-th.
-    let longest = tasks.iter().map(Vec::len).max().unwrap_or(0);
-    let chains: Vec<Summary> = (0..longest)
-        .flat_map(|j| tasks.iter().filter_map(move |t| t.get(j)))
-        .copied()
-        .collect();
+    let chains = in_render_order(&tasks);
     let (film, stats) = finish(bootstrap, prior, &films, estimates, &chains, samples);
     Ok(Output {
         film,

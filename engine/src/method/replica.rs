@@ -27,6 +27,7 @@ use crate::film::Film;
 use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::parallel;
 use crate::target::Importance;
+use crate::task::in_render_order;
 
 /// Settings of replica exchange. The budget counts the ensembles' traces,
 /// split evenly among them and rounded up to whole sweeps (a sweep costs `M`
@@ -260,12 +261,7 @@ pub(crate) fn merge(
         tasks.push(ensembles);
     }
     let (set_up, ladder, priors) = head.ok_or_else(checkpoint::does_not_fit)?;
-    // The render's order: ensemble e is task (e mod n)'s (e div n)-th.
-    let longest = tasks.iter().map(Vec::len).max().unwrap_or(0);
-    let ensembles: Vec<Summary> = (0..longest)
-        .flat_map(|j| tasks.iter().filter_map(move |t| t.get(j)))
-        .cloned()
-        .collect();
+    let ensembles = in_render_order(&tasks);
     let samples = estimates.saturating_mul(settings.traces_per_sweep());
     let film = film.scaled(resolution.pixel_count() as f64 / estimates.max(1) as f64);
     Ok(finish(

@@ -305,6 +305,32 @@ impl<W: Runs> Splatting<W> {
     }
 }
 
+/// Adds the [`SplatSums`] at the start of `bytes` (as
+/// [`Splatting::save_sums`] wrote them: one film per layer, the visits, the
+/// units) to `films` and `visits`, each film merged as it is read; returns
+/// the units they hold and the bytes after them. Sums of another shape are
+/// [`checkpoint::does_not_fit`].
+pub(crate) fn merge_saved_sums<'b>(
+    bytes: &'b [u8],
+    films: &mut [ExactFilm],
+    visits: &mut [u64],
+) -> Result<(u64, &'b [u8]), Error> {
+    // A vector's length is a usize in postcard.
+    let (layers, mut rest) = checkpoint::take::<usize>(bytes)?;
+    if layers != films.len() {
+        return Err(checkpoint::does_not_fit());
+    }
+    for film in films.iter_mut() {
+        rest = film.merge_serialized(rest)?;
+    }
+    let ((v, units), rest) = checkpoint::take::<(Vec<u64>, u64)>(rest)?;
+    if v.len() != visits.len() {
+        return Err(checkpoint::does_not_fit());
+    }
+    visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
+    Ok((units, rest))
+}
+
 impl<W: Runs> Rounds for Splatting<W> {
     fn unit_cost(&self) -> u64 {
         self.work.len().max(1) as u64 * self.unit_samples

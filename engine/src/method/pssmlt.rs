@@ -9,7 +9,9 @@ use alloc::vec::Vec;
 
 use crate::chain::{ChainStats, Normalization, PathChain, Traced, splat_weights};
 use crate::checkpoint::{self, Position};
-use crate::drive::splat::{RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker};
+use crate::drive::splat::{
+    RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker, merge_saved_sums,
+};
 use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
 use crate::exact::ExactFilm;
@@ -213,35 +215,22 @@ pub(crate) fn merge(
         films.push(ExactFilm::try_new(resolution, channels)?);
     }
     let mut visits = alloc::vec![0u64; resolution.pixel_count()];
-    let (mut estimates, mut samples) = (0u64, 0u64);
+    let mut estimates = 0u64;
     let mut tasks = Vec::with_capacity(parts.len());
     let mut head = None;
     for part in parts {
-        // `Saved` up to the chains (the image needs their summaries only),
-        // its films merged as they are read (a vector's length is a usize
-        // in postcard).
-        let ((bootstrap, prior, layers), mut rest) =
-            checkpoint::take::<(Traced, Normalization, usize)>(part)?;
-        if layers != films.len() {
-            return Err(checkpoint::does_not_fit());
-        }
-        for film in &mut films {
-            rest = film.merge_serialized(rest)?;
-        }
-        let ((v, units), rest) = checkpoint::take::<(Vec<u64>, u64)>(rest)?;
+        // `Saved` up to the chains (the image needs their summaries only).
+        let ((bootstrap, prior), rest) = checkpoint::take::<(Traced, Normalization)>(part)?;
+        let (units, rest) = merge_saved_sums(rest, &mut films, &mut visits)?;
         let chains: Vec<Summary> = checkpoint::take(rest)?.0;
-        if v.len() != visits.len() {
-            return Err(checkpoint::does_not_fit());
-        }
-        visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
         estimates = estimates.saturating_add(units.saturating_mul(chains.len() as u64));
-        samples = samples.saturating_add(units.saturating_mul(chains.len() as u64));
         head.get_or_insert((bootstrap, prior));
         tasks.push(chains);
     }
     let (bootstrap, prior) = head.ok_or_else(checkpoint::does_not_fit)?;
     let chains = in_render_order(&tasks);
-    let (film, stats) = finish(bootstrap, prior, &films, estimates, &chains, samples);
+    // An estimate is a chain step: one path.
+    let (film, stats) = finish(bootstrap, prior, &films, estimates, &chains, estimates);
     Ok(Output {
         film,
         stats,

@@ -16,7 +16,9 @@ use crate::bootstrap::Bootstrap;
 use crate::chain::{ChainStats, Normalization};
 
 use crate::checkpoint::{self, Position};
-use crate::drive::splat::{RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker};
+use crate::drive::splat::{
+    RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker, merge_saved_sums,
+};
 use crate::drive::{Driven, RenderStats, Rounds, SetUpStage, drive};
 use crate::error::Error;
 use crate::exact::ExactFilm;
@@ -242,20 +244,11 @@ pub(crate) fn merge(
     let mut tasks = Vec::with_capacity(parts.len());
     let mut head = None;
     for part in parts {
-        // `Saved` up to the ensembles (the image needs their summaries
-        // only), its film merged as it is read.
-        let ((set_up, ladder, priors, layers), rest) =
-            checkpoint::take::<(SetUp, Ladder, Vec<Normalization>, usize)>(part)?;
-        if layers != 1 {
-            return Err(checkpoint::does_not_fit());
-        }
-        let rest = film.merge_serialized(rest)?;
-        let ((v, units), rest) = checkpoint::take::<(Vec<u64>, u64)>(rest)?;
+        // `Saved` up to the ensembles (the image needs their summaries only).
+        let ((set_up, ladder, priors), rest) =
+            checkpoint::take::<(SetUp, Ladder, Vec<Normalization>)>(part)?;
+        let (units, rest) = merge_saved_sums(rest, core::slice::from_mut(&mut film), &mut visits)?;
         let ensembles: Vec<Summary> = checkpoint::take(rest)?.0;
-        if v.len() != visits.len() {
-            return Err(checkpoint::does_not_fit());
-        }
-        visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
         estimates = estimates.saturating_add(units.saturating_mul(ensembles.len() as u64));
         head.get_or_insert((set_up, ladder, priors));
         tasks.push(ensembles);
@@ -275,7 +268,7 @@ pub(crate) fn merge(
 }
 
 /// The ensembles' work, the set-up's paths, the ladder and the levels'
-/// priors, as [`start`] leaves them.
+/// priors, as [`set_up`] leaves them.
 type Started<'a, O, I> = (
     Vec<EnsembleWork<'a, O, I>>,
     SetUp,

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use rand_core::Rng;
 
 use crate::error::{Error, check_positive, check_probability};
-use crate::rng::uniform_f64;
+use crate::rng::{Pcg32, uniform_f64};
 
 /// Kelemen's exponential small step (Kelemen et al. 2002; Šik 2018, sec. 4.2.1):
 /// `d = ±s2 · exp(-ln(s2/s1) · ξ)`, so `|d|` is log-uniform in `[s1, s2]`.
@@ -211,11 +211,15 @@ pub const BATCH_LEN: usize = 32;
 /// Kelemen's, `f64` for unit normals). Each offset is a short chain of
 /// dependent floating-point operations; drawing 32 at a time lets the
 /// processor overlap them (and Kelemen's to use vector instructions) instead
-/// of waiting on each.
+/// of waiting on each. It remembers the random stream it was last filled
+/// from, so that a chain at rest can forget the offsets and draw them again
+/// ([`KernelState`]).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct OffsetBatch<T = f64> {
     values: [T; BATCH_LEN],
     next: usize,
+    /// The stream as it was before the last fill.
+    source: Pcg32,
 }
 
 impl<T: Copy + Default> Default for OffsetBatch<T> {
@@ -223,17 +227,23 @@ impl<T: Copy + Default> Default for OffsetBatch<T> {
         Self {
             values: [T::default(); BATCH_LEN],
             next: BATCH_LEN,
+            source: Pcg32::new(0, 0),
         }
     }
 }
 
 impl<T: Copy> OffsetBatch<T> {
     /// The next `n` values or, if fewer are left, those (at least one),
-    /// refilling the batch with `fill` when it is spent.
+    /// refilling the batch from `rng` with `fill` when it is spent.
     #[inline]
-    pub fn take(&mut self, n: usize, fill: impl FnOnce(&mut [T; BATCH_LEN])) -> &[T] {
+    pub fn take(
+        &mut self,
+        n: usize,
+        rng: &mut Pcg32,
+        fill: impl FnOnce(&mut Pcg32, &mut [T; BATCH_LEN]),
+    ) -> &[T] {
         if self.next == BATCH_LEN {
-            self.refill(fill);
+            self.refill(rng, fill);
         }
         let start = self.next;
         self.next = (start + n).min(BATCH_LEN);
@@ -244,9 +254,30 @@ impl<T: Copy> OffsetBatch<T> {
     /// between refills stay a load and an increment.
     #[cold]
     #[inline(never)]
-    fn refill(&mut self, fill: impl FnOnce(&mut [T; BATCH_LEN])) {
-        fill(&mut self.values);
+    fn refill(&mut self, rng: &mut Pcg32, fill: impl FnOnce(&mut Pcg32, &mut [T; BATCH_LEN])) {
+        self.source = rng.clone();
+        fill(rng, &mut self.values);
         self.next = 0;
+    }
+
+    /// Where the batch stands: the stream it was last filled from and how
+    /// many of its values are used.
+    fn position(&self) -> (Pcg32, u8) {
+        (self.source.clone(), self.next as u8)
+    }
+
+    /// Back to `position`, the values drawn again by `fill` (the one that
+    /// drew them) if any is left.
+    fn restore(
+        &mut self,
+        (source, next): (Pcg32, u8),
+        fill: impl FnOnce(&mut Pcg32, &mut [T; BATCH_LEN]),
+    ) {
+        self.next = (next as usize).min(BATCH_LEN);
+        if self.next < BATCH_LEN {
+            fill(&mut source.clone(), &mut self.values);
+        }
+        self.source = source;
     }
 }
 
@@ -512,17 +543,15 @@ impl Mutator {
     /// Every value of `values` moved by one small step, in order. The
     /// offsets come in batches, and each batch moves its stretch of values
     /// in one loop the compiler turns into vector instructions.
-    pub(crate) fn step_all<R: Rng + ?Sized>(&mut self, values: &mut [f32], rng: &mut R) {
+    pub(crate) fn step_all(&mut self, values: &mut [f32], rng: &mut Pcg32) {
         match self {
-            Mutator::Kelemen(k, batch) => shift_all(values, batch, |b| k.fill(rng, b), shift_near),
+            Mutator::Kelemen(k, batch) => {
+                let k = *k;
+                shift_all(values, batch, rng, |r, b| k.fill(r, b), shift_near)
+            }
             Mutator::Gaussian(g, batch) => {
                 let sigma = g.sigma;
-                let fill = |b: &mut [f64; BATCH_LEN]| {
-                    for pair in b.chunks_exact_mut(2) {
-                        pair.copy_from_slice(&unit_normals(rng));
-                    }
-                };
-                shift_all(values, batch, fill, |values, normals| {
+                shift_all(values, batch, rng, fill_normals, |values, normals| {
                     for (v, &normal) in values.iter_mut().zip(normals) {
                         *v = wrap_unit(*v as f64 + normal * sigma);
                     }
@@ -535,6 +564,54 @@ impl Mutator {
             }
         }
     }
+
+    /// Its running state, to keep while the chain rests.
+    pub(crate) fn state(&self) -> KernelState {
+        match self {
+            Mutator::Kelemen(_, batch) => KernelState::Batch(batch.position()),
+            Mutator::Gaussian(_, batch) => KernelState::Batch(batch.position()),
+            Mutator::Adaptive { state, .. } => KernelState::Adaptive(*state),
+        }
+    }
+
+    /// Back to a running state [`state`](Self::state) gave (of a kernel of
+    /// the same kind; another kind's is ignored).
+    pub(crate) fn restore(&mut self, kept: &KernelState) {
+        match (self, kept) {
+            (Mutator::Kelemen(k, batch), KernelState::Batch(at)) => {
+                let k = *k;
+                batch.restore(at.clone(), |r, b| k.fill(r, b));
+            }
+            (Mutator::Gaussian(_, batch), KernelState::Batch(at)) => {
+                batch.restore(at.clone(), fill_normals)
+            }
+            (Mutator::Adaptive { state, .. }, KernelState::Adaptive(kept)) => *state = *kept,
+            _ => debug_assert!(false, "a kernel's state restored into another kind"),
+        }
+    }
+}
+
+/// A small-step kernel's running state in few bytes (stratified MCMC keeps
+/// one per pixel): for the batched kernels, where the batch stands (its
+/// offsets are drawn again from its source when the chain wakes), for the
+/// adaptive kernel its `θ` and counters.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub(crate) enum KernelState {
+    Batch((Pcg32, u8)),
+    Adaptive(AdaptiveState),
+}
+
+impl Default for KernelState {
+    fn default() -> Self {
+        KernelState::Batch((Pcg32::new(0, 0), BATCH_LEN as u8))
+    }
+}
+
+/// A batch of unit normals (pairs of Box-Muller draws).
+fn fill_normals(rng: &mut Pcg32, b: &mut [f64; BATCH_LEN]) {
+    for pair in b.chunks_exact_mut(2) {
+        pair.copy_from_slice(&unit_normals(rng));
+    }
 }
 
 /// `values` moved by `shift(stretch, drawn)`, a stretch at a time, each
@@ -543,12 +620,13 @@ impl Mutator {
 fn shift_all<T: Copy>(
     values: &mut [f32],
     batch: &mut OffsetBatch<T>,
-    mut fill: impl FnMut(&mut [T; BATCH_LEN]),
+    rng: &mut Pcg32,
+    mut fill: impl FnMut(&mut Pcg32, &mut [T; BATCH_LEN]),
     shift: impl Fn(&mut [f32], &[T]),
 ) {
     let mut rest = values;
     while !rest.is_empty() {
-        let drawn = batch.take(rest.len(), &mut fill);
+        let drawn = batch.take(rest.len(), rng, &mut fill);
         let (now, later) = rest.split_at_mut(drawn.len());
         shift(now, drawn);
         rest = later;

@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::rng::Pcg32;
 
-use crate::mutate::{Mutator, SmallStep};
+use crate::mutate::{KernelState, Mutator, SmallStep};
 use crate::oracle::{FilmPoint, HELD_STREAM, ORACLE_STREAMS, Resolution, Sampler};
 use crate::rng::uniform_f32;
 
@@ -78,6 +78,45 @@ struct Stream {
     /// one small step, or fresh ones); the state itself if it is accepted.
     #[serde(skip)]
     proposal: Vec<f32>,
+}
+
+/// A primary sample at rest, in few bytes, for methods that keep a chain per
+/// pixel (stratified MCMC): the numbers its state read, every stream's in
+/// one allocation, its random stream and its kernel's running state (see
+/// [`MltSampler::pack`]). What a working sampler holds beside them (the
+/// proposal's numbers, a batch of offsets drawn ahead) is not kept.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub(crate) struct PackedSample {
+    values: alloc::boxed::Box<[f32]>,
+    lengths: [u32; STREAMS],
+    rng: Pcg32,
+    kernel: KernelState,
+}
+
+impl PackedSample {
+    /// An empty primary sample (nothing read) mutated by `small_step`,
+    /// drawing from `rng`.
+    pub(crate) fn new(small_step: SmallStep, rng: Pcg32) -> Self {
+        Self {
+            values: Default::default(),
+            lengths: [0; STREAMS],
+            rng,
+            kernel: Mutator::new(small_step).state(),
+        }
+    }
+
+    /// Whether its streams' lengths add up to its numbers, each in `[0, 1)`
+    /// (a sample read from a checkpoint).
+    pub(crate) fn fits(&self) -> bool {
+        let total = self.lengths.iter().map(|&l| l as u64).sum::<u64>();
+        total == self.values.len() as u64 && self.values.iter().all(|v| (0.0..1.0).contains(v))
+    }
+
+    /// Gives `self` the random stream of `other` and `other` that of
+    /// `self` (see [`MltSampler::swap_rng`]).
+    pub(crate) fn swap_rng(&mut self, other: &mut PackedSample) {
+        core::mem::swap(&mut self.rng, &mut other.rng);
+    }
 }
 
 /// Counters of one sampler.
@@ -163,6 +202,40 @@ impl MltSampler {
             self.read_state(FILM_STREAM, index);
         }
         self.streams[FILM_STREAM].state[..2].copy_from_slice(&u);
+    }
+
+    /// Packs the primary sample at rest (outside a proposal) into `into`,
+    /// reusing its room when the state read as many numbers as before.
+    pub(crate) fn pack(&self, into: &mut PackedSample) {
+        let total = self.streams.iter().map(|s| s.state.len()).sum();
+        if into.values.len() != total {
+            into.values = alloc::vec![0.0; total].into_boxed_slice();
+        }
+        let mut at = 0;
+        for (stream, length) in self.streams.iter().zip(&mut into.lengths) {
+            into.values[at..at + stream.state.len()].copy_from_slice(&stream.state);
+            at += stream.state.len();
+            *length = stream.state.len() as u32;
+        }
+        into.rng = self.rng.clone();
+        into.kernel = self.kernel.state();
+    }
+
+    /// Takes the primary sample `packed` holds (packed from a sampler with a
+    /// kernel of the same kind, whose parameters this one keeps).
+    pub(crate) fn unpack(&mut self, packed: &PackedSample) {
+        let mut at = 0;
+        for (stream, &length) in self.streams.iter_mut().zip(&packed.lengths) {
+            let length = length as usize;
+            stream.state.clear();
+            stream
+                .state
+                .extend_from_slice(&packed.values[at..at + length]);
+            at += length;
+        }
+        self.rng = packed.rng.clone();
+        self.kernel.restore(&packed.kernel);
+        self.large_step = false;
     }
 
     /// Opens a proposal: a large step (fresh uniform sample) if `large`, a

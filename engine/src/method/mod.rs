@@ -321,12 +321,14 @@ mod memory {
     /// A chain's state: its primary sample (values and proposal, per
     /// stream) and its path with splats.
     pub const CHAIN: u128 = 4096;
-    /// A tile chain of stratified MCMC: its primary sample, streams and
-    /// counters (measured ~1.4 KB).
-    pub const TILE_CHAIN: u128 = 1536;
-    /// Per pixel of its tile: the state evaluated there and the estimates
-    /// (measured ~180 bytes).
-    pub const TILE_PIXEL: u128 = 192;
+    /// A tile chain of stratified MCMC at rest (264 bytes, its primary
+    /// sample's ~30 numbers), and per pixel what the reconstruction gathers
+    /// beside the chains (the large steps' pooled sums, the regularizer and
+    /// its halves) and the light-tracing estimate's weights and second film.
+    pub const TILE_CHAIN: u128 = 512;
+    /// Per pixel of its tile: the state's value there and the tile's sums
+    /// (measured 88 bytes), and the gathered `G_s(k)`.
+    pub const TILE_PIXEL: u128 = 112;
     /// The most paths a round traces.
     pub const ROUND_PATHS: u64 = crate::drive::MAX_ROUND_SAMPLES;
 }

@@ -9,7 +9,7 @@ use alloc::vec::Vec;
 use core::sync::atomic::{AtomicU64, Ordering};
 
 use super::StratifiedSettings;
-use super::tile::{Context, Start, TileChain};
+use super::tile::{Context, Start, TileChain, Waking};
 use crate::bootstrap::Bootstrap;
 use crate::chain::PathChain;
 use crate::drive::{Clock, SetUpStage};
@@ -183,7 +183,7 @@ where
             let chain = &mut chains[visit.tile];
             let mut sampler = visit.sampler;
             sampler.set_film([visit.jitter.x, visit.jitter.y]);
-            chain.take_sampler(sampler);
+            chain.take_sampler(&sampler);
             chain.pending = true;
             chain.start = Start::Global;
         }
@@ -194,13 +194,13 @@ where
         count.min(wanted) as u64,
         wanted as u64,
     );
-    let replays = parallel::sum_chunks(chains, 1, |s, c| {
-        let c = &mut c[0];
-        if c.pending {
-            c.evaluate_current(ctx, s)
-        } else {
-            0
-        }
+    let width = ctx.tiles.resolution().width as usize;
+    let work = || Waking::new(ctx.tiles, ctx.small_step);
+    let replays = parallel::sum_chunks_init(chains, width, work, |work, y, row| {
+        let pending = row.iter_mut().enumerate().filter(|(_, c)| c.pending);
+        pending
+            .map(|(x, c)| c.evaluate_current(ctx, y * width + x, work))
+            .sum::<u64>()
     });
     Ok(Initialized {
         traced: target.traces.load(Ordering::Relaxed) + replays,

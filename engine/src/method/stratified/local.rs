@@ -6,8 +6,8 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
-use super::tile::{Context, Start, TileChain, Value};
-use crate::oracle::PathOracle;
+use super::tile::{Context, Start, TileChain, Value, Waking};
+use crate::oracle::{PathOracle, Radiance};
 use crate::parallel;
 use crate::rng::uniform_f64;
 use crate::target::Importance;
@@ -48,49 +48,70 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let mut count = ExchangeCount::default();
-    match (a.target() > 0.0, b.target() > 0.0) {
+    match (a.target > 0.0, b.target > 0.0) {
         (false, false) => {}
         (true, true) => {
-            let [a_in_t, b_in_s] = scratch;
-            let (ta, traced_a) = a.evaluate_in(ctx, s, t, a_in_t);
-            let (tb, traced_b) = b.evaluate_in(ctx, t, s, b_in_s);
+            let Scratch {
+                values: [a_in_t, b_in_s],
+                work,
+            } = scratch;
+            let (ta, traced_a) = a.evaluate_in(ctx, (s, t), a_in_t, work);
+            let (tb, traced_b) = b.evaluate_in(ctx, (t, s), b_in_s, work);
             count.traces = traced_a.paths + traced_b.paths;
             count.invalid = traced_a.invalid + traced_b.invalid;
             count.attempts = 1;
-            let ratio = (tb * ta) / (a.target() * b.target());
+            let ratio = (tb * ta) / (a.target * b.target);
             if uniform_f64(&mut a.decisions) < ratio {
                 // The states change tiles; each tile keeps its random stream.
-                core::mem::swap(a.chain.sampler_mut(), b.chain.sampler_mut());
-                a.chain.sampler_mut().swap_rng(b.chain.sampler_mut());
+                core::mem::swap(&mut a.sample, &mut b.sample);
+                a.sample.swap_rng(&mut b.sample);
                 a.set_state(b_in_s, tb);
                 b.set_state(a_in_t, ta);
                 count.accepted = 1;
             }
         }
-        (true, false) => count = borrow(ctx, (s, a), (t, b), &mut scratch[0]),
-        (false, true) => count = borrow(ctx, (t, b), (s, a), &mut scratch[0]),
+        (true, false) => count = borrow(ctx, (s, a), (t, b), scratch),
+        (false, true) => count = borrow(ctx, (t, b), (s, a), scratch),
     }
     count
 }
 
-/// Two buffers of one value per tile offset (see [`exchange`]).
-type Scratch<R> = [Vec<Value<R>>; 2];
+/// Two buffers of one value per tile offset (see [`exchange`]) and room to
+/// wake a chain in.
+struct Scratch<R> {
+    values: [Vec<Value<R>>; 2],
+    work: Waking<R>,
+}
+
+impl<R: Radiance> Scratch<R> {
+    fn new<O, I: ?Sized>(ctx: &Context<'_, O, I>) -> Self {
+        let offsets = ctx.tiles.offsets().len();
+        Self {
+            values: [
+                vec![Value::default(); offsets],
+                vec![Value::default(); offsets],
+            ],
+            work: Waking::new(ctx.tiles, ctx.small_step),
+        }
+    }
+}
 
 /// Tile `t` (not initialized) copies the state of its neighbour `s` if it has
-/// `T_t > 0` there (`values` is scratch of one value per tile offset).
+/// `T_t > 0` there.
 fn borrow<O, I>(
     ctx: &Context<'_, O, I>,
     (s, a): (usize, &mut TileChain<O::Radiance>),
     (t, b): (usize, &mut TileChain<O::Radiance>),
-    values: &mut [Value<O::Radiance>],
+    scratch: &mut Scratch<O::Radiance>,
 ) -> ExchangeCount
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    let (target, traced) = a.evaluate_in(ctx, s, t, values);
+    let values = &mut scratch.values[0];
+    let (target, traced) = a.evaluate_in(ctx, (s, t), values, &mut scratch.work);
     if target > 0.0 {
-        b.take_sampler(a.chain.sampler().clone());
+        b.take_sample(a.sample.clone());
         b.set_state(values, target);
         if b.start == Start::None {
             b.start = Start::Borrowed;
@@ -121,17 +142,10 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let (horizontal, parity) = pairing(round);
-    let scratch = |chains: &[TileChain<O::Radiance>]| -> Scratch<O::Radiance> {
-        let offsets = chains.first().map_or(0, |c| c.chain.state().values.len());
-        [
-            vec![Value::default(); offsets],
-            vec![Value::default(); offsets],
-        ]
-    };
     if horizontal {
         let row = |y: usize, row: &mut [TileChain<O::Radiance>]| {
             let mut count = ExchangeCount::default();
-            let mut scratch = scratch(row);
+            let mut scratch = Scratch::new(ctx);
             let mut x = parity;
             while x + 1 < width {
                 let (left, right) = row.split_at_mut(x + 1);
@@ -150,7 +164,7 @@ where
             if pair.len() < 2 * width {
                 return count;
             }
-            let mut scratch = scratch(pair);
+            let mut scratch = Scratch::new(ctx);
             let (top, bottom) = pair.split_at_mut(width);
             let y = parity + 2 * k;
             for (x, (a, b)) in top.iter_mut().zip(bottom.iter_mut()).enumerate() {

@@ -382,6 +382,7 @@ where
         importance: job.importance,
         tiles: &tiles,
         p_large: settings.mutation.large_step_probability,
+        small_step: settings.mutation.small_step,
     };
     let n = tiles.count();
     let offsets = tiles.offsets().len();
@@ -397,18 +398,7 @@ where
     let (position, saved) = match job.resumed::<Saved<O::Radiance>>()? {
         Some((position, saved)) => {
             let (chains, _, _, _, _, light) = &saved;
-            let per_tile = offsets * O::Radiance::CHANNELS;
-            let sound = |v: &[f64]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
-            let fits = chains.len() == n
-                && chains.iter().all(|c| {
-                    c.unscaled.len() == per_tile
-                        && c.uniform.len() == per_tile
-                        && c.uniform_squares.len() == offsets
-                        && c.odd_sums.len() == offsets
-                        && [&c.unscaled, &c.uniform, &c.uniform_squares, &c.odd_sums]
-                            .iter()
-                            .all(|v| sound(v))
-                });
+            let fits = chains.len() == n && chains.iter().all(|c| c.fits(offsets));
             let light_fits = light.weights == new_light().weights
                 && light.sums.fits(job.resolution, O::Radiance::CHANNELS)
                 && light.remainder.fits(job.resolution, O::Radiance::CHANNELS);

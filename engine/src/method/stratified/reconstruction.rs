@@ -45,23 +45,27 @@ pub(super) struct Reconstructed {
 }
 
 /// The image of `chains` after `sweeps` sweeps; the weighted solver (and
-/// cross-validation) end early when `stop` says so.
+/// cross-validation) end early when `stop` says so. The chains are let go
+/// once their sums are read, before the solver's work (they are most of a
+/// render's memory).
 pub(super) fn reconstruct_image<R: Radiance>(
     tiles: &Tiles,
-    chains: &[TileChain<R>],
+    chains: Vec<TileChain<R>>,
     settings: &StratifiedSettings,
     sweeps: u64,
     light: &LightTracing,
     stop: &dyn Fn() -> bool,
 ) -> Result<Reconstructed, Error> {
     let channels = R::CHANNELS;
-    let (samples, regularizer) = LargeSteps::gather(tiles, chains);
-    let unscaled = unscaled(tiles, chains, sweeps.max(1), &regularizer);
+    let (samples, regularizer) = LargeSteps::gather(tiles, &chains);
+    let unscaled = unscaled(tiles, &chains, sweeps.max(1), &regularizer);
+    let halves = (settings.cross_validate_alpha && matches!(settings.solver, Solver::Weighted(_)))
+        .then(|| Halves::gather(tiles, &chains, &samples));
+    drop(chains);
     let mut solver = settings.solver;
     let mut alpha = None;
     if let Solver::Weighted(w) = &mut solver {
-        if settings.cross_validate_alpha {
-            let halves = Halves::gather(tiles, chains, &samples);
+        if let Some(halves) = halves {
             let candidates = if sweeps < FEW_SWEEPS {
                 &ALPHAS[2..]
             } else {
@@ -214,7 +218,7 @@ fn unscaled<R: Radiance>(
     let per_tile = tiles.offsets().len() * channels;
     let mut g: Vec<f64> = chains
         .iter()
-        .flat_map(|c| c.unscaled.iter().map(move |v| v / sweeps as f64))
+        .flat_map(|c| c.unscaled().iter().map(move |v| v / sweeps as f64))
         .collect();
     for (s, tile) in g.chunks_mut(per_tile).enumerate() {
         if tile.iter().all(|&v| v == 0.0) {

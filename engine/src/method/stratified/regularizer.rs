@@ -83,9 +83,9 @@ impl LargeSteps {
                     // The centre pixel's plain MC paths.
                     samples.counts[j] += chain.centre_paths;
                 }
-                samples.squares[j] += chain.uniform_squares[o];
+                samples.squares[j] += chain.uniform_squares()[o];
                 for c in 0..channels {
-                    data[j * channels + c] += chain.uniform[o * channels + c];
+                    data[j * channels + c] += chain.uniform()[o * channels + c];
                 }
             }
             let pixel = &data[j * channels..(j + 1) * channels];
@@ -114,7 +114,7 @@ impl Halves {
         for (j, (count, sum)) in odd_counts.iter_mut().zip(&mut odd_sums).enumerate() {
             for (s, o) in tiles.tiles_of(j) {
                 *count += chains[s].odd_steps;
-                *sum += chains[s].odd_sums[o];
+                *sum += chains[s].odd_sums()[o];
             }
         }
         let mut first = Film::new(tiles.resolution(), 1);

@@ -8,7 +8,7 @@ use alloc::vec::Vec;
 
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
-use super::tile::{Context, LightTracing, Start, TileChain};
+use super::tile::{Context, LightTracing, Start, TileChain, Waking};
 use super::{StratifiedExtras, StratifiedSettings, StratifiedStats};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;
@@ -116,23 +116,9 @@ where
         stop: &dyn Fn() -> bool,
     ) -> Result<Output, Error> {
         let tiles = self.ctx.tiles;
-        let image = reconstruct_image(
-            tiles,
-            &self.chains,
-            self.settings,
-            self.stats.sweeps,
-            &self.light,
-            stop,
-        )?;
-        let stats = &mut self.stats;
-        if let Some(alpha) = image.alpha {
-            stats.alpha = alpha;
-        }
-        stats.known_pixels = image.known_pixels;
-        stats.fallback_pixels = image.fallback_pixels;
-        stats.total_scale = image.total_scale;
         let mut chain_stats = ChainStats::default();
         let mut visits = vec![0u64; tiles.count()];
+        let stats = &mut self.stats;
         for (s, c) in self.chains.iter().enumerate() {
             chain_stats.merge(&c.stats);
             for (_, q) in tiles.pixels(s) {
@@ -145,6 +131,21 @@ where
                 Start::Uniform => stats.initialized_by_uniform_draws += 1,
             }
         }
+        let image = reconstruct_image(
+            tiles,
+            core::mem::take(&mut self.chains),
+            self.settings,
+            self.stats.sweeps,
+            &self.light,
+            stop,
+        )?;
+        let stats = &mut self.stats;
+        if let Some(alpha) = image.alpha {
+            stats.alpha = alpha;
+        }
+        stats.known_pixels = image.known_pixels;
+        stats.fallback_pixels = image.fallback_pixels;
+        stats.total_scale = image.total_scale;
         let traced = stats.initialization_samples
             + stats.tile_samples
             + stats.regularizer_samples
@@ -250,17 +251,20 @@ where
         let after = self.costs.exchange_after;
         for _ in 0..units {
             let paths = self.settings.regularizer_paths;
-            let traced = parallel::sum_chunks(&mut self.chains, width, |y, row| {
-                let mut traced = SweepTraces::default();
-                for (x, chain) in row.iter_mut().enumerate() {
-                    traced.steps += chain.step(ctx, y * width + x);
-                    if paths > 0 {
-                        let (paths, invalid) = chain.trace_regularizer(ctx, y * width + x, paths);
-                        traced.regularizer += Traced { paths, invalid };
+            let work = || Waking::new(ctx.tiles, ctx.small_step);
+            let traced =
+                parallel::sum_chunks_init(&mut self.chains, width, work, |work, y, row| {
+                    let mut traced = SweepTraces::default();
+                    for (x, chain) in row.iter_mut().enumerate() {
+                        traced.steps += chain.step(ctx, y * width + x, work);
+                        if paths > 0 {
+                            let (paths, invalid) =
+                                chain.trace_regularizer(ctx, y * width + x, paths);
+                            traced.regularizer += Traced { paths, invalid };
+                        }
                     }
-                }
-                traced
-            });
+                    traced
+                });
             self.invalid += traced.regularizer.invalid;
             for chain in &mut self.chains {
                 self.light.add(&mut chain.sampled);

@@ -5,6 +5,7 @@
 //! unscaled estimates `G_s(k)`, and the large steps its coin chose also into
 //! the Monte Carlo regularizer.
 
+use alloc::boxed::Box;
 use alloc::vec;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
@@ -14,11 +15,12 @@ use crate::rng::Pcg32;
 use crate::chain::{Chain, ChainStats, Target, Traced, Weights};
 use crate::film::Film;
 use crate::mutate::MutationParams;
+use crate::mutate::SmallStep;
 use crate::oracle::{
     FilmPoint, PathOracle, Radiance, Resolution, Sampler, Splat, SplatSink, Temperature,
 };
 use crate::rng::{self, Domain, uniform_f64};
-use crate::sample::{IndependentSampler, MltSampler, Proposal};
+use crate::sample::{IndependentSampler, MltSampler, PackedSample, Proposal};
 use crate::target::{Evaluated, Importance, SplatList, valid_splat};
 use crate::tiles::Tiles;
 
@@ -180,28 +182,36 @@ pub(super) enum Start {
     Uniform,
 }
 
-/// A tile's chain and its accumulators.
+/// A tile's chain at rest and its accumulators. A film holds a chain per
+/// pixel, so what a chain keeps between its steps is kept compact: the
+/// primary sample packed in one allocation ([`PackedSample`]), the current
+/// state's values, the sums in one allocation; the working form (the
+/// unpacked sample, room for a proposal) is a [`Waking`] that each task
+/// lends to its tiles in turn.
 #[derive(Serialize, Deserialize)]
 pub(super) struct TileChain<R> {
-    pub chain: Chain<TileState<R>>,
+    /// The current state's primary sample.
+    pub sample: PackedSample,
+    /// The current state's evaluation in every tile pixel (offset order;
+    /// zero where the tile is clipped).
+    pub values: Box<[Value<R>]>,
+    /// `T_s` of the current state, the largest importance of its values.
+    pub target: f64,
     pub decisions: Pcg32,
-    /// `N G_s(k)` per offset and channel.
-    pub unscaled: Vec<f64>,
-    /// Sum of the coin-chosen large steps' radiance per offset and channel.
-    pub uniform: Vec<f64>,
-    /// Sum of the squared channel mean of the coin-chosen large steps'
-    /// radiance per offset (the regularizer's variance).
-    pub uniform_squares: Vec<f64>,
+    /// Per offset and channel `N G_s(k)`, then the sum of the coin-chosen
+    /// large steps' radiance; per offset the sum of their squared channel
+    /// mean (the regularizer's variance), then the sum of the odd-numbered
+    /// ones' channel mean (see [`Self::odd_steps`]).
+    sums: Box<[f64]>,
     /// Coin-chosen large steps: the regularizer's samples.
     pub large_steps: u64,
     /// The odd-numbered coin-chosen large steps (the first is number 0):
-    /// their count and per offset the sum of their channel means, the half
-    /// of the regularizer's samples held out to choose the solver's `α`.
+    /// the half of the regularizer's samples held out to choose the
+    /// solver's `α`.
     pub odd_steps: u64,
-    pub odd_sums: Vec<f64>,
     /// Plain MC paths traced at the tile's centre pixel for the regularizer
     /// ([`StratifiedSettings::regularizer_paths`](super::StratifiedSettings)),
-    /// summed into `uniform` and `uniform_squares` at the centre's offset.
+    /// summed into the uniform sums at the centre's offset.
     pub centre_paths: u64,
     /// Their sampler.
     mc: IndependentSampler,
@@ -214,12 +224,51 @@ pub(super) struct TileChain<R> {
     pub pending: bool,
 }
 
+/// The working form of a tile chain: a primary sample unpacked, the current
+/// state and room for a proposal. A task makes one and wakes each of its
+/// tiles' chains in it in turn ([`TileChain::step`]).
+pub(super) struct Waking<R> {
+    chain: Chain<TileState<R>>,
+}
+
+impl<R: Radiance> Waking<R> {
+    /// Room for the chains of `tiles` mutated by `small_step`.
+    pub fn new(tiles: &Tiles, small_step: SmallStep) -> Self {
+        let state = TileState {
+            values: vec![Value::default(); tiles.offsets().len()],
+            target: 0.0,
+            splats: Vec::new(),
+        };
+        Self {
+            chain: Chain::new(MltSampler::new(small_step, Pcg32::new(0, 0)), state),
+        }
+    }
+
+    /// Takes `tile`'s current state.
+    fn wake(&mut self, tile: &TileChain<R>) {
+        let (sampler, state) = self.chain.parts_mut();
+        sampler.unpack(&tile.sample);
+        state.values.copy_from_slice(&tile.values);
+        state.target = tile.target;
+    }
+
+    /// Gives `tile` back its current state.
+    fn rest(&self, tile: &mut TileChain<R>) {
+        self.chain.sampler().pack(&mut tile.sample);
+        let state = self.chain.state();
+        tile.values.copy_from_slice(&state.values);
+        tile.target = state.target;
+    }
+}
+
 /// What the tile chains share.
 pub(super) struct Context<'a, O, I: ?Sized> {
     pub oracle: &'a O,
     pub importance: &'a I,
     pub tiles: &'a Tiles,
     pub p_large: f64,
+    /// The tile chains' small step.
+    pub small_step: SmallStep,
 }
 
 /// A jitter's film "resolution": the film stream read as a point of `[0, 1)²`.
@@ -378,25 +427,18 @@ impl<R: Radiance> TileChain<R> {
         offsets: usize,
         mutation: &MutationParams,
     ) -> Self {
-        let per_offset = offsets * R::CHANNELS;
-        let sampler = MltSampler::new(
-            mutation.small_step,
-            rng::stream(seed, Domain::Tile, tile as u64),
-        );
-        let state = TileState {
-            values: vec![Value::default(); offsets],
-            target: 0.0,
-            splats: Vec::new(),
-        };
+        let channels = R::CHANNELS;
         Self {
-            chain: Chain::new(sampler, state),
+            sample: PackedSample::new(
+                mutation.small_step,
+                rng::stream(seed, Domain::Tile, tile as u64),
+            ),
+            values: vec![Value::default(); offsets].into_boxed_slice(),
+            target: 0.0,
             decisions: rng::stream(seed, Domain::Tile, (tile + tiles) as u64),
-            unscaled: vec![0.0; per_offset],
-            uniform: vec![0.0; per_offset],
-            uniform_squares: vec![0.0; offsets],
+            sums: vec![0.0; offsets * (2 * channels + 2)].into_boxed_slice(),
             large_steps: 0,
             odd_steps: 0,
-            odd_sums: vec![0.0; offsets],
             centre_paths: 0,
             mc: IndependentSampler::new(rng::stream(seed, Domain::Tile, (tile + 2 * tiles) as u64)),
             sampled: Vec::new(),
@@ -406,20 +448,61 @@ impl<R: Radiance> TileChain<R> {
         }
     }
 
-    /// `T_s` of the current state.
-    pub fn target(&self) -> f64 {
-        self.chain.state().target
+    /// Whether a chain read from a checkpoint fits tiles of `offsets`
+    /// offsets: its sums sized so, finite and not negative, its state
+    /// sound.
+    pub fn fits(&self, offsets: usize) -> bool {
+        self.values.len() == offsets
+            && self.sums.len() == offsets * (2 * R::CHANNELS + 2)
+            && self.sums.iter().all(|x| x.is_finite() && *x >= 0.0)
+            && self.target.is_finite()
+            && self.sample.fits()
     }
 
-    /// One Metropolis-Hastings step on `T_s` with coherent sampling (eq. 10).
+    /// The sums, `offsets` offsets' worth: `N G_s(k)` and the uniform
+    /// samples' per offset and channel, the squares' and the odd ones' per
+    /// offset.
+    fn split_sums(sums: &mut [f64], offsets: usize) -> [&mut [f64]; 4] {
+        let per_offset = offsets * R::CHANNELS;
+        let (unscaled, rest) = sums.split_at_mut(per_offset);
+        let (uniform, rest) = rest.split_at_mut(per_offset);
+        let (squares, odd) = rest.split_at_mut(offsets);
+        [unscaled, uniform, squares, odd]
+    }
+
+    /// `N G_s(k)` per offset and channel.
+    pub fn unscaled(&self) -> &[f64] {
+        &self.sums[..self.values.len() * R::CHANNELS]
+    }
+
+    /// The sum of the coin-chosen large steps' (and regularizer paths')
+    /// radiance per offset and channel.
+    pub fn uniform(&self) -> &[f64] {
+        let per_offset = self.values.len() * R::CHANNELS;
+        &self.sums[per_offset..2 * per_offset]
+    }
+
+    /// The sum of their squared channel means per offset.
+    pub fn uniform_squares(&self) -> &[f64] {
+        let at = 2 * self.values.len() * R::CHANNELS;
+        &self.sums[at..at + self.values.len()]
+    }
+
+    /// The sum of the odd-numbered ones' channel means per offset.
+    pub fn odd_sums(&self) -> &[f64] {
+        &self.sums[2 * self.values.len() * R::CHANNELS + self.values.len()..]
+    }
+
+    /// One Metropolis-Hastings step on `T_s` with coherent sampling (eq. 10),
+    /// the chain woken in `work`.
     /// Until the tile has a state with `T_s > 0` every step is a uniform draw.
     /// Returns paths traced.
-    pub fn step<O, I>(&mut self, ctx: &Context<'_, O, I>, tile: usize) -> u64
+    pub fn step<O, I>(&mut self, ctx: &Context<'_, O, I>, tile: usize, work: &mut Waking<R>) -> u64
     where
         O: PathOracle<Radiance = R>,
         I: Importance<R> + ?Sized,
     {
-        let dark = self.target() <= 0.0;
+        let dark = self.target <= 0.0;
         // A dark tile only makes large steps, but only those the coin chose
         // are the regularizer's samples: which steps those are then does not
         // depend on what the tile found, and their mean is unbiased. (Counting
@@ -428,8 +511,10 @@ impl<R: Radiance> TileChain<R> {
         // at 20-32 spp.)
         let chosen = uniform_f64(&mut self.decisions) < ctx.p_large;
         let large = dark || chosen;
-        let unscaled = &mut self.unscaled;
-        let outcome = self.chain.step(
+        work.wake(self);
+        let [unscaled, uniform, squares, odd_sums] =
+            Self::split_sums(&mut self.sums, self.values.len());
+        let outcome = work.chain.step(
             &TileTarget {
                 ctx,
                 tile,
@@ -442,12 +527,12 @@ impl<R: Radiance> TileChain<R> {
             |state, weight| add(&state.values, weight, unscaled),
         );
         if chosen {
-            let proposed = self.chain.last_proposal();
-            add(&proposed.values, 1.0, &mut self.uniform);
+            let proposed = work.chain.last_proposal();
+            add(&proposed.values, 1.0, uniform);
             self.sampled.extend_from_slice(&proposed.splats);
             let channels = R::CHANNELS;
             let odd = self.large_steps % 2 == 1;
-            let sums = self.uniform_squares.iter_mut().zip(&mut self.odd_sums);
+            let sums = squares.iter_mut().zip(odd_sums.iter_mut());
             for ((sq, odd_sum), v) in sums.zip(&proposed.values) {
                 let mean = (0..channels)
                     .map(|c| v.radiance.channel(c) as f64)
@@ -461,7 +546,8 @@ impl<R: Radiance> TileChain<R> {
             self.odd_steps += odd as u64;
             self.large_steps += 1;
         }
-        if outcome.accepted && dark && self.target() > 0.0 && self.start == Start::None {
+        work.rest(self);
+        if outcome.accepted && dark && self.target > 0.0 && self.start == Start::None {
             self.start = Start::Uniform;
         }
         outcome.traced.paths
@@ -493,58 +579,67 @@ impl<R: Radiance> TileChain<R> {
                 Some(&mut self.sampled),
             );
             invalid += bad as u64;
-            let sums = &mut self.uniform[centre * channels..(centre + 1) * channels];
+            let [_, uniform, squares, _] = Self::split_sums(&mut self.sums, self.values.len());
+            let sums = &mut uniform[centre * channels..(centre + 1) * channels];
             let mut mean = 0.0;
             for (c, sum) in sums.iter_mut().enumerate() {
                 let value = v.radiance.channel(c) as f64;
                 *sum += value;
                 mean += value / channels as f64;
             }
-            self.uniform_squares[centre] += mean * mean;
+            squares[centre] += mean * mean;
         }
         self.centre_paths += paths as u64;
         (paths as u64, invalid)
     }
 
     /// Evaluates the current state again in every tile pixel (after a
-    /// global chain's state was installed). Returns paths traced.
-    pub fn evaluate_current<O, I>(&mut self, ctx: &Context<'_, O, I>, tile: usize) -> u64
+    /// global chain's state was installed), woken in `work`. Returns paths
+    /// traced.
+    pub fn evaluate_current<O, I>(
+        &mut self,
+        ctx: &Context<'_, O, I>,
+        tile: usize,
+        work: &mut Waking<R>,
+    ) -> u64
     where
         O: PathOracle<Radiance = R>,
         I: Importance<R> + ?Sized,
     {
-        let (sampler, state) = self.chain.parts_mut();
+        work.wake(self);
+        let (sampler, state) = work.chain.parts_mut();
         let mut replay = sampler.replay();
         let jitter = replay.film_point(UNIT);
         let traced = ctx.trace_tile(&mut replay, tile, jitter, false, state);
+        work.rest(self);
         self.stats.invalid += traced.invalid;
         self.pending = false;
         traced.paths
     }
 
     /// The current state (of tile `from`) evaluated in every pixel of tile
-    /// `to` into `out`, reusing the pixels the two tiles share. Returns `T_to`
-    /// and what was traced.
+    /// `to` into `out`, reusing the pixels the two tiles share, woken in
+    /// `work`. Returns `T_to` and what was traced.
     pub fn evaluate_in<O, I>(
         &mut self,
         ctx: &Context<'_, O, I>,
-        from: usize,
-        to: usize,
+        (from, to): (usize, usize),
         out: &mut [Value<R>],
+        work: &mut Waking<R>,
     ) -> (f64, Traced)
     where
         O: PathOracle<Radiance = R>,
         I: Importance<R> + ?Sized,
     {
         out.fill(Value::default());
-        let (sampler, state) = self.chain.parts_mut();
-        let mut replay = sampler.replay();
+        work.wake(self);
+        let mut replay = work.chain.sampler_mut().replay();
         let jitter = replay.film_point(UNIT);
         let mut target = 0.0f64;
         let mut traced = Traced::default();
         for (o, q) in ctx.tiles.pixels(to) {
             let v = match ctx.tiles.offset_of(from, q) {
-                Some(known) => state.values[known],
+                Some(known) => self.values[known],
                 None => {
                     let (v, bad) = ctx.trace_in(&mut replay, q, jitter, None);
                     traced.paths += 1;
@@ -555,20 +650,28 @@ impl<R: Radiance> TileChain<R> {
             target = target.max(v.importance);
             out[o] = v;
         }
+        // The replay may have drawn numbers the state had forgotten.
+        work.chain.sampler().pack(&mut self.sample);
         (target, traced)
     }
 
-    /// Takes the primary sample `sampler`, keeping this tile's own random
+    /// Takes the primary sample of `sampler` (see [`Self::take_sample`]).
+    pub fn take_sampler(&mut self, sampler: &MltSampler) {
+        let mut sample = PackedSample::new(SmallStep::default(), Pcg32::new(0, 0));
+        sampler.pack(&mut sample);
+        self.take_sample(sample);
+    }
+
+    /// Takes the primary sample `sample`, keeping this tile's own random
     /// stream; its state must then be set or evaluated.
-    pub fn take_sampler(&mut self, mut sampler: MltSampler) {
-        sampler.swap_rng(self.chain.sampler_mut());
-        *self.chain.sampler_mut() = sampler;
+    pub fn take_sample(&mut self, mut sample: PackedSample) {
+        sample.swap_rng(&mut self.sample);
+        self.sample = sample;
     }
 
     /// Sets the current state's tile values and target (evaluated elsewhere).
     pub fn set_state(&mut self, values: &[Value<R>], target: f64) {
-        let state = self.chain.state_mut();
-        state.values.copy_from_slice(values);
-        state.target = target;
+        self.values.copy_from_slice(values);
+        self.target = target;
     }
 }

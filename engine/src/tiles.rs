@@ -87,6 +87,11 @@ impl Tiles {
         self.resolution.pixel_count()
     }
 
+    /// How many rows a tile reaches above and below its centre.
+    pub fn reach(&self) -> usize {
+        self.offsets.iter().map(|&(_, dy)| dy.unsigned_abs() as usize).max().unwrap_or(0)
+    }
+
     /// The offsets of a tile's pixels from its centre, the centre first.
     pub fn offsets(&self) -> &[(i32, i32)] {
         &self.offsets

@@ -83,6 +83,7 @@ use serde::{Deserialize, Serialize};
 
 use self::init::initialize;
 use self::reconstruction::reserve_reconstruction;
+use self::regularizer::Samples;
 use self::sweeps::{Saved, SweepCosts, Sweeps};
 use self::tile::{Context, LightTracing, TileChain};
 use super::{Job, Output};
@@ -397,8 +398,10 @@ where
     };
     let (position, saved) = match job.resumed::<Saved<O::Radiance>>()? {
         Some((position, saved)) => {
-            let (chains, _, _, _, _, light) = &saved;
-            let fits = chains.len() == n && chains.iter().all(|c| c.fits(offsets));
+            let (chains, samples, _, _, _, _, light) = &saved;
+            let fits = chains.len() == n
+                && chains.iter().all(|c| c.fits(offsets))
+                && samples.fits(n, O::Radiance::CHANNELS);
             let light_fits = light.weights == new_light().weights
                 && light.sums.fits(job.resolution, O::Radiance::CHANNELS)
                 && light.remainder.fits(job.resolution, O::Radiance::CHANNELS);
@@ -409,11 +412,12 @@ where
         }
         None => (None, start(&ctx, job, settings, new_light())?),
     };
-    let (chains, stats, exchange_rounds, invalid, bootstrap_traces, light) = saved;
+    let (chains, samples, stats, exchange_rounds, invalid, bootstrap_traces, light) = saved;
     let mut sweeps = Sweeps {
         ctx: &ctx,
         settings,
         chains,
+        samples,
         stats,
         exchange_rounds,
         invalid,
@@ -479,6 +483,7 @@ where
     };
     Ok((
         chains,
+        Samples::new(n, O::Radiance::CHANNELS),
         stats,
         0,
         initialized.invalid,

@@ -8,7 +8,7 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
-use super::regularizer::{Halves, LargeSteps, anchor_total, fall_back, take_known};
+use super::regularizer::{Halves, LargeSteps, Samples, anchor_total, fall_back, take_known};
 use super::tile::{LightTracing, TileChain};
 use super::{Solver, StratifiedSettings};
 #[cfg(feature = "std")]
@@ -51,16 +51,17 @@ pub(super) struct Reconstructed {
 pub(super) fn reconstruct_image<R: Radiance>(
     tiles: &Tiles,
     chains: Vec<TileChain<R>>,
+    pooled: &Samples,
     settings: &StratifiedSettings,
     sweeps: u64,
     light: &LightTracing,
     stop: &dyn Fn() -> bool,
 ) -> Result<Reconstructed, Error> {
     let channels = R::CHANNELS;
-    let (samples, regularizer) = LargeSteps::gather(tiles, &chains);
+    let (samples, regularizer) = LargeSteps::gather(tiles, &chains, pooled);
     let unscaled = unscaled(tiles, &chains, sweeps.max(1), &regularizer);
     let halves = (settings.cross_validate_alpha && matches!(settings.solver, Solver::Weighted(_)))
-        .then(|| Halves::gather(tiles, &chains, &samples));
+        .then(|| Halves::gather(tiles, &chains, pooled, &samples));
     drop(chains);
     let mut solver = settings.solver;
     let mut alpha = None;
@@ -127,12 +128,13 @@ pub(super) fn reconstruct_image<R: Radiance>(
 pub(super) fn preview<R: Radiance>(
     tiles: &Tiles,
     chains: &[TileChain<R>],
+    pooled: &Samples,
     settings: &StratifiedSettings,
     sweeps: u64,
     light: &LightTracing,
 ) -> Film {
     let channels = R::CHANNELS;
-    let (_, regularizer) = LargeSteps::gather(tiles, chains);
+    let (_, regularizer) = LargeSteps::gather(tiles, chains, pooled);
     let unscaled = unscaled(tiles, chains, sweeps, &regularizer);
     let mut film = Film::new(tiles.resolution(), channels);
     for c in 0..channels {
@@ -218,7 +220,7 @@ fn unscaled<R: Radiance>(
     let per_tile = tiles.offsets().len() * channels;
     let mut g: Vec<f64> = chains
         .iter()
-        .flat_map(|c| c.unscaled().iter().map(move |v| v / sweeps as f64))
+        .flat_map(|c| c.unscaled.iter().map(move |v| v / sweeps as f64))
         .collect();
     for (s, tile) in g.chunks_mut(per_tile).enumerate() {
         if tile.iter().all(|&v| v == 0.0) {

@@ -38,6 +38,7 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
 
 use super::tile::TileChain;
 use crate::film::Film;
@@ -54,6 +55,113 @@ const MIN_SAMPLES: u64 = 32;
 /// then off by at most `ε` of its value.
 const KNOWN_SAMPLES: u64 = 16;
 
+/// The uniform samples of every pixel (the coin-chosen large steps of the
+/// tiles holding it, its regularizer paths), summed as they are drawn: per
+/// pixel the radiance per channel, the squared channel mean and the channel
+/// mean of the odd-numbered large steps ([`TileChain::odd_steps`]). Their
+/// counts are the tiles'. Kept per pixel rather than per tile pixel, they
+/// take a fifth of the room (a cross); a tile adds to the rows it reaches,
+/// so a sweep steps its tile rows in phases whose rows reach disjoint pixel
+/// rows ([`Self::phase`]), and every pixel's sums are added in one order
+/// whatever the thread count.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub(super) struct Samples {
+    /// `channels + 2` sums per pixel.
+    sums: Vec<f64>,
+    channels: usize,
+}
+
+impl Samples {
+    pub fn new(pixels: usize, channels: usize) -> Self {
+        Self {
+            sums: vec![0.0; pixels * (channels + 2)],
+            channels,
+        }
+    }
+
+    /// Whether sums read from a checkpoint fit `pixels` pixels of
+    /// `channels` channels: sized so, finite and not negative.
+    pub fn fits(&self, pixels: usize, channels: usize) -> bool {
+        self.channels == channels
+            && self.sums.len() == pixels * (channels + 2)
+            && self.sums.iter().all(|x| x.is_finite() && *x >= 0.0)
+    }
+
+    /// Pixel `j`'s radiance sums, squared means' and odd steps' means'.
+    fn of(&self, j: usize) -> (&[f64], f64, f64) {
+        let stride = self.channels + 2;
+        let sums = &self.sums[j * stride..(j + 1) * stride];
+        (&sums[..self.channels], sums[self.channels], sums[self.channels + 1])
+    }
+
+    /// The tile rows `y` with `y % (2 reach + 1) == phase` (`reach` from
+    /// [`Tiles::reach`]), each with its tiles' chains and the pixel rows they
+    /// reach, which no other of these rows reaches.
+    pub fn phase<'a, T>(
+        &'a mut self,
+        chains: &'a mut [T],
+        tiles: &Tiles,
+        phase: usize,
+    ) -> Vec<(usize, &'a mut [T], SampleRows<'a>)> {
+        let width = tiles.resolution().width as usize;
+        let reach = tiles.reach();
+        let span = 2 * reach + 1;
+        let stride = self.channels + 2;
+        let row = width * stride;
+        // The pixel rows of tile row `phase + k span` are `phase - reach + k
+        // span` to `phase + reach + k span`: consecutive blocks of `span`
+        // rows, the first clipped by the film's top.
+        let mut rest: &mut [f64] = &mut self.sums;
+        let mut first = phase as isize - reach as isize;
+        if first > 0 {
+            let skip = (first as usize * row).min(rest.len());
+            rest = &mut rest[skip..];
+        }
+        let mut blocks = Vec::new();
+        while !rest.is_empty() {
+            let rows = (first + span as isize).max(0) as usize - first.max(0) as usize;
+            let (block, later) = rest.split_at_mut((rows * row).min(rest.len()));
+            blocks.push(SampleRows {
+                first_pixel: first.max(0) as usize * width,
+                channels: self.channels,
+                sums: block,
+            });
+            rest = later;
+            first += span as isize;
+        }
+        let rows = chains.chunks_mut(width).enumerate().skip(phase).step_by(span);
+        rows.zip(blocks).map(|((y, row), b)| (y, row, b)).collect()
+    }
+}
+
+/// Some pixel rows of [`Samples`], for one tile row's steps.
+pub(super) struct SampleRows<'a> {
+    first_pixel: usize,
+    channels: usize,
+    sums: &'a mut [f64],
+}
+
+impl SampleRows<'_> {
+    /// A uniform sample of pixel `pixel`, an odd-numbered large step's if
+    /// `odd`.
+    pub fn add<R: Radiance>(&mut self, pixel: usize, radiance: &R, odd: bool) {
+        let stride = self.channels + 2;
+        let at = (pixel - self.first_pixel) * stride;
+        let sums = &mut self.sums[at..at + stride];
+        let mut mean = 0.0;
+        for (c, sum) in sums[..self.channels].iter_mut().enumerate() {
+            let value = radiance.channel(c) as f64;
+            *sum += value;
+            mean += value;
+        }
+        let mean = mean / self.channels as f64;
+        sums[self.channels] += mean * mean;
+        if odd {
+            sums[self.channels + 1] += mean;
+        }
+    }
+}
+
 /// Per pixel, the large steps' samples of its channel mean, pooled over the
 /// tiles holding it: their count, sum and sum of squares.
 pub(super) struct LargeSteps {
@@ -65,7 +173,11 @@ pub(super) struct LargeSteps {
 impl LargeSteps {
     /// The samples of every pixel, and the regularizer `Î` (per channel,
     /// see [`pooled_means`]).
-    pub fn gather<R: Radiance>(tiles: &Tiles, chains: &[TileChain<R>]) -> (Self, Film) {
+    pub fn gather<R: Radiance>(
+        tiles: &Tiles,
+        chains: &[TileChain<R>],
+        pooled: &Samples,
+    ) -> (Self, Film) {
         let channels = R::CHANNELS;
         let n = tiles.count();
         let mut sums = Film::new(tiles.resolution(), channels);
@@ -74,22 +186,16 @@ impl LargeSteps {
             sums: vec![0.0; n],
             squares: vec![0.0; n],
         };
-        let data = sums.data_mut();
-        for j in 0..n {
-            for (s, o) in tiles.tiles_of(j) {
-                let chain = &chains[s];
-                samples.counts[j] += chain.large_steps;
-                if s == j {
-                    // The centre pixel's plain MC paths.
-                    samples.counts[j] += chain.centre_paths;
-                }
-                samples.squares[j] += chain.uniform_squares()[o];
-                for c in 0..channels {
-                    data[j * channels + c] += chain.uniform()[o * channels + c];
-                }
+        for (j, pixel) in sums.data_mut().chunks_mut(channels).enumerate() {
+            for (s, _) in tiles.tiles_of(j) {
+                samples.counts[j] += chains[s].large_steps;
             }
-            let pixel = &data[j * channels..(j + 1) * channels];
-            samples.sums[j] = pixel.iter().sum::<f64>() / channels as f64;
+            // The centre pixel's plain MC paths.
+            samples.counts[j] += chains[j].centre_paths;
+            let (radiance, squares, _) = pooled.of(j);
+            pixel.copy_from_slice(radiance);
+            samples.squares[j] = squares;
+            samples.sums[j] = radiance.iter().sum::<f64>() / channels as f64;
         }
         let regularizer = pooled_means(&sums, &samples.counts);
         (samples, regularizer)
@@ -108,14 +214,19 @@ pub(super) struct Halves {
 }
 
 impl Halves {
-    pub fn gather<R: Radiance>(tiles: &Tiles, chains: &[TileChain<R>], all: &LargeSteps) -> Self {
+    pub fn gather<R: Radiance>(
+        tiles: &Tiles,
+        chains: &[TileChain<R>],
+        pooled: &Samples,
+        all: &LargeSteps,
+    ) -> Self {
         let n = tiles.count();
         let (mut odd_counts, mut odd_sums) = (vec![0u64; n], vec![0.0; n]);
         for (j, (count, sum)) in odd_counts.iter_mut().zip(&mut odd_sums).enumerate() {
-            for (s, o) in tiles.tiles_of(j) {
+            for (s, _) in tiles.tiles_of(j) {
                 *count += chains[s].odd_steps;
-                *sum += chains[s].odd_sums()[o];
             }
+            *sum = pooled.of(j).2;
         }
         let mut first = Film::new(tiles.resolution(), 1);
         for (j, v) in first.data_mut().iter_mut().enumerate() {

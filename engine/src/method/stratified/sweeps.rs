@@ -8,6 +8,7 @@ use alloc::vec::Vec;
 
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
+use super::regularizer::Samples;
 use super::tile::{Context, LightTracing, Start, TileChain, Waking};
 use super::{StratifiedExtras, StratifiedSettings, StratifiedStats};
 use crate::chain::{ChainStats, Traced};
@@ -22,11 +23,12 @@ use crate::target::Importance;
 use crate::tiles::Tiles;
 
 /// What a checkpoint holds of stratified MCMC: the tile chains, the
-/// counters, the exchange rounds, the invalid traces outside the chains,
-/// the bootstrap's traces and the light-tracing sums ([`Sweeps::save`]'s
-/// order).
+/// pixels' uniform samples, the counters, the exchange rounds, the invalid
+/// traces outside the chains, the bootstrap's traces and the light-tracing
+/// sums ([`Sweeps::save`]'s order).
 pub(super) type Saved<R> = (
     Vec<TileChain<R>>,
+    Samples,
     StratifiedStats,
     u64,
     u64,
@@ -39,6 +41,8 @@ pub(super) struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
     pub(super) ctx: &'a Context<'b, O, I>,
     pub(super) settings: &'a StratifiedSettings,
     pub(super) chains: Vec<TileChain<O::Radiance>>,
+    /// Every pixel's uniform samples.
+    pub(super) samples: Samples,
     pub(super) stats: StratifiedStats,
     pub(super) exchange_rounds: u64,
     /// Invalid traces outside the tile chains' counters (initialization,
@@ -77,15 +81,20 @@ where
     /// remainder ([`Self::remainder`]).
     fn trace_remainder(&mut self, paths: u32) {
         let ctx = self.ctx;
-        let width = ctx.tiles.resolution().width as usize;
-        let traced = parallel::sum_chunks(&mut self.chains, width, |y, row| {
-            let mut traced = Traced::default();
-            for (x, chain) in row.iter_mut().enumerate() {
-                let (paths, invalid) = chain.trace_regularizer(ctx, y * width + x, paths);
-                traced += Traced { paths, invalid };
-            }
-            traced
-        });
+        let mut traced = Traced::default();
+        for phase in 0..2 * ctx.tiles.reach() + 1 {
+            let mut rows = self.samples.phase(&mut self.chains, ctx.tiles, phase);
+            traced += parallel::sum_each_init(&mut rows, || (), |_, (y, row, samples)| {
+                let width = row.len();
+                let mut traced = Traced::default();
+                for (x, chain) in row.iter_mut().enumerate() {
+                    let tile = *y * width + x;
+                    let (paths, invalid) = chain.trace_regularizer(ctx, tile, paths, samples);
+                    traced += Traced { paths, invalid };
+                }
+                traced
+            });
+        }
         for chain in &mut self.chains {
             self.light.add_remainder(&mut chain.sampled);
         }
@@ -98,6 +107,7 @@ where
     pub(super) fn save(&self, bootstrap_traces: u64, out: &mut Vec<u8>) {
         let saved = (
             &self.chains,
+            &self.samples,
             self.stats,
             self.exchange_rounds,
             self.invalid,
@@ -134,6 +144,7 @@ where
         let image = reconstruct_image(
             tiles,
             core::mem::take(&mut self.chains),
+            &self.samples,
             self.settings,
             self.stats.sweeps,
             &self.light,
@@ -252,19 +263,26 @@ where
         for _ in 0..units {
             let paths = self.settings.regularizer_paths;
             let work = || Waking::new(ctx.tiles, ctx.small_step);
-            let traced =
-                parallel::sum_chunks_init(&mut self.chains, width, work, |work, y, row| {
-                    let mut traced = SweepTraces::default();
-                    for (x, chain) in row.iter_mut().enumerate() {
-                        traced.steps += chain.step(ctx, y * width + x, work);
-                        if paths > 0 {
-                            let (paths, invalid) =
-                                chain.trace_regularizer(ctx, y * width + x, paths);
-                            traced.regularizer += Traced { paths, invalid };
+            let mut traced = SweepTraces::default();
+            // Tile rows in phases: each phase's rows reach disjoint pixel
+            // rows of the samples' sums.
+            for phase in 0..2 * ctx.tiles.reach() + 1 {
+                let mut rows = self.samples.phase(&mut self.chains, ctx.tiles, phase);
+                traced = traced
+                    + parallel::sum_each_init(&mut rows, work, |work, (y, row, samples)| {
+                        let mut traced = SweepTraces::default();
+                        for (x, chain) in row.iter_mut().enumerate() {
+                            let tile = *y * width + x;
+                            traced.steps += chain.step(ctx, tile, work, samples);
+                            if paths > 0 {
+                                let (paths, invalid) =
+                                    chain.trace_regularizer(ctx, tile, paths, samples);
+                                traced.regularizer += Traced { paths, invalid };
+                            }
                         }
-                    }
-                    traced
-                });
+                        traced
+                    });
+            }
             self.invalid += traced.regularizer.invalid;
             for chain in &mut self.chains {
                 self.light.add(&mut chain.sampled);
@@ -312,6 +330,7 @@ where
         preview(
             self.ctx.tiles,
             &self.chains,
+            &self.samples,
             self.settings,
             self.stats.sweeps,
             &self.light,

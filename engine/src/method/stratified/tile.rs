@@ -24,6 +24,8 @@ use crate::sample::{IndependentSampler, MltSampler, PackedSample, Proposal};
 use crate::target::{Evaluated, Importance, SplatList, valid_splat};
 use crate::tiles::Tiles;
 
+use super::regularizer::SampleRows;
+
 /// One tile pixel's evaluation of a state.
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 pub(super) struct Value<R> {
@@ -198,11 +200,8 @@ pub(super) struct TileChain<R> {
     /// `T_s` of the current state, the largest importance of its values.
     pub target: f64,
     pub decisions: Pcg32,
-    /// Per offset and channel `N G_s(k)`, then the sum of the coin-chosen
-    /// large steps' radiance; per offset the sum of their squared channel
-    /// mean (the regularizer's variance), then the sum of the odd-numbered
-    /// ones' channel mean (see [`Self::odd_steps`]).
-    sums: Box<[f64]>,
+    /// `N G_s(k)` per offset and channel.
+    pub unscaled: Box<[f64]>,
     /// Coin-chosen large steps: the regularizer's samples.
     pub large_steps: u64,
     /// The odd-numbered coin-chosen large steps (the first is number 0):
@@ -211,7 +210,7 @@ pub(super) struct TileChain<R> {
     pub odd_steps: u64,
     /// Plain MC paths traced at the tile's centre pixel for the regularizer
     /// ([`StratifiedSettings::regularizer_paths`](super::StratifiedSettings)),
-    /// summed into the uniform sums at the centre's offset.
+    /// summed into the pixel's [`Samples`](super::regularizer::Samples).
     pub centre_paths: u64,
     /// Their sampler.
     mc: IndependentSampler,
@@ -427,7 +426,6 @@ impl<R: Radiance> TileChain<R> {
         offsets: usize,
         mutation: &MutationParams,
     ) -> Self {
-        let channels = R::CHANNELS;
         Self {
             sample: PackedSample::new(
                 mutation.small_step,
@@ -436,7 +434,7 @@ impl<R: Radiance> TileChain<R> {
             values: vec![Value::default(); offsets].into_boxed_slice(),
             target: 0.0,
             decisions: rng::stream(seed, Domain::Tile, (tile + tiles) as u64),
-            sums: vec![0.0; offsets * (2 * channels + 2)].into_boxed_slice(),
+            unscaled: vec![0.0; offsets * R::CHANNELS].into_boxed_slice(),
             large_steps: 0,
             odd_steps: 0,
             centre_paths: 0,
@@ -453,51 +451,24 @@ impl<R: Radiance> TileChain<R> {
     /// sound.
     pub fn fits(&self, offsets: usize) -> bool {
         self.values.len() == offsets
-            && self.sums.len() == offsets * (2 * R::CHANNELS + 2)
-            && self.sums.iter().all(|x| x.is_finite() && *x >= 0.0)
+            && self.unscaled.len() == offsets * R::CHANNELS
+            && self.unscaled.iter().all(|x| x.is_finite() && *x >= 0.0)
             && self.target.is_finite()
             && self.sample.fits()
     }
 
-    /// The sums, `offsets` offsets' worth: `N G_s(k)` and the uniform
-    /// samples' per offset and channel, the squares' and the odd ones' per
-    /// offset.
-    fn split_sums(sums: &mut [f64], offsets: usize) -> [&mut [f64]; 4] {
-        let per_offset = offsets * R::CHANNELS;
-        let (unscaled, rest) = sums.split_at_mut(per_offset);
-        let (uniform, rest) = rest.split_at_mut(per_offset);
-        let (squares, odd) = rest.split_at_mut(offsets);
-        [unscaled, uniform, squares, odd]
-    }
-
-    /// `N G_s(k)` per offset and channel.
-    pub fn unscaled(&self) -> &[f64] {
-        &self.sums[..self.values.len() * R::CHANNELS]
-    }
-
-    /// The sum of the coin-chosen large steps' (and regularizer paths')
-    /// radiance per offset and channel.
-    pub fn uniform(&self) -> &[f64] {
-        let per_offset = self.values.len() * R::CHANNELS;
-        &self.sums[per_offset..2 * per_offset]
-    }
-
-    /// The sum of their squared channel means per offset.
-    pub fn uniform_squares(&self) -> &[f64] {
-        let at = 2 * self.values.len() * R::CHANNELS;
-        &self.sums[at..at + self.values.len()]
-    }
-
-    /// The sum of the odd-numbered ones' channel means per offset.
-    pub fn odd_sums(&self) -> &[f64] {
-        &self.sums[2 * self.values.len() * R::CHANNELS + self.values.len()..]
-    }
-
     /// One Metropolis-Hastings step on `T_s` with coherent sampling (eq. 10),
-    /// the chain woken in `work`.
+    /// the chain woken in `work`; a coin-chosen large step is a uniform
+    /// sample of every tile pixel, added to `samples`.
     /// Until the tile has a state with `T_s > 0` every step is a uniform draw.
     /// Returns paths traced.
-    pub fn step<O, I>(&mut self, ctx: &Context<'_, O, I>, tile: usize, work: &mut Waking<R>) -> u64
+    pub fn step<O, I>(
+        &mut self,
+        ctx: &Context<'_, O, I>,
+        tile: usize,
+        work: &mut Waking<R>,
+        samples: &mut SampleRows<'_>,
+    ) -> u64
     where
         O: PathOracle<Radiance = R>,
         I: Importance<R> + ?Sized,
@@ -512,8 +483,7 @@ impl<R: Radiance> TileChain<R> {
         let chosen = uniform_f64(&mut self.decisions) < ctx.p_large;
         let large = dark || chosen;
         work.wake(self);
-        let [unscaled, uniform, squares, odd_sums] =
-            Self::split_sums(&mut self.sums, self.values.len());
+        let unscaled = &mut self.unscaled;
         let outcome = work.chain.step(
             &TileTarget {
                 ctx,
@@ -528,21 +498,11 @@ impl<R: Radiance> TileChain<R> {
         );
         if chosen {
             let proposed = work.chain.last_proposal();
-            add(&proposed.values, 1.0, uniform);
-            self.sampled.extend_from_slice(&proposed.splats);
-            let channels = R::CHANNELS;
             let odd = self.large_steps % 2 == 1;
-            let sums = squares.iter_mut().zip(odd_sums.iter_mut());
-            for ((sq, odd_sum), v) in sums.zip(&proposed.values) {
-                let mean = (0..channels)
-                    .map(|c| v.radiance.channel(c) as f64)
-                    .sum::<f64>()
-                    / channels as f64;
-                *sq += mean * mean;
-                if odd {
-                    *odd_sum += mean;
-                }
+            for (o, q) in ctx.tiles.pixels(tile) {
+                samples.add(q, &proposed.values[o].radiance, odd);
             }
+            self.sampled.extend_from_slice(&proposed.splats);
             self.odd_steps += odd as u64;
             self.large_steps += 1;
         }
@@ -553,22 +513,19 @@ impl<R: Radiance> TileChain<R> {
         outcome.traced.paths
     }
 
-    /// Traces `paths` plain MC paths at the tile's centre pixel into the
-    /// regularizer's sums. Returns paths traced and how many were invalid.
+    /// Traces `paths` plain MC paths at the tile's centre pixel into
+    /// `samples`. Returns paths traced and how many were invalid.
     pub fn trace_regularizer<O, I>(
         &mut self,
         ctx: &Context<'_, O, I>,
         tile: usize,
         paths: u32,
+        samples: &mut SampleRows<'_>,
     ) -> (u64, u64)
     where
         O: PathOracle<Radiance = R>,
         I: Importance<R> + ?Sized,
     {
-        let Some(centre) = ctx.tiles.offset_of(tile, tile) else {
-            return (0, 0);
-        };
-        let channels = R::CHANNELS;
         let mut invalid = 0;
         for _ in 0..paths {
             let [x, y] = self.mc.next_2d();
@@ -579,15 +536,7 @@ impl<R: Radiance> TileChain<R> {
                 Some(&mut self.sampled),
             );
             invalid += bad as u64;
-            let [_, uniform, squares, _] = Self::split_sums(&mut self.sums, self.values.len());
-            let sums = &mut uniform[centre * channels..(centre + 1) * channels];
-            let mut mean = 0.0;
-            for (c, sum) in sums.iter_mut().enumerate() {
-                let value = v.radiance.channel(c) as f64;
-                *sum += value;
-                mean += value / channels as f64;
-            }
-            squares[centre] += mean * mean;
+            samples.add(tile, &v.radiance, false);
         }
         self.centre_paths += paths as u64;
         (paths as u64, invalid)

@@ -123,30 +123,6 @@ pub(crate) fn sum_chunks_init<T: Send, S, C: Default + Add<Output = C> + Send>(
     }
 }
 
-/// The sum of `f(scratch, item)` over every item, with scratch made by
-/// `init` once per task. As [`sum_chunks`], `C`'s addition must be exact.
-pub(crate) fn sum_each_init<T: Send, S, C: Default + Add<Output = C> + Send>(
-    items: &mut [T],
-    init: impl Fn() -> S + Sync + Send,
-    f: impl Fn(&mut S, &mut T) -> C + Sync + Send,
-) -> C {
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        items
-            .par_iter_mut()
-            .map_init(init, f)
-            .reduce(C::default, |a, b| a + b)
-    }
-    #[cfg(not(feature = "parallel"))]
-    {
-        let mut scratch = init();
-        items
-            .iter_mut()
-            .fold(C::default(), |a, item| a + f(&mut scratch, item))
-    }
-}
-
 /// `f(item)` for every item, collected in item order.
 pub(crate) fn map_each<T: Send, U: Send>(
     items: &mut [T],

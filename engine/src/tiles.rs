@@ -89,7 +89,11 @@ impl Tiles {
 
     /// How many rows a tile reaches above and below its centre.
     pub fn reach(&self) -> usize {
-        self.offsets.iter().map(|&(_, dy)| dy.unsigned_abs() as usize).max().unwrap_or(0)
+        self.offsets
+            .iter()
+            .map(|&(_, dy)| dy.unsigned_abs() as usize)
+            .max()
+            .unwrap_or(0)
     }
 
     /// The offsets of a tile's pixels from its centre, the centre first.

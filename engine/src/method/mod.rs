@@ -321,14 +321,16 @@ mod memory {
     /// A chain's state: its primary sample (values and proposal, per
     /// stream) and its path with splats.
     pub const CHAIN: u128 = 4096;
-    /// A tile chain of stratified MCMC at rest (264 bytes, its primary
-    /// sample's ~30 numbers), and per pixel what the reconstruction gathers
-    /// beside the chains (the large steps' pooled sums, the regularizer and
-    /// its halves) and the light-tracing estimate's weights and second film.
-    pub const TILE_CHAIN: u128 = 512;
-    /// Per pixel of its tile: the state's value there and the tile's sums
-    /// (measured 88 bytes), and the gathered `G_s(k)`.
-    pub const TILE_PIXEL: u128 = 112;
+    /// A tile chain of stratified MCMC at rest (200 bytes, and its primary
+    /// sample's numbers, ~30 on the Cornell box), the pixel's uniform
+    /// samples (40 bytes), and per pixel what the reconstruction gathers
+    /// beside the chains (the large steps' counts and sums, the regularizer
+    /// and its halves) and the light-tracing estimate's weights and second
+    /// film.
+    pub const TILE_CHAIN: u128 = 480;
+    /// Per pixel of its tile: the state's value there and the tile's
+    /// `G_s(k)` (48 bytes), and the gathered `G_s(k)`.
+    pub const TILE_PIXEL: u128 = 72;
     /// The most paths a round traces.
     pub const ROUND_PATHS: u64 = crate::drive::MAX_ROUND_SAMPLES;
 }

@@ -11,7 +11,7 @@ use core::sync::atomic::{AtomicU64, Ordering};
 use super::StratifiedSettings;
 use super::tile::{Context, Start, TileChain, Waking};
 use crate::bootstrap::Bootstrap;
-use crate::chain::PathChain;
+use crate::chain::{PathChain, Traced};
 use crate::drive::{Clock, SetUpStage};
 use crate::error::Error;
 use crate::oracle::{
@@ -89,6 +89,9 @@ pub(super) struct Initialized {
     pub bootstrap: u64,
     /// Of them, invalid (valued zero) outside the tile chains' own counters.
     pub invalid: u64,
+    /// Invalid traces of the installed states' evaluations, the tile
+    /// chains' own.
+    pub replays_invalid: u64,
 }
 
 /// Runs the global chains until the coverage or the budget is reached and
@@ -137,6 +140,7 @@ where
                 traced,
                 bootstrap: traced,
                 invalid: target.invalid.load(Ordering::Relaxed),
+                replays_invalid: 0,
             });
         }
         Err(e) => return Err(e),
@@ -198,12 +202,13 @@ where
     let work = || Waking::new(ctx.tiles, ctx.small_step);
     let replays = parallel::sum_chunks_init(chains, width, work, |work, y, row| {
         let pending = row.iter_mut().enumerate().filter(|(_, c)| c.pending);
-        pending
-            .map(|(x, c)| c.evaluate_current(ctx, y * width + x, work))
-            .sum::<u64>()
+        pending.fold(Traced::default(), |traced, (x, c)| {
+            traced + c.evaluate_current(ctx, y * width + x, work)
+        })
     });
     Ok(Initialized {
-        traced: target.traces.load(Ordering::Relaxed) + replays,
+        traced: target.traces.load(Ordering::Relaxed) + replays.paths,
+        replays_invalid: replays.invalid,
         bootstrap: bootstrap_traces,
         invalid: target.invalid.load(Ordering::Relaxed),
     })

@@ -87,6 +87,7 @@ use self::regularizer::Samples;
 use self::sweeps::{Saved, SweepCosts, Sweeps};
 use self::tile::{Context, LightTracing, TileChain};
 use super::{Job, Output};
+use crate::chain::ChainStats;
 use crate::checkpoint;
 use crate::drive::{Budget, drive};
 use crate::error::{Error, check_probability};
@@ -398,7 +399,7 @@ where
     };
     let (position, saved) = match job.resumed::<Saved<O::Radiance>>()? {
         Some((position, saved)) => {
-            let (chains, samples, _, _, _, _, light) = &saved;
+            let (chains, samples, _, _, _, _, _, light) = &saved;
             let fits = chains.len() == n
                 && chains.iter().all(|c| c.fits(offsets))
                 && samples.fits(n, O::Radiance::CHANNELS);
@@ -412,12 +413,14 @@ where
         }
         None => (None, start(&ctx, job, settings, new_light())?),
     };
-    let (chains, samples, stats, exchange_rounds, invalid, bootstrap_traces, light) = saved;
+    let (chains, samples, chain_stats, stats, exchange_rounds, invalid, bootstrap_traces, light) =
+        saved;
     let mut sweeps = Sweeps {
         ctx: &ctx,
         settings,
         chains,
         samples,
+        chain_stats,
         stats,
         exchange_rounds,
         invalid,
@@ -484,6 +487,10 @@ where
     Ok((
         chains,
         Samples::new(n, O::Radiance::CHANNELS),
+        ChainStats {
+            invalid: initialized.replays_invalid,
+            ..ChainStats::default()
+        },
         stats,
         0,
         initialized.invalid,

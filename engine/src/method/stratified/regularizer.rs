@@ -91,7 +91,11 @@ impl Samples {
     fn of(&self, j: usize) -> (&[f64], f64, f64) {
         let stride = self.channels + 2;
         let sums = &self.sums[j * stride..(j + 1) * stride];
-        (&sums[..self.channels], sums[self.channels], sums[self.channels + 1])
+        (
+            &sums[..self.channels],
+            sums[self.channels],
+            sums[self.channels + 1],
+        )
     }
 
     /// The tile rows `y` with `y % (2 reach + 1) == phase` (`reach` from
@@ -129,7 +133,11 @@ impl Samples {
             rest = later;
             first += span as isize;
         }
-        let rows = chains.chunks_mut(width).enumerate().skip(phase).step_by(span);
+        let rows = chains
+            .chunks_mut(width)
+            .enumerate()
+            .skip(phase)
+            .step_by(span);
         rows.zip(blocks).map(|((y, row), b)| (y, row, b)).collect()
     }
 }

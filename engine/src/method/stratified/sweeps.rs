@@ -9,7 +9,7 @@ use alloc::vec::Vec;
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
 use super::regularizer::Samples;
-use super::tile::{Context, LightTracing, Start, TileChain, Waking};
+use super::tile::{Context, LightTracing, Row, Start, TileChain, TileSplat, Waking};
 use super::{StratifiedExtras, StratifiedSettings, StratifiedStats};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;
@@ -23,12 +23,13 @@ use crate::target::Importance;
 use crate::tiles::Tiles;
 
 /// What a checkpoint holds of stratified MCMC: the tile chains, the
-/// pixels' uniform samples, the counters, the exchange rounds, the invalid
+/// pixels' uniform samples, the chains' counters, the method's counters, the exchange rounds, the invalid
 /// traces outside the chains, the bootstrap's traces and the light-tracing
 /// sums ([`Sweeps::save`]'s order).
 pub(super) type Saved<R> = (
     Vec<TileChain<R>>,
     Samples,
+    ChainStats,
     StratifiedStats,
     u64,
     u64,
@@ -43,6 +44,8 @@ pub(super) struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
     pub(super) chains: Vec<TileChain<O::Radiance>>,
     /// Every pixel's uniform samples.
     pub(super) samples: Samples,
+    /// The tile chains' counters, summed.
+    pub(super) chain_stats: ChainStats,
     pub(super) stats: StratifiedStats,
     pub(super) exchange_rounds: u64,
     /// Invalid traces outside the tile chains' counters (initialization,
@@ -81,26 +84,75 @@ where
     /// remainder ([`Self::remainder`]).
     fn trace_remainder(&mut self, paths: u32) {
         let ctx = self.ctx;
+        let rows = self.each_row(|_, chain, tile, row| {
+            let (paths, invalid) = chain.trace_regularizer(ctx, tile, paths, row);
+            Traced { paths, invalid }
+        });
         let mut traced = Traced::default();
-        for phase in 0..2 * ctx.tiles.reach() + 1 {
-            let mut rows = self.samples.phase(&mut self.chains, ctx.tiles, phase);
-            traced += parallel::sum_each_init(&mut rows, || (), |_, (y, row, samples)| {
-                let width = row.len();
-                let mut traced = Traced::default();
-                for (x, chain) in row.iter_mut().enumerate() {
-                    let tile = *y * width + x;
-                    let (paths, invalid) = chain.trace_regularizer(ctx, tile, paths, samples);
-                    traced += Traced { paths, invalid };
-                }
-                traced
-            });
-        }
-        for chain in &mut self.chains {
-            self.light.add_remainder(&mut chain.sampled);
+        for mut row in rows {
+            self.light.add_remainder(&mut row.splats);
+            traced += row.sum;
         }
         self.light.remainder_paths += u64::from(paths);
         self.invalid += traced.invalid;
         self.stats.remainder_samples += traced.paths;
+    }
+
+    /// `f(work, chain, tile, row)` for every tile, in parallel, a task's
+    /// chains woken in its `work`; per row of tiles, in row order, the sum
+    /// of `f` and what the row gave ([`Row`]). Tile rows go in phases whose
+    /// rows reach disjoint pixel rows of the uniform samples
+    /// ([`Samples::phase`]).
+    fn each_row<C>(
+        &mut self,
+        f: impl Fn(
+            &mut Waking<O::Radiance>,
+            &mut TileChain<O::Radiance>,
+            usize,
+            &mut Row<'_, O::Radiance>,
+        ) -> C
+        + Sync
+        + Send,
+    ) -> Vec<Swept<O::Radiance, C>>
+    where
+        C: Default + core::ops::Add<Output = C> + Send,
+    {
+        let ctx = self.ctx;
+        let width = ctx.tiles.resolution().width as usize;
+        let mut swept: Vec<Option<Swept<O::Radiance, C>>> =
+            (0..self.chains.len().div_ceil(width.max(1)))
+                .map(|_| None)
+                .collect();
+        for phase in 0..2 * ctx.tiles.reach() + 1 {
+            let mut rows: Vec<_> = self
+                .samples
+                .phase(&mut self.chains, ctx.tiles, phase)
+                .into_iter()
+                .map(|(y, chains, samples)| {
+                    let row = Row {
+                        samples,
+                        stats: ChainStats::default(),
+                        splats: Vec::new(),
+                    };
+                    (y, chains, row)
+                })
+                .collect();
+            let sums = parallel::map_each(&mut rows, |(y, chains, row)| {
+                let mut work = Waking::new(ctx.tiles, ctx.small_step);
+                let tiles = chains.iter_mut().enumerate();
+                tiles.fold(C::default(), |sum, (x, chain)| {
+                    sum + f(&mut work, chain, *y * width + x, row)
+                })
+            });
+            for ((y, _, row), sum) in rows.into_iter().zip(sums) {
+                swept[y] = Some(Swept {
+                    stats: row.stats,
+                    splats: row.splats,
+                    sum,
+                });
+            }
+        }
+        swept.into_iter().flatten().collect()
     }
 
     /// Appends the state to a checkpoint (read back as [`Saved`]).
@@ -108,6 +160,7 @@ where
         let saved = (
             &self.chains,
             &self.samples,
+            &self.chain_stats,
             self.stats,
             self.exchange_rounds,
             self.invalid,
@@ -126,13 +179,12 @@ where
         stop: &dyn Fn() -> bool,
     ) -> Result<Output, Error> {
         let tiles = self.ctx.tiles;
-        let mut chain_stats = ChainStats::default();
         let mut visits = vec![0u64; tiles.count()];
         let stats = &mut self.stats;
         for (s, c) in self.chains.iter().enumerate() {
-            chain_stats.merge(&c.stats);
+            // Every tile steps once a sweep.
             for (_, q) in tiles.pixels(s) {
-                visits[q] += c.stats.proposals;
+                visits[q] += stats.sweeps;
             }
             match c.start {
                 Start::None => stats.never_initialized += 1,
@@ -141,6 +193,7 @@ where
                 Start::Uniform => stats.initialized_by_uniform_draws += 1,
             }
         }
+        let chain_stats = self.chain_stats;
         let image = reconstruct_image(
             tiles,
             core::mem::take(&mut self.chains),
@@ -262,31 +315,24 @@ where
         let after = self.costs.exchange_after;
         for _ in 0..units {
             let paths = self.settings.regularizer_paths;
-            let work = || Waking::new(ctx.tiles, ctx.small_step);
+            let rows = self.each_row(|work, chain, tile, row| {
+                let mut traced = SweepTraces {
+                    steps: chain.step(ctx, tile, work, row),
+                    ..SweepTraces::default()
+                };
+                if paths > 0 {
+                    let (paths, invalid) = chain.trace_regularizer(ctx, tile, paths, row);
+                    traced.regularizer += Traced { paths, invalid };
+                }
+                traced
+            });
             let mut traced = SweepTraces::default();
-            // Tile rows in phases: each phase's rows reach disjoint pixel
-            // rows of the samples' sums.
-            for phase in 0..2 * ctx.tiles.reach() + 1 {
-                let mut rows = self.samples.phase(&mut self.chains, ctx.tiles, phase);
-                traced = traced
-                    + parallel::sum_each_init(&mut rows, work, |work, (y, row, samples)| {
-                        let mut traced = SweepTraces::default();
-                        for (x, chain) in row.iter_mut().enumerate() {
-                            let tile = *y * width + x;
-                            traced.steps += chain.step(ctx, tile, work, samples);
-                            if paths > 0 {
-                                let (paths, invalid) =
-                                    chain.trace_regularizer(ctx, tile, paths, samples);
-                                traced.regularizer += Traced { paths, invalid };
-                            }
-                        }
-                        traced
-                    });
+            for mut row in rows {
+                self.light.add(&mut row.splats);
+                self.chain_stats.merge(&row.stats);
+                traced = traced + row.sum;
             }
             self.invalid += traced.regularizer.invalid;
-            for chain in &mut self.chains {
-                self.light.add(&mut chain.sampled);
-            }
             let stats = &mut self.stats;
             stats.tile_samples += traced.steps;
             stats.regularizer_samples += traced.regularizer.paths;
@@ -336,6 +382,13 @@ where
             &self.light,
         )
     }
+}
+
+/// What a row of tiles gave ([`Sweeps::each_row`]).
+pub(super) struct Swept<R, C> {
+    stats: ChainStats,
+    splats: Vec<TileSplat<R>>,
+    sum: C,
 }
 
 /// Paths a sweep's tile steps and regularizer paths traced.

@@ -214,10 +214,6 @@ pub(super) struct TileChain<R> {
     pub centre_paths: u64,
     /// Their sampler.
     mc: IndependentSampler,
-    /// The splats of this sweep's uniform samples (coin-chosen large steps,
-    /// regularizer paths), for [`LightTracing`].
-    pub sampled: Vec<TileSplat<R>>,
-    pub stats: ChainStats,
     pub start: Start,
     /// A global chain's state was installed and must be evaluated.
     pub pending: bool,
@@ -258,6 +254,16 @@ impl<R: Radiance> Waking<R> {
         tile.values.copy_from_slice(&state.values);
         tile.target = state.target;
     }
+}
+
+/// Where the steps of one row of tiles go: the uniform samples of the pixel
+/// rows they reach, the chains' counters, and the splats of the uniform
+/// samples (coin-chosen large steps, regularizer paths) in tile order, for
+/// [`LightTracing`].
+pub(super) struct Row<'a, R> {
+    pub samples: SampleRows<'a>,
+    pub stats: ChainStats,
+    pub splats: Vec<TileSplat<R>>,
 }
 
 /// What the tile chains share.
@@ -439,8 +445,6 @@ impl<R: Radiance> TileChain<R> {
             odd_steps: 0,
             centre_paths: 0,
             mc: IndependentSampler::new(rng::stream(seed, Domain::Tile, (tile + 2 * tiles) as u64)),
-            sampled: Vec::new(),
-            stats: ChainStats::default(),
             start: Start::None,
             pending: false,
         }
@@ -459,7 +463,7 @@ impl<R: Radiance> TileChain<R> {
 
     /// One Metropolis-Hastings step on `T_s` with coherent sampling (eq. 10),
     /// the chain woken in `work`; a coin-chosen large step is a uniform
-    /// sample of every tile pixel, added to `samples`.
+    /// sample of every tile pixel, added to `row`.
     /// Until the tile has a state with `T_s > 0` every step is a uniform draw.
     /// Returns paths traced.
     pub fn step<O, I>(
@@ -467,7 +471,7 @@ impl<R: Radiance> TileChain<R> {
         ctx: &Context<'_, O, I>,
         tile: usize,
         work: &mut Waking<R>,
-        samples: &mut SampleRows<'_>,
+        row: &mut Row<'_, R>,
     ) -> u64
     where
         O: PathOracle<Radiance = R>,
@@ -493,16 +497,16 @@ impl<R: Radiance> TileChain<R> {
             &TileWeights,
             large,
             &mut self.decisions,
-            &mut self.stats,
+            &mut row.stats,
             |state, weight| add(&state.values, weight, unscaled),
         );
         if chosen {
             let proposed = work.chain.last_proposal();
             let odd = self.large_steps % 2 == 1;
             for (o, q) in ctx.tiles.pixels(tile) {
-                samples.add(q, &proposed.values[o].radiance, odd);
+                row.samples.add(q, &proposed.values[o].radiance, odd);
             }
-            self.sampled.extend_from_slice(&proposed.splats);
+            row.splats.extend_from_slice(&proposed.splats);
             self.odd_steps += odd as u64;
             self.large_steps += 1;
         }
@@ -514,13 +518,13 @@ impl<R: Radiance> TileChain<R> {
     }
 
     /// Traces `paths` plain MC paths at the tile's centre pixel into
-    /// `samples`. Returns paths traced and how many were invalid.
+    /// `row`. Returns paths traced and how many were invalid.
     pub fn trace_regularizer<O, I>(
         &mut self,
         ctx: &Context<'_, O, I>,
         tile: usize,
         paths: u32,
-        samples: &mut SampleRows<'_>,
+        row: &mut Row<'_, R>,
     ) -> (u64, u64)
     where
         O: PathOracle<Radiance = R>,
@@ -533,24 +537,24 @@ impl<R: Radiance> TileChain<R> {
                 &mut self.mc,
                 tile,
                 FilmPoint { x, y },
-                Some(&mut self.sampled),
+                Some(&mut row.splats),
             );
             invalid += bad as u64;
-            samples.add(tile, &v.radiance, false);
+            row.samples.add(tile, &v.radiance, false);
         }
         self.centre_paths += paths as u64;
         (paths as u64, invalid)
     }
 
     /// Evaluates the current state again in every tile pixel (after a
-    /// global chain's state was installed), woken in `work`. Returns paths
-    /// traced.
+    /// global chain's state was installed), woken in `work`. Returns what
+    /// was traced.
     pub fn evaluate_current<O, I>(
         &mut self,
         ctx: &Context<'_, O, I>,
         tile: usize,
         work: &mut Waking<R>,
-    ) -> u64
+    ) -> Traced
     where
         O: PathOracle<Radiance = R>,
         I: Importance<R> + ?Sized,
@@ -561,9 +565,8 @@ impl<R: Radiance> TileChain<R> {
         let jitter = replay.film_point(UNIT);
         let traced = ctx.trace_tile(&mut replay, tile, jitter, false, state);
         work.rest(self);
-        self.stats.invalid += traced.invalid;
         self.pending = false;
-        traced.paths
+        traced
     }
 
     /// The current state (of tile `from`) evaluated in every pixel of tile

@@ -237,7 +237,9 @@ impl Method {
                     }
                 };
                 let per_tile_pixel = TILE_PIXEL + splats * queued / 100;
-                counted + pixels * (TILE_CHAIN + tile * per_tile_pixel) + workers * CHAIN
+                // Light tracing's two films, made at the first splat.
+                let light = if splats > 0 { 2 * film } else { 0 };
+                counted + light + pixels * (TILE_CHAIN + tile * per_tile_pixel) + workers * CHAIN
             }
             Method::Erpt(s) => {
                 // A block's start paths and a wave's proposals and states,
@@ -323,14 +325,12 @@ mod memory {
     pub const CHAIN: u128 = 4096;
     /// A tile chain of stratified MCMC at rest (200 bytes, and its primary
     /// sample's numbers, ~30 on the Cornell box), the pixel's uniform
-    /// samples (40 bytes), and per pixel what the reconstruction gathers
-    /// beside the chains (the large steps' counts and sums, the regularizer
-    /// and its halves) and the light-tracing estimate's weights and second
-    /// film.
-    pub const TILE_CHAIN: u128 = 480;
+    /// samples (40 bytes), and what the reconstruction takes of the chains
+    /// as it lets them go (fitted to the measured peak).
+    pub const TILE_CHAIN: u128 = 328;
     /// Per pixel of its tile: the state's value there and the tile's
-    /// `G_s(k)` (48 bytes), and the gathered `G_s(k)`.
-    pub const TILE_PIXEL: u128 = 72;
+    /// `G_s(k)`.
+    pub const TILE_PIXEL: u128 = 48;
     /// The most paths a round traces.
     pub const ROUND_PATHS: u64 = crate::drive::MAX_ROUND_SAMPLES;
 }

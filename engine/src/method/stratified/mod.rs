@@ -63,7 +63,8 @@
 //!
 //! | file | owns |
 //! |---|---|
-//! | `tile.rs` | a tile's chain: its state, target and weights, its accumulators |
+//! | `tile.rs` | a tile's chain: its state at rest and awake, target and weights, its accumulators |
+//! | `light.rs` | light tracing's splats, estimated apart by Monte Carlo |
 //! | `local.rs` | local replica exchange and state borrowing |
 //! | `init.rs` | the global chains' initialization |
 //! | `regularizer.rs` | the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the total it anchors |
@@ -72,6 +73,7 @@
 //! | this file | settings, counters, a fresh start or a resumed state, the smallest budget |
 
 mod init;
+mod light;
 mod local;
 mod reconstruction;
 mod regularizer;
@@ -82,10 +84,11 @@ use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
 use self::init::initialize;
+use self::light::LightTracing;
 use self::reconstruction::reserve_reconstruction;
 use self::regularizer::Samples;
 use self::sweeps::{Saved, SweepCosts, Sweeps};
-use self::tile::{Context, LightTracing, TileChain};
+use self::tile::{Context, TileChain};
 use super::{Job, Output};
 use crate::chain::ChainStats;
 use crate::checkpoint;
@@ -391,7 +394,6 @@ where
     let costs = SweepCosts::new(&tiles, settings);
     let new_light = || {
         LightTracing::new(
-            &tiles,
             settings.mutation.large_step_probability,
             settings.regularizer_paths,
             O::Radiance::CHANNELS,
@@ -403,9 +405,7 @@ where
             let fits = chains.len() == n
                 && chains.iter().all(|c| c.fits(offsets))
                 && samples.fits(n, O::Radiance::CHANNELS);
-            let light_fits = light.weights == new_light().weights
-                && light.sums.fits(job.resolution, O::Radiance::CHANNELS)
-                && light.remainder.fits(job.resolution, O::Radiance::CHANNELS);
+            let light_fits = light.fits(&new_light(), &tiles);
             if !fits || !light_fits {
                 return Err(checkpoint::does_not_fit());
             }

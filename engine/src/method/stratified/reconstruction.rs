@@ -8,8 +8,9 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
+use super::light::LightTracing;
 use super::regularizer::{Halves, LargeSteps, Samples, anchor_total, fall_back, take_known};
-use super::tile::{LightTracing, TileChain};
+use super::tile::{Draws, TileChain};
 use super::{Solver, StratifiedSettings};
 #[cfg(feature = "std")]
 use crate::drive::Budget;
@@ -46,8 +47,8 @@ pub(super) struct Reconstructed {
 
 /// The image of `chains` after `sweeps` sweeps; the weighted solver (and
 /// cross-validation) end early when `stop` says so. The chains are let go
-/// once their sums are read, before the solver's work (they are most of a
-/// render's memory).
+/// as their sums are taken, before anything else is gathered (they are
+/// most of a render's memory).
 pub(super) fn reconstruct_image<R: Radiance>(
     tiles: &Tiles,
     chains: Vec<TileChain<R>>,
@@ -58,11 +59,13 @@ pub(super) fn reconstruct_image<R: Radiance>(
     stop: &dyn Fn() -> bool,
 ) -> Result<Reconstructed, Error> {
     let channels = R::CHANNELS;
-    let (samples, regularizer) = LargeSteps::gather(tiles, &chains, pooled);
-    let unscaled = unscaled(tiles, &chains, sweeps.max(1), &regularizer);
+    let (draws, sums): (Vec<Draws>, Vec<_>) =
+        chains.into_iter().map(|c| (c.draws, c.unscaled)).unzip();
+    let (samples, regularizer) = LargeSteps::gather(tiles, &draws, pooled);
     let halves = (settings.cross_validate_alpha && matches!(settings.solver, Solver::Weighted(_)))
-        .then(|| Halves::gather(tiles, &chains, pooled, &samples));
-    drop(chains);
+        .then(|| Halves::gather(tiles, &draws, pooled, &samples));
+    drop(draws);
+    let unscaled = unscaled::<R, _>(tiles, sums, sweeps.max(1), &regularizer);
     let mut solver = settings.solver;
     let mut alpha = None;
     if let Solver::Weighted(w) = &mut solver {
@@ -109,7 +112,7 @@ pub(super) fn reconstruct_image<R: Radiance>(
     } else {
         1.0
     };
-    light.add_to(&mut film, sweeps);
+    light.add_to(tiles, &mut film, sweeps);
     Ok(Reconstructed {
         film,
         regularizer,
@@ -134,8 +137,10 @@ pub(super) fn preview<R: Radiance>(
     light: &LightTracing,
 ) -> Film {
     let channels = R::CHANNELS;
-    let (_, regularizer) = LargeSteps::gather(tiles, chains, pooled);
-    let unscaled = unscaled(tiles, chains, sweeps, &regularizer);
+    let draws: Vec<Draws> = chains.iter().map(|c| c.draws).collect();
+    let (_, regularizer) = LargeSteps::gather(tiles, &draws, pooled);
+    let sums = chains.iter().map(|c| &c.unscaled);
+    let unscaled = unscaled::<R, _>(tiles, sums, sweeps, &regularizer);
     let mut film = Film::new(tiles.resolution(), channels);
     for c in 0..channels {
         let g = channel(&unscaled, channels, c);
@@ -146,7 +151,7 @@ pub(super) fn preview<R: Radiance>(
     if settings.anchor_total {
         anchor_total(&mut film, &regularizer, &[]);
     }
-    light.add_to(&mut film, sweeps);
+    light.add_to(tiles, &mut film, sweeps);
     film
 }
 
@@ -210,18 +215,20 @@ where
 /// pixels to one weakly constrained tile. A tile black for the regularizer
 /// too stays without an estimate and is left out
 /// ([`reconstruct::informative`]).
-fn unscaled<R: Radiance>(
+fn unscaled<R: Radiance, T: AsRef<[f64]>>(
     tiles: &Tiles,
-    chains: &[TileChain<R>],
+    sums: impl IntoIterator<Item = T>,
     sweeps: u64,
     regularizer: &Film,
 ) -> Vec<f64> {
     let channels = R::CHANNELS;
     let per_tile = tiles.offsets().len() * channels;
-    let mut g: Vec<f64> = chains
-        .iter()
-        .flat_map(|c| c.unscaled.iter().map(move |v| v / sweeps as f64))
-        .collect();
+    // Sized once: a vector grown by doubling would hold up to twice this.
+    let mut g: Vec<f64> = Vec::with_capacity(tiles.count() * per_tile);
+    // Each tile's sums are let go once read.
+    for tile in sums {
+        g.extend(tile.as_ref().iter().map(|v| v / sweeps as f64));
+    }
     for (s, tile) in g.chunks_mut(per_tile).enumerate() {
         if tile.iter().all(|&v| v == 0.0) {
             for (o, pixel) in tiles.pixels(s) {

@@ -40,7 +40,7 @@ use alloc::vec;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
-use super::tile::TileChain;
+use super::tile::Draws;
 use crate::film::Film;
 use crate::oracle::Radiance;
 use crate::tiles::Tiles;
@@ -58,7 +58,7 @@ const KNOWN_SAMPLES: u64 = 16;
 /// The uniform samples of every pixel (the coin-chosen large steps of the
 /// tiles holding it, its regularizer paths), summed as they are drawn: per
 /// pixel the radiance per channel, the squared channel mean and the channel
-/// mean of the odd-numbered large steps ([`TileChain::odd_steps`]). Their
+/// mean of the odd-numbered large steps ([`Draws::odd_steps`]). Their
 /// counts are the tiles'. Kept per pixel rather than per tile pixel, they
 /// take a fifth of the room (a cross); a tile adds to the rows it reaches,
 /// so a sweep steps its tile rows in phases whose rows reach disjoint pixel
@@ -181,12 +181,8 @@ pub(super) struct LargeSteps {
 impl LargeSteps {
     /// The samples of every pixel, and the regularizer `Î` (per channel,
     /// see [`pooled_means`]).
-    pub fn gather<R: Radiance>(
-        tiles: &Tiles,
-        chains: &[TileChain<R>],
-        pooled: &Samples,
-    ) -> (Self, Film) {
-        let channels = R::CHANNELS;
+    pub fn gather(tiles: &Tiles, draws: &[Draws], pooled: &Samples) -> (Self, Film) {
+        let channels = pooled.channels;
         let n = tiles.count();
         let mut sums = Film::new(tiles.resolution(), channels);
         let mut samples = Self {
@@ -196,10 +192,10 @@ impl LargeSteps {
         };
         for (j, pixel) in sums.data_mut().chunks_mut(channels).enumerate() {
             for (s, _) in tiles.tiles_of(j) {
-                samples.counts[j] += chains[s].large_steps;
+                samples.counts[j] += draws[s].large_steps;
             }
             // The centre pixel's plain MC paths.
-            samples.counts[j] += chains[j].centre_paths;
+            samples.counts[j] += draws[j].centre_paths;
             let (radiance, squares, _) = pooled.of(j);
             pixel.copy_from_slice(radiance);
             samples.squares[j] = squares;
@@ -222,17 +218,12 @@ pub(super) struct Halves {
 }
 
 impl Halves {
-    pub fn gather<R: Radiance>(
-        tiles: &Tiles,
-        chains: &[TileChain<R>],
-        pooled: &Samples,
-        all: &LargeSteps,
-    ) -> Self {
+    pub fn gather(tiles: &Tiles, draws: &[Draws], pooled: &Samples, all: &LargeSteps) -> Self {
         let n = tiles.count();
         let (mut odd_counts, mut odd_sums) = (vec![0u64; n], vec![0.0; n]);
         for (j, (count, sum)) in odd_counts.iter_mut().zip(&mut odd_sums).enumerate() {
             for (s, _) in tiles.tiles_of(j) {
-                *count += chains[s].odd_steps;
+                *count += draws[s].odd_steps;
             }
             *sum = pooled.of(j).2;
         }

@@ -6,10 +6,11 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
+use super::light::LightTracing;
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
 use super::regularizer::Samples;
-use super::tile::{Context, LightTracing, Row, Start, TileChain, TileSplat, Waking};
+use super::tile::{Context, Row, Start, TileChain, TileSplat, Waking};
 use super::{StratifiedExtras, StratifiedSettings, StratifiedStats};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;
@@ -90,7 +91,7 @@ where
         });
         let mut traced = Traced::default();
         for mut row in rows {
-            self.light.add_remainder(&mut row.splats);
+            self.light.add_remainder(ctx.tiles, &mut row.splats);
             traced += row.sum;
         }
         self.light.remainder_paths += u64::from(paths);
@@ -328,7 +329,7 @@ where
             });
             let mut traced = SweepTraces::default();
             for mut row in rows {
-                self.light.add(&mut row.splats);
+                self.light.add(ctx.tiles, &mut row.splats);
                 self.chain_stats.merge(&row.stats);
                 traced = traced + row.sum;
             }

@@ -13,7 +13,6 @@ use serde::{Deserialize, Serialize};
 use crate::rng::Pcg32;
 
 use crate::chain::{Chain, ChainStats, Target, Traced, Weights};
-use crate::film::Film;
 use crate::mutate::MutationParams;
 use crate::mutate::SmallStep;
 use crate::oracle::{
@@ -49,95 +48,8 @@ pub(super) struct TileState<R> {
     /// `T_s`, the largest importance of the values (eq. 9).
     pub target: f64,
     /// The splats of those traces (light tracing), which the tile target
-    /// does not count (see [`LightTracing`]).
+    /// does not count (see [`LightTracing`](super::light::LightTracing)).
     pub splats: Vec<TileSplat<R>>,
-}
-
-/// Light tracing in stratified MCMC. Its splats land anywhere on the film,
-/// so it "cannot be stratified in the image space" (Gruson et al. 2020, sec. 5): the
-/// tile chains value and accumulate only the radiance at their own pixels,
-/// and the splats are estimated apart, by Monte Carlo, from the traces that
-/// are independent uniform samples: the coin-chosen large steps (each a
-/// uniform sample of every pixel of its tile) and the regularizer's paths.
-/// Pixel `p` is such a sample `m_p = p_large · |tiles ∋ p| + regularizer
-/// paths` times per sweep in expectation, whatever the paths found, so by
-/// Wald's identity each splat from `p`, weighted `1 / m_p`, summed over the
-/// sweeps and divided by their number, is an unbiased estimate of the light
-/// tracing image for one camera path per pixel; it is added to the
-/// reconstructed image.
-///
-/// A sample budget's remainder after its last whole sweep is spent on `e`
-/// more regularizer paths at every tile's centre
-/// ([`StratifiedSettings`](super::StratifiedSettings)); their splats,
-/// summed and divided by `e`, are a second unbiased estimate of the same
-/// image, and the two are mixed with one constant weight (so the mix is
-/// unbiased too), the extra paths' share of the samples.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub(super) struct LightTracing {
-    /// `1 / m_p` per pixel (0 where `m_p = 0`).
-    pub weights: Vec<f64>,
-    /// The weighted splats so far.
-    pub sums: Film,
-    /// The splats of the remainder's paths, and how many each tile traced.
-    pub remainder: Film,
-    pub remainder_paths: u64,
-}
-
-impl LightTracing {
-    pub fn new(tiles: &Tiles, p_large: f64, regularizer_paths: u32, channels: usize) -> Self {
-        let weights = (0..tiles.count())
-            .map(|p| {
-                let m = p_large * tiles.tiles_of(p).count() as f64 + regularizer_paths as f64;
-                if m > 0.0 { 1.0 / m } else { 0.0 }
-            })
-            .collect();
-        Self {
-            weights,
-            sums: Film::new(tiles.resolution(), channels),
-            remainder: Film::new(tiles.resolution(), channels),
-            remainder_paths: 0,
-        }
-    }
-
-    /// Adds the splats of the remainder's paths (emptying the list).
-    pub fn add_remainder<R: Radiance>(&mut self, sampled: &mut Vec<TileSplat<R>>) {
-        let resolution = self.remainder.resolution();
-        for s in sampled.drain(..) {
-            let pixel = resolution.pixel_index(s.splat.film);
-            self.remainder.add(pixel, 1.0, &s.splat.radiance);
-        }
-    }
-
-    /// Adds the light-tracing image after `sweeps` sweeps to `film`.
-    pub fn add_to(&self, film: &mut Film, sweeps: u64) {
-        let sweeps = sweeps.max(1) as f64;
-        if self.remainder_paths == 0 {
-            film.add_scaled(&self.sums, 1.0 / sweeps);
-            return;
-        }
-        let per_sweep = self
-            .weights
-            .iter()
-            .map(|w| if *w > 0.0 { 1.0 / w } else { 0.0 });
-        let mean = per_sweep.sum::<f64>() / self.weights.len().max(1) as f64;
-        let extra = self.remainder_paths as f64;
-        let share = extra / (sweeps * mean + extra);
-        film.add_scaled(&self.sums, (1.0 - share) / sweeps);
-        film.add_scaled(&self.remainder, share / extra);
-    }
-
-    /// Adds a tile chain's sampled splats (emptying its list).
-    pub fn add<R: Radiance>(&mut self, sampled: &mut Vec<TileSplat<R>>) {
-        let resolution = self.sums.resolution();
-        for s in sampled.drain(..) {
-            let weight = self.weights[s.source as usize];
-            self.sums.add(
-                resolution.pixel_index(s.splat.film),
-                weight,
-                &s.splat.radiance,
-            );
-        }
-    }
 }
 
 /// Where a tile trace's splats go: each is checked (a bad one, or one too
@@ -202,6 +114,19 @@ pub(super) struct TileChain<R> {
     pub decisions: Pcg32,
     /// `N G_s(k)` per offset and channel.
     pub unscaled: Box<[f64]>,
+    /// Its uniform samples.
+    pub draws: Draws,
+    /// Their sampler.
+    mc: IndependentSampler,
+    pub start: Start,
+    /// A global chain's state was installed and must be evaluated.
+    pub pending: bool,
+}
+
+/// How many uniform samples a tile drew (each a sample of every pixel of
+/// the tile, summed into the pixels' [`Samples`](super::regularizer::Samples)).
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
+pub(super) struct Draws {
     /// Coin-chosen large steps: the regularizer's samples.
     pub large_steps: u64,
     /// The odd-numbered coin-chosen large steps (the first is number 0):
@@ -210,13 +135,8 @@ pub(super) struct TileChain<R> {
     pub odd_steps: u64,
     /// Plain MC paths traced at the tile's centre pixel for the regularizer
     /// ([`StratifiedSettings::regularizer_paths`](super::StratifiedSettings)),
-    /// summed into the pixel's [`Samples`](super::regularizer::Samples).
+    /// which sample that pixel alone.
     pub centre_paths: u64,
-    /// Their sampler.
-    mc: IndependentSampler,
-    pub start: Start,
-    /// A global chain's state was installed and must be evaluated.
-    pub pending: bool,
 }
 
 /// The working form of a tile chain: a primary sample unpacked, the current
@@ -259,7 +179,7 @@ impl<R: Radiance> Waking<R> {
 /// Where the steps of one row of tiles go: the uniform samples of the pixel
 /// rows they reach, the chains' counters, and the splats of the uniform
 /// samples (coin-chosen large steps, regularizer paths) in tile order, for
-/// [`LightTracing`].
+/// [`LightTracing`](super::light::LightTracing).
 pub(super) struct Row<'a, R> {
     pub samples: SampleRows<'a>,
     pub stats: ChainStats,
@@ -441,9 +361,7 @@ impl<R: Radiance> TileChain<R> {
             target: 0.0,
             decisions: rng::stream(seed, Domain::Tile, (tile + tiles) as u64),
             unscaled: vec![0.0; offsets * R::CHANNELS].into_boxed_slice(),
-            large_steps: 0,
-            odd_steps: 0,
-            centre_paths: 0,
+            draws: Draws::default(),
             mc: IndependentSampler::new(rng::stream(seed, Domain::Tile, (tile + 2 * tiles) as u64)),
             start: Start::None,
             pending: false,
@@ -502,13 +420,13 @@ impl<R: Radiance> TileChain<R> {
         );
         if chosen {
             let proposed = work.chain.last_proposal();
-            let odd = self.large_steps % 2 == 1;
+            let odd = self.draws.large_steps % 2 == 1;
             for (o, q) in ctx.tiles.pixels(tile) {
                 row.samples.add(q, &proposed.values[o].radiance, odd);
             }
             row.splats.extend_from_slice(&proposed.splats);
-            self.odd_steps += odd as u64;
-            self.large_steps += 1;
+            self.draws.odd_steps += odd as u64;
+            self.draws.large_steps += 1;
         }
         work.rest(self);
         if outcome.accepted && dark && self.target > 0.0 && self.start == Start::None {
@@ -542,7 +460,7 @@ impl<R: Radiance> TileChain<R> {
             invalid += bad as u64;
             row.samples.add(tile, &v.radiance, false);
         }
-        self.centre_paths += paths as u64;
+        self.draws.centre_paths += paths as u64;
         (paths as u64, invalid)
     }
 

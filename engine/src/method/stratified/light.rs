@@ -1,0 +1,136 @@
+//! Light tracing in stratified MCMC: the splats' Monte Carlo estimate.
+
+use alloc::vec::Vec;
+use serde::{Deserialize, Serialize};
+
+use super::tile::TileSplat;
+use crate::film::Film;
+use crate::oracle::Radiance;
+use crate::tiles::Tiles;
+
+/// Light tracing in stratified MCMC. Its splats land anywhere on the film,
+/// so it "cannot be stratified in the image space" (Gruson et al. 2020, sec. 5): the
+/// tile chains value and accumulate only the radiance at their own pixels,
+/// and the splats are estimated apart, by Monte Carlo, from the traces that
+/// are independent uniform samples: the coin-chosen large steps (each a
+/// uniform sample of every pixel of its tile) and the regularizer's paths.
+/// Pixel `p` is such a sample `m_p = p_large · |tiles ∋ p| + regularizer
+/// paths` times per sweep in expectation, whatever the paths found, so by
+/// Wald's identity each splat from `p`, weighted `1 / m_p`, summed over the
+/// sweeps and divided by their number, is an unbiased estimate of the light
+/// tracing image for one camera path per pixel; it is added to the
+/// reconstructed image.
+///
+/// A sample budget's remainder after its last whole sweep is spent on `e`
+/// more regularizer paths at every tile's centre
+/// ([`StratifiedSettings`](super::StratifiedSettings)); their splats,
+/// summed and divided by `e`, are a second unbiased estimate of the same
+/// image, and the two are mixed with one constant weight (so the mix is
+/// unbiased too), the extra paths' share of the samples.
+///
+/// Its films are made when the first splat arrives: a path sampler that
+/// never splats (a unidirectional one) costs nothing per pixel.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub(super) struct LightTracing {
+    /// `p_large` and the regularizer paths per sweep, of `m_p`.
+    p_large: f64,
+    regularizer_paths: u32,
+    channels: usize,
+    /// The weighted splats so far.
+    sums: Option<Film>,
+    /// The splats of the remainder's paths, and how many each tile traced.
+    remainder: Option<Film>,
+    pub remainder_paths: u64,
+}
+
+impl LightTracing {
+    pub fn new(p_large: f64, regularizer_paths: u32, channels: usize) -> Self {
+        Self {
+            p_large,
+            regularizer_paths,
+            channels,
+            sums: None,
+            remainder: None,
+            remainder_paths: 0,
+        }
+    }
+
+    /// Whether a state read from a checkpoint is this one's (made by
+    /// [`new`](Self::new) with these arguments) on `tiles`.
+    pub fn fits(&self, other: &LightTracing, tiles: &Tiles) -> bool {
+        let film_fits = |f: &Option<Film>| {
+            f.as_ref()
+                .is_none_or(|f| f.fits(tiles.resolution(), self.channels))
+        };
+        self.p_large == other.p_large
+            && self.regularizer_paths == other.regularizer_paths
+            && self.channels == other.channels
+            && film_fits(&self.sums)
+            && film_fits(&self.remainder)
+    }
+
+    /// `1 / m_p` of pixel `p` (0 where `m_p = 0`).
+    fn weight(&self, tiles: &Tiles, p: usize) -> f64 {
+        let m = self.p_large * tiles.tiles_of(p).count() as f64 + self.regularizer_paths as f64;
+        if m > 0.0 { 1.0 / m } else { 0.0 }
+    }
+
+    /// Adds the splats of the remainder's paths (emptying the list).
+    pub fn add_remainder<R: Radiance>(&mut self, tiles: &Tiles, sampled: &mut Vec<TileSplat<R>>) {
+        if sampled.is_empty() {
+            return;
+        }
+        let resolution = tiles.resolution();
+        let film = self
+            .remainder
+            .get_or_insert_with(|| Film::new(resolution, R::CHANNELS));
+        for s in sampled.drain(..) {
+            film.add(resolution.pixel_index(s.splat.film), 1.0, &s.splat.radiance);
+        }
+    }
+
+    /// Adds a row of tile chains' sampled splats (emptying the list).
+    pub fn add<R: Radiance>(&mut self, tiles: &Tiles, sampled: &mut Vec<TileSplat<R>>) {
+        if sampled.is_empty() {
+            return;
+        }
+        let resolution = tiles.resolution();
+        let mut sums = self
+            .sums
+            .take()
+            .unwrap_or_else(|| Film::new(resolution, R::CHANNELS));
+        for s in sampled.drain(..) {
+            let weight = self.weight(tiles, s.source as usize);
+            sums.add(
+                resolution.pixel_index(s.splat.film),
+                weight,
+                &s.splat.radiance,
+            );
+        }
+        self.sums = Some(sums);
+    }
+
+    /// Adds the light-tracing image after `sweeps` sweeps to `film`.
+    pub fn add_to(&self, tiles: &Tiles, film: &mut Film, sweeps: u64) {
+        let sweeps = sweeps.max(1) as f64;
+        if self.remainder_paths == 0 {
+            if let Some(sums) = &self.sums {
+                film.add_scaled(sums, 1.0 / sweeps);
+            }
+            return;
+        }
+        let per_sweep = (0..tiles.count()).map(|p| {
+            let w = self.weight(tiles, p);
+            if w > 0.0 { 1.0 / w } else { 0.0 }
+        });
+        let mean = per_sweep.sum::<f64>() / tiles.count().max(1) as f64;
+        let extra = self.remainder_paths as f64;
+        let share = extra / (sweeps * mean + extra);
+        if let Some(sums) = &self.sums {
+            film.add_scaled(sums, (1.0 - share) / sweeps);
+        }
+        if let Some(remainder) = &self.remainder {
+            film.add_scaled(remainder, share / extra);
+        }
+    }
+}

@@ -586,7 +586,8 @@ impl Mutator {
                 batch.restore(at.clone(), fill_normals)
             }
             (Mutator::Adaptive { state, .. }, KernelState::Adaptive(kept)) => *state = *kept,
-            _ => debug_assert!(false, "a kernel's state restored into another kind"),
+            // Checked on reading a checkpoint (`KernelState::fits`).
+            _ => {}
         }
     }
 }
@@ -599,6 +600,19 @@ impl Mutator {
 pub(crate) enum KernelState {
     Batch((Pcg32, u8)),
     Adaptive(AdaptiveState),
+}
+
+impl KernelState {
+    /// Whether it is the running state of a kernel of `small_step`'s kind.
+    pub(crate) fn fits(&self, small_step: &SmallStep) -> bool {
+        matches!(
+            (self, small_step),
+            (
+                KernelState::Batch(_),
+                SmallStep::Kelemen(_) | SmallStep::Gaussian(_)
+            ) | (KernelState::Adaptive(_), SmallStep::Adaptive(_))
+        )
+    }
 }
 
 impl Default for KernelState {

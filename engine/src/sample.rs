@@ -105,11 +105,14 @@ impl PackedSample {
         }
     }
 
-    /// Whether its streams' lengths add up to its numbers, each in `[0, 1)`
-    /// (a sample read from a checkpoint).
-    pub(crate) fn fits(&self) -> bool {
+    /// Whether a sample read from a checkpoint is sound: its streams'
+    /// lengths add up to its numbers, each in `[0, 1)`, and its kernel
+    /// state is one of `small_step`'s kind.
+    pub(crate) fn fits(&self, small_step: &SmallStep) -> bool {
         let total = self.lengths.iter().map(|&l| l as u64).sum::<u64>();
-        total == self.values.len() as u64 && self.values.iter().all(|v| (0.0..1.0).contains(v))
+        total == self.values.len() as u64
+            && self.values.iter().all(|v| (0.0..1.0).contains(v))
+            && self.kernel.fits(small_step)
     }
 
     /// Gives `self` the random stream of `other` and `other` that of
@@ -529,6 +532,71 @@ mod tests {
             let mut r = s.replay();
             assert_eq!(read_n(&mut r, 6), moved, "{k:?}: accept must keep");
         }
+    }
+
+    /// Packed at rest and woken in another sampler, a chain goes on as if it
+    /// had never slept: the same numbers read, moved and drawn (stratified
+    /// MCMC's tile chains sleep between their steps).
+    #[test]
+    fn a_packed_sample_wakes_to_the_same_chain() {
+        // One step: read a varying number of coordinates in two streams,
+        // accept when the first is below 0.6.
+        let step = |s: &mut MltSampler, i: usize| {
+            let mut p = s.propose(i % 7 == 0);
+            let mut read = read_n(&mut p, 3 + i % 5);
+            p.start_stream(2);
+            read.extend(read_n(&mut p, 1 + i % 3));
+            if read[0] < 0.6 {
+                p.accept(0.6)
+            } else {
+                p.reject(0.6)
+            }
+            read
+        };
+        for k in kernels() {
+            // Two chains woken in turn in one sampler, as a task's tiles are.
+            let mut awake: Vec<MltSampler> = (0..2)
+                .map(|c| MltSampler::new(k, stream(2, Domain::User, c)))
+                .collect();
+            let mut packed: Vec<PackedSample> = awake
+                .iter()
+                .map(|s| {
+                    let mut p = PackedSample::new(k, stream(9, Domain::User, 9));
+                    s.pack(&mut p);
+                    p
+                })
+                .collect();
+            let mut woken = MltSampler::new(k, stream(7, Domain::User, 7));
+            for i in 0..60 {
+                for (a, p) in awake.iter_mut().zip(&mut packed) {
+                    woken.unpack(p);
+                    assert_eq!(step(a, i), step(&mut woken, i), "{k:?}, step {i}");
+                    woken.pack(p);
+                }
+            }
+            assert!(packed.iter().all(|p| p.fits(&k)));
+        }
+    }
+
+    /// A packed sample read from a checkpoint is checked: lengths that do not
+    /// add up, numbers outside `[0, 1)`, another kernel's state.
+    #[test]
+    fn unsound_packed_samples_do_not_fit() {
+        let k = SmallStep::Kelemen(Kelemen::DEFAULT);
+        let mut s = MltSampler::new(k, stream(3, Domain::User, 0));
+        let mut p = s.propose(true);
+        read_n(&mut p, 5);
+        p.accept(1.0);
+        let mut packed = PackedSample::new(k, stream(0, Domain::User, 0));
+        s.pack(&mut packed);
+        assert!(packed.fits(&k));
+        assert!(!packed.fits(&SmallStep::Adaptive(Adaptive::DEFAULT)));
+        let mut long = packed.clone();
+        long.lengths[1] += 1;
+        assert!(!long.fits(&k));
+        let mut outside = packed.clone();
+        outside.values[0] = 1.0;
+        assert!(!outside.fits(&k));
     }
 
     /// A restarted sampler draws what a new one on the same stream draws.

@@ -403,7 +403,9 @@ where
         Some((position, saved)) => {
             let (chains, samples, _, _, _, _, _, light) = &saved;
             let fits = chains.len() == n
-                && chains.iter().all(|c| c.fits(offsets))
+                && chains
+                    .iter()
+                    .all(|c| c.fits(offsets, &settings.mutation.small_step))
                 && samples.fits(n, O::Radiance::CHANNELS);
             let light_fits = light.fits(&new_light(), &tiles);
             if !fits || !light_fits {

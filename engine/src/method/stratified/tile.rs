@@ -13,8 +13,7 @@ use serde::{Deserialize, Serialize};
 use crate::rng::Pcg32;
 
 use crate::chain::{Chain, ChainStats, Target, Traced, Weights};
-use crate::mutate::MutationParams;
-use crate::mutate::SmallStep;
+use crate::mutate::{MutationParams, SmallStep};
 use crate::oracle::{
     FilmPoint, PathOracle, Radiance, Resolution, Sampler, Splat, SplatSink, Temperature,
 };
@@ -99,9 +98,10 @@ pub(super) enum Start {
 /// A tile's chain at rest and its accumulators. A film holds a chain per
 /// pixel, so what a chain keeps between its steps is kept compact: the
 /// primary sample packed in one allocation ([`PackedSample`]), the current
-/// state's values, the sums in one allocation; the working form (the
+/// state's values and `G_s(k)` in one each, counters; the working form (the
 /// unpacked sample, room for a proposal) is a [`Waking`] that each task
-/// lends to its tiles in turn.
+/// lends to its tiles in turn, and the uniform samples it draws are summed
+/// per pixel ([`Samples`](super::regularizer::Samples)).
 #[derive(Serialize, Deserialize)]
 pub(super) struct TileChain<R> {
     /// The current state's primary sample.
@@ -369,14 +369,14 @@ impl<R: Radiance> TileChain<R> {
     }
 
     /// Whether a chain read from a checkpoint fits tiles of `offsets`
-    /// offsets: its sums sized so, finite and not negative, its state
-    /// sound.
-    pub fn fits(&self, offsets: usize) -> bool {
+    /// offsets mutated by `small_step`: its sums sized so, finite and not
+    /// negative, its state sound.
+    pub fn fits(&self, offsets: usize, small_step: &SmallStep) -> bool {
         self.values.len() == offsets
             && self.unscaled.len() == offsets * R::CHANNELS
             && self.unscaled.iter().all(|x| x.is_finite() && *x >= 0.0)
             && self.target.is_finite()
-            && self.sample.fits()
+            && self.sample.fits(small_step)
     }
 
     /// One Metropolis-Hastings step on `T_s` with coherent sampling (eq. 10),

@@ -542,7 +542,7 @@ mod tests {
         // One step: read a varying number of coordinates in two streams,
         // accept when the first is below 0.6.
         let step = |s: &mut MltSampler, i: usize| {
-            let mut p = s.propose(i % 7 == 0);
+            let mut p = s.propose(i.is_multiple_of(7));
             let mut read = read_n(&mut p, 3 + i % 5);
             p.start_stream(2);
             read.extend(read_n(&mut p, 1 + i % 3));
@@ -606,7 +606,7 @@ mod tests {
             let run = |s: &mut MltSampler| {
                 let mut drawn = Vec::new();
                 for i in 0..50 {
-                    let mut p = s.propose(i % 7 == 0);
+                    let mut p = s.propose(i.is_multiple_of(7));
                     drawn.extend(read_n(&mut p, 3 + i % 5));
                     if i % 3 == 0 {
                         p.reject(0.2)

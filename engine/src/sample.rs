@@ -606,7 +606,7 @@ mod tests {
             let run = |s: &mut MltSampler| {
                 let mut drawn = Vec::new();
                 for i in 0..50 {
-                    let mut p = s.propose(i.is_multiple_of(7));
+                    let mut p = s.propose(i % 7 == 0);
                     drawn.extend(read_n(&mut p, 3 + i % 5));
                     if i % 3 == 0 {
                         p.reject(0.2)

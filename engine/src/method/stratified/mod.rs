@@ -67,9 +67,9 @@
 //! | `light.rs` | light tracing's splats, estimated apart by Monte Carlo |
 //! | `local.rs` | local replica exchange and state borrowing |
 //! | `init.rs` | the global chains' initialization |
-//! | `regularizer.rs` | the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the total it anchors |
+//! | `regularizer.rs` | every pixel's uniform samples (summed per pixel as they are drawn), the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the total it anchors |
 //! | `reconstruction.rs` | the normalizations, the image, the choice of `α`, the time reserved for them |
-//! | `sweeps.rs` | the state between rounds, a sweep (steps, exchanges from `exchange_after` on), what sweeps cost, the budget's remainder, the checkpoint, the output |
+//! | `sweeps.rs` | the state between rounds, a sweep (steps by tile rows in phases, exchanges from `exchange_after` on), what sweeps cost, the budget's remainder, the checkpoint, the output |
 //! | this file | settings, counters, a fresh start or a resumed state, the smallest budget |
 
 mod init;

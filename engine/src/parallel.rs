@@ -137,6 +137,24 @@ pub(crate) fn map_each<T: Send, U: Send>(
     items.iter_mut().map(f).collect()
 }
 
+/// Like [`map_each`], with scratch made by `init` once per task.
+pub(crate) fn map_each_init<T: Send, S, U: Send>(
+    items: &mut [T],
+    init: impl Fn() -> S + Sync + Send,
+    f: impl Fn(&mut S, &mut T) -> U + Sync + Send,
+) -> Vec<U> {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        items.par_iter_mut().map_init(init, f).collect()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        let mut scratch = init();
+        items.iter_mut().map(|item| f(&mut scratch, item)).collect()
+    }
+}
+
 /// `[f(0), f(1), ..., f(n - 1)]`.
 pub(crate) fn map_indices<U: Send>(n: usize, f: impl Fn(usize) -> U + Sync + Send) -> Vec<U> {
     #[cfg(feature = "parallel")]

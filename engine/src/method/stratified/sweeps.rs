@@ -138,11 +138,11 @@ where
                     (y, chains, row)
                 })
                 .collect();
-            let sums = parallel::map_each(&mut rows, |(y, chains, row)| {
-                let mut work = Waking::new(ctx.tiles, ctx.small_step);
+            let work = || Waking::new(ctx.tiles, ctx.small_step);
+            let sums = parallel::map_each_init(&mut rows, work, |work, (y, chains, row)| {
                 let tiles = chains.iter_mut().enumerate();
                 tiles.fold(C::default(), |sum, (x, chain)| {
-                    sum + f(&mut work, chain, *y * width + x, row)
+                    sum + f(work, chain, *y * width + x, row)
                 })
             });
             for ((y, _, row), sum) in rows.into_iter().zip(sums) {

@@ -212,8 +212,8 @@ pub const BATCH_LEN: usize = 32;
 /// dependent floating-point operations; drawing 32 at a time lets the
 /// processor overlap them (and Kelemen's to use vector instructions) instead
 /// of waiting on each. It remembers the random stream it was last filled
-/// from, so that a chain at rest can forget the offsets and draw them again
-/// ([`KernelState`]).
+/// from, so that a chain at rest (stratified MCMC's tile chains) can forget
+/// the offsets and draw them again.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct OffsetBatch<T = f64> {
     values: [T; BATCH_LEN],

@@ -139,6 +139,16 @@ pub(super) struct Draws {
     pub centre_paths: u64,
 }
 
+impl Draws {
+    /// Whether counts read from a checkpoint can be: the odd steps among
+    /// the large ones, and every count below `2^48` (a render could not
+    /// reach it; the pixels' sums over their tiles then cannot overflow).
+    fn fits(&self) -> bool {
+        const MOST: u64 = 1 << 48;
+        self.odd_steps <= self.large_steps && self.large_steps < MOST && self.centre_paths < MOST
+    }
+}
+
 /// The working form of a tile chain: a primary sample unpacked, the current
 /// state and room for a proposal. A task makes one and wakes each of its
 /// tiles' chains in it in turn ([`TileChain::step`]).
@@ -377,6 +387,7 @@ impl<R: Radiance> TileChain<R> {
             && self.unscaled.iter().all(|x| x.is_finite() && *x >= 0.0)
             && self.target.is_finite()
             && self.sample.fits(small_step)
+            && self.draws.fits()
     }
 
     /// One Metropolis-Hastings step on `T_s` with coherent sampling (eq. 10),

@@ -4,7 +4,12 @@
 //! BVH's order once at build time, in obvhs' intersection layout for the
 //! inner loop and as their original vertices and index for the closest hit's
 //! barycentrics, so neither needs an indirection (through obvhs' index they
-//! cost 5-8 % of the closest-hit rate on a 1M-triangle mesh).
+//! cost 5-8 % of the closest-hit rate on a 1M-triangle mesh). On processors
+//! with AVX2 the traversal tests a node's eight children at once ([`avx2`]:
+//! the same hits, 15-29 % faster).
+
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 
 use std::time::Duration;
 
@@ -27,6 +32,8 @@ pub struct BvhIntersector {
     /// Triangles in BVH order as given: for the closest hit's index and
     /// barycentrics.
     given: Vec<Given>,
+    /// Whether the processor has AVX2, for the node test of [`avx2`].
+    avx2: bool,
 }
 
 /// A triangle as given to [`BvhIntersector::new`]: its vertices and index.
@@ -68,6 +75,10 @@ impl BvhIntersector {
             bvh,
             ordered,
             given,
+            #[cfg(target_arch = "x86_64")]
+            avx2: std::is_x86_feature_detected!("avx2"),
+            #[cfg(not(target_arch = "x86_64"))]
+            avx2: false,
         }
     }
 
@@ -85,9 +96,21 @@ impl Intersector for BvhIntersector {
     fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
         let bvh = self.bvh.as_ref()?;
         let mut hit = RayHit::none();
-        if !bvh.ray_traverse(Self::obvhs_ray(ray), &mut hit, |r, i| {
-            self.ordered[i].intersect(r)
-        }) {
+        let intersect = |r: &obvhs::ray::Ray, i: usize| self.ordered[i].intersect(r);
+        let query = Self::obvhs_ray(ray);
+        #[cfg(target_arch = "x86_64")]
+        let found = if self.avx2 {
+            // SAFETY: the processor has AVX2 (detected in `new`).
+            #[allow(unsafe_code)]
+            unsafe {
+                avx2::closest_hit(bvh, query, &mut hit, intersect)
+            }
+        } else {
+            bvh.ray_traverse(query, &mut hit, intersect)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let found = bvh.ray_traverse(query, &mut hit, intersect);
+        if !found {
             return None;
         }
         let given = &self.given[hit.primitive_id as usize];
@@ -112,9 +135,18 @@ impl Intersector for BvhIntersector {
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        self.bvh.as_ref().is_some_and(|bvh| {
-            !bvh.ray_traverse_miss(Self::obvhs_ray(ray), |r, i| self.ordered[i].intersect(r))
-        })
+        let Some(bvh) = &self.bvh else {
+            return false;
+        };
+        let intersect = |r: &obvhs::ray::Ray, i: usize| self.ordered[i].intersect(r);
+        let ray = Self::obvhs_ray(ray);
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: the processor has AVX2 (detected in `new`).
+            #[allow(unsafe_code)]
+            return unsafe { !avx2::misses(bvh, ray, intersect) };
+        }
+        !bvh.ray_traverse_miss(ray, intersect)
     }
 }
 
@@ -157,6 +189,58 @@ fn closest_barycentrics(p: Vec3, t: &[Vec3; 3]) -> glam::Vec2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The AVX2 node test finds exactly obvhs's hits: the same triangle at
+    /// the same distance, and the same occlusion, ray by ray.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_avx2_traversal_finds_obvhs_hits() {
+        if !std::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        // A bumpy sheet of small triangles and rays from all around it.
+        let mut tris = Vec::new();
+        for i in 0..60 {
+            for j in 0..60 {
+                let z = |a: i32, b: i32| ((a * 13 + b * 7) % 11) as f32 * 0.01;
+                let p = |a: i32, b: i32| Vec3::new(a as f32 * 0.05, b as f32 * 0.05, z(a, b));
+                tris.push([p(i, j), p(i + 1, j), p(i, j + 1)]);
+                tris.push([p(i + 1, j), p(i + 1, j + 1), p(i, j + 1)]);
+            }
+        }
+        let bvh = BvhIntersector::new(&tris);
+        let cw = bvh.bvh.as_ref().unwrap();
+        let intersect = |r: &obvhs::ray::Ray, i: usize| bvh.ordered[i].intersect(r);
+        let (mut hits, mut occluded) = (0, 0);
+        for k in 0..4000u32 {
+            let f = |m: u32, s: f32| ((k.wrapping_mul(m) % 1000) as f32 / 1000.0 - 0.5) * s;
+            let origin = Vec3::new(1.5 + f(7919, 4.0), 1.5 + f(104729, 4.0), f(1299709, 3.0));
+            let target = Vec3::new(1.5 + f(15485863, 3.0), 1.5 + f(32452843, 3.0), 0.05);
+            let mut ray = Ray::new(origin, (target - origin).normalize());
+            ray.t_max = 1.0 + (k % 5) as f32;
+            let query = BvhIntersector::obvhs_ray(&ray);
+            let (mut a, mut b) = (RayHit::none(), RayHit::none());
+            // SAFETY: the processor has AVX2 (checked above).
+            #[allow(unsafe_code)]
+            let found = unsafe { avx2::closest_hit(cw, query, &mut a, intersect) };
+            assert_eq!(found, cw.ray_traverse(query, &mut b, intersect), "ray {k}");
+            assert_eq!(
+                (a.primitive_id, a.t.to_bits()),
+                (b.primitive_id, b.t.to_bits())
+            );
+            // SAFETY: as above.
+            #[allow(unsafe_code)]
+            let missed = unsafe { avx2::misses(cw, query, intersect) };
+            assert_eq!(missed, cw.ray_traverse_miss(query, intersect), "ray {k}");
+            hits += found as u32;
+            occluded += !missed as u32;
+        }
+        // Both outcomes are common.
+        assert!(
+            hits > 500 && hits < 3500 && occluded > 500,
+            "{hits} {occluded}"
+        );
+    }
 
     #[test]
     fn bvh_agrees_with_brute_force() {

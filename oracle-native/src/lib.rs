@@ -2,6 +2,11 @@
 //! contract — the default ray backend and the reference for how an oracle
 //! draws every random decision from the engine's sampler.
 
+// One reviewed exception, `#[allow(unsafe_code)]` with a SAFETY comment at
+// each call: the BVH traversal's AVX2 node test, called once the processor
+// is known to have AVX2 (`bvh`).
+#![deny(unsafe_code)]
+
 pub mod bidirectional;
 pub mod builtin;
 pub mod bvh;

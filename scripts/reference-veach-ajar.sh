@@ -5,10 +5,11 @@
 # their mean (equal weights). Hours of work: run it in the background, niced,
 # and again later; finished chunks are skipped, a chunk in progress
 # checkpoints every 600 s and resumes while the checkpoint format is
-# unchanged. Needs `cargo build --release` first.
+# unchanged. Needs `cargo build --release` first (or STRATA_BIN: a strata
+# binary kept apart, so that rebuilding meanwhile does not swap it).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
-bin="$root/target/release/strata"
+bin="${STRATA_BIN:-$root/target/release/strata}"
 scene="${STRATA_SCENES:-$root/../shared/scenes}/veach-ajar/scene.pbrt"
 mkdir -p "$root/out/reference" && cd "$root/out/reference"
 for seed in $(seq 5000 5999); do

@@ -126,14 +126,20 @@ pub struct PathSample<R> {
     pub radiance: R,
     /// Oracle-defined flags.
     pub flags: PathFlags,
+    /// The part of `radiance` that is emission seen directly: `L_e` where
+    /// the camera ray first lands, or the environment it escapes to (the
+    /// paths of one segment). Filled in by an oracle that
+    /// [separates it](PathOracle::separates_emission), zero otherwise.
+    pub emission: R,
 }
 
-impl<R> PathSample<R> {
-    /// A sample with no flags.
+impl<R: Default> PathSample<R> {
+    /// A sample with no flags and no emission told apart.
     pub fn new(radiance: R) -> Self {
         Self {
             radiance,
             flags: PathFlags::NONE,
+            emission: R::default(),
         }
     }
 }
@@ -200,6 +206,9 @@ pub trait Radiance:
             .map(|i| self.channel(i))
             .fold(0.0, f32::max)
     }
+    /// `self - part`, channel by channel, at least 0 (rounding cannot
+    /// make a channel negative).
+    fn without(self, part: Self) -> Self;
     /// Finite and non-negative in every channel.
     fn is_valid(&self) -> bool {
         (0..Self::CHANNELS).all(|i| {
@@ -216,6 +225,9 @@ impl Radiance for f32 {
     }
     fn luminance(&self) -> f32 {
         *self
+    }
+    fn without(self, part: f32) -> f32 {
+        (self - part).max(0.0)
     }
 }
 
@@ -240,6 +252,9 @@ impl Radiance for Rgb {
     }
     fn luminance(&self) -> f32 {
         0.2126 * self.0[0] + 0.7152 * self.0[1] + 0.0722 * self.0[2]
+    }
+    fn without(self, part: Rgb) -> Rgb {
+        Rgb([0, 1, 2].map(|i| (self.0[i] - part.0[i]).max(0.0)))
     }
 }
 
@@ -314,6 +329,27 @@ pub trait PathOracle: Sync {
     /// An oracle that never splats keeps the default, 0.
     fn splats_per_path(&self) -> f64 {
         0.0
+    }
+
+    /// Whether [`trace`](Self::trace) tells apart the emission its camera ray
+    /// sees directly ([`PathSample::emission`]) and [`emission`](Self::emission)
+    /// traces it alone. Stratified MCMC then leaves it out of its tile
+    /// chains and estimates it with camera rays of its own
+    /// ([`StratifiedSettings::emission_rays`](crate::method::StratifiedSettings::emission_rays)).
+    /// The default: false.
+    fn separates_emission(&self) -> bool {
+        false
+    }
+
+    /// The emission seen directly through `film`: what
+    /// [`trace`](Self::trace) would put in [`PathSample::emission`] for the
+    /// same film point and numbers (the camera's numbers drawn from
+    /// `sampler`'s stream 0 as `trace` draws them), without tracing the rest
+    /// of the path. Called only when [`separates_emission`](Self::separates_emission)
+    /// says so; the default returns zero. Must be as pure as `trace`.
+    fn emission<S: Sampler + ?Sized>(&self, film: FilmPoint, sampler: &mut S) -> Self::Radiance {
+        let _ = (film, sampler);
+        Self::Radiance::default()
     }
 }
 

@@ -166,6 +166,7 @@ impl<R: Radiance> Evaluated<R> {
                 let sample = PathSample {
                     radiance: s.radiance,
                     flags: self.sample.flags,
+                    emission: R::default(),
                 };
                 value += importance.importance(&sample, s.film);
             }

@@ -144,12 +144,33 @@ impl<I: Intersector> PathTracer<I> {
         &self.accel
     }
 
+    /// The emission the camera ray through `film` sees directly: `L_e` of
+    /// the emitter it lands on (front side), or the environment it escapes
+    /// to. The pinhole camera draws no numbers.
+    fn seen_emission(&self, film: FilmPoint) -> Vec3 {
+        let scene = &self.scene;
+        let (origin, direction) = scene.camera.ray(film.x, film.y);
+        let ray = Ray::new(origin, direction);
+        let Some(hit) = self.accel.closest_hit(&ray) else {
+            return scene.environment.unwrap_or(Vec3::ZERO);
+        };
+        let tri = hit.triangle as usize;
+        let light = scene.light_of[tri];
+        if light != NO_LIGHT && scene.front[tri].dot(-ray.direction.normalize()) > 0.0 {
+            scene.lights[light as usize].radiance
+        } else {
+            Vec3::ZERO
+        }
+    }
+
+    /// A camera path's radiance, flags and the emission its camera ray saw
+    /// directly (a part of the radiance).
     fn radiance<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,
         sampler: &mut S,
         temperature: f32,
-    ) -> (Vec3, PathFlags) {
+    ) -> (Vec3, PathFlags, Vec3) {
         let scene = &self.scene;
         let floor = self.regularization.map_or(0.0, |r| r.floor());
         let (origin, direction) = scene.camera.ray(film.x, film.y);
@@ -157,6 +178,7 @@ impl<I: Intersector> PathTracer<I> {
         let mut beta = Vec3::ONE;
         let mut radiance = Vec3::ZERO;
         let mut flags = PathFlags::NONE;
+        let mut seen = Vec3::ZERO;
         let mut specular_bounce = true;
         let mut previous_pdf = 0.0f32;
         let mut previous_point = origin;
@@ -170,6 +192,9 @@ impl<I: Intersector> PathTracer<I> {
             let Some(hit) = self.accel.closest_hit(&ray) else {
                 if let Some(env) = scene.environment {
                     radiance += beta * env;
+                    if depth == 0 {
+                        seen = env;
+                    }
                 }
                 break;
             };
@@ -183,6 +208,7 @@ impl<I: Intersector> PathTracer<I> {
                 let emitted = scene.lights[light as usize].radiance;
                 if depth == 0 {
                     flags.0 |= DIRECT_EMITTER.0;
+                    seen = emitted;
                 }
                 let weight = if specular_bounce {
                     1.0
@@ -255,7 +281,7 @@ impl<I: Intersector> PathTracer<I> {
             }
             ray = Ray::new(offset(p, n_geometric, wi_world), wi_world);
         }
-        (radiance, flags)
+        (radiance, flags, seen)
     }
 }
 
@@ -284,6 +310,17 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
         }
     }
 
+    /// Unidirectional paths tell apart the emission their camera ray sees
+    /// (bidirectional ones weigh it against light tracing's `t = 1`
+    /// strategy, so it is not the camera ray's alone).
+    fn separates_emission(&self) -> bool {
+        self.sampler == PathSampler::Unidirectional
+    }
+
+    fn emission<S: Sampler + ?Sized>(&self, film: FilmPoint, _sampler: &mut S) -> Rgb {
+        Rgb(self.seen_emission(film).to_array())
+    }
+
     fn trace<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,
@@ -291,29 +328,27 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
         temperature: Temperature,
         splats: &mut dyn SplatSink<Rgb>,
     ) -> PathSample<Rgb> {
-        let (l, flags) = match self.sampler {
-            PathSampler::Unidirectional => self.radiance(film, sampler, temperature.0),
-            PathSampler::Bidirectional => {
-                self.bidirectional(film, sampler, temperature.0, splats, Strategies::All)
-            }
-            PathSampler::Multiplexed => self.bidirectional(
-                film,
-                sampler,
-                temperature.0,
-                splats,
-                Strategies::Multiplexed,
-            ),
-            PathSampler::Strategy { light, camera } => {
-                let one = Strategies::One {
-                    light: light as usize,
-                    camera: camera as usize,
+        let strategies = match self.sampler {
+            PathSampler::Unidirectional => {
+                let (l, flags, seen) = self.radiance(film, sampler, temperature.0);
+                return PathSample {
+                    radiance: Rgb(l.to_array()),
+                    flags,
+                    emission: Rgb(seen.to_array()),
                 };
-                self.bidirectional(film, sampler, temperature.0, splats, one)
             }
+            PathSampler::Bidirectional => Strategies::All,
+            PathSampler::Multiplexed => Strategies::Multiplexed,
+            PathSampler::Strategy { light, camera } => Strategies::One {
+                light: light as usize,
+                camera: camera as usize,
+            },
         };
+        let (l, flags) = self.bidirectional(film, sampler, temperature.0, splats, strategies);
         PathSample {
             radiance: Rgb(l.to_array()),
             flags,
+            emission: Rgb::BLACK,
         }
     }
 }

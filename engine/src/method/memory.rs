@@ -87,9 +87,16 @@ impl Method {
                     }
                 };
                 let per_tile_pixel = TILE_PIXEL + splats * queued / 100;
-                // Light tracing's two films, made at the first splat.
+                // Light tracing's two films, made at the first splat; the
+                // emission seen directly's (counted whether or not the
+                // oracle separates it).
                 let light = if splats > 0 { 2 * film } else { 0 };
-                counted + light + pixels * (TILE_CHAIN + tile * per_tile_pixel) + workers * CHAIN
+                let emission = if s.emission_rays > 0 { film } else { 0 };
+                counted
+                    + light
+                    + emission
+                    + pixels * (TILE_CHAIN + tile * per_tile_pixel)
+                    + workers * CHAIN
             }
             Method::Erpt(s) => {
                 // A block's start paths and a wave's proposals and states,

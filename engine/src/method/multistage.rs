@@ -214,6 +214,12 @@ impl<R: Radiance> Radiance for Probed<R> {
     fn max_channel(&self) -> f32 {
         self.radiance.max_channel()
     }
+    fn without(self, part: Self) -> Self {
+        Self {
+            radiance: self.radiance.without(part.radiance),
+            deviation: (self.deviation - part.deviation).max(0.0),
+        }
+    }
 }
 
 /// The oracle with its radiance [`Probed`] against `estimate` (luminance per pixel).
@@ -242,6 +248,7 @@ impl<O: PathOracle> PathOracle for ProbeOracle<'_, O> {
         PathSample {
             radiance: self.probed(film, s.radiance),
             flags: s.flags,
+            emission: Default::default(),
         }
     }
 }
@@ -319,6 +326,7 @@ where
                 let inner = PathSample {
                     radiance: sample.radiance.radiance,
                     flags: sample.flags,
+                    emission: Default::default(),
                 };
                 job.importance.importance(&inner, film) * noise[resolution.pixel_index(film)]
                     / regions.at(film)

@@ -176,6 +176,12 @@ const STRATIFIED: &[Setting] = &[
         4096,
         "plain MC paths per pixel traced for the regularizer alone",
     ),
+    whole(
+        "emission_rays",
+        0,
+        4096,
+        "camera rays per pixel and sweep for the emission seen directly (0: the tile chains keep it)",
+    ),
     LARGE_STEP,
     SMALL_STEP,
     STEP_MIN,
@@ -267,6 +273,7 @@ impl Method {
             }
             (Method::Stratified(s), "fallback_sigmas") => number(s.fallback_sigmas.unwrap_or(0.0)),
             (Method::Stratified(s), "regularizer_paths") => number(s.regularizer_paths.into()),
+            (Method::Stratified(s), "emission_rays") => number(s.emission_rays.into()),
             (Method::Stratified(s), _) => mutation_get(&s.mutation, name),
             (Method::Erpt(s), "chain_length") => number(s.chain_length.into()),
             (Method::Erpt(s), "chains_per_path") => number(s.chains_per_path),
@@ -331,6 +338,7 @@ impl Method {
             (Method::Stratified(s), "cross_validate_alpha") => s.cross_validate_alpha = on,
             (Method::Stratified(s), "fallback_sigmas") => s.fallback_sigmas = on.then_some(value),
             (Method::Stratified(s), "regularizer_paths") => s.regularizer_paths = n as u32,
+            (Method::Stratified(s), "emission_rays") => s.emission_rays = n as u32,
             (Method::Stratified(s), _) => mutation_set(&mut s.mutation, name, value)?,
             (Method::Erpt(s), "chain_length") => s.chain_length = n as u32,
             (Method::Erpt(s), "chains_per_path") => s.chains_per_path = value,

@@ -72,6 +72,7 @@
 //! | `sweeps.rs` | the state between rounds, a sweep (steps by tile rows in phases, exchanges from `exchange_after` on), what sweeps cost, the budget's remainder, the checkpoint, the output |
 //! | this file | settings, counters, a fresh start or a resumed state, the smallest budget |
 
+mod emission;
 mod init;
 mod light;
 mod local;
@@ -83,6 +84,7 @@ mod tile;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
+use self::emission::SeenEmission;
 use self::init::initialize;
 use self::light::LightTracing;
 use self::reconstruction::reserve_reconstruction;
@@ -173,6 +175,9 @@ impl Default for Initialization {
 /// The default of [`StratifiedSettings::exchange_after`].
 const EXCHANGE_AFTER: u32 = 8;
 
+/// The default of [`StratifiedSettings::emission_rays`].
+const EMISSION_RAYS: u32 = 4;
+
 /// Settings of stratified MCMC. The budget counts every path traced
 /// (initialization, tile steps and exchanges); a sample budget is turned
 /// into the nearest whole number of sweeps (at least one), each at the cost
@@ -245,6 +250,12 @@ pub struct StratifiedSettings {
     /// one absolute anchor, and its noise is what limits the image on
     /// veach-ajar (docs/RESULTS.md).
     pub regularizer_paths: u32,
+    /// Camera rays per pixel and sweep for the emission seen directly, when
+    /// the oracle [separates it](crate::oracle::PathOracle::separates_emission)
+    /// (4 by default; 0: the tile chains keep it, as in Gruson et al. 2020).
+    /// Ours: tiles straddling an emitter's edge have bimodal targets, and
+    /// one ray costs a fraction of a path (see `emission.rs`).
+    pub emission_rays: u32,
 }
 
 impl Default for StratifiedSettings {
@@ -263,6 +274,7 @@ impl Default for StratifiedSettings {
             fallback_sigmas: Some(3.0),
             anchor_total: true,
             regularizer_paths: 0,
+            emission_rays: EMISSION_RAYS,
         }
     }
 }
@@ -341,6 +353,10 @@ pub struct StratifiedStats {
     /// Pixels whose large steps all saw the same radiance (an emitter or a
     /// constant environment seen directly) and took it.
     pub known_pixels: u64,
+    /// Camera rays traced for the emission seen directly
+    /// ([`StratifiedSettings::emission_rays`]; not paths, not counted in
+    /// the budget).
+    pub emission_rays: u64,
     /// The factor that gave the image the regularizer's total (1 without
     /// [`StratifiedSettings::anchor_total`]).
     pub total_scale: f64,
@@ -388,6 +404,7 @@ where
         tiles: &tiles,
         p_large: settings.mutation.large_step_probability,
         small_step: settings.mutation.small_step,
+        emission_apart: SeenEmission::new(job.oracle, settings.emission_rays).apart(),
     };
     let n = tiles.count();
     let offsets = tiles.offsets().len();
@@ -401,13 +418,17 @@ where
     };
     let (position, saved) = match job.resumed::<Saved<O::Radiance>>()? {
         Some((position, saved)) => {
-            let (chains, samples, _, _, _, _, _, light) = &saved;
+            let (chains, samples, _, _, _, _, _, light, emission) = &saved;
             let fits = chains.len() == n
                 && chains
                     .iter()
                     .all(|c| c.fits(offsets, &settings.mutation.small_step))
                 && samples.fits(n, O::Radiance::CHANNELS);
-            let light_fits = light.fits(&new_light(), &tiles);
+            let light_fits = light.fits(&new_light(), &tiles)
+                && emission.fits(
+                    &SeenEmission::new(job.oracle, settings.emission_rays),
+                    &tiles,
+                );
             if !fits || !light_fits {
                 return Err(checkpoint::does_not_fit());
             }
@@ -415,8 +436,17 @@ where
         }
         None => (None, start(&ctx, job, settings, new_light())?),
     };
-    let (chains, samples, chain_stats, stats, exchange_rounds, invalid, bootstrap_traces, light) =
-        saved;
+    let (
+        chains,
+        samples,
+        chain_stats,
+        stats,
+        exchange_rounds,
+        invalid,
+        bootstrap_traces,
+        light,
+        emission,
+    ) = saved;
     let mut sweeps = Sweeps {
         ctx: &ctx,
         settings,
@@ -428,6 +458,8 @@ where
         invalid,
         costs,
         light,
+        emission,
+        seed: job.seed,
         remainder: None,
     };
     sweeps.remainder = sweeps.remainder(job.budget);
@@ -498,6 +530,7 @@ where
         initialized.invalid,
         initialized.bootstrap,
         light,
+        SeenEmission::new(job.oracle, settings.emission_rays),
     ))
 }
 

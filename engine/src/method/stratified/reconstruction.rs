@@ -8,6 +8,7 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
+use super::emission::SeenEmission;
 use super::light::LightTracing;
 use super::regularizer::{Halves, LargeSteps, Samples, anchor_total, fall_back, take_known};
 use super::tile::{Draws, TileChain};
@@ -24,7 +25,8 @@ use crate::tiles::Tiles;
 
 /// The reconstructed image and what the render reports of it.
 pub(super) struct Reconstructed {
-    /// The image, light tracing's splats included.
+    /// The image of the tile chains' radiance (light tracing's splats and
+    /// the emission estimated apart are added by the caller).
     pub film: Film,
     /// The large steps' Monte Carlo estimate `Î`.
     pub regularizer: Film,
@@ -55,7 +57,6 @@ pub(super) fn reconstruct_image<R: Radiance>(
     pooled: &Samples,
     settings: &StratifiedSettings,
     sweeps: u64,
-    light: &LightTracing,
     stop: &dyn Fn() -> bool,
 ) -> Result<Reconstructed, Error> {
     let channels = R::CHANNELS;
@@ -112,7 +113,6 @@ pub(super) fn reconstruct_image<R: Radiance>(
     } else {
         1.0
     };
-    light.add_to(tiles, &mut film, sweeps);
     Ok(Reconstructed {
         film,
         regularizer,
@@ -135,6 +135,7 @@ pub(super) fn preview<R: Radiance>(
     settings: &StratifiedSettings,
     sweeps: u64,
     light: &LightTracing,
+    emission: &SeenEmission,
 ) -> Film {
     let channels = R::CHANNELS;
     let draws: Vec<Draws> = chains.iter().map(|c| c.draws).collect();
@@ -152,6 +153,7 @@ pub(super) fn preview<R: Radiance>(
         anchor_total(&mut film, &regularizer, &[]);
     }
     light.add_to(tiles, &mut film, sweeps);
+    emission.add_to(&mut film);
     film
 }
 

@@ -6,6 +6,7 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
+use super::emission::SeenEmission;
 use super::light::LightTracing;
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
@@ -25,8 +26,8 @@ use crate::tiles::Tiles;
 
 /// What a checkpoint holds of stratified MCMC: the tile chains, the
 /// pixels' uniform samples, the chains' counters, the method's counters, the exchange rounds, the invalid
-/// traces outside the chains, the bootstrap's traces and the light-tracing
-/// sums ([`Sweeps::save`]'s order).
+/// traces outside the chains, the bootstrap's traces, the light-tracing
+/// sums and the emission seen directly ([`Sweeps::save`]'s order).
 pub(super) type Saved<R> = (
     Vec<TileChain<R>>,
     Samples,
@@ -36,6 +37,7 @@ pub(super) type Saved<R> = (
     u64,
     u64,
     LightTracing,
+    SeenEmission,
 );
 
 /// Stratified MCMC's state between rounds: the tile chains and their counters.
@@ -56,6 +58,10 @@ pub(super) struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
     pub(super) costs: SweepCosts,
     /// The splats' estimate.
     pub(super) light: LightTracing,
+    /// The emission seen directly, if estimated apart.
+    pub(super) emission: SeenEmission,
+    /// The render's seed (the emission's rays).
+    pub(super) seed: u64,
     /// A sample budget's last sweep and the budget, whose remainder is
     /// traced after that sweep ([`Self::remainder`]).
     pub(super) remainder: Option<(u64, u64)>,
@@ -167,6 +173,7 @@ where
             self.invalid,
             bootstrap_traces,
             &self.light,
+            &self.emission,
         );
         checkpoint::append(&saved, out);
     }
@@ -195,15 +202,16 @@ where
             }
         }
         let chain_stats = self.chain_stats;
-        let image = reconstruct_image(
+        let mut image = reconstruct_image(
             tiles,
             core::mem::take(&mut self.chains),
             &self.samples,
             self.settings,
             self.stats.sweeps,
-            &self.light,
             stop,
         )?;
+        self.light.add_to(tiles, &mut image.film, self.stats.sweeps);
+        self.emission.add_to(&mut image.film);
         let stats = &mut self.stats;
         if let Some(alpha) = image.alpha {
             stats.alpha = alpha;
@@ -211,6 +219,7 @@ where
         stats.known_pixels = image.known_pixels;
         stats.fallback_pixels = image.fallback_pixels;
         stats.total_scale = image.total_scale;
+        stats.emission_rays = self.emission.traced * tiles.count() as u64;
         let traced = stats.initialization_samples
             + stats.tile_samples
             + stats.regularizer_samples
@@ -334,6 +343,7 @@ where
                 traced = traced + row.sum;
             }
             self.invalid += traced.regularizer.invalid;
+            self.invalid += self.emission.trace(ctx.oracle, ctx.tiles, self.seed);
             let stats = &mut self.stats;
             stats.tile_samples += traced.steps;
             stats.regularizer_samples += traced.regularizer.paths;
@@ -381,6 +391,7 @@ where
             self.settings,
             self.stats.sweeps,
             &self.light,
+            &self.emission,
         )
     }
 }

@@ -204,6 +204,9 @@ pub(super) struct Context<'a, O, I: ?Sized> {
     pub p_large: f64,
     /// The tile chains' small step.
     pub small_step: SmallStep,
+    /// Whether the emission seen directly is left out of every trace
+    /// ([`SeenEmission`](super::emission::SeenEmission) estimates it).
+    pub emission_apart: bool,
 }
 
 /// A jitter's film "resolution": the film stream read as a point of `[0, 1)²`.
@@ -215,7 +218,8 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     /// Replays the state `sampler` is positioned on (film stream read) at
-    /// `jitter` in pixel `pixel`: the radiance there and its importance, and
+    /// `jitter` in pixel `pixel`: the radiance there (without the emission
+    /// seen directly if it is estimated apart) and its importance, and
     /// whether the trace was invalid. Its splats are checked, and added to
     /// `splats` if given ([`LightTracing`]).
     pub fn trace_in<S: Sampler + ?Sized>(
@@ -236,15 +240,23 @@ where
             made: 0,
             invalid: false,
         };
+        let mut sample = self
+            .oracle
+            .trace(film, sampler, Temperature::ONE, &mut sink);
+        let mut emission_invalid = false;
+        if self.emission_apart {
+            emission_invalid = !sample.emission.is_valid();
+            if sample.radiance.is_valid() && !emission_invalid {
+                sample.radiance = sample.radiance.without(sample.emission);
+            }
+        }
         let mut e = Evaluated {
             film,
-            sample: self
-                .oracle
-                .trace(film, sampler, Temperature::ONE, &mut sink),
+            sample,
             ..Evaluated::default()
         };
         e.value(self.importance, resolution);
-        if e.invalid || sink.invalid {
+        if e.invalid || sink.invalid || emission_invalid {
             if let Some(keep) = sink.keep {
                 keep.truncate(kept);
             }

@@ -419,7 +419,8 @@ impl Method {
     /// Sets the values of a named preset: `seed-001`, the settings of
     /// Gruson et al. (2020), sec. 4 (Kelemen steps from 1/1024 to 1/32 for
     /// stratified MCMC and ERPT; for stratified MCMC also large steps with
-    /// probability 0.3 and the solver's own `α` without cross-validation).
+    /// probability 0.3, the solver's own `α` without cross-validation, and
+    /// the emission seen directly left to the tile chains).
     /// Methods the preset does not concern are left as they are.
     pub fn apply_preset(&mut self, name: &str) -> Result<(), Error> {
         let values: &[(&str, f64)] = match (name, &*self) {
@@ -427,6 +428,7 @@ impl Method {
                 ("small_step_max", 1.0 / 32.0),
                 ("large_step_probability", 0.3),
                 ("cross_validate_alpha", 0.0),
+                ("emission_rays", 0.0),
             ],
             ("seed-001", Method::Erpt(_)) => &[("small_step_max", 1.0 / 32.0)],
             ("seed-001", _) => &[],
@@ -706,6 +708,7 @@ mod tests {
         assert_eq!(s.mutation.small_step, SmallStep::Kelemen(Kelemen::SEED_001));
         assert_eq!(s.mutation.large_step_probability, 0.3);
         assert!(!s.cross_validate_alpha);
+        assert_eq!(s.emission_rays, 0);
         let mut pssmlt = Method::from_name("pssmlt").unwrap();
         pssmlt.apply_preset("seed-001").unwrap();
         assert_eq!(pssmlt, Method::from_name("pssmlt").unwrap());

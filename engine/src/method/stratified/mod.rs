@@ -42,6 +42,13 @@
 //!   at 64-256 spp; docs/RESULTS.md). The image is eq. 12. The weighted
 //!   solver's `α` is chosen by cross-validation against half of the large
 //!   steps ([`StratifiedSettings::cross_validate_alpha`], ours).
+//! * **The emission seen directly, apart** (ours): when the oracle
+//!   [separates it](crate::oracle::PathOracle::separates_emission), the
+//!   tile chains, the regularizer and the anchor work on the radiance
+//!   without it, and each pixel's emission is the mean of
+//!   [`StratifiedSettings::emission_rays`] camera rays a sweep (see
+//!   `emission.rs`): tiles straddling an emitter's edge were most of the
+//!   error on the Cornell box.
 //! * **Known pixels** (ours): a pixel whose large steps all saw the same
 //!   radiance (an emitter or a constant environment seen directly) takes
 //!   it; Monte Carlo knows it exactly, the reconstruction to its noise.
@@ -65,6 +72,7 @@
 //! |---|---|
 //! | `tile.rs` | a tile's chain: its state at rest and awake, target and weights, its accumulators |
 //! | `light.rs` | light tracing's splats, estimated apart by Monte Carlo |
+//! | `emission.rs` | the emission seen directly, estimated apart by camera rays of its own |
 //! | `local.rs` | local replica exchange and state borrowing |
 //! | `init.rs` | the global chains' initialization |
 //! | `regularizer.rs` | every pixel's uniform samples (summed per pixel as they are drawn), the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the total it anchors |
@@ -176,7 +184,7 @@ impl Default for Initialization {
 const EXCHANGE_AFTER: u32 = 8;
 
 /// The default of [`StratifiedSettings::emission_rays`].
-const EMISSION_RAYS: u32 = 4;
+const EMISSION_RAYS: u32 = 8;
 
 /// Settings of stratified MCMC. The budget counts every path traced
 /// (initialization, tile steps and exchanges); a sample budget is turned
@@ -252,7 +260,7 @@ pub struct StratifiedSettings {
     pub regularizer_paths: u32,
     /// Camera rays per pixel and sweep for the emission seen directly, when
     /// the oracle [separates it](crate::oracle::PathOracle::separates_emission)
-    /// (4 by default; 0: the tile chains keep it, as in Gruson et al. 2020).
+    /// (8 by default; 0: the tile chains keep it, as in Gruson et al. 2020).
     /// Ours: tiles straddling an emitter's edge have bimodal targets, and
     /// one ray costs a fraction of a path (see `emission.rs`).
     pub emission_rays: u32,

@@ -52,7 +52,7 @@ int main(int argc, char **argv) {
     }
     printf("an unknown method: %s\n", strata_last_error());
 
-    StrataOracle oracle = {16, 12, NULL, trace};
+    StrataOracle oracle = {16, 12, NULL, trace, NULL};
     oracle.user = &oracle;
     StrataSettings *settings = strata_settings_new(argv[1]);
     if (settings == NULL) {

@@ -13,7 +13,7 @@ template <typename F> struct LambdaOracle {
     StrataOracle oracle;
 
     LambdaOracle(uint32_t width, uint32_t height, F f) : trace(f) {
-        oracle = StrataOracle{width, height, this, &LambdaOracle::call};
+        oracle = StrataOracle{width, height, this, &LambdaOracle::call, nullptr};
     }
     static void call(void *user, float x, float y, StrataSampler *sampler, float temperature,
                      float *rgb) {

@@ -64,7 +64,8 @@ typedef struct StrataSettings StrataSettings;
 // values may flatten it, see replica exchange), writes its radiance
 // (linear RGB) to `rgb[0..3]` and hands contributions landing elsewhere on
 // the film to `strata_sampler_splat`. Called from several threads at once;
-// must be a pure function of its inputs.
+// must be a pure function of its inputs. Members added later go at the
+// end: zero them.
 typedef struct StrataOracle {
   // The film's width in pixels.
   uint32_t width;
@@ -79,6 +80,15 @@ typedef struct StrataOracle {
                 struct StrataSampler *sampler,
                 float temperature,
                 float *rgb);
+  // Optional (null: none). The emission the camera ray through (`x`,
+  // `y`) sees directly (the emitter it first lands on, or the
+  // environment it escapes to), written to `rgb[0..3]` without tracing
+  // the rest of the path, drawing the camera's numbers from `sampler` as
+  // `trace` does. An oracle that has it must tell that part of every
+  // radiance `trace` writes with `strata_sampler_emission`; stratified
+  // MCMC then estimates it with camera rays of its own (the setting
+  // `emission_rays`).
+  void (*emission)(void *user, float x, float y, struct StrataSampler *sampler, float *rgb);
 } StrataOracle;
 
 // What a render reports while it runs (every member may be null/0). All
@@ -183,6 +193,15 @@ enum StrataStatus strata_sampler_splat(struct StrataSampler *sampler,
                                        float x,
                                        float y,
                                        const float *rgb);
+
+// Tells the engine that `rgb[0..3]` of the radiance the path being traced
+// writes is emission seen directly (the emitter its camera ray first lands
+// on, or the environment it escapes to): for an oracle with an `emission`
+// callback, which must give the same for the same film point and numbers.
+// A later call replaces an earlier one. A null sampler or `rgb` is
+// `STRATA_STATUS_INVALID_ARGUMENT`; called from `emission` itself it is
+// ignored.
+enum StrataStatus strata_sampler_emission(struct StrataSampler *sampler, const float *rgb);
 
 // The next number in [0, 1) of the current stream (0 for a null sampler).
 float strata_sampler_next_1d(struct StrataSampler *sampler);

@@ -3,7 +3,7 @@
 use std::ffi::c_void;
 
 use strata_engine::{
-    FilmPoint, PathOracle, PathSample, Resolution, Rgb, Sampler, SplatSink, Temperature,
+    DropSplats, FilmPoint, PathOracle, PathSample, Resolution, Rgb, Sampler, SplatSink, Temperature,
 };
 
 use crate::*;
@@ -14,7 +14,8 @@ use crate::*;
 /// values may flatten it, see replica exchange), writes its radiance
 /// (linear RGB) to `rgb[0..3]` and hands contributions landing elsewhere on
 /// the film to `strata_sampler_splat`. Called from several threads at once;
-/// must be a pure function of its inputs.
+/// must be a pure function of its inputs. Members added later go at the
+/// end: zero them.
 #[repr(C)]
 pub struct StrataOracle {
     /// The film's width in pixels.
@@ -34,13 +35,34 @@ pub struct StrataOracle {
             rgb: *mut f32,
         ),
     >,
+    /// Optional (null: none). The emission the camera ray through (`x`,
+    /// `y`) sees directly (the emitter it first lands on, or the
+    /// environment it escapes to), written to `rgb[0..3]` without tracing
+    /// the rest of the path, drawing the camera's numbers from `sampler` as
+    /// `trace` does. An oracle that has it must tell that part of every
+    /// radiance `trace` writes with `strata_sampler_emission`; stratified
+    /// MCMC then estimates it with camera rays of its own (the setting
+    /// `emission_rays`).
+    pub emission: Option<
+        extern "C" fn(
+            user: *mut c_void,
+            x: f32,
+            y: f32,
+            sampler: *mut StrataSampler,
+            rgb: *mut f32,
+        ),
+    >,
 }
+
+/// A C oracle's `emission` callback.
+type EmissionFn = extern "C" fn(*mut c_void, f32, f32, *mut StrataSampler, *mut f32);
 
 /// The engine's view of a [`StrataOracle`].
 pub(crate) struct COracle {
     pub(crate) resolution: Resolution,
     pub(crate) user: usize,
     pub(crate) trace: extern "C" fn(*mut c_void, f32, f32, *mut StrataSampler, f32, *mut f32),
+    emission: Option<EmissionFn>,
 }
 
 impl COracle {
@@ -62,6 +84,7 @@ impl COracle {
             resolution: Resolution::new(oracle.width, oracle.height),
             user: oracle.user as usize,
             trace,
+            emission: oracle.emission,
         })
     }
 }
@@ -82,9 +105,11 @@ impl PathOracle for COracle {
     ) -> PathSample<Rgb> {
         let mut dynamic: &mut dyn Sampler = &mut &mut *sampler;
         let mut sink: &mut dyn SplatSink<Rgb> = splats;
+        let mut emission = Rgb::BLACK;
         let mut handle = StrataSampler {
             inner: &mut dynamic as *mut &mut dyn Sampler as *mut c_void,
             splats: &mut sink as *mut &mut dyn SplatSink<Rgb> as *mut c_void,
+            emission: &mut emission,
         };
         let mut rgb = [0.0f32; 3];
         (self.trace)(
@@ -95,6 +120,36 @@ impl PathOracle for COracle {
             temperature.0,
             rgb.as_mut_ptr(),
         );
-        PathSample::new(Rgb(rgb))
+        PathSample {
+            radiance: Rgb(rgb),
+            emission,
+            ..PathSample::default()
+        }
+    }
+
+    fn separates_emission(&self) -> bool {
+        self.emission.is_some()
+    }
+
+    fn emission<S: Sampler + ?Sized>(&self, film: FilmPoint, sampler: &mut S) -> Rgb {
+        let Some(emission) = self.emission else {
+            return Rgb::BLACK;
+        };
+        let mut dynamic: &mut dyn Sampler = &mut &mut *sampler;
+        let mut drop: &mut dyn SplatSink<Rgb> = &mut DropSplats;
+        let mut handle = StrataSampler {
+            inner: &mut dynamic as *mut &mut dyn Sampler as *mut c_void,
+            splats: &mut drop as *mut &mut dyn SplatSink<Rgb> as *mut c_void,
+            emission: std::ptr::null_mut(),
+        };
+        let mut rgb = [0.0f32; 3];
+        emission(
+            self.user as *mut c_void,
+            film.x,
+            film.y,
+            &mut handle,
+            rgb.as_mut_ptr(),
+        );
+        Rgb(rgb)
     }
 }

@@ -11,6 +11,8 @@ use crate::*;
 pub struct StrataSampler {
     pub(crate) inner: *mut c_void,
     pub(crate) splats: *mut c_void,
+    /// Where `strata_sampler_emission` writes (null outside `trace`).
+    pub(crate) emission: *mut Rgb,
 }
 
 /// Runs `f` on the engine's sampler behind `sampler`.
@@ -52,6 +54,32 @@ pub extern "C" fn strata_sampler_splat(
     // around a live `&mut &mut dyn SplatSink<Rgb>`, and lives for that call.
     let splats = unsafe { &mut *((*sampler).splats as *mut &mut dyn SplatSink<Rgb>) };
     splats.splat(FilmPoint { x, y }, radiance);
+    StrataStatus::Ok
+}
+
+/// Tells the engine that `rgb[0..3]` of the radiance the path being traced
+/// writes is emission seen directly (the emitter its camera ray first lands
+/// on, or the environment it escapes to): for an oracle with an `emission`
+/// callback, which must give the same for the same film point and numbers.
+/// A later call replaces an earlier one. A null sampler or `rgb` is
+/// `STRATA_STATUS_INVALID_ARGUMENT`; called from `emission` itself it is
+/// ignored.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_sampler_emission(
+    sampler: *mut StrataSampler,
+    rgb: *const f32,
+) -> StrataStatus {
+    if sampler.is_null() || rgb.is_null() {
+        return fail(StrataStatus::InvalidArgument, "null sampler or rgb");
+    }
+    // SAFETY: the caller passes three floats; a non-null `StrataSampler` is
+    // only ever made by `COracle` around a live `Rgb` (or null) for `emission`.
+    unsafe {
+        let radiance = Rgb([*rgb, *rgb.add(1), *rgb.add(2)]);
+        if let Some(out) = (*sampler).emission.as_mut() {
+            *out = radiance;
+        }
+    }
     StrataStatus::Ok
 }
 

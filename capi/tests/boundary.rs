@@ -44,6 +44,7 @@ fn oracle(
         height: 6,
         user: null_mut(),
         trace: Some(trace),
+        emission: None,
     }
 }
 
@@ -702,4 +703,123 @@ fn tasks_merge_to_the_film_of_the_unsplit_render() {
     strata_film_free(whole);
     strata_settings_free(settings);
     strata_settings_free(stratified);
+}
+
+/// A lamp of 4 left of x = 3.5 over `u` in every channel.
+fn lamp(x: f32) -> f32 {
+    if x < 3.5 { 4.0 } else { 0.0 }
+}
+
+extern "C" fn lamp_trace(
+    _: *mut c_void,
+    x: f32,
+    _: f32,
+    s: *mut StrataSampler,
+    _: f32,
+    rgb: *mut f32,
+) {
+    let u = strata_sampler_next_1d(s);
+    let e = lamp(x);
+    assert_eq!(
+        strata_sampler_emission(s, [e; 3].as_ptr()),
+        StrataStatus::Ok
+    );
+    // SAFETY: the engine passes room for three floats.
+    unsafe { std::slice::from_raw_parts_mut(rgb, 3).fill(e + u) };
+}
+
+extern "C" fn lamp_emission(_: *mut c_void, x: f32, _: f32, s: *mut StrataSampler, rgb: *mut f32) {
+    // Ignored here: only `trace` tells the emission apart.
+    assert_eq!(
+        strata_sampler_emission(s, [1.0; 3].as_ptr()),
+        StrataStatus::Ok
+    );
+    // SAFETY: as above.
+    unsafe { std::slice::from_raw_parts_mut(rgb, 3).fill(lamp(x)) };
+}
+
+/// The same lamp in Rust.
+struct Lamp;
+
+impl strata_engine::PathOracle for Lamp {
+    type Radiance = strata_engine::Rgb;
+
+    fn resolution(&self) -> strata_engine::Resolution {
+        strata_engine::Resolution::new(8, 6)
+    }
+
+    fn trace<S: strata_engine::Sampler + ?Sized>(
+        &self,
+        film: strata_engine::FilmPoint,
+        sampler: &mut S,
+        _: strata_engine::Temperature,
+        _: &mut dyn strata_engine::SplatSink<strata_engine::Rgb>,
+    ) -> strata_engine::PathSample<strata_engine::Rgb> {
+        let u = sampler.next_1d();
+        let e = lamp(film.x);
+        strata_engine::PathSample {
+            radiance: strata_engine::Rgb([e + u; 3]),
+            emission: strata_engine::Rgb([e; 3]),
+            ..Default::default()
+        }
+    }
+
+    fn separates_emission(&self) -> bool {
+        true
+    }
+
+    fn emission<S: strata_engine::Sampler + ?Sized>(
+        &self,
+        film: strata_engine::FilmPoint,
+        _: &mut S,
+    ) -> strata_engine::Rgb {
+        strata_engine::Rgb([lamp(film.x); 3])
+    }
+}
+
+/// A C oracle with an `emission` callback that tells the emission apart
+/// with `strata_sampler_emission` renders stratified MCMC exactly as the
+/// same oracle in Rust; without the callback the tile chains keep the
+/// emission, and the film differs.
+#[test]
+fn a_c_oracle_tells_its_emission_apart() {
+    use strata_engine::target::MaxChannel;
+    use strata_engine::{Budget, Method, PathOracle, Settings, Silent, render};
+    let settings = strata_settings_new(c"stratified".as_ptr());
+    strata_settings_set_seed(settings, 3);
+    strata_settings_set_samples_per_pixel(settings, 16);
+    let with = StrataOracle {
+        emission: Some(lamp_emission),
+        ..oracle(lamp_trace)
+    };
+    let (mut apart, mut kept) = (null_mut(), null_mut());
+    assert_eq!(
+        strata_render(&with, settings, null(), &mut apart),
+        StrataStatus::Ok
+    );
+    assert_eq!(
+        strata_render(&oracle(lamp_trace), settings, null(), &mut kept),
+        StrataStatus::Ok
+    );
+    let rust = render(
+        &Lamp,
+        &MaxChannel,
+        &Settings {
+            seed: 3,
+            budget: Budget::samples_per_pixel(16, Lamp.resolution()),
+            method: Method::from_name("stratified").unwrap(),
+        },
+        &Silent,
+    )
+    .unwrap();
+    let rust_bits: Vec<u64> = rust.film.data().iter().map(|v| v.to_bits()).collect();
+    assert_eq!(film_bits(apart), rust_bits);
+    assert_ne!(film_bits(kept), rust_bits);
+    assert_eq!(
+        strata_sampler_emission(null_mut(), [0.0; 3].as_ptr()),
+        StrataStatus::InvalidArgument
+    );
+    strata_film_free(apart);
+    strata_film_free(kept);
+    strata_settings_free(settings);
 }

@@ -230,6 +230,7 @@ fn every_accepted_setting_renders_through_the_c_api() {
         height: size.height,
         user: null_mut(),
         trace: Some(procedural),
+        emission: None,
     };
     let mut runner = runner();
     let (accepted, refused) = (AtomicUsize::new(0), AtomicUsize::new(0));

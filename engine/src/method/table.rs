@@ -176,6 +176,12 @@ const STRATIFIED: &[Setting] = &[
         4096,
         "plain MC paths per pixel traced for the regularizer alone",
     ),
+    real(
+        "init_coverage",
+        0.0,
+        1.0,
+        "global chains initialize tiles until this fraction is (Gruson et al. 2020: 0.3)",
+    ),
     whole(
         "emission_rays",
         0,
@@ -274,6 +280,7 @@ impl Method {
             (Method::Stratified(s), "fallback_sigmas") => number(s.fallback_sigmas.unwrap_or(0.0)),
             (Method::Stratified(s), "regularizer_paths") => number(s.regularizer_paths.into()),
             (Method::Stratified(s), "emission_rays") => number(s.emission_rays.into()),
+            (Method::Stratified(s), "init_coverage") => number(s.initialization.coverage),
             (Method::Stratified(s), _) => mutation_get(&s.mutation, name),
             (Method::Erpt(s), "chain_length") => number(s.chain_length.into()),
             (Method::Erpt(s), "chains_per_path") => number(s.chains_per_path),
@@ -339,6 +346,7 @@ impl Method {
             (Method::Stratified(s), "fallback_sigmas") => s.fallback_sigmas = on.then_some(value),
             (Method::Stratified(s), "regularizer_paths") => s.regularizer_paths = n as u32,
             (Method::Stratified(s), "emission_rays") => s.emission_rays = n as u32,
+            (Method::Stratified(s), "init_coverage") => s.initialization.coverage = value,
             (Method::Stratified(s), _) => mutation_set(&mut s.mutation, name, value)?,
             (Method::Erpt(s), "chain_length") => s.chain_length = n as u32,
             (Method::Erpt(s), "chains_per_path") => s.chains_per_path = value,
@@ -419,8 +427,9 @@ impl Method {
     /// Sets the values of a named preset: `seed-001`, the settings of
     /// Gruson et al. (2020), sec. 4 (Kelemen steps from 1/1024 to 1/32 for
     /// stratified MCMC and ERPT; for stratified MCMC also large steps with
-    /// probability 0.3, the solver's own `α` without cross-validation, and
-    /// the emission seen directly left to the tile chains).
+    /// probability 0.3, the solver's own `α` without cross-validation, the
+    /// emission seen directly left to the tile chains, and the
+    /// initialization ended at 30 % of the tiles).
     /// Methods the preset does not concern are left as they are.
     pub fn apply_preset(&mut self, name: &str) -> Result<(), Error> {
         let values: &[(&str, f64)] = match (name, &*self) {
@@ -429,6 +438,7 @@ impl Method {
                 ("large_step_probability", 0.3),
                 ("cross_validate_alpha", 0.0),
                 ("emission_rays", 0.0),
+                ("init_coverage", 0.3),
             ],
             ("seed-001", Method::Erpt(_)) => &[("small_step_max", 1.0 / 32.0)],
             ("seed-001", _) => &[],
@@ -709,6 +719,7 @@ mod tests {
         assert_eq!(s.mutation.large_step_probability, 0.3);
         assert!(!s.cross_validate_alpha);
         assert_eq!(s.emission_rays, 0);
+        assert_eq!(s.initialization.coverage, 0.3);
         let mut pssmlt = Method::from_name("pssmlt").unwrap();
         pssmlt.apply_preset("seed-001").unwrap();
         assert_eq!(pssmlt, Method::from_name("pssmlt").unwrap());

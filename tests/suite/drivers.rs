@@ -351,7 +351,7 @@ fn invalid_settings_are_typed_errors_before_any_work() {
     );
     let mut stratified = StratifiedSettings::default();
     stratified.initialization.coverage = 1.5;
-    refuse(Method::Stratified(stratified), "coverage");
+    refuse(Method::Stratified(stratified), "init_coverage");
     refuse(
         Method::Stratified(StratifiedSettings {
             fallback_sigmas: Some(-1.0),

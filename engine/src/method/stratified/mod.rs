@@ -313,7 +313,7 @@ impl StratifiedSettings {
             ));
         }
         let init = &self.initialization;
-        check_probability("coverage", init.coverage)?;
+        check_probability("init_coverage", init.coverage)?;
         check_probability("max_budget_fraction", init.max_budget_fraction)?;
         if let Some(k) = self.fallback_sigmas
             && !(k.is_finite() && k > 0.0)

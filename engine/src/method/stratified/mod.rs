@@ -412,13 +412,14 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let tiles = Tiles::new(job.resolution, settings.shape)?;
+    let fresh_emission = SeenEmission::new(job.oracle, settings.emission_rays);
     let ctx = Context {
         oracle: job.oracle,
         importance: job.importance,
         tiles: &tiles,
         p_large: settings.mutation.large_step_probability,
         small_step: settings.mutation.small_step,
-        emission_apart: SeenEmission::new(job.oracle, settings.emission_rays).apart(),
+        emission_apart: fresh_emission.apart(),
     };
     let n = tiles.count();
     let offsets = tiles.offsets().len();
@@ -438,17 +439,17 @@ where
                     .iter()
                     .all(|c| c.fits(offsets, &settings.mutation.small_step))
                 && samples.fits(n, O::Radiance::CHANNELS);
-            let light_fits = light.fits(&new_light(), &tiles)
-                && emission.fits(
-                    &SeenEmission::new(job.oracle, settings.emission_rays),
-                    &tiles,
-                );
+            let light_fits =
+                light.fits(&new_light(), &tiles) && emission.fits(&fresh_emission, &tiles);
             if !fits || !light_fits {
                 return Err(checkpoint::does_not_fit());
             }
             (Some(position), saved)
         }
-        None => (None, start(&ctx, job, settings, new_light())?),
+        None => (
+            None,
+            start(&ctx, job, settings, new_light(), fresh_emission)?,
+        ),
     };
     let (
         chains,
@@ -494,6 +495,7 @@ fn start<O, I>(
     job: &Job<'_, O, I>,
     settings: &StratifiedSettings,
     light: LightTracing,
+    emission: SeenEmission,
 ) -> Result<Saved<O::Radiance>, Error>
 where
     O: PathOracle,
@@ -544,7 +546,7 @@ where
         initialized.invalid,
         initialized.bootstrap,
         light,
-        SeenEmission::new(job.oracle, settings.emission_rays),
+        emission,
     ))
 }
 

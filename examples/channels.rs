@@ -19,6 +19,7 @@
 //! ```text
 //! cargo run --release --features studies --example channels -- --scene saturated --spp 16,64,256 --seeds 6
 //! cargo run --release --features studies --example channels -- --scene cornell --time 2,8 --seeds 3
+//! cargo run --release --features studies --example channels -- --scene caustic --path-sampler bidirectional
 //! ```
 //! Scenes: the built-ins or a directory of `$STRATA_SCENES`.
 
@@ -34,7 +35,7 @@ use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Film, Method, PathOracle, Resolution, Settings, Silent, metrics, render,
 };
-use strata::native::{builtin, native_tracer, pbrt};
+use strata::native::{PathSampler, builtin, native_tracer, pbrt};
 
 use common::{AnyResult, cached_mc};
 
@@ -64,6 +65,10 @@ struct Args {
     /// that has it (repeatable; `strata settings` lists them).
     #[arg(long = "set", value_name = "NAME=VALUE")]
     sets: Vec<String>,
+    /// The native tracer's path sampler (the reference is MC over it too).
+    #[arg(long, default_value = "unidirectional",
+          value_parser = PossibleValuesParser::new(PathSampler::NAMES))]
+    path_sampler: String,
     /// Seeds per method and budget (0, 1, ...).
     #[arg(long, default_value_t = 4)]
     seeds: u64,
@@ -120,7 +125,8 @@ fn main() -> AnyResult<()> {
             scene
         }
     };
-    let tracer = native_tracer(scene);
+    let mut tracer = native_tracer(scene);
+    tracer.sampler = PathSampler::from_name(&args.path_sampler).expect("a listed name");
     let r = tracer.resolution();
     let reference = cached_mc(&tracer, "reference", args.reference_spp, 1000, &dir)?;
     let check = cached_mc(

@@ -1,7 +1,11 @@
 //! Checking the oracle contract's purity: the same film point, numbers and
 //! stream switches must give the same path and splats, bit for bit (see
-//! [`oracle`](crate::oracle)).
+//! [`oracle`](crate::oracle)); and an oracle that
+//! [separates its emission](PathOracle::separates_emission) must give in
+//! [`PathOracle::emission`] what [`PathOracle::trace`] put in
+//! [`PathSample::emission`] for the same numbers.
 
+use alloc::boxed::Box;
 use alloc::vec::Vec;
 
 use crate::oracle::{
@@ -22,19 +26,25 @@ pub struct PurityViolation<R> {
     pub replay_splats: Vec<Splat<R>>,
     /// Numbers drawn by the first trace.
     pub drawn: usize,
+    /// What [`PathOracle::emission`] gave for the same numbers, if the
+    /// oracle separates its emission.
+    pub emission: Option<R>,
 }
 
 /// Traces `film` twice with the same numbers (and stream switches) and checks
-/// that the two samples are bit-identical, for `trials` random number streams
-/// derived from `seed`. An oracle that passes may still be impure elsewhere,
-/// but one that fails is certainly wrong.
+/// that the two samples are bit-identical, and, if the oracle
+/// [separates its emission](PathOracle::separates_emission), that
+/// [`PathOracle::emission`] given the same numbers returns the first
+/// sample's [`emission`](PathSample::emission), for `trials` random number
+/// streams derived from `seed`. An oracle that passes may still be impure
+/// elsewhere, but one that fails is certainly wrong.
 pub fn check_purity<O: PathOracle>(
     oracle: &O,
     film: FilmPoint,
     temperature: Temperature,
     seed: u64,
     trials: u32,
-) -> Result<(), PurityViolation<O::Radiance>> {
+) -> Result<(), Box<PurityViolation<O::Radiance>>> {
     for trial in 0..trials {
         let mut recorder = Recording {
             rng: rng::stream(seed, Domain::User, trial as u64),
@@ -59,20 +69,32 @@ pub fn check_purity<O: PathOracle>(
         let same_point = |a: FilmPoint, b: FilmPoint| {
             a.x.to_bits() == b.x.to_bits() && a.y.to_bits() == b.y.to_bits()
         };
+        let emission = oracle.separates_emission().then(|| {
+            let mut replayer = Replaying {
+                log: &recorder.log,
+                at: 0,
+            };
+            oracle.emission(film, &mut replayer)
+        });
         let same = first.flags == replay.flags
             && same_radiance(&first.radiance, &replay.radiance)
+            && same_radiance(&first.emission, &replay.emission)
+            && emission
+                .as_ref()
+                .is_none_or(|e| same_radiance(e, &first.emission))
             && first_splats.0.len() == replay_splats.0.len()
             && first_splats.0.iter().zip(&replay_splats.0).all(|(a, b)| {
                 same_point(a.film, b.film) && same_radiance(&a.radiance, &b.radiance)
             });
         if !same || replayer.at != recorder.log.len() {
-            return Err(PurityViolation {
+            return Err(Box::new(PurityViolation {
                 first,
                 first_splats: first_splats.0,
                 replay,
                 replay_splats: replay_splats.0,
                 drawn,
-            });
+                emission,
+            }));
         }
     }
     Ok(())
@@ -168,5 +190,47 @@ mod tests {
         let p = FilmPoint { x: 0.25, y: 0.5 };
         assert!(check_purity(&pure, p, Temperature::ONE, 7, 50).is_ok());
         assert!(check_purity(&impure, p, Temperature::ONE, 7, 1).is_err());
+    }
+
+    /// An oracle whose camera ray sees `0.25 + u` for its first number `u`
+    /// and whose path adds a second number; `emission` gives the seen part
+    /// from the numbers, or (`off`) something else.
+    struct Lamp {
+        off: bool,
+    }
+
+    impl PathOracle for Lamp {
+        type Radiance = f32;
+        fn resolution(&self) -> Resolution {
+            Resolution::new(1, 1)
+        }
+        fn separates_emission(&self) -> bool {
+            true
+        }
+        fn emission<S: Sampler + ?Sized>(&self, _: FilmPoint, sampler: &mut S) -> f32 {
+            0.25 + sampler.next_1d() + if self.off { 1e-6 } else { 0.0 }
+        }
+        fn trace<S: Sampler + ?Sized>(
+            &self,
+            _: FilmPoint,
+            sampler: &mut S,
+            _: Temperature,
+            _: &mut dyn SplatSink<f32>,
+        ) -> PathSample<f32> {
+            let seen = 0.25 + sampler.next_1d();
+            PathSample {
+                radiance: seen + sampler.next_1d(),
+                flags: crate::oracle::PathFlags::NONE,
+                emission: seen,
+            }
+        }
+    }
+
+    #[test]
+    fn purity_check_compares_the_emission_traced_alone() {
+        let p = FilmPoint { x: 0.5, y: 0.5 };
+        assert!(check_purity(&Lamp { off: false }, p, Temperature::ONE, 3, 20).is_ok());
+        let broken = check_purity(&Lamp { off: true }, p, Temperature::ONE, 3, 1);
+        assert!(broken.is_err_and(|v| v.emission.is_some()));
     }
 }

@@ -216,7 +216,9 @@ struct Subpaths {
 impl<I: Intersector> PathTracer<I> {
     /// A bidirectional path through `film`: its radiance there, with its
     /// light-tracing contributions handed to `splats`, by the strategies
-    /// `which`.
+    /// `which`; its flags; and the part of the radiance its camera ray saw
+    /// directly ([`seen_emission`](Self::seen_emission)), kept apart only
+    /// for [`Strategies::All`] (zero otherwise).
     pub(crate) fn bidirectional<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,
@@ -224,7 +226,7 @@ impl<I: Intersector> PathTracer<I> {
         temperature: f32,
         splats: &mut dyn SplatSink<Rgb>,
         which: Strategies,
-    ) -> (Vec3, PathFlags) {
+    ) -> (Vec3, PathFlags, Vec3) {
         let scene = &self.scene;
         let camera = self.projection;
         let longest = scene.max_depth as usize + 2;
@@ -259,6 +261,10 @@ impl<I: Intersector> PathTracer<I> {
             Some((0, t)) if paths.camera.len() + 1 == t => paths.environment * scale,
             Some(_) => Vec3::ZERO,
         };
+        let mut seen = match (which, paths.camera.len()) {
+            (Strategies::All, 1) => paths.environment,
+            _ => Vec3::ZERO,
+        };
         // Light tracing only makes splats: skipped when they are dropped.
         let first_t = if splats.wants_splats() { 1 } else { 2 };
         for t in first_t..=paths.camera.len() {
@@ -283,11 +289,37 @@ impl<I: Intersector> PathTracer<I> {
                             splats.splat(at, Rgb(value.to_array()));
                         }
                     }
-                    None => radiance += value,
+                    None => {
+                        if (s, t) == (0, 2) && which == Strategies::All {
+                            seen = value;
+                        }
+                        radiance += value
+                    }
                 }
             }
         }
-        (radiance, paths.flags)
+        (radiance, paths.flags, seen)
+    }
+
+    /// The emission the camera ray through `film` sees directly, as
+    /// [`bidirectional`](Self::bidirectional) over every strategy counts it:
+    /// the environment if the ray escapes, else the strategy `(0, 2)`'s
+    /// value, the emitter it lands on (a path of one segment has no other
+    /// strategy: its MIS weight is 1, `joinable`). Draws the camera's
+    /// numbers of one bounce.
+    pub(crate) fn seen_emission_bidirectional<S: Sampler + ?Sized>(
+        &self,
+        film: FilmPoint,
+        sampler: &mut S,
+    ) -> Vec3 {
+        let camera = self.projection;
+        let paths = self.subpaths(film, sampler, &camera, (2, 0), false);
+        match paths.camera.get(1) {
+            None => paths.environment,
+            Some(pt) => self
+                .connect(&paths, 0, 2, pt, None, &camera)
+                .map_or(Vec3::ZERO, |(value, _)| value),
+        }
     }
 
     /// Both subpaths, of at most `(camera, light)` vertices: the camera's

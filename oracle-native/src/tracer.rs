@@ -310,15 +310,24 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
         }
     }
 
-    /// Unidirectional paths tell apart the emission their camera ray sees
-    /// (bidirectional ones weigh it against light tracing's `t = 1`
-    /// strategy, so it is not the camera ray's alone).
+    /// Unidirectional and bidirectional paths tell apart the emission
+    /// their camera ray sees (for bidirectional ones, the strategy
+    /// `(s, t) = (0, 2)`, weight 1). A multiplexed path or a single strategy
+    /// carries it only when that strategy is chosen, scaled by the choice:
+    /// not the camera ray's alone.
     fn separates_emission(&self) -> bool {
-        self.sampler == PathSampler::Unidirectional
+        matches!(
+            self.sampler,
+            PathSampler::Unidirectional | PathSampler::Bidirectional
+        )
     }
 
-    fn emission<S: Sampler + ?Sized>(&self, film: FilmPoint, _sampler: &mut S) -> Rgb {
-        Rgb(self.seen_emission(film).to_array())
+    fn emission<S: Sampler + ?Sized>(&self, film: FilmPoint, sampler: &mut S) -> Rgb {
+        let seen = match self.sampler {
+            PathSampler::Bidirectional => self.seen_emission_bidirectional(film, sampler),
+            _ => self.seen_emission(film),
+        };
+        Rgb(seen.to_array())
     }
 
     fn trace<S: Sampler + ?Sized>(
@@ -344,11 +353,11 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
                 camera: camera as usize,
             },
         };
-        let (l, flags) = self.bidirectional(film, sampler, temperature.0, splats, strategies);
+        let (l, flags, seen) = self.bidirectional(film, sampler, temperature.0, splats, strategies);
         PathSample {
             radiance: Rgb(l.to_array()),
             flags,
-            emission: Rgb::BLACK,
+            emission: Rgb(seen.to_array()),
         }
     }
 }

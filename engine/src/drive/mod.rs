@@ -187,9 +187,10 @@ pub(crate) struct Loop<'a> {
     pub observer: &'a dyn Observer,
     pub checkpoints: &'a dyn Checkpoints,
     pub resumed: Option<Position>,
-    /// Under a time budget, start no round expected to end past the
-    /// clock's limit (each unit expected to take as long as the last
-    /// round's did): for work that must follow the rounds within the budget.
+    /// Under a time budget, put in a round only the units expected to end
+    /// before the clock's limit (each as long as the last round's were),
+    /// and stop when none is: for work that must follow the rounds within
+    /// the budget.
     pub ends_within: bool,
     /// Where to put a checkpoint of the state after the last round (a
     /// task's partial result, or its checkpoint if it was stopped).
@@ -264,9 +265,19 @@ pub(crate) fn drive<W: Rounds>(
                 save(work, out);
             }));
         }
-        let next_overruns = ends_within && clock.expires_within(unit_seconds * round as f64);
-        if planned.is_none() && (clock.expired() || next_overruns) {
-            break;
+        if planned.is_none() {
+            if clock.expired() {
+                break;
+            }
+            if ends_within {
+                // As many units as still fit, up to a round's (a longer
+                // round would end past the clock; a shorter one uses the
+                // time a whole round would have wasted).
+                match clock.units_within(unit_seconds) {
+                    0 => break,
+                    fit => round = round.min(fit),
+                }
+            }
         }
     }
     if let Some(cell) = last {
@@ -333,15 +344,23 @@ impl Clock {
         self.fraction() >= 1.0
     }
 
-    /// Whether the time budget will be spent `seconds` from now (always,
-    /// without one).
-    pub(crate) fn expires_within(&self, seconds: f64) -> bool {
+    /// How many pieces of work of `seconds` each still fit before the time
+    /// budget is spent (0 without one).
+    pub(crate) fn units_within(&self, seconds: f64) -> u64 {
         #[cfg(feature = "std")]
         if let Some(limit) = self.limit {
-            return self.seconds() + seconds >= limit.as_secs_f64();
+            let left = limit.as_secs_f64() - self.seconds();
+            return if left <= 0.0 {
+                0
+            } else if seconds > 0.0 {
+                // Saturating: a unit too fast to time fits any number of times.
+                libm::floor(left / seconds) as u64
+            } else {
+                u64::MAX
+            };
         }
         let _ = seconds;
-        true
+        0
     }
 
     /// This clock (the same start) with its time budget ending `by` earlier

@@ -322,7 +322,8 @@ impl<O, I: ?Sized> Job<'_, O, I> {
 
     /// The round loop of this job, at `resumed`, whose time budget runs out
     /// by `clock` (one that ends before the job's, to leave time for work
-    /// after the rounds), and which starts no round expected to end past it.
+    /// after the rounds), and whose rounds hold only the units expected to
+    /// end before it.
     pub fn round_loop_until<'c>(&'c self, resumed: Option<Position>, clock: &'c Clock) -> Loop<'c> {
         Loop {
             clock,

@@ -433,14 +433,14 @@ where
     };
     let (position, saved) = match job.resumed::<Saved<O::Radiance>>()? {
         Some((position, saved)) => {
-            let (chains, samples, _, _, _, _, _, light, emission) = &saved;
-            let fits = chains.len() == n
-                && chains
+            let fits = saved.chains.len() == n
+                && saved
+                    .chains
                     .iter()
                     .all(|c| c.fits(offsets, &settings.mutation.small_step))
-                && samples.fits(n, O::Radiance::CHANNELS);
-            let light_fits =
-                light.fits(&new_light(), &tiles) && emission.fits(&fresh_emission, &tiles);
+                && saved.samples.fits(n, O::Radiance::CHANNELS);
+            let light_fits = saved.light.fits(&new_light(), &tiles)
+                && saved.emission.fits(&fresh_emission, &tiles);
             if !fits || !light_fits {
                 return Err(checkpoint::does_not_fit());
             }
@@ -451,7 +451,7 @@ where
             start(&ctx, job, settings, new_light(), fresh_emission)?,
         ),
     };
-    let (
+    let Saved {
         chains,
         samples,
         chain_stats,
@@ -461,7 +461,7 @@ where
         bootstrap_traces,
         light,
         emission,
-    ) = saved;
+    } = saved;
     let mut sweeps = Sweeps {
         ctx: &ctx,
         settings,
@@ -534,20 +534,20 @@ where
         initialization_samples: initialized.traced,
         ..Default::default()
     };
-    Ok((
+    Ok(Saved {
         chains,
-        Samples::new(n, O::Radiance::CHANNELS),
-        ChainStats {
+        samples: Samples::new(n, O::Radiance::CHANNELS),
+        chain_stats: ChainStats {
             invalid: initialized.replays_invalid,
             ..ChainStats::default()
         },
         stats,
-        0,
-        initialized.invalid,
-        initialized.bootstrap,
+        exchange_rounds: 0,
+        invalid: initialized.invalid,
+        bootstrap_traces: initialized.bootstrap,
         light,
         emission,
-    ))
+    })
 }
 
 /// The smallest sample budget of stratified MCMC on `resolution`: one sweep

@@ -6,6 +6,8 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
+use serde::Deserialize;
+
 use super::emission::SeenEmission;
 use super::light::LightTracing;
 use super::local::{exchange_all, exchange_cost};
@@ -24,21 +26,23 @@ use crate::parallel;
 use crate::target::Importance;
 use crate::tiles::Tiles;
 
-/// What a checkpoint holds of stratified MCMC: the tile chains, the
-/// pixels' uniform samples, the chains' counters, the method's counters, the exchange rounds, the invalid
-/// traces outside the chains, the bootstrap's traces, the light-tracing
-/// sums and the emission seen directly ([`Sweeps::save`]'s order).
-pub(super) type Saved<R> = (
-    Vec<TileChain<R>>,
-    Samples,
-    ChainStats,
-    StratifiedStats,
-    u64,
-    u64,
-    u64,
-    LightTracing,
-    SeenEmission,
-);
+/// What a checkpoint holds of stratified MCMC, read back in
+/// [`Sweeps::save`]'s order (the fields of [`Sweeps`] that outlive a round,
+/// and the bootstrap's traces).
+#[derive(Deserialize)]
+pub(super) struct Saved<R> {
+    pub chains: Vec<TileChain<R>>,
+    pub samples: Samples,
+    pub chain_stats: ChainStats,
+    pub stats: StratifiedStats,
+    pub exchange_rounds: u64,
+    /// Invalid traces outside the tile chains' counters.
+    pub invalid: u64,
+    /// The paths the global chains' bootstrap traced.
+    pub bootstrap_traces: u64,
+    pub light: LightTracing,
+    pub emission: SeenEmission,
+}
 
 /// Stratified MCMC's state between rounds: the tile chains and their counters.
 pub(super) struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
@@ -162,7 +166,8 @@ where
         swept.into_iter().flatten().collect()
     }
 
-    /// Appends the state to a checkpoint (read back as [`Saved`]).
+    /// Appends the state to a checkpoint (read back as [`Saved`]: these
+    /// are its fields, in its order, borrowed).
     pub(super) fn save(&self, bootstrap_traces: u64, out: &mut Vec<u8>) {
         let saved = (
             &self.chains,

@@ -14,7 +14,8 @@
 //! difference of the error between neighbouring rows and columns, over
 //! twice the error's mean square: 1 for noise independent from pixel to
 //! pixel, 0 for an error constant over the image, far above 1 for straight
-//! lines). Writes `channels.csv` and each method's last image.
+//! lines). Writes `channels.csv`, every region's ratios and z-scores
+//! (`blocks.csv`) and each method's first image.
 //!
 //! ```text
 //! cargo run --release --features studies --example channels -- --scene saturated --spp 16,64,256 --seeds 6
@@ -96,6 +97,8 @@ struct Row {
     channels: [(f64, f64); 3],
     /// Worst region: |z|, relative error, region and channel.
     region: (f64, f64, usize, usize),
+    /// Every region's and channel's ratio and z, region by region.
+    blocks: Vec<[(f64, f64); 3]>,
     mse: f64,
     mse_trimmed: f64,
     max_ratio: f64,
@@ -232,6 +235,7 @@ fn main() -> AnyResult<()> {
         }
     }
     write_csv(&dir.join("channels.csv"), &rows)?;
+    write_blocks(&dir.join("blocks.csv"), &rows)?;
     println!("wrote {}", dir.display());
     Ok(())
 }
@@ -323,18 +327,20 @@ fn measure(
     }
     let image_mean = (0..3).map(|c| reference.channel_mean(c)).sum::<f64>() / 3.0;
     let mut region = (0.0, 0.0, 0, 0);
+    let mut blocks = vec![[(f64::NAN, f64::NAN); 3]; exact.regions.len()];
     for (b, e) in exact.regions.iter().enumerate() {
         for (c, &exact_c) in e.iter().enumerate() {
-            // Regions where the channel is below 5 % of the image mean carry
-            // no colour a viewer sees.
-            if exact_c.0 < 0.05 * image_mean {
-                continue;
-            }
             let (ratio, z) = against(
                 spread.regions[b][c],
                 exact_c,
                 baseline.map(|base| base.regions[b][c]),
             );
+            blocks[b][c] = (ratio, z);
+            // Regions where the channel is below 5 % of the image mean carry
+            // no colour a viewer sees.
+            if exact_c.0 < 0.05 * image_mean {
+                continue;
+            }
             if z.abs() > region.0 {
                 region = (z.abs(), ratio - 1.0, b, c);
             }
@@ -368,6 +374,7 @@ fn measure(
         seconds: 0.0,
         channels,
         region,
+        blocks,
         mse: mses.iter().sum::<f64>() / n,
         mse_trimmed: trimmed.iter().sum::<f64>() / n,
         max_ratio,
@@ -420,6 +427,26 @@ fn seam_measure(film: &Film, reference: &Film) -> f64 {
         }
     }
     diff / count / (2.0 * square)
+}
+
+/// Every region's channel ratios and z-scores, a line per method, budget
+/// and region (regions row by row from the top left).
+fn write_blocks(path: &Path, rows: &[Row]) -> AnyResult<()> {
+    let mut f = std::fs::File::create(path)?;
+    writeln!(
+        f,
+        "method,budget,region,r_ratio,r_z,g_ratio,g_z,b_ratio,b_z"
+    )?;
+    for row in rows {
+        for (b, [r, g, bl]) in row.blocks.iter().enumerate() {
+            writeln!(
+                f,
+                "{},{},{b},{:.5},{:.2},{:.5},{:.2},{:.5},{:.2}",
+                row.method, row.budget, r.0, r.1, g.0, g.1, bl.0, bl.1
+            )?;
+        }
+    }
+    Ok(())
 }
 
 fn write_csv(path: &Path, rows: &[Row]) -> AnyResult<()> {

@@ -217,7 +217,7 @@ impl<I: Intersector> PathTracer<I> {
     /// A bidirectional path through `film`: its radiance there, with its
     /// light-tracing contributions handed to `splats`, by the strategies
     /// `which`; its flags; and the part of the radiance its camera ray saw
-    /// directly ([`seen_emission`](Self::seen_emission)), kept apart only
+    /// directly ([`seen_emission_bidirectional`](Self::seen_emission_bidirectional)), kept apart only
     /// for [`Strategies::All`] (zero otherwise).
     pub(crate) fn bidirectional<S: Sampler + ?Sized>(
         &self,

@@ -385,3 +385,19 @@ impl Clock {
         core::time::Duration::try_from_secs_f64(left * share).unwrap_or(core::time::Duration::MAX)
     }
 }
+
+#[cfg(all(test, feature = "std"))]
+mod tests {
+    use super::*;
+    use core::time::Duration;
+
+    #[test]
+    fn a_clock_counts_the_units_that_still_fit() {
+        let clock = Clock::start(Budget::Time(Duration::from_secs(1000)));
+        assert_eq!(clock.units_within(100.0), 9, "999.9... s left");
+        assert_eq!(clock.units_within(0.0), u64::MAX);
+        let spent = Clock::start(Budget::Time(Duration::ZERO));
+        assert_eq!(spent.units_within(1e-9), 0);
+        assert_eq!(Clock::start(Budget::Samples(10)).units_within(1.0), 0);
+    }
+}

@@ -352,6 +352,9 @@ fn invalid_settings_are_typed_errors_before_any_work() {
     let mut stratified = StratifiedSettings::default();
     stratified.initialization.coverage = 1.5;
     refuse(Method::Stratified(stratified), "init_coverage");
+    let mut stratified = StratifiedSettings::default();
+    stratified.initialization.max_budget_fraction = -0.1;
+    refuse(Method::Stratified(stratified), "init_budget");
     refuse(
         Method::Stratified(StratifiedSettings {
             fallback_sigmas: Some(-1.0),

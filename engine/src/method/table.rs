@@ -182,6 +182,12 @@ const STRATIFIED: &[Setting] = &[
         1.0,
         "global chains initialize tiles until this fraction is (Gruson et al. 2020: 0.3)",
     ),
+    real(
+        "init_budget",
+        0.0,
+        1.0,
+        "at most this fraction of the budget (paths or time) for the initialization",
+    ),
     whole(
         "emission_rays",
         0,
@@ -281,6 +287,7 @@ impl Method {
             (Method::Stratified(s), "regularizer_paths") => number(s.regularizer_paths.into()),
             (Method::Stratified(s), "emission_rays") => number(s.emission_rays.into()),
             (Method::Stratified(s), "init_coverage") => number(s.initialization.coverage),
+            (Method::Stratified(s), "init_budget") => number(s.initialization.max_budget_fraction),
             (Method::Stratified(s), _) => mutation_get(&s.mutation, name),
             (Method::Erpt(s), "chain_length") => number(s.chain_length.into()),
             (Method::Erpt(s), "chains_per_path") => number(s.chains_per_path),
@@ -347,6 +354,7 @@ impl Method {
             (Method::Stratified(s), "regularizer_paths") => s.regularizer_paths = n as u32,
             (Method::Stratified(s), "emission_rays") => s.emission_rays = n as u32,
             (Method::Stratified(s), "init_coverage") => s.initialization.coverage = value,
+            (Method::Stratified(s), "init_budget") => s.initialization.max_budget_fraction = value,
             (Method::Stratified(s), _) => mutation_set(&mut s.mutation, name, value)?,
             (Method::Erpt(s), "chain_length") => s.chain_length = n as u32,
             (Method::Erpt(s), "chains_per_path") => s.chains_per_path = value,

@@ -167,7 +167,10 @@ pub struct Initialization {
     pub coverage: f64,
     /// At most this many paths per pixel (Gruson et al. 2020: an effective 32).
     pub max_samples_per_pixel: f64,
-    /// And at most this fraction of the render's budget (samples or time).
+    /// And at most this fraction of the render's budget (samples or time;
+    /// table setting `init_budget`). The main cost of a short render: a
+    /// smaller share leaves more tiles to start-up bias (docs/RESULTS.md,
+    /// "At MC's 64 paths a pixel, equal time").
     pub max_budget_fraction: f64,
     /// Bootstrap candidates of the global chains (capped at half of the
     /// initialization budget).
@@ -314,7 +317,7 @@ impl StratifiedSettings {
         }
         let init = &self.initialization;
         check_probability("init_coverage", init.coverage)?;
-        check_probability("max_budget_fraction", init.max_budget_fraction)?;
+        check_probability("init_budget", init.max_budget_fraction)?;
         if let Some(k) = self.fallback_sigmas
             && !(k.is_finite() && k > 0.0)
         {
@@ -513,6 +516,9 @@ where
                 .min(init.max_budget_fraction * total as f64);
             (cap as u64, None)
         }
+        // No share of the time: no initialization (its bootstrap included).
+        #[cfg(feature = "std")]
+        Budget::Time(_) if init.max_budget_fraction == 0.0 => (0, None),
         #[cfg(feature = "std")]
         Budget::Time(t) => (
             libm::ceil(init.max_samples_per_pixel * n as f64) as u64,

@@ -160,6 +160,7 @@ fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), 
             ensemble,
             exchange,
             ladder_tuning_sweeps: tuning,
+            ..ReplicaSettings::default()
         };
         run(name, Method::Replica(replica))?;
     }

@@ -78,6 +78,8 @@ fn measure<O: PathOracle>(
         chains: 256,
         bootstrap_candidates: 16_384,
         mutation,
+        // The engine's cost per path: no camera rays beside the paths.
+        emission_rays: 0.0,
     }));
     let (mut mc, mut pss) = (Vec::new(), Vec::new());
     for _ in 0..repeats {

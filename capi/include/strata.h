@@ -85,9 +85,9 @@ typedef struct StrataOracle {
   // environment it escapes to), written to `rgb[0..3]` without tracing
   // the rest of the path, drawing the camera's numbers from `sampler` as
   // `trace` does. An oracle that has it must tell that part of every
-  // radiance `trace` writes with `strata_sampler_emission`; stratified
-  // MCMC then estimates it with camera rays of its own (the setting
-  // `emission_rays`).
+  // radiance `trace` writes with `strata_sampler_emission`; every
+  // Metropolis method then leaves it out of its chains and estimates it
+  // with camera rays of its own (the setting `emission_rays`).
   void (*emission)(void *user, float x, float y, struct StrataSampler *sampler, float *rgb);
 } StrataOracle;
 

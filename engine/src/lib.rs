@@ -37,6 +37,7 @@ pub mod checkpoint;
 pub mod convergence;
 pub mod diagnose;
 pub mod drive;
+mod emission;
 pub mod error;
 pub mod exact;
 pub mod exchange;

@@ -333,9 +333,10 @@ pub trait PathOracle: Sync {
 
     /// Whether [`trace`](Self::trace) tells apart the emission its camera ray
     /// sees directly ([`PathSample::emission`]) and [`emission`](Self::emission)
-    /// traces it alone. Stratified MCMC then leaves it out of its tile
+    /// traces it alone. Every Metropolis method then leaves it out of its
     /// chains and estimates it with camera rays of its own
-    /// ([`StratifiedSettings::emission_rays`](crate::method::StratifiedSettings::emission_rays)).
+    /// ([`PssmltSettings::emission_rays`](crate::method::PssmltSettings::emission_rays),
+    /// [`StratifiedSettings::emission_rays`](crate::method::StratifiedSettings::emission_rays)).
     /// The default: false.
     fn separates_emission(&self) -> bool {
         false

@@ -699,6 +699,13 @@ fn run(args: &Args) -> AnyResult<Ended> {
         s.bootstrap_samples,
         s.invalid_samples
     );
+    if s.emission_rays > 0 {
+        say!(
+            "camera rays for the emission seen directly: {} ({:.2} a path)",
+            s.emission_rays,
+            s.emission_rays as f64 / s.samples.max(1) as f64
+        );
+    }
     if s.samples > 0 && s.invalid_samples >= s.samples {
         warn!(
             "warning: every path was invalid (the oracle returned NaN, infinite or negative radiance): the image is black"

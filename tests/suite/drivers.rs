@@ -180,6 +180,7 @@ fn replica_exchange_refuses_a_tempering_that_changes_nothing() {
         ensemble,
         exchange: ExchangeKind::IsPermutation,
         ladder_tuning_sweeps: 0,
+        ..ReplicaSettings::default()
     };
     let run = |r: &ReplicaSettings| {
         render(

@@ -561,6 +561,7 @@ fn replica_settings(exchange: ExchangeKind) -> ReplicaSettings {
         ensemble,
         exchange,
         ladder_tuning_sweeps: 0,
+        ..ReplicaSettings::default()
     }
 }
 

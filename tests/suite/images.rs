@@ -18,6 +18,7 @@ fn pssmlt(mutation: MutationParams) -> Method {
         chains: 64,
         bootstrap_candidates: 20_000,
         mutation,
+        ..PssmltSettings::default()
     })
 }
 

@@ -11,6 +11,7 @@ mod channels;
 mod cli;
 mod convergence;
 mod drivers;
+mod emission;
 mod exchange;
 mod images;
 mod importance;

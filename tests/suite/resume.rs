@@ -16,6 +16,7 @@ use strata::engine::{
     Resolution, Rgb, Sampler, Settings, Silent, SplatSink, Temperature, render, resume,
 };
 
+use crate::emission::Lit;
 use crate::threads;
 use threads::{bits, in_pool, small_methods};
 
@@ -63,8 +64,13 @@ impl Observer for StopAt {
     }
 }
 
-fn image() -> ProceduralImage {
-    ProceduralImage::showcase(Resolution::new(48, 32))
+/// The procedural image with a lamp whose emission it tells apart: the
+/// emission seen directly is estimated apart by every method.
+fn image() -> Lit<ProceduralImage> {
+    Lit {
+        inner: ProceduralImage::showcase(Resolution::new(48, 32)),
+        nan: false,
+    }
 }
 
 fn settings(method: &Method) -> Settings {
@@ -99,6 +105,9 @@ fn a_resumed_render_gives_the_bytes_of_the_uninterrupted_one() {
         let count = StopAt::new(0);
         let whole = render(&image(), &MaxChannel, &settings(&method), &count).unwrap();
         let rounds = count.rounds.load(Ordering::Relaxed);
+        // The emission seen directly is apart (its state resumed too).
+        let apart = !matches!(method, Method::Mc);
+        assert_eq!(whole.stats.emission_rays > 0, apart, "{name}");
         let total = *count.samples.lock().unwrap();
         assert!(rounds >= 4, "{name}: {rounds} rounds");
         // After the first round, in the middle (for multi-stage MLT, in a

@@ -18,11 +18,17 @@ use strata::prelude::{
     resume_task,
 };
 
+use crate::emission::Lit;
 use crate::threads;
 use threads::{bits, in_pool};
 
-fn image() -> ProceduralImage {
-    ProceduralImage::showcase(Resolution::new(48, 32))
+/// The procedural image with a lamp whose emission it tells apart: the
+/// emission seen directly is estimated apart by every method.
+fn image() -> Lit<ProceduralImage> {
+    Lit {
+        inner: ProceduralImage::showcase(Resolution::new(48, 32)),
+        nan: false,
+    }
 }
 
 /// The methods that split, small: MC, PSSMLT, replica exchange and ERPT.
@@ -102,6 +108,9 @@ fn tasks_merge_to_the_bytes_of_the_unsplit_render() {
         let whole = in_pool(2, || {
             render(&image(), &MaxChannel, &settings, &Silent).unwrap()
         });
+        // Each task traces the emission's rays of its own rows.
+        let apart = method.emission_rays() > 0.0;
+        assert_eq!(whole.stats.emission_rays > 0, apart, "{}", method.name());
         for count in [1, 2, 3, 8] {
             // Tasks on alternating thread counts, merged in reverse order.
             let mut parts: Vec<Checkpoint> = (0..count)

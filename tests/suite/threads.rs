@@ -40,6 +40,7 @@ pub fn small_methods() -> Vec<Method> {
             ensemble,
             exchange: ExchangeKind::IsPermutation,
             ladder_tuning_sweeps: 0,
+            ..ReplicaSettings::default()
         }),
         Method::Stratified(StratifiedSettings {
             initialization: Initialization {

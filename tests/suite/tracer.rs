@@ -308,6 +308,7 @@ fn replica_exchange_with_oracle_tempering_agrees_with_mc() {
         ensemble,
         exchange: ExchangeKind::IsPermutation,
         ladder_tuning_sweeps: 0,
+        ..ReplicaSettings::default()
     };
     let settings = Settings {
         seed: 1,
@@ -340,6 +341,7 @@ fn replica_exchange_with_oracle_tempering_agrees_with_mc() {
                     ensemble,
                     exchange: ExchangeKind::IsPermutation,
                     ladder_tuning_sweeps: 0,
+                    ..ReplicaSettings::default()
                 };
                 run(&tracer, 200 + seed, 64, Method::Replica(replica)).film
             })

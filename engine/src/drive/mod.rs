@@ -137,8 +137,13 @@ pub struct RenderStats {
     /// Paths traced by the bootstrap (and other set-up that does not count
     /// toward the budget).
     pub bootstrap_samples: u64,
-    /// Samples with NaN, infinite or negative radiance (or importance), excluded.
+    /// Samples with NaN, infinite or negative radiance (or importance),
+    /// excluded; invalid camera rays of the emission seen directly too.
     pub invalid_samples: u64,
+    /// Camera rays traced for the emission seen directly, estimated apart
+    /// from the paths (each method's `emission_rays`; not paths, not
+    /// counted in `samples`).
+    pub emission_rays: u64,
     /// The normalization `b`, the integral of the importance (MCMC methods
     /// with a bootstrap): the mean importance of the bootstrap candidates and,
     /// for PSSMLT and replica exchange, of every large-step proposal too.
@@ -164,6 +169,16 @@ pub(crate) trait Rounds {
     fn samples(&self) -> u64;
     /// The normalized image now (for previews).
     fn preview(&self) -> Film;
+}
+
+/// Work the round loop does beside a method's rounds, kept up with them:
+/// the emission seen directly, estimated apart (`crate::emission`).
+pub(crate) trait Beside {
+    /// After a round: the method's `samples` so far, and `fraction` of a
+    /// sample budget used (exactly 1 once it is all used).
+    fn keep_up(&self, samples: u64, fraction: f64);
+    /// Adds its estimate to the method's normalized image `film`.
+    fn add_to(&self, film: &mut Film);
 }
 
 /// What [`drive`] did.
@@ -195,6 +210,8 @@ pub(crate) struct Loop<'a> {
     /// Where to put a checkpoint of the state after the last round (a
     /// task's partial result, or its checkpoint if it was stopped).
     pub last: Option<&'a OnceCell<Checkpoint>>,
+    /// Work kept up with the rounds, after each of them.
+    pub beside: Option<&'a dyn Beside>,
 }
 
 /// The round loop: runs `work` round after round until the budget is spent
@@ -218,6 +235,7 @@ pub(crate) fn drive<W: Rounds>(
         resumed,
         ends_within,
         last,
+        beside,
     } = at;
     if resumed.is_some_and(|p| p.done != work.units()) {
         return Err(Error::CheckpointCorrupted {
@@ -248,12 +266,19 @@ pub(crate) fn drive<W: Rounds>(
         done += units;
         let unit_seconds = round_clock.seconds() / units as f64;
         let fraction = planned.map_or_else(|| clock.fraction(), |n| done as f64 / n as f64);
+        if let Some(beside) = beside {
+            beside.keep_up(work.samples(), fraction);
+        }
         observer.progress(&Progress {
             samples: work.samples(),
             fraction: fraction.clamp(0.0, 1.0),
         });
         if observer.wants_preview() {
-            observer.preview(&work.preview());
+            let mut film = work.preview();
+            if let Some(beside) = beside {
+                beside.add_to(&mut film);
+            }
+            observer.preview(&film);
         }
         if planned.is_none() && round_clock.seconds() < MIN_ROUND_SECONDS {
             round = (round * 2).min(max_round);

@@ -64,6 +64,11 @@ pub struct ErptSettings {
     pub small_step: SmallStep,
     /// Bootstrap candidates for `b`.
     pub bootstrap_candidates: u64,
+    /// Camera rays for the emission seen directly, per path the method
+    /// traces, when the oracle [separates it](crate::oracle::PathOracle::separates_emission):
+    /// the paths then leave it out and each pixel's emission is the mean of
+    /// its rays (the module `emission`); 0 keeps it in the paths.
+    pub emission_rays: f64,
 }
 
 impl Default for ErptSettings {
@@ -73,6 +78,7 @@ impl Default for ErptSettings {
             chains_per_path: 1.0,
             small_step: SmallStep::default(),
             bootstrap_candidates: 100_000,
+            emission_rays: crate::emission::EMISSION_RAYS,
         }
     }
 }

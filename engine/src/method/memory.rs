@@ -12,7 +12,8 @@ impl Method {
     /// way). `channels` are the radiance's, `splats_per_path` the oracle's
     /// ([`PathOracle::splats_per_path`](crate::oracle::PathOracle::splats_per_path)), `workers` the threads.
     ///
-    /// Counted: the films (exact sums, [`ExactFilm`](crate::exact::ExactFilm), and the image) and per-pixel counts; the bootstrap's candidates
+    /// Counted: the films (exact sums, [`ExactFilm`](crate::exact::ExactFilm), and the image; the
+    /// emission seen directly's sums) and per-pixel counts; the bootstrap's candidates
     /// (let go before the first round); every chain's state (its primary
     /// sample and path); stratified MCMC's tile chains, per pixel a part of
     /// its own and one per tile pixel (the state evaluated there, with its
@@ -112,7 +113,12 @@ impl Method {
                 // One PSSMLT stage, and beside it the estimate so far, the
                 // stages' sums and per pixel its luminance, deviation,
                 // importance and adaptation.
-                let stage = Method::Pssmlt(s.pssmlt).memory_bound(
+                // (The emission apart counted once, below.)
+                let pssmlt = super::PssmltSettings {
+                    emission_rays: 0.0,
+                    ..s.pssmlt
+                };
+                let stage = Method::Pssmlt(pssmlt).memory_bound(
                     resolution,
                     channels,
                     splats_per_path,
@@ -122,7 +128,10 @@ impl Method {
                 stage as u128 + 2 * film + 4 * 8 * pixels
             }
         };
-        u64::try_from(bytes.max(film)).unwrap_or(u64::MAX)
+        // The emission seen directly, estimated apart (`emission_rays`;
+        // counted whether or not the oracle separates it).
+        let apart = if self.emission_rays() > 0.0 { film } else { 0 };
+        u64::try_from((bytes + apart).max(film)).unwrap_or(u64::MAX)
     }
 }
 

@@ -50,7 +50,8 @@ pub use tasks::{merge, render_task, resume_task};
 use serde::de::DeserializeOwned;
 
 use crate::checkpoint::{self, Checkpoint, Checkpointer, Checkpoints, OracleId, Position};
-use crate::drive::{Budget, Clock, Loop, Observer, RenderStats, SetUp, SetUpStage};
+use crate::drive::{Beside, Budget, Clock, Loop, Observer, RenderStats, SetUp, SetUpStage};
+use crate::emission::{EmissionApart, WithoutSeen};
 use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{PathOracle, Radiance, Resolution};
@@ -176,6 +177,20 @@ impl Method {
         })
     }
 
+    /// Camera rays a path for the emission seen directly, estimated apart
+    /// from the method's paths ([`PssmltSettings::emission_rays`]); 0 for
+    /// MC, whose paths are independent already, and for stratified MCMC,
+    /// which estimates it itself ([`StratifiedSettings::emission_rays`]).
+    pub fn emission_rays(&self) -> f64 {
+        match self {
+            Method::Mc | Method::Stratified(_) => 0.0,
+            Method::Pssmlt(s) => s.emission_rays,
+            Method::Replica(s) => s.emission_rays,
+            Method::Erpt(s) => s.emission_rays,
+            Method::MultiStage(s) => s.pssmlt.emission_rays,
+        }
+    }
+
     /// What one unit of this method's work is (as [`Error::BudgetTooSmall`]
     /// names it): the least a render does, whatever its budget.
     pub fn unit_of_work(&self) -> &'static str {
@@ -281,6 +296,9 @@ pub(crate) struct Job<'a, O, I: ?Sized> {
     /// Where the round loop puts a checkpoint of the state after its last
     /// round (a task's partial result).
     pub last: Option<&'a OnceCell<Checkpoint>>,
+    /// Work the round loop keeps up with the rounds (the emission seen
+    /// directly, estimated apart).
+    pub beside: Option<&'a dyn Beside>,
 }
 
 impl<O, I: ?Sized> Job<'_, O, I> {
@@ -317,6 +335,7 @@ impl<O, I: ?Sized> Job<'_, O, I> {
             resumed,
             ends_within: false,
             last: self.last,
+            beside: self.beside,
         }
     }
 
@@ -578,27 +597,56 @@ where
     }
     let oracle_id = || OracleId::of(oracle);
     let checkpoints = Checkpointer::new(settings, task, O::Radiance::CHANNELS, &oracle_id);
-    let job = Job {
+    let (emission, resume) = EmissionApart::new(
         oracle,
-        importance,
-        seed: settings.seed,
-        budget: settings.budget,
-        observer,
-        resolution,
+        settings.method.emission_rays(),
+        settings.budget,
+        settings.seed,
         task,
-        clock: Clock::start(settings.budget),
-        checkpoints: &checkpoints,
+        &checkpoints,
         resume,
-        last,
+    )?;
+    let clock = Clock::start(settings.budget);
+    let render_method = |resume| {
+        let apart = emission.apart();
+        let oracle = WithoutSeen {
+            inner: oracle,
+            apart,
+        };
+        let job = Job {
+            oracle: &oracle,
+            importance,
+            seed: settings.seed,
+            budget: settings.budget,
+            observer,
+            resolution,
+            task,
+            clock: clock.clone(),
+            checkpoints: &emission,
+            resume,
+            last,
+            beside: apart.then_some(&emission as &dyn Beside),
+        };
+        match &settings.method {
+            Method::Mc => mc::render(&job),
+            Method::Pssmlt(s) => pssmlt::render(s, &job),
+            Method::Replica(s) => replica::render(s, &job),
+            Method::Stratified(s) => stratified::render(s, &job),
+            Method::Erpt(s) => erpt::render(s, &job),
+            Method::MultiStage(s) => multistage::render(s, &job),
+        }
     };
-    match &settings.method {
-        Method::Mc => mc::render(&job),
-        Method::Pssmlt(s) => pssmlt::render(s, &job),
-        Method::Replica(s) => replica::render(s, &job),
-        Method::Stratified(s) => stratified::render(s, &job),
-        Method::Erpt(s) => erpt::render(s, &job),
-        Method::MultiStage(s) => multistage::render(s, &job),
-    }
+    let mut output = match render_method(resume) {
+        // The paths without the emission seen directly are black: the
+        // chains keep it (the image is all emitters seen directly).
+        Err(Error::AllCandidatesBlack { .. }) if emission.apart() && resume.is_none() => {
+            emission.keep_in_paths();
+            render_method(None)
+        }
+        result => result,
+    }?;
+    emission.add_to_output(&mut output);
+    Ok(output)
 }
 
 /// Whether `bytes` can be had, by reserving them and letting them go before
@@ -649,11 +697,13 @@ mod tests {
         let saved = first.0.into_inner().unwrap().unwrap();
         let bytes = saved.as_bytes();
         let (header, rest) = saved.header::<Settings>().unwrap();
+        let (emission, rest) = take::<Option<crate::emission::SeenEmission>>(rest).unwrap();
         let (position, state) = take::<Position>(rest).unwrap();
         let forge = |done: u64| {
             let mut forged = bytes[..MAGIC.len() + 4].to_vec();
             let header: &Header<Settings> = &header;
             append(header, &mut forged);
+            append(&emission, &mut forged);
             append(&Position { done, ..position }, &mut forged);
             forged.extend_from_slice(state);
             let crc = crc32fast::hash(&forged);

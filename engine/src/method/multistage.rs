@@ -347,6 +347,11 @@ where
             stage_samples: AtomicU64::new(0),
             fraction: weight_done as f64 / weight_sum as f64,
             share: k as f64 / weight_sum as f64,
+            beside: job.beside.map(|b| {
+                let mut film = Film::new(resolution, O::Radiance::CHANNELS);
+                b.add_to(&mut film);
+                film
+            }),
         };
         let stage_job = Job {
             oracle: &probe,
@@ -360,12 +365,20 @@ where
             checkpoints: &stage_checkpoints,
             resume: resumed_stage.filter(|_| s == first),
             last: None,
+            // Kept up with the stages below, as the whole render's.
+            beside: None,
         };
         let (mut run, position) = Pssmlt::start(&settings.pssmlt, &stage_job)?;
         let saver = run.saver();
         let driven = drive(&mut run.chains, stage_job.round_loop(position), saver)?;
         let out = run.finish(driven);
         done.add(&out, k);
+        if let Some(beside) = job.beside {
+            beside.keep_up(
+                done.stats.samples,
+                done.weight_done as f64 / weight_sum as f64,
+            );
+        }
         done.estimate(&mut estimate, &mut luminance, &mut variance);
         if out.cancelled {
             cancelled = true;
@@ -526,6 +539,9 @@ struct StageObserver<'a> {
     /// The budget fraction before this stage, and this stage's share.
     fraction: f64,
     share: f64,
+    /// The render's estimate beside the stages (the emission seen
+    /// directly, which stays as it is during a stage), added to previews.
+    beside: Option<Film>,
 }
 
 impl Observer for StageObserver<'_> {
@@ -558,6 +574,9 @@ impl Observer for StageObserver<'_> {
             for (v, s) in pixel.iter_mut().zip(staged) {
                 *v = (*v + n * s) * inverse;
             }
+        }
+        if let Some(beside) = &self.beside {
+            combined.add_scaled(beside, 1.0);
         }
         self.outer.preview(&combined);
     }

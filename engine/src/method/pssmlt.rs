@@ -34,6 +34,11 @@ pub struct PssmltSettings {
     pub bootstrap_candidates: u64,
     /// Small step and large step probability.
     pub mutation: MutationParams,
+    /// Camera rays for the emission seen directly, per path the method
+    /// traces, when the oracle [separates it](crate::oracle::PathOracle::separates_emission):
+    /// the paths then leave it out and each pixel's emission is the mean of
+    /// its rays (the module `emission`); 0 keeps it in the paths.
+    pub emission_rays: f64,
 }
 
 impl Default for PssmltSettings {
@@ -42,6 +47,7 @@ impl Default for PssmltSettings {
             chains: 256,
             bootstrap_candidates: 100_000,
             mutation: MutationParams::default(),
+            emission_rays: crate::emission::EMISSION_RAYS,
         }
     }
 }

@@ -47,6 +47,11 @@ pub struct ReplicaSettings {
     /// (Syed et al. 2021; [`Ladder::equalized`]) in rounds of doubling length;
     /// 0 keeps the given ladder. Not splatted, not counted in the budget.
     pub ladder_tuning_sweeps: u64,
+    /// Camera rays for the emission seen directly, per path the method
+    /// traces, when the oracle [separates it](crate::oracle::PathOracle::separates_emission):
+    /// the paths then leave it out and each pixel's emission is the mean of
+    /// its rays (the module `emission`); 0 keeps it in the paths.
+    pub emission_rays: f64,
 }
 
 impl Default for ReplicaSettings {
@@ -57,6 +62,7 @@ impl Default for ReplicaSettings {
                 .expect("8 chains up to 2500 is a valid ladder"),
             exchange: ExchangeKind::IsPermutation,
             ladder_tuning_sweeps: 0,
+            emission_rays: crate::emission::EMISSION_RAYS,
         }
     }
 }

@@ -91,8 +91,21 @@ const STEP_MAX: Setting = real(
     "Kelemen's largest step s2 (kelemen kernel; Gruson et al. 2020: 1/32)",
 );
 
+const EMISSION_RAYS: Setting = real(
+    "emission_rays",
+    0.0,
+    256.0,
+    "camera rays per path for the emission seen directly (0: the chains keep it)",
+);
+
 const PSSMLT: &[Setting] = &[
-    CHAINS, BOOTSTRAP, LARGE_STEP, SMALL_STEP, STEP_MIN, STEP_MAX,
+    CHAINS,
+    BOOTSTRAP,
+    LARGE_STEP,
+    SMALL_STEP,
+    STEP_MIN,
+    STEP_MAX,
+    EMISSION_RAYS,
 ];
 const REPLICA: &[Setting] = &[
     whole(
@@ -129,6 +142,7 @@ const REPLICA: &[Setting] = &[
     SMALL_STEP,
     STEP_MIN,
     STEP_MAX,
+    EMISSION_RAYS,
 ];
 const STRATIFIED: &[Setting] = &[
     whole(
@@ -211,6 +225,7 @@ const ERPT: &[Setting] = &[
     SMALL_STEP,
     STEP_MIN,
     STEP_MAX,
+    EMISSION_RAYS,
 ];
 const MULTISTAGE: &[Setting] = &[
     whole(
@@ -229,6 +244,7 @@ const MULTISTAGE: &[Setting] = &[
     SMALL_STEP,
     STEP_MIN,
     STEP_MAX,
+    EMISSION_RAYS,
 ];
 
 impl Method {
@@ -258,6 +274,7 @@ impl Method {
         match (self, name) {
             (Method::Pssmlt(s), "chains") => number(s.chains.into()),
             (Method::Pssmlt(s), "bootstrap_candidates") => number(s.bootstrap_candidates as f64),
+            (Method::Pssmlt(s), "emission_rays") => number(s.emission_rays),
             (Method::Pssmlt(s), _) => mutation_get(&s.mutation, name),
             (Method::Replica(s), "ensembles") => number(s.ensembles.into()),
             (Method::Replica(s), "replicas") => number(s.ensemble.ladder.len() as f64),
@@ -268,6 +285,7 @@ impl Method {
             (Method::Replica(s), "bootstrap_candidates") => {
                 number(s.ensemble.bootstrap_candidates as f64)
             }
+            (Method::Replica(s), "emission_rays") => number(s.emission_rays),
             (Method::Replica(s), _) => mutation_get(&s.ensemble.mutation, name),
             (Method::Stratified(s), "tile_radius") => number(match s.shape {
                 TileShape::Cross => 0.0,
@@ -292,6 +310,7 @@ impl Method {
             (Method::Erpt(s), "chain_length") => number(s.chain_length.into()),
             (Method::Erpt(s), "chains_per_path") => number(s.chains_per_path),
             (Method::Erpt(s), "bootstrap_candidates") => number(s.bootstrap_candidates as f64),
+            (Method::Erpt(s), "emission_rays") => number(s.emission_rays),
             (Method::Erpt(s), "small_step" | "small_step_min" | "small_step_max") => {
                 let mutation = MutationParams {
                     small_step: s.small_step,
@@ -305,6 +324,7 @@ impl Method {
             (Method::MultiStage(s), "bootstrap_candidates") => {
                 number(s.pssmlt.bootstrap_candidates as f64)
             }
+            (Method::MultiStage(s), "emission_rays") => number(s.pssmlt.emission_rays),
             (Method::MultiStage(s), _) => mutation_get(&s.pssmlt.mutation, name),
             _ => None,
         }
@@ -325,6 +345,7 @@ impl Method {
         match (&mut next, name) {
             (Method::Pssmlt(s), "chains") => s.chains = n as u32,
             (Method::Pssmlt(s), "bootstrap_candidates") => s.bootstrap_candidates = n,
+            (Method::Pssmlt(s), "emission_rays") => s.emission_rays = value,
             (Method::Pssmlt(s), _) => mutation_set(&mut s.mutation, name, value)?,
             (Method::Replica(s), "ensembles") => s.ensembles = n as u32,
             (Method::Replica(s), "replicas") => rebuild_ladder(&mut s.ensemble, n as usize, None)?,
@@ -334,6 +355,7 @@ impl Method {
             }
             (Method::Replica(s), "ladder_tuning_sweeps") => s.ladder_tuning_sweeps = n,
             (Method::Replica(s), "bootstrap_candidates") => s.ensemble.bootstrap_candidates = n,
+            (Method::Replica(s), "emission_rays") => s.emission_rays = value,
             (Method::Replica(s), _) => mutation_set(&mut s.ensemble.mutation, name, value)?,
             (Method::Stratified(s), "tile_radius") => {
                 s.shape = match n {
@@ -359,6 +381,7 @@ impl Method {
             (Method::Erpt(s), "chain_length") => s.chain_length = n as u32,
             (Method::Erpt(s), "chains_per_path") => s.chains_per_path = value,
             (Method::Erpt(s), "bootstrap_candidates") => s.bootstrap_candidates = n,
+            (Method::Erpt(s), "emission_rays") => s.emission_rays = value,
             (Method::Erpt(s), _) => {
                 let mut mutation = MutationParams {
                     small_step: s.small_step,
@@ -371,6 +394,7 @@ impl Method {
             (Method::MultiStage(s), "noise_aware") => s.noise_aware = on,
             (Method::MultiStage(s), "chains") => s.pssmlt.chains = n as u32,
             (Method::MultiStage(s), "bootstrap_candidates") => s.pssmlt.bootstrap_candidates = n,
+            (Method::MultiStage(s), "emission_rays") => s.pssmlt.emission_rays = value,
             (Method::MultiStage(s), _) => mutation_set(&mut s.pssmlt.mutation, name, value)?,
             _ => return Err(Error::NotApplicable { name: row.name }),
         }

@@ -22,6 +22,7 @@ use core::cell::OnceCell;
 use super::{Method, Output, Settings, erpt, mc, pssmlt, replica, run, run_resumed};
 use crate::checkpoint::{Checkpoint, Header, Position, take};
 use crate::drive::{Budget, Observer};
+use crate::emission::take_saved;
 use crate::error::Error;
 use crate::oracle::{PathOracle, Resolution};
 use crate::target::Importance;
@@ -153,6 +154,7 @@ pub fn merge(parts: &[Checkpoint], subset: bool) -> Result<Output, Error> {
     let (head, _) = first.header::<Settings>()?;
     let mut states = Vec::with_capacity(parts.len());
     let mut seen = Vec::new();
+    let mut apart = None;
     for (part, checkpoint) in parts.iter().enumerate() {
         let (header, rest): (Header<Settings>, _) = checkpoint.header()?;
         let mismatch = |what| Error::PartMismatch { part, what };
@@ -177,18 +179,27 @@ pub fn merge(parts: &[Checkpoint], subset: bool) -> Result<Output, Error> {
             });
         }
         seen.push(header.task.index);
+        let channels = header.channels as usize;
+        let resolution = header.oracle.resolution;
+        let (emission, rest) = take_saved(rest, header.task, channels, resolution)?;
+        if emission.is_some() != *apart.get_or_insert(emission.is_some()) {
+            return Err(mismatch(
+                "emission seen directly (apart in some parts only)",
+            ));
+        }
         let (_, state) = take::<Position>(rest)?;
-        states.push((header.task.index, state));
+        states.push((header.task.index, emission, state));
     }
     let count = head.task.count;
     let missing: Vec<u32> = (0..count).filter(|i| !seen.contains(i)).collect();
     if !missing.is_empty() && !subset {
         return Err(Error::TasksMissing { missing, count });
     }
-    states.sort_by_key(|(index, _)| *index);
-    let states: Vec<&[u8]> = states.into_iter().map(|(_, s)| s).collect();
+    states.sort_by_key(|(index, _, _)| *index);
+    let (emission, states): (Vec<_>, Vec<&[u8]>) =
+        states.into_iter().map(|(_, e, s)| (e, s)).unzip();
     let resolution = head.oracle.resolution;
-    match &head.settings.method {
+    let mut output = match &head.settings.method {
         Method::Mc => mc::merge(&states, resolution, head.channels as usize),
         Method::Pssmlt(_) => pssmlt::merge(&states, resolution, head.channels as usize),
         Method::Erpt(_) => erpt::merge(&states, resolution, head.channels as usize),
@@ -196,5 +207,12 @@ pub fn merge(parts: &[Checkpoint], subset: bool) -> Result<Output, Error> {
         method => Err(Error::NotSplittable {
             method: method.name(),
         }),
+    }?;
+    // Each task traced its own rows: the sums add up to the render's
+    // unsplit, in the same operations for each pixel.
+    for seen in emission.iter().flatten() {
+        seen.add_to(&mut output.film);
+        output.stats.emission_rays += seen.rays(resolution);
     }
+    Ok(output)
 }

@@ -72,7 +72,6 @@
 //! |---|---|
 //! | `tile.rs` | a tile's chain: its state at rest and awake, target and weights, its accumulators |
 //! | `light.rs` | light tracing's splats, estimated apart by Monte Carlo |
-//! | `emission.rs` | the emission seen directly, estimated apart by camera rays of its own |
 //! | `local.rs` | local replica exchange and state borrowing |
 //! | `init.rs` | the global chains' initialization |
 //! | `regularizer.rs` | every pixel's uniform samples (summed per pixel as they are drawn), the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the total it anchors |
@@ -80,7 +79,6 @@
 //! | `sweeps.rs` | the state between rounds, a sweep (steps by tile rows in phases, exchanges from `exchange_after` on), what sweeps cost, the budget's remainder, the checkpoint, the output |
 //! | this file | settings, counters, a fresh start or a resumed state, the smallest budget |
 
-mod emission;
 mod init;
 mod light;
 mod local;
@@ -92,7 +90,6 @@ mod tile;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
-use self::emission::SeenEmission;
 use self::init::initialize;
 use self::light::LightTracing;
 use self::reconstruction::reserve_reconstruction;
@@ -103,6 +100,7 @@ use super::{Job, Output};
 use crate::chain::ChainStats;
 use crate::checkpoint;
 use crate::drive::{Budget, drive};
+use crate::emission::SeenEmission;
 use crate::error::{Error, check_probability};
 use crate::film::Film;
 use crate::mutate::MutationParams;
@@ -370,10 +368,6 @@ pub struct StratifiedStats {
     /// Pixels whose large steps all saw the same radiance (an emitter or a
     /// constant environment seen directly) and took it.
     pub known_pixels: u64,
-    /// Camera rays traced for the emission seen directly
-    /// ([`StratifiedSettings::emission_rays`]; not paths, not counted in
-    /// the budget).
-    pub emission_rays: u64,
     /// The factor that gave the image the regularizer's total (1 without
     /// [`StratifiedSettings::anchor_total`]).
     pub total_scale: f64,
@@ -415,14 +409,16 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let tiles = Tiles::new(job.resolution, settings.shape)?;
-    let fresh_emission = SeenEmission::new(job.oracle, settings.emission_rays);
+    let emission_apart = settings.emission_rays > 0 && job.oracle.separates_emission();
+    let fresh_emission =
+        emission_apart.then(|| SeenEmission::new(O::Radiance::CHANNELS, crate::task::Task::WHOLE));
     let ctx = Context {
         oracle: job.oracle,
         importance: job.importance,
         tiles: &tiles,
         p_large: settings.mutation.large_step_probability,
         small_step: settings.mutation.small_step,
-        emission_apart: fresh_emission.apart(),
+        emission_apart,
     };
     let n = tiles.count();
     let offsets = tiles.offsets().len();
@@ -443,7 +439,10 @@ where
                     .all(|c| c.fits(offsets, &settings.mutation.small_step))
                 && saved.samples.fits(n, O::Radiance::CHANNELS);
             let light_fits = saved.light.fits(&new_light(), &tiles)
-                && saved.emission.fits(&fresh_emission, &tiles);
+                && match (&saved.emission, &fresh_emission) {
+                    (Some(saved), Some(fresh)) => saved.fits(fresh, job.resolution),
+                    (saved, fresh) => saved.is_none() && fresh.is_none(),
+                };
             if !fits || !light_fits {
                 return Err(checkpoint::does_not_fit());
             }
@@ -498,7 +497,7 @@ fn start<O, I>(
     job: &Job<'_, O, I>,
     settings: &StratifiedSettings,
     light: LightTracing,
-    emission: SeenEmission,
+    emission: Option<SeenEmission>,
 ) -> Result<Saved<O::Radiance>, Error>
 where
     O: PathOracle,

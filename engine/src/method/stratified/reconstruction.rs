@@ -8,7 +8,6 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
-use super::emission::SeenEmission;
 use super::light::LightTracing;
 use super::regularizer::{Halves, LargeSteps, Samples, anchor_total, fall_back, take_known};
 use super::tile::{Draws, TileChain};
@@ -16,6 +15,7 @@ use super::{Solver, StratifiedSettings};
 #[cfg(feature = "std")]
 use crate::drive::Budget;
 use crate::drive::Clock;
+use crate::emission::SeenEmission;
 use crate::error::Error;
 use crate::film::Film;
 use crate::method::Job;
@@ -135,7 +135,7 @@ pub(super) fn preview<R: Radiance>(
     settings: &StratifiedSettings,
     sweeps: u64,
     light: &LightTracing,
-    emission: &SeenEmission,
+    emission: Option<&SeenEmission>,
 ) -> Film {
     let channels = R::CHANNELS;
     let draws: Vec<Draws> = chains.iter().map(|c| c.draws).collect();
@@ -153,7 +153,9 @@ pub(super) fn preview<R: Radiance>(
         anchor_total(&mut film, &regularizer, &[]);
     }
     light.add_to(tiles, &mut film, sweeps);
-    emission.add_to(&mut film);
+    if let Some(emission) = emission {
+        emission.add_to(&mut film);
+    }
     film
 }
 

@@ -8,7 +8,6 @@ use alloc::vec::Vec;
 
 use serde::Deserialize;
 
-use super::emission::SeenEmission;
 use super::light::LightTracing;
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
@@ -18,6 +17,7 @@ use super::{StratifiedExtras, StratifiedSettings, StratifiedStats};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;
 use crate::drive::{Budget, Driven, RenderStats, Rounds};
+use crate::emission::SeenEmission;
 use crate::error::Error;
 use crate::film::Film;
 use crate::method::{Extras, Output};
@@ -41,7 +41,7 @@ pub(super) struct Saved<R> {
     /// The paths the global chains' bootstrap traced.
     pub bootstrap_traces: u64,
     pub light: LightTracing,
-    pub emission: SeenEmission,
+    pub emission: Option<SeenEmission>,
 }
 
 /// Stratified MCMC's state between rounds: the tile chains and their counters.
@@ -63,7 +63,7 @@ pub(super) struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
     /// The splats' estimate.
     pub(super) light: LightTracing,
     /// The emission seen directly, if estimated apart.
-    pub(super) emission: SeenEmission,
+    pub(super) emission: Option<SeenEmission>,
     /// The render's seed (the emission's rays).
     pub(super) seed: u64,
     /// A sample budget's last sweep and the budget, whose remainder is
@@ -178,7 +178,7 @@ where
             self.invalid,
             bootstrap_traces,
             &self.light,
-            &self.emission,
+            self.emission.as_ref(),
         );
         checkpoint::append(&saved, out);
     }
@@ -216,7 +216,9 @@ where
             stop,
         )?;
         self.light.add_to(tiles, &mut image.film, self.stats.sweeps);
-        self.emission.add_to(&mut image.film);
+        if let Some(emission) = &self.emission {
+            emission.add_to(&mut image.film);
+        }
         let stats = &mut self.stats;
         if let Some(alpha) = image.alpha {
             stats.alpha = alpha;
@@ -224,7 +226,6 @@ where
         stats.known_pixels = image.known_pixels;
         stats.fallback_pixels = image.fallback_pixels;
         stats.total_scale = image.total_scale;
-        stats.emission_rays = self.emission.traced * tiles.count() as u64;
         let traced = stats.initialization_samples
             + stats.tile_samples
             + stats.regularizer_samples
@@ -236,6 +237,10 @@ where
                 samples: traced - bootstrap_traces,
                 bootstrap_samples: bootstrap_traces,
                 invalid_samples: chain_stats.invalid + self.invalid,
+                emission_rays: self
+                    .emission
+                    .as_ref()
+                    .map_or(0, |e| e.rays(tiles.resolution())),
                 chains: chain_stats,
                 ..Default::default()
             },
@@ -348,7 +353,11 @@ where
                 traced = traced + row.sum;
             }
             self.invalid += traced.regularizer.invalid;
-            self.invalid += self.emission.trace(ctx.oracle, ctx.tiles, self.seed);
+            if let Some(emission) = &mut self.emission {
+                let rays = u64::from(self.settings.emission_rays);
+                let resolution = ctx.tiles.resolution();
+                self.invalid += emission.trace(ctx.oracle, resolution, self.seed, rays);
+            }
             let stats = &mut self.stats;
             stats.tile_samples += traced.steps;
             stats.regularizer_samples += traced.regularizer.paths;
@@ -396,7 +405,7 @@ where
             self.settings,
             self.stats.sweeps,
             &self.light,
-            &self.emission,
+            self.emission.as_ref(),
         )
     }
 }

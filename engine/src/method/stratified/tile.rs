@@ -205,7 +205,7 @@ pub(super) struct Context<'a, O, I: ?Sized> {
     /// The tile chains' small step.
     pub small_step: SmallStep,
     /// Whether the emission seen directly is left out of every trace
-    /// ([`SeenEmission`](super::emission::SeenEmission) estimates it).
+    /// (`crate::emission::SeenEmission` estimates it).
     pub emission_apart: bool,
 }
 

@@ -458,9 +458,9 @@ impl Method {
 
     /// Sets the values of a named preset: `seed-001`, the settings of
     /// Gruson et al. (2020), sec. 4 (Kelemen steps from 1/1024 to 1/32 for
-    /// stratified MCMC and ERPT; for stratified MCMC also large steps with
-    /// probability 0.3, the solver's own `α` without cross-validation, the
-    /// emission seen directly left to the tile chains, and the
+    /// stratified MCMC and ERPT, the emission seen directly left to their
+    /// chains; for stratified MCMC also large steps with probability 0.3,
+    /// the solver's own `α` without cross-validation, and the
     /// initialization ended at 30 % of the tiles).
     /// Methods the preset does not concern are left as they are.
     pub fn apply_preset(&mut self, name: &str) -> Result<(), Error> {
@@ -472,7 +472,9 @@ impl Method {
                 ("emission_rays", 0.0),
                 ("init_coverage", 0.3),
             ],
-            ("seed-001", Method::Erpt(_)) => &[("small_step_max", 1.0 / 32.0)],
+            ("seed-001", Method::Erpt(_)) => {
+                &[("small_step_max", 1.0 / 32.0), ("emission_rays", 0.0)]
+            }
             ("seed-001", _) => &[],
             _ => {
                 return Err(Error::UnknownChoice {
@@ -752,6 +754,9 @@ mod tests {
         assert!(!s.cross_validate_alpha);
         assert_eq!(s.emission_rays, 0);
         assert_eq!(s.initialization.coverage, 0.3);
+        let mut erpt = Method::from_name("erpt").unwrap();
+        erpt.apply_preset("seed-001").unwrap();
+        assert_eq!(erpt.get("emission_rays"), Some(Value::Number(0.0)));
         let mut pssmlt = Method::from_name("pssmlt").unwrap();
         pssmlt.apply_preset("seed-001").unwrap();
         assert_eq!(pssmlt, Method::from_name("pssmlt").unwrap());

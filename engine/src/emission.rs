@@ -56,9 +56,10 @@ pub(crate) struct SeenEmission {
     /// The rows traced: those whose index `y` has `y mod count == index`
     /// (a task's share; all of them for a whole render).
     rows: Task,
-    /// Every pixel's sum of its rays' emission (made at the first pass).
-    sums: Option<Film>,
-    /// Rays each pixel of the traced rows has traced.
+    /// Every pixel's sum of its rays' emission, its rows one after the
+    /// other (made at the first pass).
+    sums: Option<Vec<f64>>,
+    /// Rays each pixel of its rows has traced.
     traced: u64,
 }
 
@@ -78,15 +79,29 @@ impl SeenEmission {
         self.traced
     }
 
+    /// The image rows it traces on a film of `resolution`, in the order of
+    /// its sums.
+    fn image_rows(&self, resolution: Resolution) -> impl Iterator<Item = usize> + use<> {
+        let count = self.rows.count.max(1) as usize;
+        (self.rows.index as usize..resolution.height as usize).step_by(count)
+    }
+
+    /// Values in its sums on a film of `resolution`.
+    fn len(&self, resolution: Resolution) -> usize {
+        let rows = self.rows.share(u64::from(resolution.height)) as usize;
+        rows * resolution.width as usize * self.channels
+    }
+
     /// Whether a state read from a checkpoint (`self`) is of the same shape
-    /// as `fresh` on a film of `resolution`.
+    /// as `fresh` on a film of `resolution`, its sums finite and
+    /// non-negative.
     pub fn fits(&self, fresh: &SeenEmission, resolution: Resolution) -> bool {
         self.rows == fresh.rows
             && self.channels == fresh.channels
-            && self
-                .sums
-                .as_ref()
-                .is_none_or(|f| f.fits(resolution, self.channels))
+            && self.sums.as_ref().is_none_or(|sums| {
+                sums.len() == self.len(resolution)
+                    && sums.iter().all(|v| v.is_finite() && *v >= 0.0)
+            })
     }
 
     /// Traces `rays` more rays at every pixel of its rows; returns the
@@ -102,18 +117,14 @@ impl SeenEmission {
         if rays == 0 {
             return 0;
         }
-        let channels = self.channels;
-        let first = self.traced;
-        let rows = self.rows;
-        let sums = self
-            .sums
-            .get_or_insert_with(|| Film::new(resolution, channels));
+        let (channels, first) = (self.channels, self.traced);
+        let (index, count) = (self.rows.index as usize, self.rows.count.max(1) as usize);
+        let len = self.len(resolution);
+        let sums = self.sums.get_or_insert_with(|| alloc::vec![0.0; len]);
         let width = resolution.width as usize;
         let invalid = AtomicU64::new(0);
-        parallel::for_each_chunk(sums.data_mut(), width * channels, |y, row| {
-            if y as u64 % u64::from(rows.count.max(1)) != u64::from(rows.index) {
-                return;
-            }
+        parallel::for_each_chunk(sums, width * channels, |j, row| {
+            let y = index + j * count;
             let mut bad = 0;
             for (x, pixel) in row.chunks_mut(channels).enumerate() {
                 let p = y * width + x;
@@ -158,10 +169,21 @@ impl SeenEmission {
         self.traced * rows * u64::from(resolution.width)
     }
 
-    /// Adds each pixel's mean emission to `film`.
+    /// Adds each pixel's mean emission to `film` (of the resolution it
+    /// was traced on).
     pub fn add_to(&self, film: &mut Film) {
-        if let Some(sums) = &self.sums {
-            film.add_scaled(sums, 1.0 / self.traced.max(1) as f64);
+        let Some(sums) = &self.sums else {
+            return;
+        };
+        let scale = 1.0 / self.traced.max(1) as f64;
+        let resolution = film.resolution();
+        let row = resolution.width as usize * self.channels;
+        let rows = self.image_rows(resolution);
+        for (y, sums) in rows.zip(sums.chunks(row)) {
+            let pixels = &mut film.data_mut()[y * row..(y + 1) * row];
+            for (v, o) in pixels.iter_mut().zip(sums) {
+                *v += scale * o;
+            }
         }
     }
 }

@@ -273,7 +273,6 @@ impl<'a, O: PathOracle> EmissionApart<'a, O> {
     /// checkpoint holds after its header) if the render is resumed, which
     /// returns the bytes after it. Checkpoints go to `checkpoints`, the
     /// state in front.
-    #[allow(clippy::too_many_arguments)]
     pub fn new<'r>(
         oracle: &'a O,
         rate: f64,

@@ -90,7 +90,7 @@ pub enum Domain {
     Energy = 0x9fb2_1c65_1e98_df25,
     /// ERPT: the order of pass `i`'s blocks.
     Pass = 0x3c79_ac49_2ba7_b653,
-    /// Stratified MCMC: pixel `i`'s rays for the emission seen directly.
+    /// The emission seen directly: pixel `i`'s camera rays (`emission`).
     Emission = 0x8ebc_6af0_9c88_c6e3,
     /// Anything a test or caller wants to seed.
     User = 0xa076_1d64_78bd_642f,

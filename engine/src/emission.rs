@@ -6,8 +6,8 @@
 //! the worst for a Markov chain: an emitter's pixels outshine the rest by
 //! orders of magnitude, so a chain's target is bimodal at its edges, and a
 //! chain's estimate of them converges slowly where a camera ray alone
-//! would be exact at the price of one ray. Veach and Guibas (1997,
-//! sec. 5.2) and Mitsuba's PSSMLT render these paths apart from the
+//! would be exact at the price of one ray. Veach and Guibas (1997)
+//! and Mitsuba's PSSMLT render these paths apart from the
 //! chains. When the oracle [separates them](PathOracle::separates_emission),
 //! the methods run on the radiance without them ([`EmissionApart`]'s
 //! oracle) and each pixel's emission is the mean of camera rays through

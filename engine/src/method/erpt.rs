@@ -67,7 +67,7 @@ pub struct ErptSettings {
     /// Camera rays for the emission seen directly, per path the method
     /// traces, when the oracle [separates it](crate::oracle::PathOracle::separates_emission):
     /// the paths then leave it out and each pixel's emission is the mean of
-    /// its rays (as Veach and Guibas 1997, sec. 5.2, render paths of one
+    /// its rays (as Veach and Guibas 1997 and Mitsuba's PSSMLT render paths of one
     /// segment apart from the chains); 0 keeps it in the paths.
     pub emission_rays: f64,
 }

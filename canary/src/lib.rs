@@ -19,6 +19,7 @@ pub fn render_tiny() -> f64 {
             chains: 4,
             bootstrap_candidates: 64,
             mutation: MutationParams::default(),
+            ..PssmltSettings::default()
         }),
     };
     render(&image, &MaxChannel, &settings, &Silent).map_or(0.0, |out| out.film.channel_mean(1))

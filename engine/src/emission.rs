@@ -24,7 +24,7 @@
 //! its own rows) merges to the same bytes.
 
 use alloc::vec::Vec;
-use core::cell::{Cell, RefCell};
+use core::cell::RefCell;
 use core::sync::atomic::{AtomicU64, Ordering};
 use serde::{Deserialize, Serialize};
 
@@ -61,6 +61,8 @@ pub(crate) struct SeenEmission {
     sums: Option<Vec<f64>>,
     /// Rays each pixel of its rows has traced.
     traced: u64,
+    /// Rays whose emission was NaN, infinite or negative (not added).
+    invalid: u64,
 }
 
 impl SeenEmission {
@@ -71,6 +73,7 @@ impl SeenEmission {
             rows,
             sums: None,
             traced: 0,
+            invalid: 0,
         }
     }
 
@@ -104,18 +107,16 @@ impl SeenEmission {
             })
     }
 
-    /// Traces `rays` more rays at every pixel of its rows; returns the
-    /// invalid ones (NaN, infinite or negative emission: counted, not
-    /// added).
+    /// Traces `rays` more rays at every pixel of its rows.
     pub fn trace<O: PathOracle>(
         &mut self,
         oracle: &O,
         resolution: Resolution,
         seed: u64,
         rays: u64,
-    ) -> u64 {
+    ) {
         if rays == 0 {
-            return 0;
+            return;
         }
         let (channels, first) = (self.channels, self.traced);
         let (index, count) = (self.rows.index as usize, self.rows.count.max(1) as usize);
@@ -160,7 +161,15 @@ impl SeenEmission {
             invalid.fetch_add(bad, Ordering::Relaxed);
         });
         self.traced += rays;
-        invalid.into_inner()
+        self.invalid += invalid.into_inner();
+    }
+
+    /// Adds the emission to `output`'s image, its rays and the invalid
+    /// ones to its counters.
+    pub fn add_to_output(&self, output: &mut crate::method::Output) {
+        self.add_to(&mut output.film);
+        output.stats.emission_rays += self.rays(output.film.resolution());
+        output.stats.invalid_samples += self.invalid;
     }
 
     /// Rays traced by all its pixels on a film of `resolution`.
@@ -262,7 +271,6 @@ pub(crate) struct EmissionApart<'a, O> {
     /// `None` when the emission stays in the paths (rate 0, or an oracle
     /// that does not separate it).
     state: RefCell<Option<SeenEmission>>,
-    invalid: Cell<u64>,
     checkpoints: &'a dyn Checkpoints,
 }
 
@@ -316,7 +324,6 @@ impl<'a, O: PathOracle> EmissionApart<'a, O> {
             resolution,
             schedule,
             state: RefCell::new(state),
-            invalid: Cell::new(0),
             checkpoints,
         };
         Ok((apart, rest))
@@ -335,19 +342,11 @@ impl<'a, O: PathOracle> EmissionApart<'a, O> {
         *self.state.borrow_mut() = None;
     }
 
-    /// Rays traced by all pixels, and the invalid ones among them.
-    pub fn rays(&self) -> (u64, u64) {
-        let state = self.state.borrow();
-        let rays = state.as_ref().map_or(0, |s| s.rays(self.resolution));
-        (rays, self.invalid.get())
-    }
-
     /// Adds the emission to `output`'s image and its rays to its counters.
     pub fn add_to_output(&self, output: &mut crate::method::Output) {
-        self.add_to(&mut output.film);
-        let (rays, invalid) = self.rays();
-        output.stats.emission_rays += rays;
-        output.stats.invalid_samples += invalid;
+        if let Some(seen) = self.state.borrow().as_ref() {
+            seen.add_to_output(output);
+        }
     }
 }
 
@@ -369,8 +368,7 @@ impl<O: PathOracle> Beside for EmissionApart<'_, O> {
         let owed = owed.max(1);
         if owed > seen.traced() {
             let rays = owed - seen.traced();
-            let bad = seen.trace(self.oracle, self.resolution, self.seed, rays);
-            self.invalid.set(self.invalid.get() + bad);
+            seen.trace(self.oracle, self.resolution, self.seed, rays);
         }
     }
 

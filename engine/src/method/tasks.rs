@@ -211,8 +211,7 @@ pub fn merge(parts: &[Checkpoint], subset: bool) -> Result<Output, Error> {
     // Each task traced its own rows: the sums add up to the render's
     // unsplit, in the same operations for each pixel.
     for seen in emission.iter().flatten() {
-        seen.add_to(&mut output.film);
-        output.stats.emission_rays += seen.rays(resolution);
+        seen.add_to_output(&mut output);
     }
     Ok(output)
 }

@@ -216,9 +216,6 @@ where
             stop,
         )?;
         self.light.add_to(tiles, &mut image.film, self.stats.sweeps);
-        if let Some(emission) = &self.emission {
-            emission.add_to(&mut image.film);
-        }
         let stats = &mut self.stats;
         if let Some(alpha) = image.alpha {
             stats.alpha = alpha;
@@ -231,16 +228,12 @@ where
             + stats.regularizer_samples
             + stats.remainder_samples
             + stats.exchange_samples;
-        Ok(Output {
+        let mut output = Output {
             film: image.film,
             stats: RenderStats {
                 samples: traced - bootstrap_traces,
                 bootstrap_samples: bootstrap_traces,
                 invalid_samples: chain_stats.invalid + self.invalid,
-                emission_rays: self
-                    .emission
-                    .as_ref()
-                    .map_or(0, |e| e.rays(tiles.resolution())),
                 chains: chain_stats,
                 ..Default::default()
             },
@@ -253,7 +246,11 @@ where
                 unscaled: image.unscaled,
                 reconstruction_cut: image.cut,
             }),
-        })
+        };
+        if let Some(emission) = &self.emission {
+            emission.add_to_output(&mut output);
+        }
+        Ok(output)
     }
 }
 
@@ -356,7 +353,7 @@ where
             if let Some(emission) = &mut self.emission {
                 let rays = u64::from(self.settings.emission_rays);
                 let resolution = ctx.tiles.resolution();
-                self.invalid += emission.trace(ctx.oracle, resolution, self.seed, rays);
+                emission.trace(ctx.oracle, resolution, self.seed, rays);
             }
             let stats = &mut self.stats;
             stats.tile_samples += traced.steps;

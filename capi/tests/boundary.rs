@@ -778,48 +778,51 @@ impl strata_engine::PathOracle for Lamp {
 }
 
 /// A C oracle with an `emission` callback that tells the emission apart
-/// with `strata_sampler_emission` renders stratified MCMC exactly as the
-/// same oracle in Rust; without the callback the tile chains keep the
-/// emission, and the film differs.
+/// with `strata_sampler_emission` renders stratified MCMC and PSSMLT
+/// exactly as the same oracle in Rust; without the callback the chains
+/// keep the emission, and the film differs.
 #[test]
 fn a_c_oracle_tells_its_emission_apart() {
     use strata_engine::target::MaxChannel;
     use strata_engine::{Budget, Method, PathOracle, Settings, Silent, render};
-    let settings = strata_settings_new(c"stratified".as_ptr());
-    strata_settings_set_seed(settings, 3);
-    strata_settings_set_samples_per_pixel(settings, 16);
-    let with = StrataOracle {
-        emission: Some(lamp_emission),
-        ..oracle(lamp_trace)
-    };
-    let (mut apart, mut kept) = (null_mut(), null_mut());
-    assert_eq!(
-        strata_render(&with, settings, null(), &mut apart),
-        StrataStatus::Ok
-    );
-    assert_eq!(
-        strata_render(&oracle(lamp_trace), settings, null(), &mut kept),
-        StrataStatus::Ok
-    );
-    let rust = render(
-        &Lamp,
-        &MaxChannel,
-        &Settings {
-            seed: 3,
-            budget: Budget::samples_per_pixel(16, Lamp.resolution()),
-            method: Method::from_name("stratified").unwrap(),
-        },
-        &Silent,
-    )
-    .unwrap();
-    let rust_bits: Vec<u64> = rust.film.data().iter().map(|v| v.to_bits()).collect();
-    assert_eq!(film_bits(apart), rust_bits);
-    assert_ne!(film_bits(kept), rust_bits);
+    // Stratified MCMC's own rays a sweep, and PSSMLT's a path.
+    for method in [c"stratified", c"pssmlt"] {
+        let settings = strata_settings_new(method.as_ptr());
+        strata_settings_set_seed(settings, 3);
+        strata_settings_set_samples_per_pixel(settings, 16);
+        let with = StrataOracle {
+            emission: Some(lamp_emission),
+            ..oracle(lamp_trace)
+        };
+        let (mut apart, mut kept) = (null_mut(), null_mut());
+        assert_eq!(
+            strata_render(&with, settings, null(), &mut apart),
+            StrataStatus::Ok
+        );
+        assert_eq!(
+            strata_render(&oracle(lamp_trace), settings, null(), &mut kept),
+            StrataStatus::Ok
+        );
+        let rust = render(
+            &Lamp,
+            &MaxChannel,
+            &Settings {
+                seed: 3,
+                budget: Budget::samples_per_pixel(16, Lamp.resolution()),
+                method: Method::from_name(method.to_str().unwrap()).unwrap(),
+            },
+            &Silent,
+        )
+        .unwrap();
+        let rust_bits: Vec<u64> = rust.film.data().iter().map(|v| v.to_bits()).collect();
+        assert_eq!(film_bits(apart), rust_bits, "{method:?}");
+        assert_ne!(film_bits(kept), rust_bits, "{method:?}");
+        strata_film_free(apart);
+        strata_film_free(kept);
+        strata_settings_free(settings);
+    }
     assert_eq!(
         strata_sampler_emission(null_mut(), [0.0; 3].as_ptr()),
         StrataStatus::InvalidArgument
     );
-    strata_film_free(apart);
-    strata_film_free(kept);
-    strata_settings_free(settings);
 }

@@ -132,21 +132,17 @@ impl SeenEmission {
                 let mut offset = rng::stream(seed, Domain::Emission, p as u64);
                 let o = [rng::uniform_f64(&mut offset), rng::uniform_f64(&mut offset)];
                 for k in first..first + rays {
-                    let inside = |a: usize, cell: usize| {
-                        let j = libm::fmod(o[a] + k as f64 * STEPS[a], 1.0) as f32;
-                        let j = j.min(f32::from_bits(1.0f32.to_bits() - 1));
-                        let (lo, hi) = (cell as f32, (cell + 1) as f32);
-                        let v = lo + j;
-                        if v < hi {
-                            v
-                        } else {
-                            f32::from_bits(hi.to_bits() - 1)
-                        }
+                    let jitter = |a: usize| {
+                        let v = libm::fmod(o[a] + k as f64 * STEPS[a], 1.0) as f32;
+                        v.min(f32::from_bits(1.0f32.to_bits() - 1))
                     };
-                    let film = FilmPoint {
-                        x: inside(0, x),
-                        y: inside(1, y),
-                    };
+                    let film = resolution.pixel_point(
+                        p,
+                        FilmPoint {
+                            x: jitter(0),
+                            y: jitter(1),
+                        },
+                    );
                     let numbers = rng::stream(seed ^ rng::mix64(k + 1), Domain::Emission, p as u64);
                     let e = oracle.emission(film, &mut IndependentSampler::new(numbers));
                     if !e.is_valid() {

@@ -57,6 +57,23 @@ impl Resolution {
         y as usize * self.width as usize + x as usize
     }
 
+    /// The point at `jitter` (in `[0, 1)²`) inside pixel `pixel` (an index,
+    /// row by row): always inside the pixel, even where `x + jitter` would
+    /// round up to the next pixel.
+    #[inline]
+    pub fn pixel_point(self, pixel: usize, jitter: FilmPoint) -> FilmPoint {
+        let w = self.width as usize;
+        let inside = |cell: usize, j: f32| {
+            let (lo, hi) = (cell as f32, (cell + 1) as f32);
+            let v = lo + j;
+            if v < hi { v } else { f32_below(hi) }
+        };
+        FilmPoint {
+            x: inside(pixel % w, jitter.x),
+            y: inside(pixel / w, jitter.y),
+        }
+    }
+
     /// The film point at primary-sample coordinates `u` in `[0, 1)^2`, always
     /// strictly inside the film even after f32 rounding.
     #[inline]

@@ -11,7 +11,7 @@ use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
-use crate::oracle::{FilmPoint, Resolution};
+use crate::oracle::Resolution;
 
 /// The shape of every tile.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -123,28 +123,6 @@ impl Tiles {
         (0..self.offsets.len()).find(|&o| self.pixel(tile, o) == Some(pixel))
     }
 
-    /// The point at `jitter` (in `[0, 1)²`) inside pixel `pixel`: the same
-    /// jitter in every pixel of a tile replays one primary sample across it
-    /// (Gruson et al. 2020, sec. 3.1, coherent sampling). Always inside the pixel, even
-    /// where `x + jitter` would round up to the next pixel.
-    #[inline]
-    pub fn pixel_point(&self, pixel: usize, jitter: FilmPoint) -> FilmPoint {
-        let w = self.resolution.width as usize;
-        let inside = |cell: usize, j: f32| {
-            let (lo, hi) = (cell as f32, (cell + 1) as f32);
-            let v = lo + j;
-            if v < hi {
-                v
-            } else {
-                f32::from_bits(hi.to_bits() - 1)
-            }
-        };
-        FilmPoint {
-            x: inside(pixel % w, jitter.x),
-            y: inside(pixel / w, jitter.y),
-        }
-    }
-
     /// `(tile, offset)` of every tile containing pixel `pixel` (offsets are
     /// symmetric, so the tiles are `pixel - offset`).
     pub fn tiles_of(&self, pixel: usize) -> impl Iterator<Item = (usize, usize)> + '_ {
@@ -164,6 +142,7 @@ impl Tiles {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::oracle::FilmPoint;
 
     #[test]
     fn tiles_are_clipped_crosses_and_cover_each_pixel_as_often_as_they_overlap_it() {
@@ -189,7 +168,7 @@ mod tests {
         assert_eq!(t.offset_of(7, 9), None);
         let wide = Tiles::new(Resolution::new(40_000, 2), TileShape::Cross).unwrap();
         let almost_one = f32::from_bits(1.0f32.to_bits() - 1);
-        let p = wide.pixel_point(
+        let p = wide.resolution().pixel_point(
             39_999,
             FilmPoint {
                 x: almost_one,

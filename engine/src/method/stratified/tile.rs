@@ -230,7 +230,9 @@ where
         splats: Option<&mut Vec<TileSplat<O::Radiance>>>,
     ) -> (Value<O::Radiance>, bool) {
         sampler.start_stream(0);
-        let film = self.tiles.pixel_point(pixel, jitter);
+        // The same jitter in every pixel of a tile replays one primary
+        // sample across it (Gruson et al. 2020, sec. 3.1, coherent sampling).
+        let film = self.tiles.resolution().pixel_point(pixel, jitter);
         let resolution = self.oracle.resolution();
         let kept = splats.as_ref().map_or(0, |s| s.len());
         let mut sink = TileSink {

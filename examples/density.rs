@@ -59,6 +59,7 @@ fn run<O: PathOracle>(
             pssmlt,
             linear_stages: 10,
             noise_aware,
+            ..Default::default()
         })
     };
     let methods = [

@@ -13,7 +13,9 @@
 # With TIME=SECONDS, every task (and the unsplit render) gets that time
 # budget instead of SPP (the work balance of a time-split budget; the
 # merged image is then not compared: a time budget's image varies from run
-# to run), and the csv is out/bench/tasks-time.csv.
+# to run), and the csv is out/bench/tasks-time.csv. SET="NAME=VALUE ..."
+# passes settings to every render (e.g. SET=runs=8 for stratified MCMC and
+# multi-stage MLT, which split by runs).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scene=${1:-cornell}
@@ -26,6 +28,8 @@ dir=out/bench/tasks
 csv=out/bench/tasks${TIME:+-time}.csv
 budget=(--spp "$spp")
 [ -n "${TIME:-}" ] && budget=(--time "$TIME")
+sets=()
+for setting in ${SET:-}; do sets+=(--set "$setting"); done
 mkdir -p "$dir"
 echo "method,what,index,seconds,peak_mb,file_mb" >"$csv"
 timed() { # label index command... -> a csv line
@@ -38,7 +42,7 @@ timed() { # label index command... -> a csv line
   echo "$label,$index,$secs,$peak"
 }
 for method in ${METHODS:-mc pssmlt}; do
-  common=(render "$scene" --method "$method" "${budget[@]}" --seed 1 --width "$width" --height "$height" --threads 2)
+  common=(render "$scene" --method "$method" "${budget[@]}" "${sets[@]}" --seed 1 --width "$width" --height "$height" --threads 2)
   line=$(timed whole 0 "$bin" "${common[@]}" --out "$dir/$method-whole")
   echo "$method,$line," >>"$csv"
   for ((i = 0; i < n; i++)); do

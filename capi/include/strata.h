@@ -283,8 +283,8 @@ enum StrataStatus strata_settings_set_task(struct StrataSettings *settings,
 
 // Renders the task `settings` name ([`strata_settings_set_task`]) into a
 // new part at `*part` (free it with [`strata_part_free`]; its bytes with
-// [`strata_part_bytes`]). A method that cannot be split, or a task count
-// above the render's units of work, is `STRATA_STATUS_RENDER_FAILED`; if
+// [`strata_part_bytes`]). A task count above the render's units of work
+// (passes, chains, ensembles or runs) is `STRATA_STATUS_RENDER_FAILED`; if
 // the progress callback stopped it, `STRATA_STATUS_CANCELLED` and the part
 // is an unfinished task, which [`strata_merge`] refuses.
 enum StrataStatus strata_render_task(const struct StrataOracle *oracle,

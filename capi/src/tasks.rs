@@ -1,4 +1,5 @@
-//! A render split into tasks (MC, PSSMLT, replica exchange, ERPT): each task's partial result as
+//! A render split into tasks (every method, by its units of work: stratified
+//! MCMC and multi-stage MLT by their setting `runs`): each task's partial result as
 //! bytes to store where the merge can read them, and the merge into the
 //! film the render unsplit gives, byte for byte (the engine's
 //! `method::merge`).
@@ -43,8 +44,8 @@ pub extern "C" fn strata_settings_set_task(
 
 /// Renders the task `settings` name ([`strata_settings_set_task`]) into a
 /// new part at `*part` (free it with [`strata_part_free`]; its bytes with
-/// [`strata_part_bytes`]). A method that cannot be split, or a task count
-/// above the render's units of work, is `STRATA_STATUS_RENDER_FAILED`; if
+/// [`strata_part_bytes`]). A task count above the render's units of work
+/// (passes, chains, ensembles or runs) is `STRATA_STATUS_RENDER_FAILED`; if
 /// the progress callback stopped it, `STRATA_STATUS_CANCELLED` and the part
 /// is an unfinished task, which [`strata_merge`] refuses.
 #[unsafe(no_mangle)]

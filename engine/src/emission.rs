@@ -107,6 +107,18 @@ impl SeenEmission {
             })
     }
 
+    /// Adds the rays of another estimate over the same rows (another run's,
+    /// with its own seed).
+    pub fn pool(&mut self, other: &SeenEmission) {
+        match (&mut self.sums, &other.sums) {
+            (Some(sums), Some(more)) => sums.iter_mut().zip(more).for_each(|(a, b)| *a += b),
+            (None, more) => self.sums = more.clone(),
+            (Some(_), None) => {}
+        }
+        self.traced += other.traced;
+        self.invalid += other.invalid;
+    }
+
     /// Traces `rays` more rays at every pixel of its rows.
     pub fn trace<O: PathOracle>(
         &mut self,

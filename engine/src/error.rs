@@ -116,12 +116,6 @@ pub enum Error {
         /// What differs.
         what: &'static str,
     },
-    /// A render split into tasks with a method whose units of work are
-    /// coupled while they run ([`Method::splits`](crate::Method::splits)).
-    NotSplittable {
-        /// The method.
-        method: &'static str,
-    },
     /// A part given to [`merge`](crate::method::merge) is of another render
     /// than the first part.
     PartMismatch {
@@ -269,11 +263,6 @@ impl fmt::Display for Error {
             Error::CheckpointMismatch { what } => write!(
                 f,
                 "the checkpoint is of another render: its {what} differs from this one's"
-            ),
-            Error::NotSplittable { method } => write!(
-                f,
-                "{method} cannot be split into tasks (mc, pssmlt, replica and erpt can: the units \
-                 of {method}'s work are coupled while they run)"
             ),
             Error::PartMismatch { part, what } => write!(
                 f,

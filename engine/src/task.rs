@@ -1,15 +1,15 @@
-//! A render split into tasks: which units of work each task owns. The
-//! methods that can be split ([`Method::splits`](crate::Method::splits))
-//! give task `index` of `count` the units (chains, ensembles, passes) whose index `k`
-//! has `k mod count == index`; their films are exact sums
-//! ([`exact`](crate::exact)), so [`merge`](crate::method::merge) of the
-//! tasks' partial results gives the bytes of the render unsplit.
+//! A render split into tasks: which units of work each task owns. Every
+//! method gives task `index` of `count` the units (passes, chains,
+//! ensembles, independent runs) whose index `k` has `k mod count ==
+//! index`; their films are exact sums ([`exact`](crate::exact)), or a
+//! method's runs pooled in run order, so [`merge`](crate::method::merge) of
+//! the tasks' partial results gives the bytes of the render unsplit.
 
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
 /// One of `count` tasks of a render split across processes or machines
-/// ([`render_task`](crate::method::render_task)): the task owns the units of work (chains, ensembles, passes) whose
+/// ([`render_task`](crate::method::render_task)): the task owns the units of work (passes, chains, ensembles, runs) whose
 /// index `k` has `k mod count == index`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Task {
@@ -37,10 +37,12 @@ impl Task {
 
 /// The units of a render from its tasks' shares, given in task order:
 /// unit `k` is task `k mod n`'s `(k div n)`-th ([`Task::unit`] inverted).
-pub(crate) fn in_render_order<T: Clone>(shares: &[Vec<T>]) -> Vec<T> {
-    let longest = shares.iter().map(Vec::len).max().unwrap_or(0);
-    (0..longest)
-        .flat_map(|j| shares.iter().filter_map(move |share| share.get(j)))
-        .cloned()
-        .collect()
+pub(crate) fn in_render_order<T>(shares: Vec<Vec<T>>) -> Vec<T> {
+    let total = shares.iter().map(Vec::len).sum();
+    let mut shares: Vec<_> = shares.into_iter().map(Vec::into_iter).collect();
+    let mut units = Vec::with_capacity(total);
+    while units.len() < total {
+        units.extend(shares.iter_mut().filter_map(Iterator::next));
+    }
+    units
 }

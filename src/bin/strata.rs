@@ -19,7 +19,8 @@
 //! `--spp`, the image is the one an uninterrupted render gives, bit for bit).
 //! `--preview-every SECONDS` rewrites the PNG and EXR while rendering.
 //!
-//! On several machines (MC, PSSMLT, replica exchange, ERPT): `strata render ... --task-index I
+//! On several machines (every method; stratified MCMC and multi-stage MLT with
+//! `--set runs=N`): `strata render ... --task-index I
 //! --task-count N --out part-I` renders task I of N and writes its partial
 //! result `part-I.part`; `strata merge part-*.part --out image` writes the
 //! image the render unsplit gives, byte for byte (README, "Rendering on a

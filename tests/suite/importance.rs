@@ -52,6 +52,7 @@ fn multistage_and_noise_aware_mlt_are_unbiased() {
                         pssmlt: pssmlt(),
                         linear_stages: 10,
                         noise_aware,
+                        ..Default::default()
                     }),
                 };
                 let out = render(&image, &MaxChannel, &settings, &Silent).unwrap();

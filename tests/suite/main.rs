@@ -17,6 +17,7 @@ mod images;
 mod importance;
 mod invariance;
 mod resume;
+mod runs;
 mod scenes;
 mod splats;
 mod stratified;

@@ -14,8 +14,8 @@ use strata::engine::{
     render,
 };
 use strata::prelude::{
-    ErptSettings, PssmltSettings, ReplicaSettings, StratifiedSettings, Task, merge, render_task,
-    resume_task,
+    ErptSettings, MultiStageSettings, PssmltSettings, ReplicaSettings, StratifiedSettings, Task,
+    merge, render_task, resume_task,
 };
 
 use crate::emission::Lit;
@@ -32,8 +32,9 @@ fn image() -> Lit<ProceduralImage> {
     }
 }
 
-/// The methods that split, small: MC, PSSMLT, replica exchange and ERPT.
-fn methods() -> [Method; 4] {
+/// Every method, small; stratified MCMC and multi-stage MLT split by their
+/// 8 runs.
+fn methods() -> [Method; 6] {
     [
         Method::Mc,
         Method::Pssmlt(PssmltSettings {
@@ -56,14 +57,30 @@ fn methods() -> [Method; 4] {
             bootstrap_candidates: 5_000,
             ..Default::default()
         }),
+        Method::Stratified(StratifiedSettings {
+            runs: 8,
+            ..Default::default()
+        }),
+        Method::MultiStage(MultiStageSettings {
+            pssmlt: PssmltSettings {
+                chains: 4,
+                bootstrap_candidates: 2_000,
+                ..Default::default()
+            },
+            linear_stages: 2,
+            runs: 8,
+            ..Default::default()
+        }),
     ]
 }
 
-/// 40 paths per pixel (40 MC passes, 40 PSSMLT steps a chain), and 8 ERPT
-/// passes.
+/// 40 paths per pixel (40 MC passes, 40 PSSMLT steps a chain), 8 ERPT
+/// passes, and 160 for stratified MCMC (a sweep of its cross tiles costs
+/// ~8 paths a pixel: 2 sweeps a run).
 fn settings(method: &Method) -> Settings {
     let spp = match method {
         Method::Erpt(s) => 8.0 * s.paths_per_pixel(),
+        Method::Stratified(_) => 160.0,
         _ => 40.0,
     };
     Settings {
@@ -109,8 +126,9 @@ fn tasks_merge_to_the_bytes_of_the_unsplit_render() {
         let whole = in_pool(2, || {
             render(&image(), &MaxChannel, &settings, &Silent).unwrap()
         });
-        // Each task traces the emission's rays of its own rows.
-        let apart = method.emission_rays() > 0.0;
+        // Each task traces the emission's rays of its own rows (stratified
+        // MCMC's runs, each its own over the whole film).
+        let apart = !matches!(method, Method::Mc);
         assert_eq!(whole.stats.emission_rays > 0, apart, "{}", method.name());
         for count in [1, 2, 3, 8] {
             // Tasks on alternating thread counts, merged in reverse order.
@@ -235,16 +253,18 @@ fn merges_refuse_missing_repeated_and_foreign_parts() {
 }
 
 #[test]
-fn methods_whose_work_is_coupled_and_bad_task_numbers_are_refused() {
+fn more_tasks_than_units_of_work_and_bad_task_numbers_are_refused() {
     let image = image();
+    // Stratified MCMC's one run (its default) is one task.
     let stratified = settings(&Method::Stratified(StratifiedSettings::default()));
     let t = Task { index: 0, count: 2 };
-    assert_eq!(
-        render_task(&image, &MaxChannel, &stratified, t, &Silent).unwrap_err(),
-        Error::NotSplittable {
-            method: "stratified"
-        }
-    );
+    assert!(matches!(
+        render_task(&image, &MaxChannel, &stratified, t, &Silent),
+        Err(Error::InvalidParameter {
+            name: "task_count",
+            ..
+        })
+    ));
     let pssmlt = settings(&methods()[1]);
     for (index, count) in [(2, 2), (0, 0), (0, 38)] {
         let bad = Task { index, count };

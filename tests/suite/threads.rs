@@ -62,6 +62,7 @@ pub fn small_methods() -> Vec<Method> {
             },
             linear_stages: 4,
             noise_aware: true,
+            ..Default::default()
         }),
     ]
 }

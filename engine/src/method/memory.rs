@@ -13,7 +13,8 @@ impl Method {
     /// ([`PathOracle::splats_per_path`](crate::oracle::PathOracle::splats_per_path)), `workers` the threads.
     ///
     /// Counted: the films (exact sums, [`ExactFilm`](crate::exact::ExactFilm), and the image; the
-    /// emission seen directly's sums) and per-pixel counts; the bootstrap's candidates
+    /// emission seen directly's sums) and per-pixel counts; the sums of
+    /// the independent runs finished (stratified MCMC, multi-stage MLT); the bootstrap's candidates
     /// (let go before the first round); every chain's state (its primary
     /// sample and path); stratified MCMC's tile chains, per pixel a part of
     /// its own and one per tile pixel (the state evaluated there, with its
@@ -93,11 +94,18 @@ impl Method {
                 // oracle separates it).
                 let light = if splats > 0 { 2 * film } else { 0 };
                 let emission = if s.emission_rays > 0 { film } else { 0 };
+                // The sums of the runs finished before the last (each
+                // tile's `N G_s(k)` and draws, the uniform samples' sums,
+                // its light tracing and emission), kept to be pooled.
+                let run = pixels * (8 * tile * channels as u128 + 24 + 8 * (channels as u128 + 2))
+                    + light
+                    + emission;
                 counted
                     + light
                     + emission
                     + pixels * (TILE_CHAIN + tile * per_tile_pixel)
                     + workers * CHAIN
+                    + (s.runs.max(1) as u128 - 1) * run
             }
             Method::Erpt(s) => {
                 // A block's start paths and a wave's proposals and states,
@@ -125,7 +133,10 @@ impl Method {
                     workers as usize,
                     budget,
                 );
-                stage as u128 + 2 * film + 4 * 8 * pixels
+                // The sums of the runs finished before the last: film,
+                // deviations and visits.
+                let run = film + 16 * pixels;
+                stage as u128 + 2 * film + 4 * 8 * pixels + (s.runs.max(1) as u128 - 1) * run
             }
         };
         // The emission seen directly, estimated apart (`emission_rays`;

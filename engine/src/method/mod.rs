@@ -27,6 +27,7 @@ mod multistage;
 mod noise_aware;
 mod pssmlt;
 mod replica;
+mod runs;
 mod stratified;
 mod table;
 mod tasks;
@@ -631,9 +632,9 @@ where
             Method::Mc => mc::render(&job),
             Method::Pssmlt(s) => pssmlt::render(s, &job),
             Method::Replica(s) => replica::render(s, &job),
-            Method::Stratified(s) => stratified::render(s, &job),
+            Method::Stratified(s) => runs::render(s, &job),
             Method::Erpt(s) => erpt::render(s, &job),
-            Method::MultiStage(s) => multistage::render(s, &job),
+            Method::MultiStage(s) => runs::render(s, &job),
         }
     };
     let mut output = match render_method(resume) {

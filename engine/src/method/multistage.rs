@@ -30,12 +30,14 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use core::cell::OnceCell;
 use serde::{Deserialize, Serialize};
 
 use core::sync::atomic::{AtomicU64, Ordering};
 
 use super::noise_aware::noise_target;
 use super::pssmlt::{Pssmlt, PssmltSettings};
+use super::runs::{self, Pooled};
 use super::{Extras, Job, Output};
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
 use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, SetUp, drive};
@@ -57,6 +59,10 @@ pub struct MultiStageSettings {
     /// Noise-aware MLT (Hoberock and Hart 2010, sec. 4.3.4-4.3.5): also target the
     /// estimated visual noise of each pixel.
     pub noise_aware: bool,
+    /// Independent runs, each of every stage with a share of the budget,
+    /// pooled at the end (1 by default): the units a task of a split render
+    /// owns (see `runs.rs`).
+    pub runs: u32,
 }
 
 impl Default for MultiStageSettings {
@@ -68,6 +74,7 @@ impl Default for MultiStageSettings {
             },
             linear_stages: 10,
             noise_aware: false,
+            runs: 1,
         }
     }
 }
@@ -128,9 +135,10 @@ pub(crate) fn smallest_budget(settings: &MultiStageSettings, resolution: Resolut
     let grids = grids_of(settings, resolution);
     let weight_sum: u64 = grids.iter().map(|&k| k as u64).sum();
     let smallest = grids.iter().copied().min().unwrap_or(1).max(1) as u64;
-    (settings.pssmlt.chains as u64)
+    let one_run = (settings.pssmlt.chains as u64)
         .saturating_mul(weight_sum)
-        .div_ceil(smallest)
+        .div_ceil(smallest);
+    runs::smallest_budget(one_run, settings.runs)
 }
 
 /// The mean luminance of `film` over a `k x k` grid of regions (clamped to
@@ -278,13 +286,14 @@ impl<O: PathOracle> SplatSink<O::Radiance> for ProbedSplats<'_, '_, O> {
     }
 }
 
-/// Multi-stage MLT (Hoberock and Hart 2010, Alg. 2) over `job`'s importance (the base
-/// importance, e.g. [`MaxChannel`](crate::target::MaxChannel)); see the
-/// module docs. The image is the sample-weighted mean of every stage's.
-pub(crate) fn render<O, I>(
+/// One run of multi-stage MLT (Hoberock and Hart 2010, Alg. 2) over `job`'s importance
+/// (the base importance, e.g. [`MaxChannel`](crate::target::MaxChannel));
+/// see the module docs: its stages' sums, and whether the observer stopped
+/// it. The image is the sample-weighted mean of every stage's.
+fn run_stages<O, I>(
     settings: &MultiStageSettings,
     job: &Job<'_, O, I>,
-) -> Result<Output, Error>
+) -> Result<(StagesDone, bool), Error>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
@@ -353,6 +362,7 @@ where
                 film
             }),
         };
+        let stage_last = OnceCell::new();
         let stage_job = Job {
             oracle: &probe,
             importance: &staged,
@@ -364,7 +374,7 @@ where
             clock: Clock::start(budget),
             checkpoints: &stage_checkpoints,
             resume: resumed_stage.filter(|_| s == first),
-            last: None,
+            last: job.last.map(|_| &stage_last),
             // Kept up with the stages below, as the whole render's.
             beside: None,
         };
@@ -381,17 +391,60 @@ where
         }
         done.estimate(&mut estimate, &mut luminance, &mut variance);
         if out.cancelled {
+            // A stopped stage's state is the render's to continue from.
+            if let (Some(last), Some(state)) = (job.last, stage_last.into_inner()) {
+                let _ = last.set(state);
+            }
             cancelled = true;
             break;
         }
     }
-    Ok(Output {
-        film: estimate,
-        stats: done.stats,
-        cancelled,
-        visits: done.visits,
-        extras: Extras::MultiStage(done.stages),
-    })
+    Ok((done, cancelled))
+}
+
+impl Pooled for MultiStageSettings {
+    type Partial = StagesDone;
+
+    fn runs(&self) -> u32 {
+        self.runs
+    }
+
+    fn run<O, I>(&self, job: &Job<'_, O, I>) -> Result<(StagesDone, bool), Error>
+    where
+        O: PathOracle,
+        I: Importance<O::Radiance> + ?Sized,
+    {
+        run_stages(self, job)
+    }
+
+    fn samples(done: &StagesDone) -> u64 {
+        done.stats.samples
+    }
+
+    fn fits(&self, done: &StagesDone, resolution: Resolution, channels: usize) -> bool {
+        done.fits(resolution, channels, grids_of(self, resolution).len() + 1)
+    }
+
+    fn pool(
+        &self,
+        partials: Vec<StagesDone>,
+        _: Resolution,
+        _: usize,
+        _: &dyn Fn() -> bool,
+    ) -> Result<Output, Error> {
+        let mut runs = partials.into_iter();
+        let mut done = runs.next().ok_or_else(checkpoint::does_not_fit)?;
+        for run in runs {
+            done.pool(run);
+        }
+        Ok(Output {
+            film: done.sum.scaled(1.0 / done.stats.samples.max(1) as f64),
+            stats: done.stats,
+            cancelled: false,
+            visits: done.visits,
+            extras: Extras::MultiStage(done.stages),
+        })
+    }
 }
 
 /// Noise-aware MLT's per-pixel factor of the importance (Hoberock and
@@ -418,8 +471,8 @@ fn noise_factors(
 /// The stages done of a multi-stage render: what the next stages and the
 /// image are made of, and what a checkpoint holds before the current stage's
 /// state.
-#[derive(Serialize, Deserialize)]
-struct StagesDone {
+#[derive(Clone, Serialize, Deserialize)]
+pub(crate) struct StagesDone {
     /// Sample-weighted sums of the stages' images and deviation channels.
     sum: Film,
     deviation_sum: Vec<f64>,
@@ -452,14 +505,43 @@ impl StagesDone {
             return Ok((done, None));
         };
         let (done, rest) = checkpoint::take::<StagesDone>(bytes)?;
-        let fits = done.sum.fits(job.resolution, channels)
-            && done.deviation_sum.len() == pixels
-            && done.visits.len() == pixels
-            && done.stages.len() < stages;
-        if !fits {
+        if !done.fits(job.resolution, channels, stages) {
             return Err(checkpoint::does_not_fit());
         }
         Ok((done, Some(rest)))
+    }
+
+    /// Whether stages done read from a checkpoint fit a film of
+    /// `resolution` and `channels`, with fewer than `stages` stages.
+    fn fits(&self, resolution: Resolution, channels: usize, stages: usize) -> bool {
+        let pixels = resolution.pixel_count();
+        self.sum.fits(resolution, channels)
+            && self.deviation_sum.len() == pixels
+            && self.visits.len() == pixels
+            && self.stages.len() < stages
+    }
+
+    /// Adds the stages of another run (see `runs.rs`).
+    fn pool(&mut self, run: StagesDone) {
+        self.sum.add_scaled(&run.sum, 1.0);
+        for (a, b) in self.deviation_sum.iter_mut().zip(&run.deviation_sum) {
+            *a += b;
+        }
+        for (a, b) in self.visits.iter_mut().zip(&run.visits) {
+            *a += b;
+        }
+        self.add_stats(&run.stats);
+        self.stages.extend(run.stages);
+        self.weight_done += run.weight_done;
+    }
+
+    /// Adds a stage's or a run's counters.
+    fn add_stats(&mut self, other: &RenderStats) {
+        let stats = &mut self.stats;
+        stats.samples += other.samples;
+        stats.bootstrap_samples += other.bootstrap_samples;
+        stats.invalid_samples += other.invalid_samples;
+        stats.chains.merge(&other.chains);
     }
 
     /// Adds the stage of grid `k` that rendered `out`.
@@ -479,11 +561,7 @@ impl StagesDone {
             .iter_mut()
             .zip(&out.visits)
             .for_each(|(a, b)| *a += b);
-        let stats = &mut self.stats;
-        stats.samples += out.stats.samples;
-        stats.bootstrap_samples += out.stats.bootstrap_samples;
-        stats.invalid_samples += out.stats.invalid_samples;
-        stats.chains.merge(&out.stats.chains);
+        self.add_stats(&out.stats);
         self.stages.push(Stage {
             grid: k,
             samples: out.stats.samples,

@@ -235,7 +235,7 @@ pub(crate) fn merge(
         tasks.push(chains);
     }
     let (bootstrap, prior) = head.ok_or_else(checkpoint::does_not_fit)?;
-    let chains = in_render_order(&tasks);
+    let chains = in_render_order(tasks);
     // An estimate is a chain step: one path.
     let (film, stats) = finish(bootstrap, prior, &films, estimates, &chains, estimates);
     Ok(Output {

@@ -261,7 +261,7 @@ pub(crate) fn merge(
         tasks.push(ensembles);
     }
     let (set_up, ladder, priors) = head.ok_or_else(checkpoint::does_not_fit)?;
-    let ensembles = in_render_order(&tasks);
+    let ensembles = in_render_order(tasks);
     let samples = estimates.saturating_mul(settings.traces_per_sweep());
     let film = film.scaled(resolution.pixel_count() as f64 / estimates.max(1) as f64);
     Ok(finish(

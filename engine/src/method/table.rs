@@ -98,6 +98,15 @@ const EMISSION_RAYS: Setting = real(
     "camera rays per path for the emission seen directly (0: the chains keep it)",
 );
 
+/// Independent runs: the units of work of the methods whose work is coupled
+/// while it runs, which a split render's tasks share (`runs.rs`).
+const RUNS: Setting = whole(
+    "runs",
+    1,
+    4096,
+    "independent runs, each with a share of the budget, pooled at the end (a task of a split render runs some of them)",
+);
+
 const PSSMLT: &[Setting] = &[
     CHAINS,
     BOOTSTRAP,
@@ -208,6 +217,7 @@ const STRATIFIED: &[Setting] = &[
         4096,
         "camera rays per pixel and sweep for the emission seen directly (0: the tile chains keep it)",
     ),
+    RUNS,
     LARGE_STEP,
     SMALL_STEP,
     STEP_MIN,
@@ -238,6 +248,7 @@ const MULTISTAGE: &[Setting] = &[
         "noise_aware",
         "noise-aware importance (Hoberock and Hart 2010, sec. 4.3)",
     ),
+    RUNS,
     STAGE_CHAINS,
     BOOTSTRAP,
     LARGE_STEP,
@@ -306,6 +317,7 @@ impl Method {
             (Method::Stratified(s), "emission_rays") => number(s.emission_rays.into()),
             (Method::Stratified(s), "init_coverage") => number(s.initialization.coverage),
             (Method::Stratified(s), "init_budget") => number(s.initialization.max_budget_fraction),
+            (Method::Stratified(s), "runs") => number(s.runs.into()),
             (Method::Stratified(s), _) => mutation_get(&s.mutation, name),
             (Method::Erpt(s), "chain_length") => number(s.chain_length.into()),
             (Method::Erpt(s), "chains_per_path") => number(s.chains_per_path),
@@ -320,6 +332,7 @@ impl Method {
             }
             (Method::MultiStage(s), "linear_stages") => number(s.linear_stages.into()),
             (Method::MultiStage(s), "noise_aware") => number(f64::from(u8::from(s.noise_aware))),
+            (Method::MultiStage(s), "runs") => number(s.runs.into()),
             (Method::MultiStage(s), "chains") => number(s.pssmlt.chains.into()),
             (Method::MultiStage(s), "bootstrap_candidates") => {
                 number(s.pssmlt.bootstrap_candidates as f64)
@@ -377,6 +390,7 @@ impl Method {
             (Method::Stratified(s), "emission_rays") => s.emission_rays = n as u32,
             (Method::Stratified(s), "init_coverage") => s.initialization.coverage = value,
             (Method::Stratified(s), "init_budget") => s.initialization.max_budget_fraction = value,
+            (Method::Stratified(s), "runs") => s.runs = n as u32,
             (Method::Stratified(s), _) => mutation_set(&mut s.mutation, name, value)?,
             (Method::Erpt(s), "chain_length") => s.chain_length = n as u32,
             (Method::Erpt(s), "chains_per_path") => s.chains_per_path = value,
@@ -392,6 +406,7 @@ impl Method {
             }
             (Method::MultiStage(s), "linear_stages") => s.linear_stages = n as u32,
             (Method::MultiStage(s), "noise_aware") => s.noise_aware = on,
+            (Method::MultiStage(s), "runs") => s.runs = n as u32,
             (Method::MultiStage(s), "chains") => s.pssmlt.chains = n as u32,
             (Method::MultiStage(s), "bootstrap_candidates") => s.pssmlt.bootstrap_candidates = n,
             (Method::MultiStage(s), "emission_rays") => s.pssmlt.emission_rays = value,

@@ -13,13 +13,15 @@
 //! Every task repeats the render's set-up (bootstraps, replica exchange's
 //! ladder tuning over every ensemble), which is deterministic. Methods
 //! whose units are coupled while they run (stratified MCMC's exchanges
-//! between neighbouring tiles, multi-stage MLT's stages) cannot be split
-//! yet ([`Method::splits`]).
+//! between neighbouring tiles, multi-stage MLT's stages) split by
+//! independent runs (their setting `runs`; see `runs.rs`): a task renders
+//! its runs whole, and the merge pools every run's sums in run order, as
+//! the render unsplit does.
 
 use alloc::vec::Vec;
 use core::cell::OnceCell;
 
-use super::{Method, Output, Settings, erpt, mc, pssmlt, replica, run, run_resumed};
+use super::{Method, Output, Settings, erpt, mc, pssmlt, replica, run, run_resumed, runs};
 use crate::checkpoint::{Checkpoint, Header, Position, take};
 use crate::drive::{Budget, Observer};
 use crate::emission::take_saved;
@@ -28,27 +30,12 @@ use crate::oracle::{PathOracle, Resolution};
 use crate::target::Importance;
 use crate::task::Task;
 
-impl Method {
-    /// Whether a render with this method can be split into tasks
-    /// ([`render_task`]): MC, PSSMLT, replica exchange and ERPT.
-    pub fn splits(&self) -> bool {
-        matches!(
-            self,
-            Method::Mc | Method::Pssmlt(_) | Method::Replica(_) | Method::Erpt(_)
-        )
-    }
-}
-
-/// Checks that `settings` can be split into `task`'s tasks: a method that
-/// [splits](Method::splits), an index below the count, and no task without
-/// work (a sample budget's MC passes, PSSMLT's chains).
+/// Checks that `settings` can be split into `task`'s tasks: an index below
+/// the count, and no task without work (a sample budget's MC and ERPT
+/// passes, PSSMLT's chains, replica exchange's ensembles, the runs of
+/// stratified MCMC and multi-stage MLT).
 fn check_task(settings: &Settings, task: Task, resolution: Resolution) -> Result<(), Error> {
     let pixels = resolution.pixel_count() as u64;
-    if !settings.method.splits() {
-        return Err(Error::NotSplittable {
-            method: settings.method.name(),
-        });
-    }
     if task.count == 0 {
         return Err(Error::invalid("task_count", 0.0, "at least 1"));
     }
@@ -62,9 +49,13 @@ fn check_task(settings: &Settings, task: Task, resolution: Resolution) -> Result
     let units = match (&settings.method, settings.budget) {
         (Method::Pssmlt(s), _) => Some(s.chains as u64),
         (Method::Replica(s), _) => Some(s.ensembles as u64),
+        (Method::Stratified(s), _) => Some(s.runs as u64),
+        (Method::MultiStage(s), _) => Some(s.runs as u64),
         (Method::Mc, Budget::Samples(n)) => Some((n / pixels.max(1)).max(1)),
         (Method::Erpt(s), Budget::Samples(n)) => Some(erpt::planned_passes(s, resolution, n)),
-        _ => None,
+        // As many passes as time allows.
+        #[cfg(feature = "std")]
+        (Method::Mc | Method::Erpt(_), Budget::Time(_)) => None,
     };
     if let Some(units) = units
         && task.count as u64 > units
@@ -73,7 +64,7 @@ fn check_task(settings: &Settings, task: Task, resolution: Resolution) -> Result
             "task_count",
             task.count as f64,
             "at most the render's units of work (MC and ERPT: passes; PSSMLT: chains; replica \
-             exchange: ensembles)",
+             exchange: ensembles; stratified MCMC and multi-stage MLT: runs)",
         ));
     }
     Ok(())
@@ -187,8 +178,7 @@ pub fn merge(parts: &[Checkpoint], subset: bool) -> Result<Output, Error> {
                 "emission seen directly (apart in some parts only)",
             ));
         }
-        let (_, state) = take::<Position>(rest)?;
-        states.push((header.task.index, emission, state));
+        states.push((header.task.index, emission, rest));
     }
     let count = head.task.count;
     let missing: Vec<u32> = (0..count).filter(|i| !seen.contains(i)).collect();
@@ -198,15 +188,19 @@ pub fn merge(parts: &[Checkpoint], subset: bool) -> Result<Output, Error> {
     states.sort_by_key(|(index, _, _)| *index);
     let (emission, states): (Vec<_>, Vec<&[u8]>) =
         states.into_iter().map(|(_, e, s)| (e, s)).unzip();
-    let resolution = head.oracle.resolution;
+    let (resolution, channels) = (head.oracle.resolution, head.channels as usize);
+    let budget = head.settings.budget;
+    // The round loop's methods: their states after its position.
+    let after_position = || -> Result<Vec<&[u8]>, Error> {
+        states.iter().map(|s| Ok(take::<Position>(s)?.1)).collect()
+    };
     let mut output = match &head.settings.method {
-        Method::Mc => mc::merge(&states, resolution, head.channels as usize),
-        Method::Pssmlt(_) => pssmlt::merge(&states, resolution, head.channels as usize),
-        Method::Erpt(_) => erpt::merge(&states, resolution, head.channels as usize),
-        Method::Replica(s) => replica::merge(s, &states, resolution, head.channels as usize),
-        method => Err(Error::NotSplittable {
-            method: method.name(),
-        }),
+        Method::Mc => mc::merge(&after_position()?, resolution, channels),
+        Method::Pssmlt(_) => pssmlt::merge(&after_position()?, resolution, channels),
+        Method::Erpt(_) => erpt::merge(&after_position()?, resolution, channels),
+        Method::Replica(s) => replica::merge(s, &after_position()?, resolution, channels),
+        Method::Stratified(s) => runs::merge(s, budget, &states, resolution, channels),
+        Method::MultiStage(s) => runs::merge(s, budget, &states, resolution, channels),
     }?;
     // Each task traced its own rows: the sums add up to the render's
     // unsplit, in the same operations for each pixel.

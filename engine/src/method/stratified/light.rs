@@ -110,6 +110,18 @@ impl LightTracing {
         self.sums = Some(sums);
     }
 
+    /// Adds another run's sums (of the same settings; see `runs.rs`).
+    pub fn pool(&mut self, other: LightTracing) {
+        let add = |into: &mut Option<Film>, more: Option<Film>| match (into.as_mut(), more) {
+            (Some(film), Some(more)) => film.add_scaled(&more, 1.0),
+            (None, more) => *into = more,
+            (Some(_), None) => {}
+        };
+        add(&mut self.sums, other.sums);
+        add(&mut self.remainder, other.remainder);
+        self.remainder_paths += other.remainder_paths;
+    }
+
     /// Adds the light-tracing image after `sweeps` sweeps to `film`.
     pub fn add_to(&self, tiles: &Tiles, film: &mut Film, sweeps: u64) {
         let sweeps = sweeps.max(1) as f64;

@@ -94,8 +94,9 @@ use self::init::initialize;
 use self::light::LightTracing;
 use self::reconstruction::reserve_reconstruction;
 use self::regularizer::Samples;
-use self::sweeps::{Saved, SweepCosts, Sweeps};
+use self::sweeps::{Saved, SweepCosts, Sweeps, SweptRun, pool_runs};
 use self::tile::{Context, TileChain};
+use super::runs::{self, Pooled};
 use super::{Job, Output};
 use crate::chain::ChainStats;
 use crate::checkpoint;
@@ -104,9 +105,10 @@ use crate::emission::SeenEmission;
 use crate::error::{Error, check_probability};
 use crate::film::Film;
 use crate::mutate::MutationParams;
-use crate::oracle::{PathOracle, Radiance};
+use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::reconstruct::{LogSettings, WeightedSettings};
 use crate::target::Importance;
+use crate::task::Task;
 use crate::tiles::{TileShape, Tiles};
 
 /// How the tile normalizations are reconstructed.
@@ -271,6 +273,12 @@ pub struct StratifiedSettings {
     /// Ours: tiles straddling an emitter's edge have bimodal targets, and
     /// one ray costs a fraction of a path (see `emission.rs`).
     pub emission_rays: u32,
+    /// Independent runs, each of its own tile chains with a share of the
+    /// budget, whose sums are pooled before one reconstruction (1 by
+    /// default): the units a task of a split render owns (see `runs.rs`).
+    /// Ours: the local exchanges couple neighbouring tiles, so a render
+    /// splits by runs, not by tiles.
+    pub runs: u32,
 }
 
 impl Default for StratifiedSettings {
@@ -290,6 +298,7 @@ impl Default for StratifiedSettings {
             anchor_total: true,
             regularizer_paths: 0,
             emission_rays: EMISSION_RAYS,
+            runs: 1,
         }
     }
 }
@@ -376,6 +385,25 @@ pub struct StratifiedStats {
     pub alpha: f64,
 }
 
+impl StratifiedStats {
+    /// Adds another run's counters (those of the reconstruction are set
+    /// once, after the runs are pooled).
+    fn pool(&mut self, other: &StratifiedStats) {
+        self.sweeps += other.sweeps;
+        self.tile_samples += other.tile_samples;
+        self.regularizer_samples += other.regularizer_samples;
+        self.remainder_samples += other.remainder_samples;
+        self.exchange_samples += other.exchange_samples;
+        self.initialization_samples += other.initialization_samples;
+        self.initialized_by_global_chains += other.initialized_by_global_chains;
+        self.initialized_by_borrowing += other.initialized_by_borrowing;
+        self.initialized_by_uniform_draws += other.initialized_by_uniform_draws;
+        self.never_initialized += other.never_initialized;
+        self.exchange_attempts += other.exchange_attempts;
+        self.exchange_accepted += other.exchange_accepted;
+    }
+}
+
 /// What stratified MCMC returns beyond the image ([`Extras::Stratified`](super::Extras::Stratified)).
 /// The render's `visits` count, per pixel, the tile-chain states evaluated
 /// in it (every tile containing the pixel, once per sweep).
@@ -399,11 +427,12 @@ pub struct StratifiedExtras {
     pub reconstruction_cut: bool,
 }
 
-/// Stratified MCMC under `job` (see the module docs).
-pub(crate) fn render<O, I>(
+/// One run of stratified MCMC under `job` (see the module docs): its sums
+/// before the reconstruction, and whether the observer stopped it.
+fn run_sweeps<O, I>(
     settings: &StratifiedSettings,
     job: &Job<'_, O, I>,
-) -> Result<Output, Error>
+) -> Result<(SweptRun, bool), Error>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
@@ -411,7 +440,7 @@ where
     let tiles = Tiles::new(job.resolution, settings.shape)?;
     let emission_apart = settings.emission_rays > 0 && job.oracle.separates_emission();
     let fresh_emission =
-        emission_apart.then(|| SeenEmission::new(O::Radiance::CHANNELS, crate::task::Task::WHOLE));
+        emission_apart.then(|| SeenEmission::new(O::Radiance::CHANNELS, Task::WHOLE));
     let ctx = Context {
         oracle: job.oracle,
         importance: job.importance,
@@ -486,7 +515,52 @@ where
         job.round_loop_until(position, &sweeps_clock),
         |s, out| s.save(bootstrap_traces, out),
     )?;
-    sweeps.finish(driven, bootstrap_traces, &job.out_of_time())
+    Ok((sweeps.into_run(bootstrap_traces), driven.cancelled))
+}
+
+impl Pooled for StratifiedSettings {
+    type Partial = SweptRun;
+
+    fn runs(&self) -> u32 {
+        self.runs
+    }
+
+    fn run<O, I>(&self, job: &Job<'_, O, I>) -> Result<(SweptRun, bool), Error>
+    where
+        O: PathOracle,
+        I: Importance<O::Radiance> + ?Sized,
+    {
+        run_sweeps(self, job)
+    }
+
+    fn samples(run: &SweptRun) -> u64 {
+        run.samples()
+    }
+
+    fn fits(&self, run: &SweptRun, resolution: Resolution, channels: usize) -> bool {
+        let Ok(tiles) = Tiles::new(resolution, self.shape) else {
+            return false;
+        };
+        let light = LightTracing::new(
+            self.mutation.large_step_probability,
+            self.regularizer_paths,
+            channels,
+        );
+        let emission = SeenEmission::new(channels, Task::WHOLE);
+        run.fits(&tiles, channels, &light, Some(&emission))
+            || run.fits(&tiles, channels, &light, None)
+    }
+
+    fn pool(
+        &self,
+        runs: Vec<SweptRun>,
+        resolution: Resolution,
+        channels: usize,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Output, Error> {
+        let tiles = Tiles::new(resolution, self.shape)?;
+        pool_runs(runs, &tiles, self, channels, stop)
+    }
 }
 
 /// A fresh render's state before its first sweep: a chain per tile,
@@ -560,8 +634,9 @@ where
 /// top).
 pub(crate) fn smallest_budget(
     settings: &StratifiedSettings,
-    resolution: crate::oracle::Resolution,
+    resolution: Resolution,
 ) -> Result<u64, Error> {
     let tiles = Tiles::new(resolution, settings.shape)?;
-    Ok(libm::ceil(SweepCosts::new(&tiles, settings).full()) as u64)
+    let one_run = libm::ceil(SweepCosts::new(&tiles, settings).full()) as u64;
+    Ok(runs::smallest_budget(one_run, settings.runs))
 }

@@ -5,6 +5,7 @@
 //! then the known pixels, the fallback and the anchored total (ours, see
 //! the module above); and, under a time budget, the time it reserves.
 
+use alloc::boxed::Box;
 use alloc::vec;
 use alloc::vec::Vec;
 
@@ -47,26 +48,25 @@ pub(super) struct Reconstructed {
     pub cut: bool,
 }
 
-/// The image of `chains` after `sweeps` sweeps; the weighted solver (and
-/// cross-validation) end early when `stop` says so. The chains are let go
-/// as their sums are taken, before anything else is gathered (they are
-/// most of a render's memory).
-pub(super) fn reconstruct_image<R: Radiance>(
+/// The image of the tiles' `sums` (their uniform samples' counts and `N
+/// G_s(k)`) after `sweeps` sweeps; the weighted solver (and
+/// cross-validation) end early when `stop` says so. Each tile's sums are
+/// let go as they are taken.
+pub(super) fn reconstruct_image(
     tiles: &Tiles,
-    chains: Vec<TileChain<R>>,
+    sums: Vec<(Draws, Box<[f64]>)>,
     pooled: &Samples,
     settings: &StratifiedSettings,
+    channels: usize,
     sweeps: u64,
     stop: &dyn Fn() -> bool,
 ) -> Result<Reconstructed, Error> {
-    let channels = R::CHANNELS;
-    let (draws, sums): (Vec<Draws>, Vec<_>) =
-        chains.into_iter().map(|c| (c.draws, c.unscaled)).unzip();
+    let (draws, sums): (Vec<Draws>, Vec<_>) = sums.into_iter().unzip();
     let (samples, regularizer) = LargeSteps::gather(tiles, &draws, pooled);
     let halves = (settings.cross_validate_alpha && matches!(settings.solver, Solver::Weighted(_)))
         .then(|| Halves::gather(tiles, &draws, pooled, &samples));
     drop(draws);
-    let unscaled = unscaled::<R, _>(tiles, sums, sweeps.max(1), &regularizer);
+    let unscaled = unscaled(tiles, sums, channels, sweeps.max(1), &regularizer);
     let mut solver = settings.solver;
     let mut alpha = None;
     if let Solver::Weighted(w) = &mut solver {
@@ -141,7 +141,7 @@ pub(super) fn preview<R: Radiance>(
     let draws: Vec<Draws> = chains.iter().map(|c| c.draws).collect();
     let (_, regularizer) = LargeSteps::gather(tiles, &draws, pooled);
     let sums = chains.iter().map(|c| &c.unscaled);
-    let unscaled = unscaled::<R, _>(tiles, sums, sweeps, &regularizer);
+    let unscaled = unscaled(tiles, sums, channels, sweeps, &regularizer);
     let mut film = Film::new(tiles.resolution(), channels);
     for c in 0..channels {
         let g = channel(&unscaled, channels, c);
@@ -219,13 +219,13 @@ where
 /// pixels to one weakly constrained tile. A tile black for the regularizer
 /// too stays without an estimate and is left out
 /// ([`reconstruct::informative`]).
-fn unscaled<R: Radiance, T: AsRef<[f64]>>(
+fn unscaled<T: AsRef<[f64]>>(
     tiles: &Tiles,
     sums: impl IntoIterator<Item = T>,
+    channels: usize,
     sweeps: u64,
     regularizer: &Film,
 ) -> Vec<f64> {
-    let channels = R::CHANNELS;
     let per_tile = tiles.offsets().len() * channels;
     // Sized once: a vector grown by doubling would hold up to twice this.
     let mut g: Vec<f64> = Vec::with_capacity(tiles.count() * per_tile);

@@ -87,6 +87,13 @@ impl Samples {
             && self.sums.iter().all(|x| x.is_finite() && *x >= 0.0)
     }
 
+    /// Adds another run's sums (of the same film and channels).
+    pub fn pool(&mut self, other: &Samples) {
+        for (a, b) in self.sums.iter_mut().zip(&other.sums) {
+            *a += b;
+        }
+    }
+
     /// Pixel `j`'s radiance sums, squared means' and odd steps' means'.
     fn of(&self, j: usize) -> (&[f64], f64, f64) {
         let stride = self.channels + 2;

@@ -3,20 +3,21 @@
 //! (from [`StratifiedSettings::exchange_after`] on), a sample budget's
 //! remainder after the last sweep, the checkpoint and the render's output.
 
+use alloc::boxed::Box;
 use alloc::vec;
 use alloc::vec::Vec;
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::light::LightTracing;
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
 use super::regularizer::Samples;
-use super::tile::{Context, Row, Start, TileChain, TileSplat, Waking};
+use super::tile::{Context, Draws, Row, Start, TileChain, TileSplat, Waking};
 use super::{StratifiedExtras, StratifiedSettings, StratifiedStats};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;
-use crate::drive::{Budget, Driven, RenderStats, Rounds};
+use crate::drive::{Budget, RenderStats, Rounds};
 use crate::emission::SeenEmission;
 use crate::error::Error;
 use crate::film::Film;
@@ -183,75 +184,179 @@ where
         checkpoint::append(&saved, out);
     }
 
-    /// The reconstruction, the fallback and the counters; the weighted
-    /// solver (and cross-validation) end early when `stop` says so.
-    pub(super) fn finish(
-        mut self,
-        driven: Driven,
-        bootstrap_traces: u64,
-        stop: &dyn Fn() -> bool,
-    ) -> Result<Output, Error> {
-        let tiles = self.ctx.tiles;
-        let mut visits = vec![0u64; tiles.count()];
-        let stats = &mut self.stats;
-        for (s, c) in self.chains.iter().enumerate() {
-            // Every tile steps once a sweep.
-            for (_, q) in tiles.pixels(s) {
-                visits[q] += stats.sweeps;
-            }
-            match c.start {
-                Start::None => stats.never_initialized += 1,
-                Start::Global => stats.initialized_by_global_chains += 1,
-                Start::Borrowed => stats.initialized_by_borrowing += 1,
-                Start::Uniform => stats.initialized_by_uniform_draws += 1,
-            }
-        }
-        let chain_stats = self.chain_stats;
-        let mut image = reconstruct_image(
+    /// What the run leaves for the pool: the tiles' sums and the
+    /// counters, the chains' states let go (see [`SweptRun`]).
+    pub(super) fn into_run(self, bootstrap_traces: u64) -> SweptRun {
+        let mut stats = self.stats;
+        let tiles = self
+            .chains
+            .into_iter()
+            .map(|c| {
+                match c.start {
+                    Start::None => stats.never_initialized += 1,
+                    Start::Global => stats.initialized_by_global_chains += 1,
+                    Start::Borrowed => stats.initialized_by_borrowing += 1,
+                    Start::Uniform => stats.initialized_by_uniform_draws += 1,
+                }
+                (c.draws, c.unscaled)
+            })
+            .collect();
+        SweptRun {
             tiles,
-            core::mem::take(&mut self.chains),
-            &self.samples,
-            self.settings,
-            self.stats.sweeps,
-            stop,
-        )?;
-        self.light.add_to(tiles, &mut image.film, self.stats.sweeps);
-        let stats = &mut self.stats;
-        if let Some(alpha) = image.alpha {
-            stats.alpha = alpha;
+            samples: self.samples,
+            light: self.light,
+            emission: self.emission,
+            stats,
+            chain_stats: self.chain_stats,
+            invalid: self.invalid,
+            bootstrap_traces,
         }
-        stats.known_pixels = image.known_pixels;
-        stats.fallback_pixels = image.fallback_pixels;
-        stats.total_scale = image.total_scale;
-        let traced = stats.initialization_samples
-            + stats.tile_samples
-            + stats.regularizer_samples
-            + stats.remainder_samples
-            + stats.exchange_samples;
-        let mut output = Output {
-            film: image.film,
-            stats: RenderStats {
-                samples: traced - bootstrap_traces,
-                bootstrap_samples: bootstrap_traces,
-                invalid_samples: chain_stats.invalid + self.invalid,
-                chains: chain_stats,
-                ..Default::default()
-            },
-            cancelled: driven.cancelled,
-            visits,
-            extras: Extras::Stratified(StratifiedExtras {
-                counters: self.stats,
-                regularizer: image.regularizer,
-                normalizations: image.normalizations,
-                unscaled: image.unscaled,
-                reconstruction_cut: image.cut,
-            }),
-        };
-        if let Some(emission) = &self.emission {
-            emission.add_to_output(&mut output);
-        }
-        Ok(output)
     }
+}
+
+/// What a run of stratified MCMC leaves for the pool (`runs.rs`): its sums
+/// before the reconstruction, every one of which adds across runs (the
+/// tiles' `N G_s(k)` over the sweeps of every run estimate the same
+/// ratios; a tile's share of sweeps spent before its initialization scales
+/// all its `G_s(k)` alike, which its `b_s` absorbs).
+#[derive(Clone, Serialize, Deserialize)]
+pub(crate) struct SweptRun {
+    /// Per tile, its uniform samples' counts and `N G_s(k)` per offset and
+    /// channel.
+    tiles: Vec<(Draws, Box<[f64]>)>,
+    samples: Samples,
+    light: LightTracing,
+    emission: Option<SeenEmission>,
+    stats: StratifiedStats,
+    chain_stats: ChainStats,
+    /// Invalid traces outside the tile chains' counters.
+    invalid: u64,
+    /// The paths the global chains' bootstrap traced.
+    bootstrap_traces: u64,
+}
+
+impl SweptRun {
+    /// The paths the run traced (bootstrap excluded).
+    pub(super) fn samples(&self) -> u64 {
+        let s = &self.stats;
+        s.initialization_samples
+            + s.tile_samples
+            + s.regularizer_samples
+            + s.remainder_samples
+            + s.exchange_samples
+            - self.bootstrap_traces
+    }
+
+    /// Whether a run read from a checkpoint fits `tiles` and `channels`,
+    /// and `light`'s and `emission`'s settings (a fresh run's).
+    pub(super) fn fits(
+        &self,
+        tiles: &Tiles,
+        channels: usize,
+        light: &LightTracing,
+        emission: Option<&SeenEmission>,
+    ) -> bool {
+        let per_tile = tiles.offsets().len() * channels;
+        self.tiles.len() == tiles.count()
+            && self.tiles.iter().all(|(draws, unscaled)| {
+                draws.fits()
+                    && unscaled.len() == per_tile
+                    && unscaled.iter().all(|v| v.is_finite() && *v >= 0.0)
+            })
+            && self.samples.fits(tiles.count(), channels)
+            && self.light.fits(light, tiles)
+            && match (&self.emission, emission) {
+                (Some(saved), Some(fresh)) => saved.fits(fresh, tiles.resolution()),
+                (saved, fresh) => saved.is_none() && fresh.is_none(),
+            }
+            && self.bootstrap_traces <= self.stats.initialization_samples
+    }
+
+    /// Adds another run's sums and counters.
+    fn pool(&mut self, other: SweptRun) {
+        for ((draws, unscaled), (more, sums)) in self.tiles.iter_mut().zip(other.tiles) {
+            draws.add(&more);
+            for (a, b) in unscaled.iter_mut().zip(sums.iter()) {
+                *a += b;
+            }
+        }
+        self.samples.pool(&other.samples);
+        self.light.pool(other.light);
+        if let (Some(emission), Some(more)) = (&mut self.emission, &other.emission) {
+            emission.pool(more);
+        }
+        self.stats.pool(&other.stats);
+        self.chain_stats.merge(&other.chain_stats);
+        self.invalid += other.invalid;
+        self.bootstrap_traces += other.bootstrap_traces;
+    }
+}
+
+/// The image of the runs `runs` (in run order) on `tiles`: their sums
+/// pooled, then the reconstruction, the fallback and the counters; the
+/// weighted solver (and cross-validation) end early when `stop` says so.
+pub(super) fn pool_runs(
+    runs: Vec<SweptRun>,
+    tiles: &Tiles,
+    settings: &StratifiedSettings,
+    channels: usize,
+    stop: &dyn Fn() -> bool,
+) -> Result<Output, Error> {
+    let mut runs = runs.into_iter();
+    let mut run = runs.next().ok_or_else(checkpoint::does_not_fit)?;
+    for other in runs {
+        run.pool(other);
+    }
+    let samples = run.samples();
+    let SweptRun {
+        tiles: sums,
+        samples: pooled,
+        light,
+        emission,
+        mut stats,
+        chain_stats,
+        invalid,
+        bootstrap_traces,
+    } = run;
+    let mut visits = vec![0u64; tiles.count()];
+    for s in 0..tiles.count() {
+        // Every tile steps once a sweep.
+        for (_, q) in tiles.pixels(s) {
+            visits[q] += stats.sweeps;
+        }
+    }
+    let mut image =
+        reconstruct_image(tiles, sums, &pooled, settings, channels, stats.sweeps, stop)?;
+    light.add_to(tiles, &mut image.film, stats.sweeps);
+    if let Some(alpha) = image.alpha {
+        stats.alpha = alpha;
+    }
+    stats.known_pixels = image.known_pixels;
+    stats.fallback_pixels = image.fallback_pixels;
+    stats.total_scale = image.total_scale;
+    let mut output = Output {
+        film: image.film,
+        stats: RenderStats {
+            samples,
+            bootstrap_samples: bootstrap_traces,
+            invalid_samples: chain_stats.invalid + invalid,
+            chains: chain_stats,
+            ..Default::default()
+        },
+        cancelled: false,
+        visits,
+        extras: Extras::Stratified(StratifiedExtras {
+            counters: stats,
+            regularizer: image.regularizer,
+            normalizations: image.normalizations,
+            unscaled: image.unscaled,
+            reconstruction_cut: image.cut,
+        }),
+    };
+    if let Some(emission) = &emission {
+        emission.add_to_output(&mut output);
+    }
+    Ok(output)
 }
 
 /// What sweeps cost in paths, if every tile steps.

@@ -143,9 +143,16 @@ impl Draws {
     /// Whether counts read from a checkpoint can be: the odd steps among
     /// the large ones, and every count below `2^48` (a render could not
     /// reach it; the pixels' sums over their tiles then cannot overflow).
-    fn fits(&self) -> bool {
+    pub fn fits(&self) -> bool {
         const MOST: u64 = 1 << 48;
         self.odd_steps <= self.large_steps && self.large_steps < MOST && self.centre_paths < MOST
+    }
+
+    /// Adds another run's counts of the same tile.
+    pub fn add(&mut self, other: &Draws) {
+        self.large_steps += other.large_steps;
+        self.odd_steps += other.odd_steps;
+        self.centre_paths += other.centre_paths;
     }
 }
 

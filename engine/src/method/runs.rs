@@ -24,9 +24,9 @@ use once_cell::race::OnceBox;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
-use super::{Job, Output};
+use super::{Extras, Job, Output};
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
-use crate::drive::{Beside, Budget, Clock, Observer, Progress, SetUp};
+use crate::drive::{Beside, Budget, Clock, Observer, Progress, RenderStats, SetUp};
 use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{PathOracle, Resolution};
@@ -193,15 +193,28 @@ where
         }
         finished.push(partial);
     }
-    if let Some(last) = job.last
-        && !cancelled
-    {
-        // Every run finished: the task's partial result.
-        let samples = finished.iter().map(P::samples).sum();
-        let _ = last.set(
-            job.checkpoints
-                .checkpoint(samples, true, &mut |out| checkpoint::append(&finished, out)),
-        );
+    let samples = finished.iter().map(P::samples).sum();
+    if let Some(last) = job.last {
+        if !cancelled {
+            // Every run finished: the task's partial result.
+            let _ = last.set(
+                job.checkpoints
+                    .checkpoint(samples, true, &mut |out| checkpoint::append(&finished, out)),
+            );
+        }
+        // A task's result is that checkpoint, and its image the merge's:
+        // its runs are not pooled here (for stratified MCMC, a
+        // reconstruction of the whole film).
+        return Ok(Output {
+            film: Film::try_new(job.resolution, channels)?,
+            stats: RenderStats {
+                samples,
+                ..Default::default()
+            },
+            cancelled,
+            visits: Vec::new(),
+            extras: Extras::None,
+        });
     }
     let mut output = method.pool(finished, job.resolution, channels, &job.out_of_time())?;
     output.cancelled = cancelled;

@@ -53,6 +53,14 @@ pub enum Error {
         /// Its options.
         choices: &'static [&'static str],
     },
+    /// A small-step kernel that cannot be registered
+    /// ([`Custom::new`](crate::mutate::Custom::new)).
+    InvalidKernel {
+        /// The kernel's name.
+        name: &'static str,
+        /// Why.
+        reason: &'static str,
+    },
     /// A sample budget smaller than one unit of the method's work
     /// ([`Method::smallest_budget`](crate::Method::smallest_budget)): it
     /// would be overrun, not kept.
@@ -264,6 +272,12 @@ impl fmt::Display for Error {
                 f,
                 "the checkpoint is of another render: its {what} differs from this one's"
             ),
+            Error::InvalidKernel { name, reason } => {
+                write!(
+                    f,
+                    "small-step kernel {name:?} cannot be registered: {reason}"
+                )
+            }
             Error::PartMismatch { part, what } => write!(
                 f,
                 "part {} is of another render than the first: its {what} differ",

@@ -22,6 +22,8 @@ fn kernels() -> Vec<(&'static str, SmallStep)> {
         ("kelemen-seed001", SmallStep::Kelemen(Kelemen::SEED_001)),
         ("gaussian", SmallStep::Gaussian(Gaussian::DEFAULT)),
         ("adaptive", SmallStep::Adaptive(Adaptive::DEFAULT)),
+        // A kernel of one's own, from outside the engine.
+        ("cauchy", crate::kernels::cauchy()),
     ]
 }
 

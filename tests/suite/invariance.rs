@@ -22,8 +22,10 @@ fn offset_pmf(step: &SmallStep, asymmetric: bool) -> Vec<f64> {
     let h = 1.0 / N as f64;
     let mut q = vec![0.0; N];
     for (k, qk) in q.iter_mut().enumerate() {
-        // Offsets landing in cell k (mod 1): sum over windings.
-        for wind in -3i32..=3 {
+        // Offsets landing in cell k (mod 1): sum over windings, as many
+        // below as above (cell k's winding w mirrors cell N - k's -(w + 1)),
+        // so that a heavy-tailed law's truncation stays symmetric.
+        for wind in -4i32..4 {
             let center = k as f64 * h + wind as f64;
             *qk += step.offset_probability(center - h / 2.0, center + h / 2.0);
         }
@@ -90,6 +92,8 @@ fn kernels() -> Vec<(&'static str, SmallStep)> {
             "adaptive",
             SmallStep::Adaptive(Adaptive::new(0.4, 0.234).unwrap()),
         ),
+        // A kernel of one's own (its law through `Kernel::abs_cdf`).
+        ("cauchy", crate::kernels::cauchy()),
     ]
 }
 

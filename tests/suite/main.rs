@@ -16,6 +16,7 @@ mod exchange;
 mod images;
 mod importance;
 mod invariance;
+mod kernels;
 mod resume;
 mod runs;
 mod scenes;

@@ -22,7 +22,7 @@ use threads::{bits, in_pool, small_methods};
 
 /// Stops a render after `round` rounds, keeping the checkpoint made then
 /// and the paths traced by then.
-struct StopAt {
+pub struct StopAt {
     round: u32,
     rounds: AtomicU32,
     saved: Mutex<Option<(Checkpoint, u64)>>,
@@ -30,7 +30,7 @@ struct StopAt {
 }
 
 impl StopAt {
-    fn new(round: u32) -> Self {
+    pub fn new(round: u32) -> Self {
         Self {
             round,
             rounds: AtomicU32::new(0),
@@ -39,7 +39,7 @@ impl StopAt {
         }
     }
 
-    fn checkpoint(self) -> (Checkpoint, u64) {
+    pub fn checkpoint(self) -> (Checkpoint, u64) {
         self.saved
             .into_inner()
             .unwrap()

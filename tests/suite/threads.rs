@@ -49,6 +49,16 @@ pub fn small_methods() -> Vec<Method> {
             },
             ..Default::default()
         }),
+        // Two independent runs, pooled (`runs.rs`): stopped and resumed in
+        // either.
+        Method::Stratified(StratifiedSettings {
+            initialization: Initialization {
+                bootstrap_candidates: 2_000,
+                ..Default::default()
+            },
+            runs: 2,
+            ..Default::default()
+        }),
         Method::Erpt(ErptSettings {
             chain_length: 20,
             bootstrap_candidates: 5_000,

@@ -6,6 +6,10 @@
 //! in the Metropolis-Hastings acceptance (eq. 3.2). A large step replaces the
 //! whole vector by a uniform one (also symmetric).
 
+mod custom;
+
+pub use custom::{Custom, Kernel};
+
 use serde::{Deserialize, Serialize};
 
 use rand_core::Rng;
@@ -406,6 +410,8 @@ pub enum SmallStep {
     Gaussian(Gaussian),
     /// The adaptive step of eq. 6.8.
     Adaptive(Adaptive),
+    /// A kernel of your own (see [`Kernel`]).
+    Custom(Custom),
 }
 
 impl Default for SmallStep {
@@ -424,11 +430,12 @@ impl SmallStep {
             SmallStep::Kelemen(_) => "kelemen",
             SmallStep::Gaussian(_) => "gaussian",
             SmallStep::Adaptive(_) => "adaptive",
+            SmallStep::Custom(c) => c.kernel().name(),
         }
     }
 
-    /// The kernel called `name` (one of [`NAMES`](Self::NAMES)) with its
-    /// default parameters.
+    /// The kernel called `name` (one of [`NAMES`](Self::NAMES), with its
+    /// default parameters, or a registered [`Custom`] kernel).
     pub fn from_name(name: &str) -> Option<SmallStep> {
         [
             SmallStep::Kelemen(Kelemen::DEFAULT),
@@ -437,6 +444,7 @@ impl SmallStep {
         ]
         .into_iter()
         .find(|k| k.name() == name)
+        .or_else(|| Custom::by_name(name).map(SmallStep::Custom))
     }
 
     /// `P(lo <= d < hi)` for one unwrapped step's offset `d` (for the adaptive
@@ -446,6 +454,7 @@ impl SmallStep {
             SmallStep::Kelemen(k) => k.abs_cdf(x),
             SmallStep::Gaussian(g) => g.abs_cdf(x),
             SmallStep::Adaptive(a) => Adaptive::abs_cdf(a.initial_theta, x),
+            SmallStep::Custom(c) => c.kernel().abs_cdf(x),
         };
         // Symmetric and without an atom at 0: P(d < t) = (1 + sign(t) F(|t|)) / 2.
         let cdf = |t: f64| 0.5 + 0.5 * t.signum() * abs_cdf(t.abs());
@@ -491,6 +500,8 @@ impl MutationParams {
             }
             SmallStep::Gaussian(g) => Gaussian::new(g.sigma).map(drop),
             SmallStep::Adaptive(a) => Adaptive::new(a.initial_theta, a.target_acceptance).map(drop),
+            // Registered (it cannot be built otherwise).
+            SmallStep::Custom(_) => Ok(()),
         }
     }
 }
@@ -509,6 +520,8 @@ pub(crate) enum Mutator {
         kernel: Adaptive,
         state: AdaptiveState,
     },
+    /// A kernel of your own, an offset at a time.
+    Custom(Custom),
 }
 
 impl Mutator {
@@ -520,6 +533,7 @@ impl Mutator {
                 kernel: a,
                 state: AdaptiveState::new(&a),
             },
+            SmallStep::Custom(c) => Mutator::Custom(c),
         }
     }
 
@@ -529,6 +543,7 @@ impl Mutator {
             Mutator::Kelemen(k, _) => SmallStep::Kelemen(*k),
             Mutator::Gaussian(g, _) => SmallStep::Gaussian(*g),
             Mutator::Adaptive { kernel, .. } => SmallStep::Adaptive(*kernel),
+            Mutator::Custom(c) => SmallStep::Custom(*c),
         }
     }
 
@@ -562,6 +577,12 @@ impl Mutator {
                     *v = wrap_unit(*v as f64 + Adaptive::offset(state.theta(), rng));
                 }
             }
+            Mutator::Custom(c) => {
+                let kernel = c.kernel();
+                for v in values {
+                    *v = wrap_unit(*v as f64 + kernel.offset(rng));
+                }
+            }
         }
     }
 
@@ -571,6 +592,7 @@ impl Mutator {
             Mutator::Kelemen(_, batch) => KernelState::Batch(batch.position()),
             Mutator::Gaussian(_, batch) => KernelState::Batch(batch.position()),
             Mutator::Adaptive { state, .. } => KernelState::Adaptive(*state),
+            Mutator::Custom(_) => KernelState::Stateless,
         }
     }
 
@@ -595,11 +617,13 @@ impl Mutator {
 /// A small-step kernel's running state in few bytes (stratified MCMC keeps
 /// one per pixel): for the batched kernels, where the batch stands (its
 /// offsets are drawn again from its source when the chain wakes), for the
-/// adaptive kernel its `θ` and counters.
+/// adaptive kernel its `θ` and counters; nothing for a custom kernel.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) enum KernelState {
     Batch((Pcg32, u8)),
     Adaptive(AdaptiveState),
+    /// A kernel that draws each offset from the chain's stream.
+    Stateless,
 }
 
 impl KernelState {
@@ -611,6 +635,7 @@ impl KernelState {
                 KernelState::Batch(_),
                 SmallStep::Kelemen(_) | SmallStep::Gaussian(_)
             ) | (KernelState::Adaptive(_), SmallStep::Adaptive(_))
+                | (KernelState::Stateless, SmallStep::Custom(_))
         )
     }
 }

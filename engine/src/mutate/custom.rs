@@ -1,0 +1,150 @@
+//! Small-step kernels of your own: any symmetric offset law, registered by
+//! name so that settings and checkpoints can carry it ([`Custom`]).
+//!
+//! A small step moves each coordinate by an offset `d` whose law is
+//! symmetric about zero; the proposal is then symmetric and cancels in the
+//! Metropolis-Hastings acceptance (Šik 2018, eq. 3.2), whatever the law:
+//! Kelemen's exponential step, a Gaussian, a Cauchy step with heavy tails
+//! (long jumps now and then), a mixture. Implement [`Kernel`], wrap it in
+//! [`Custom::new`] and set it as any built-in kernel
+//! ([`SmallStep::Custom`](super::SmallStep::Custom)); every method, the
+//! analytic targets and the diagnostics then run it.
+//!
+//! ```
+//! use strata_engine::mutate::{Custom, Kernel, SmallStep};
+//! use strata_engine::rng::{Pcg32, uniform_f64};
+//!
+//! /// Cauchy offsets of scale `gamma`: `d = gamma tan(pi (xi - 1/2))`.
+//! #[derive(Debug)]
+//! struct Cauchy {
+//!     gamma: f64,
+//! }
+//!
+//! impl Kernel for Cauchy {
+//!     fn name(&self) -> &'static str {
+//!         "cauchy"
+//!     }
+//!     fn offset(&self, rng: &mut Pcg32) -> f64 {
+//!         self.gamma * (core::f64::consts::PI * (uniform_f64(rng) - 0.5)).tan()
+//!     }
+//!     fn abs_cdf(&self, x: f64) -> f64 {
+//!         2.0 / core::f64::consts::PI * (x / self.gamma).atan()
+//!     }
+//! }
+//!
+//! static CAUCHY: Cauchy = Cauchy { gamma: 0.01 };
+//! let step = SmallStep::Custom(Custom::new(&CAUCHY).unwrap());
+//! assert_eq!(step.name(), "cauchy");
+//! assert_eq!(SmallStep::from_name("cauchy"), Some(step));
+//! ```
+
+use alloc::boxed::Box;
+use alloc::string::String;
+use core::fmt;
+
+use once_cell::race::OnceBox;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+use super::SmallStep;
+use crate::error::Error;
+use crate::rng::Pcg32;
+
+/// A small-step kernel: the law of one coordinate's offset.
+pub trait Kernel: Send + Sync + fmt::Debug + 'static {
+    /// Its name, unique among kernels (the built-ins' included): settings,
+    /// checkpoints, the C API and the command line know it by it.
+    fn name(&self) -> &'static str;
+
+    /// One offset `d`, drawn from `rng` (the chain's mutation stream): its
+    /// law must be symmetric about zero (`d` and `-d` equally likely), or the
+    /// chain leaves its target. Any finite value; the coordinate moved is
+    /// wrapped onto `[0, 1)`.
+    fn offset(&self, rng: &mut Pcg32) -> f64;
+
+    /// `P(|d| <= x)` for `x >= 0`: the law [`offset`](Self::offset) draws
+    /// from, for exact transition matrices
+    /// ([`SmallStep::offset_probability`](super::SmallStep::offset_probability)).
+    fn abs_cdf(&self, x: f64) -> f64;
+}
+
+/// A registered [`Kernel`], as [`SmallStep::Custom`](super::SmallStep::Custom)
+/// holds it: compared, saved and read back by its name.
+#[derive(Clone, Copy)]
+pub struct Custom(&'static dyn Kernel);
+
+/// The kernels registered so far (at most [`MOST`]).
+static REGISTERED: [OnceBox<&'static dyn Kernel>; MOST] = [const { OnceBox::new() }; MOST];
+
+/// How many kernels a process can register.
+const MOST: usize = 32;
+
+impl Custom {
+    /// `kernel`, registered under its name (again for the same kernel: the
+    /// name is then known). Another kernel of a taken name, a built-in's
+    /// name, or more than 32 kernels is
+    /// [`Error::InvalidKernel`](crate::Error::InvalidKernel).
+    pub fn new(kernel: &'static dyn Kernel) -> Result<Custom, Error> {
+        let name = kernel.name();
+        let taken = Error::InvalidKernel {
+            name,
+            reason: "another kernel has this name",
+        };
+        if SmallStep::NAMES.contains(&name) {
+            return Err(taken);
+        }
+        for slot in &REGISTERED {
+            let held = *slot.get_or_init(|| Box::new(kernel));
+            if core::ptr::addr_eq(held, kernel) {
+                return Ok(Custom(kernel));
+            }
+            if held.name() == name {
+                return Err(taken);
+            }
+        }
+        Err(Error::InvalidKernel {
+            name,
+            reason: "32 kernels are registered already",
+        })
+    }
+
+    /// The registered kernel called `name`.
+    pub fn by_name(name: &str) -> Option<Custom> {
+        REGISTERED
+            .iter()
+            .map_while(OnceBox::get)
+            .find(|k| k.name() == name)
+            .map(|k| Custom(*k))
+    }
+
+    /// The kernel.
+    pub fn kernel(&self) -> &'static dyn Kernel {
+        self.0
+    }
+}
+
+impl PartialEq for Custom {
+    fn eq(&self, other: &Custom) -> bool {
+        self.0.name() == other.0.name()
+    }
+}
+
+impl fmt::Debug for Custom {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+impl Serialize for Custom {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.0.name())
+    }
+}
+
+impl<'de> Deserialize<'de> for Custom {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Custom, D::Error> {
+        let name = String::deserialize(deserializer)?;
+        Custom::by_name(&name).ok_or_else(|| {
+            serde::de::Error::custom("a small-step kernel that this process has not registered")
+        })
+    }
+}

@@ -77,7 +77,11 @@ const LARGE_STEP: Setting = real(
     1.0,
     "probability of a large step (an independent path)",
 );
-const SMALL_STEP: Setting = choice("small_step", &SmallStep::NAMES, "the small-step kernel");
+const SMALL_STEP: Setting = choice(
+    "small_step",
+    &SmallStep::NAMES,
+    "the small-step kernel (or a registered kernel of one's own, by its name)",
+);
 const STEP_MIN: Setting = real(
     "small_step_min",
     1e-9,

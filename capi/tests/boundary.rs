@@ -679,19 +679,31 @@ fn tasks_merge_to_the_film_of_the_unsplit_render() {
         StrataStatus::Ok
     );
     strata_film_free(film);
-    // Bad tasks and methods that do not split.
+    // Bad tasks, and more tasks than units of work: stratified MCMC's one
+    // run (its default) is one task; with two runs, it splits in two.
     assert_eq!(
         strata_settings_set_task(settings, 3, 3),
         StrataStatus::InvalidArgument
     );
     let stratified = strata_settings_new(c"stratified".as_ptr());
+    strata_settings_set_samples_per_pixel(stratified, 64);
     strata_settings_set_task(stratified, 0, 2);
     let mut part = null_mut();
     assert_eq!(
         strata_render_task(&oracle(uniform), stratified, null(), &mut part),
         StrataStatus::RenderFailed
     );
-    assert!(last_error().contains("cannot be split"), "{}", last_error());
+    assert!(last_error().contains("units of work"), "{}", last_error());
+    assert_eq!(
+        strata_settings_set(stratified, c"runs".as_ptr(), 2.0),
+        StrataStatus::Ok
+    );
+    assert_eq!(
+        strata_render_task(&oracle(uniform), stratified, null(), &mut part),
+        StrataStatus::Ok
+    );
+    strata_part_free(part);
+    let mut part = null_mut();
     assert_eq!(
         strata_part_read([1u8, 2].as_ptr(), 2, &mut part),
         StrataStatus::InvalidArgument

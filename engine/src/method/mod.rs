@@ -300,6 +300,10 @@ pub(crate) struct Job<'a, O, I: ?Sized> {
     /// Work the round loop keeps up with the rounds (the emission seen
     /// directly, estimated apart).
     pub beside: Option<&'a dyn Beside>,
+    /// Whether the method's finish (stratified MCMC's reconstruction) runs
+    /// after this job's rounds, within its time budget: not for a task,
+    /// whose result is its part, nor for a run that other runs follow.
+    pub finish_within: bool,
 }
 
 impl<O, I: ?Sized> Job<'_, O, I> {
@@ -627,6 +631,7 @@ where
             resume,
             last,
             beside: apart.then_some(&emission as &dyn Beside),
+            finish_within: last.is_none(),
         };
         match &settings.method {
             Method::Mc => mc::render(&job),

@@ -377,6 +377,7 @@ where
             last: job.last.map(|_| &stage_last),
             // Kept up with the stages below, as the whole render's.
             beside: None,
+            finish_within: false,
         };
         let (mut run, position) = Pssmlt::start(&settings.pssmlt, &stage_job)?;
         let saver = run.saver();

@@ -178,6 +178,8 @@ where
             resume: resume.take(),
             last: job.last.map(|_| &run_last),
             beside: beside.as_ref().map(|b| b as &dyn Beside),
+            // The runs are finished once, after the last.
+            finish_within: job.finish_within && j + 1 == owned,
         };
         let (partial, stopped) = method.run(&run_job)?;
         cancelled = stopped;

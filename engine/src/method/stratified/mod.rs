@@ -509,7 +509,12 @@ where
         remainder: None,
     };
     sweeps.remainder = sweeps.remainder(job.budget);
-    let sweeps_clock = reserve_reconstruction(job, &tiles, settings);
+    // Time for the reconstruction, if it follows this run.
+    let sweeps_clock = if job.finish_within {
+        reserve_reconstruction(job, &tiles, settings)
+    } else {
+        job.clock.clone()
+    };
     let driven = drive(
         &mut sweeps,
         job.round_loop_until(position, &sweeps_clock),

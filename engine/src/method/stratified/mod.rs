@@ -66,7 +66,9 @@
 //! is initialized scale all its `G_s(k)` by the same factor, which the
 //! reconstruction absorbs into `b_s`. A unit of work is a sweep: every tile
 //! steps once, in parallel, each with its own PCG streams; exchanges pair
-//! disjoint tiles; the result does not depend on the thread count.
+//! disjoint tiles; the result does not depend on the thread count. A render
+//! of [`StratifiedSettings::runs`] runs pools their sums before one
+//! reconstruction (`runs.rs`): the units a split render's tasks own.
 //!
 //! | file | owns |
 //! |---|---|
@@ -76,8 +78,8 @@
 //! | `init.rs` | the global chains' initialization |
 //! | `regularizer.rs` | every pixel's uniform samples (summed per pixel as they are drawn), the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the total it anchors |
 //! | `reconstruction.rs` | the normalizations, the image, the choice of `α`, the time reserved for them |
-//! | `sweeps.rs` | the state between rounds, a sweep (steps by tile rows in phases, exchanges from `exchange_after` on), what sweeps cost, the budget's remainder, the checkpoint, the output |
-//! | this file | settings, counters, a fresh start or a resumed state, the smallest budget |
+//! | `sweeps.rs` | the state between rounds, a sweep (steps by tile rows in phases, exchanges from `exchange_after` on), what sweeps cost, the budget's remainder, the checkpoint; a run's sums (`SweptRun`) and their pool into the output |
+//! | this file | settings, counters, a run from a fresh start or a resumed state, the smallest budget |
 
 mod init;
 mod light;

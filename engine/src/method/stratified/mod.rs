@@ -388,6 +388,15 @@ pub struct StratifiedStats {
 }
 
 impl StratifiedStats {
+    /// Every path traced, the bootstrap's included.
+    fn traced(&self) -> u64 {
+        self.initialization_samples
+            + self.tile_samples
+            + self.regularizer_samples
+            + self.remainder_samples
+            + self.exchange_samples
+    }
+
     /// Adds another run's counters (those of the reconstruction are set
     /// once, after the runs are pooled).
     fn pool(&mut self, other: &StratifiedStats) {

@@ -238,13 +238,7 @@ pub(crate) struct SweptRun {
 impl SweptRun {
     /// The paths the run traced (bootstrap excluded).
     pub(super) fn samples(&self) -> u64 {
-        let s = &self.stats;
-        s.initialization_samples
-            + s.tile_samples
-            + s.regularizer_samples
-            + s.remainder_samples
-            + s.exchange_samples
-            - self.bootstrap_traces
+        self.stats.traced() - self.bootstrap_traces
     }
 
     /// Whether a run read from a checkpoint fits `tiles` and `channels`,
@@ -489,12 +483,7 @@ where
     }
 
     fn samples(&self) -> u64 {
-        let s = &self.stats;
-        s.initialization_samples
-            + s.tile_samples
-            + s.regularizer_samples
-            + s.remainder_samples
-            + s.exchange_samples
+        self.stats.traced()
     }
 
     /// Eq. 12 with the initial normalizations, channel by channel (a quick

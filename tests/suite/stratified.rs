@@ -218,7 +218,7 @@ fn renders_do_not_depend_on_the_thread_count() {
         },
         ..Default::default()
     };
-    let strat = |threads| in_pool(threads, || stratified_with(&image, 7, 64, settings.clone()));
+    let strat = |threads| in_pool(threads, || stratified_with(&image, 7, 64, settings));
     let (one, two) = (strat(1), strat(2));
     assert_eq!(bits(&one.film), bits(&two.film));
     assert_eq!(extras(&one).counters, extras(&two).counters);

@@ -209,16 +209,7 @@ fn the_environment_plane_is_close_to_mc_and_far_below_pssmlt() {
 #[test]
 fn renders_do_not_depend_on_the_thread_count() {
     let image = ProceduralImage::showcase(Resolution::new(23, 13));
-    // With the global chains' initialization (off by default), which runs
-    // its chains in parallel too.
-    let settings = StratifiedSettings {
-        initialization: Initialization {
-            max_budget_fraction: 0.25,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    let strat = |threads| in_pool(threads, || stratified_with(&image, 7, 64, settings));
+    let strat = |threads| in_pool(threads, || stratified(&image, 7, 64));
     let (one, two) = (strat(1), strat(2));
     assert_eq!(bits(&one.film), bits(&two.film));
     assert_eq!(extras(&one).counters, extras(&two).counters);

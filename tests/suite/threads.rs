@@ -45,7 +45,6 @@ pub fn small_methods() -> Vec<Method> {
         Method::Stratified(StratifiedSettings {
             initialization: Initialization {
                 bootstrap_candidates: 2_000,
-                max_budget_fraction: 0.25,
                 ..Default::default()
             },
             ..Default::default()

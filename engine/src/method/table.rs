@@ -213,7 +213,7 @@ const STRATIFIED: &[Setting] = &[
         "init_budget",
         0.0,
         1.0,
-        "at most this fraction of the budget (paths or time) for the global chains' initialization (0: none; seed-001 preset: 0.25)",
+        "at most this fraction of the budget (paths or time) for the initialization",
     ),
     whole(
         "emission_rays",
@@ -480,7 +480,7 @@ impl Method {
     /// stratified MCMC and ERPT, the emission seen directly left to their
     /// chains; for stratified MCMC also large steps with probability 0.3,
     /// the solver's own `α` without cross-validation, and the
-    /// global chains' initialization, ended at 30 % of the tiles).
+    /// initialization ended at 30 % of the tiles).
     /// Methods the preset does not concern are left as they are.
     pub fn apply_preset(&mut self, name: &str) -> Result<(), Error> {
         let values: &[(&str, f64)] = match (name, &*self) {
@@ -490,7 +490,6 @@ impl Method {
                 ("cross_validate_alpha", 0.0),
                 ("emission_rays", 0.0),
                 ("init_coverage", 0.3),
-                ("init_budget", 0.25),
             ],
             ("seed-001", Method::Erpt(_)) => {
                 &[("small_step_max", 1.0 / 32.0), ("emission_rays", 0.0)]
@@ -774,7 +773,6 @@ mod tests {
         assert!(!s.cross_validate_alpha);
         assert_eq!(s.emission_rays, 0);
         assert_eq!(s.initialization.coverage, 0.3);
-        assert_eq!(s.initialization.max_budget_fraction, 0.25);
         let mut erpt = Method::from_name("erpt").unwrap();
         erpt.apply_preset("seed-001").unwrap();
         assert_eq!(erpt.get("emission_rays"), Some(Value::Number(0.0)));

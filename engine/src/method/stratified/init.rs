@@ -125,7 +125,7 @@ where
     let offsets = ctx.tiles.offsets().len() as u64;
     let candidates = init
         .bootstrap_candidates
-        .min(max_traces / (4 * offsets))
+        .min(max_traces / (2 * offsets))
         .max(1);
     let seed = seed ^ 0x6a09_e667_f3bc_c908;
     let small_step = settings.mutation.small_step;

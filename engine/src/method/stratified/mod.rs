@@ -18,14 +18,13 @@
 //!   traced for it alone: [`StratifiedSettings::regularizer_paths`]). Their
 //!   probability is 0.8 by default, Gruson et al.'s (2020) is 0.3 (ours, measured: see
 //!   [`StratifiedSettings::mutation`]).
-//! * **Initialization** (sec. 3.3). A tile draws uniform states (its large
-//!   steps) until one has `T_s > 0`, and borrows a neighbour's state during
-//!   local exchange. Before the first sweep, global chains run PSSMLT over
-//!   the union of the tile targets (the film position picks the tile, its
-//!   fraction the jitter); a tile takes the state of the first global chain
-//!   that visits it, until [`Initialization::coverage`] of the tiles are
-//!   initialized or the initialization's share of the budget
-//!   ([`Initialization::max_budget_fraction`], a tenth) is spent.
+//! * **Initialization** (sec. 3.3). Global chains run PSSMLT over the union of
+//!   the tile targets (the film position picks the tile, its fraction the
+//!   jitter); a tile takes the state of the first global chain that visits it,
+//!   until [`Initialization::coverage`] of the tiles are initialized or the
+//!   initialization budget is spent. A tile still without a state draws
+//!   uniform states (its large steps) until one has `T_s > 0`, and borrows a
+//!   neighbour's state during local exchange.
 //! * **Local replica exchange** (sec. 3.4, eq. 21) between neighbouring tiles,
 //!   pairs alternating horizontal/vertical and even/odd offsets sweep by sweep,
 //!   accepted with `min(1, T_s(x_t) T_t(x_s) / (T_s(x_s) T_t(x_t)))`,
@@ -171,19 +170,12 @@ pub struct Initialization {
     /// At most this many paths per pixel (Gruson et al. 2020: an effective 32).
     pub max_samples_per_pixel: f64,
     /// And at most this fraction of the render's budget (samples or time;
-    /// table setting `init_budget`; 0.1, the `seed-001` preset 0.25). The
-    /// main cost of a short render: at MC's 64 paths a pixel of time a
-    /// quarter of the budget made stratified MCMC's MSE 1.6-2.1x MC's, a
-    /// tenth 1.1-1.3x; none at all is better still on easy scenes but
-    /// leaves start-up bias where light is rare (a caustic's block 6 %
-    /// dark, the procedural image 5 %; docs/RESULTS.md "The
-    /// initialization's share").
+    /// table setting `init_budget`). The main cost of a short render: a
+    /// smaller share leaves more tiles to start-up bias (docs/RESULTS.md,
+    /// "At MC's 64 paths a pixel, equal time").
     pub max_budget_fraction: f64,
-    /// Bootstrap candidates of the global chains (capped at a quarter of
-    /// the initialization budget). They only pick the chains' first
-    /// states (the global chains' normalization is not used): 2000 for 16
-    /// chains; 20 000, half of a preview's initialization, left the chains
-    /// too few steps (docs/RESULTS.md "The initialization's share").
+    /// Bootstrap candidates of the global chains (capped at half of the
+    /// initialization budget).
     pub bootstrap_candidates: u64,
 }
 
@@ -193,8 +185,8 @@ impl Default for Initialization {
             global_chains: 16,
             coverage: 1.0,
             max_samples_per_pixel: 32.0,
-            max_budget_fraction: 0.1,
-            bootstrap_candidates: 2_000,
+            max_budget_fraction: 0.25,
+            bootstrap_candidates: 20_000,
         }
     }
 }

@@ -426,18 +426,17 @@ impl Pooled for MultiStageSettings {
         done.fits(resolution, channels, grids_of(self, resolution).len() + 1)
     }
 
-    fn pool(
+    fn add(pooled: &mut StagesDone, next: StagesDone) {
+        pooled.pool(next);
+    }
+
+    fn finish(
         &self,
-        partials: Vec<StagesDone>,
+        done: StagesDone,
         _: Resolution,
         _: usize,
         _: &dyn Fn() -> bool,
     ) -> Result<Output, Error> {
-        let mut runs = partials.into_iter();
-        let mut done = runs.next().ok_or_else(checkpoint::does_not_fit)?;
-        for run in runs {
-            done.pool(run);
-        }
         Ok(Output {
             film: done.sum.scaled(1.0 / done.stats.samples.max(1) as f64),
             stats: done.stats,

@@ -31,7 +31,7 @@ use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{PathOracle, Resolution};
 use crate::target::Importance;
-use crate::task::{Task, in_render_order};
+use crate::task::Task;
 
 /// A method made of independent runs (see the module docs).
 pub(crate) trait Pooled: Sync {
@@ -55,15 +55,29 @@ pub(crate) trait Pooled: Sync {
     /// and `channels`.
     fn fits(&self, partial: &Self::Partial, resolution: Resolution, channels: usize) -> bool;
 
-    /// The image of `partials` (every run's, in run order); work after the
-    /// sums (a reconstruction) ends early when `stop` says so.
-    fn pool(
+    /// Adds the sums of the run after those in `pooled` (runs are pooled
+    /// one at a time, in run order).
+    fn add(pooled: &mut Self::Partial, next: Self::Partial);
+
+    /// The image of the pooled runs; work after the sums (a
+    /// reconstruction) ends early when `stop` says so.
+    fn finish(
         &self,
-        partials: Vec<Self::Partial>,
+        pooled: Self::Partial,
         resolution: Resolution,
         channels: usize,
         stop: &dyn Fn() -> bool,
     ) -> Result<Output, Error>;
+}
+
+/// `partials` (every run's, in run order) pooled into one.
+fn pool<P: Pooled>(partials: impl IntoIterator<Item = P::Partial>) -> Result<P::Partial, Error> {
+    let mut partials = partials.into_iter();
+    let mut pooled = partials.next().ok_or_else(checkpoint::does_not_fit)?;
+    for next in partials {
+        P::add(&mut pooled, next);
+    }
+    Ok(pooled)
 }
 
 /// Run `r`'s seed: the render's for run 0, others apart from it and from
@@ -136,10 +150,9 @@ where
         });
         let resolution = job.resolution;
         let pool = |partials: &[P::Partial]| {
-            method
-                .pool(partials.to_vec(), resolution, channels, &|| false)
-                .ok()
-                .map(|o| o.film)
+            let pooled = pool::<P>(partials.iter().cloned()).ok()?;
+            let output = method.finish(pooled, resolution, channels, &|| false);
+            output.ok().map(|o| o.film)
         };
         let observer = RunObserver {
             outer: job.observer,
@@ -218,7 +231,8 @@ where
             extras: Extras::None,
         });
     }
-    let mut output = method.pool(finished, job.resolution, channels, &job.out_of_time())?;
+    let pooled = pool::<P>(finished)?;
+    let mut output = method.finish(pooled, job.resolution, channels, &job.out_of_time())?;
     output.cancelled = cancelled;
     Ok(output)
 }
@@ -231,7 +245,9 @@ fn out_of_time<O, I: ?Sized>(job: &Job<'_, O, I>) -> bool {
 /// The image of a split render's tasks' saved states `parts` (in task
 /// order; see [`merge`](super::merge)): every run's partial, pooled in run
 /// order. Under a sample budget every task ran all its runs; under a time
-/// budget a task may have ended before its last.
+/// budget a task may have ended before its last. The runs are decoded and
+/// pooled one at a time (run `k` is part `k mod N`'s), so the merge holds
+/// the pooled sums and one run's besides the parts.
 pub(crate) fn merge<P: Pooled>(
     method: &P,
     budget: Budget,
@@ -240,31 +256,45 @@ pub(crate) fn merge<P: Pooled>(
     channels: usize,
 ) -> Result<Output, Error> {
     let count = parts.len() as u32;
-    let mut shares = Vec::with_capacity(parts.len());
+    // Each part's runs not yet decoded: the bytes of a `Vec` of partials
+    // after its length, and how many are left.
+    let mut left = Vec::with_capacity(parts.len());
     for (index, part) in parts.iter().enumerate() {
-        let (finished, rest) = checkpoint::take::<Vec<P::Partial>>(part)?;
+        let (runs, rest) = checkpoint::take::<usize>(part)?;
         let owned = Task {
             index: index as u32,
             count,
         }
         .share(method.runs() as u64);
         let all = match budget {
-            Budget::Samples(_) => finished.len() as u64 == owned,
+            Budget::Samples(_) => runs as u64 == owned,
             #[cfg(feature = "std")]
-            Budget::Time(_) => (1..=owned).contains(&(finished.len() as u64)),
+            Budget::Time(_) => (1..=owned).contains(&(runs as u64)),
         };
-        let fits = rest.is_empty()
-            && all
-            && finished
-                .iter()
-                .all(|p| method.fits(p, resolution, channels));
-        if !fits {
+        if !all {
             return Err(checkpoint::does_not_fit());
         }
-        shares.push(finished);
+        left.push((rest, runs));
     }
-    let partials = in_render_order(shares);
-    method.pool(partials, resolution, channels, &|| false)
+    let mut pooled = None;
+    while left.iter().any(|&(_, runs)| runs > 0) {
+        for (bytes, runs) in left.iter_mut().filter(|(_, runs)| *runs > 0) {
+            let (partial, rest) = checkpoint::take::<P::Partial>(bytes)?;
+            if !method.fits(&partial, resolution, channels) {
+                return Err(checkpoint::does_not_fit());
+            }
+            (*bytes, *runs) = (rest, *runs - 1);
+            match &mut pooled {
+                None => pooled = Some(partial),
+                Some(pooled) => P::add(pooled, partial),
+            }
+        }
+    }
+    if left.iter().any(|(bytes, _)| !bytes.is_empty()) {
+        return Err(checkpoint::does_not_fit());
+    }
+    let pooled = pooled.ok_or_else(checkpoint::does_not_fit)?;
+    method.finish(pooled, resolution, channels, &|| false)
 }
 
 /// A run's checkpoints: the runs finished before it, then its own state.

@@ -96,7 +96,7 @@ use self::init::initialize;
 use self::light::LightTracing;
 use self::reconstruction::reserve_reconstruction;
 use self::regularizer::Samples;
-use self::sweeps::{Saved, SweepCosts, Sweeps, SweptRun, pool_runs};
+use self::sweeps::{Saved, SweepCosts, Sweeps, SweptRun, finish_runs};
 use self::tile::{Context, TileChain};
 use super::runs::{self, Pooled};
 use super::{Job, Output};
@@ -567,15 +567,19 @@ impl Pooled for StratifiedSettings {
             || run.fits(&tiles, channels, &light, None)
     }
 
-    fn pool(
+    fn add(pooled: &mut SweptRun, next: SweptRun) {
+        pooled.pool(next);
+    }
+
+    fn finish(
         &self,
-        runs: Vec<SweptRun>,
+        pooled: SweptRun,
         resolution: Resolution,
         channels: usize,
         stop: &dyn Fn() -> bool,
     ) -> Result<Output, Error> {
         let tiles = Tiles::new(resolution, self.shape)?;
-        pool_runs(runs, &tiles, self, channels, stop)
+        finish_runs(pooled, &tiles, self, channels, stop)
     }
 }
 

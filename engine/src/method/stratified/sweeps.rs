@@ -267,7 +267,7 @@ impl SweptRun {
     }
 
     /// Adds another run's sums and counters.
-    fn pool(&mut self, other: SweptRun) {
+    pub(super) fn pool(&mut self, other: SweptRun) {
         for ((draws, unscaled), (more, sums)) in self.tiles.iter_mut().zip(other.tiles) {
             draws.add(&more);
             for (a, b) in unscaled.iter_mut().zip(sums.iter()) {
@@ -286,21 +286,16 @@ impl SweptRun {
     }
 }
 
-/// The image of the runs `runs` (in run order) on `tiles`: their sums
-/// pooled, then the reconstruction, the fallback and the counters; the
-/// weighted solver (and cross-validation) end early when `stop` says so.
-pub(super) fn pool_runs(
-    runs: Vec<SweptRun>,
+/// The image of `run` (the runs' sums pooled) on `tiles`: the
+/// reconstruction, the fallback and the counters; the weighted solver (and
+/// cross-validation) end early when `stop` says so.
+pub(super) fn finish_runs(
+    run: SweptRun,
     tiles: &Tiles,
     settings: &StratifiedSettings,
     channels: usize,
     stop: &dyn Fn() -> bool,
 ) -> Result<Output, Error> {
-    let mut runs = runs.into_iter();
-    let mut run = runs.next().ok_or_else(checkpoint::does_not_fit)?;
-    for other in runs {
-        run.pool(other);
-    }
     let samples = run.samples();
     let SweptRun {
         tiles: sums,

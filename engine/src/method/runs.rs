@@ -10,8 +10,9 @@
 //! A run leaves a [`Pooled::Partial`]: its sums before the method's
 //! finish (for stratified MCMC, the tiles' `G_s(k)` and the large steps'
 //! sums, before the reconstruction). The render keeps every run's partial
-//! and pools them in run order, as [`merge`](super::merge) pools the
-//! tasks' runs, so the merged image has the same bytes. One run (the
+//! and pools them one at a time in run order ([`Pooled::add`]), as
+//! [`merge`](super::merge) pools the tasks' runs, so the merged image has
+//! the same bytes. One run (the
 //! default) is the method as it was.
 
 use alloc::boxed::Box;

@@ -258,7 +258,9 @@ pub(crate) fn merge<P: Pooled>(
 ) -> Result<Output, Error> {
     let count = parts.len() as u32;
     // Each part's runs not yet decoded: the bytes of a `Vec` of partials
-    // after its length, and how many are left.
+    // after its length (postcard writes a sequence's length as a `usize`
+    // varint), and how many are left. The tasks test fails if these are
+    // pooled part after part instead of in run order (tried).
     let mut left = Vec::with_capacity(parts.len());
     for (index, part) in parts.iter().enumerate() {
         let (runs, rest) = checkpoint::take::<usize>(part)?;

@@ -158,11 +158,11 @@ pub extern "C" fn strata_merge(
         return fail(StrataStatus::InvalidArgument, "a null part");
     }
     // SAFETY: live parts made by this API.
-    let checkpoints: Vec<Checkpoint> = pointers
+    let checkpoints: Vec<&Checkpoint> = pointers
         .iter()
-        .map(|&p| unsafe { &*p }.checkpoint.clone())
+        .map(|&p| &unsafe { &*p }.checkpoint)
         .collect();
-    match merge(&checkpoints, subset != 0) {
+    match merge(&checkpoints[..], subset != 0) {
         Ok(output) => {
             // SAFETY: checked non-null above.
             unsafe { *film = StrataFilm::boxed(output) };

@@ -59,7 +59,7 @@ impl core::fmt::Debug for Checkpoint {
 /// which this module only carries.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(crate) struct Header<S> {
-    engine: String,
+    pub engine: String,
     pub settings: S,
     pub oracle: OracleId,
     pub channels: u32,
@@ -203,32 +203,17 @@ impl Checkpoint {
     /// version and the checksum (not yet the oracle or the settings, which
     /// [`resume`](crate::method::resume) checks).
     pub fn from_bytes(bytes: Vec<u8>) -> Result<Self, Error> {
-        if bytes.len() < MAGIC.len() + 8 || bytes[..MAGIC.len()] != MAGIC {
-            return Err(Error::CheckpointCorrupted {
-                reason: "not a strata checkpoint (no STRATAck header)",
-            });
+        if bytes.len() < PREFIX + 4 {
+            return Err(not_a_checkpoint());
         }
-        let version = u32::from_le_bytes(read4(&bytes[MAGIC.len()..]));
-        if version != FORMAT_VERSION {
-            return Err(Error::CheckpointVersion {
-                found: version,
-                expected: FORMAT_VERSION,
-            });
-        }
+        check_prefix(&bytes[..PREFIX])?;
         let (data, crc) = bytes.split_at(bytes.len() - 4);
         if crc32fast::hash(data) != u32::from_le_bytes(read4(crc)) {
-            return Err(Error::CheckpointCorrupted {
-                reason: "its checksum does not match (truncated or damaged)",
-            });
+            return Err(damaged());
         }
         let this = Checkpoint { bytes };
         // The header's first field.
-        let (engine, _) = take::<String>(this.body())?;
-        if engine != ENGINE_VERSION {
-            return Err(Error::CheckpointMismatch {
-                what: "engine version",
-            });
-        }
+        check_engine(&take::<String>(this.body())?.0)?;
         Ok(this)
     }
 
@@ -240,7 +225,50 @@ impl Checkpoint {
 
     /// Everything between the version and the checksum.
     fn body(&self) -> &[u8] {
-        &self.bytes[MAGIC.len() + 4..self.bytes.len() - 4]
+        &self.bytes[PREFIX..self.bytes.len() - 4]
+    }
+}
+
+/// The bytes before the body: the magic and the format version.
+pub(crate) const PREFIX: usize = MAGIC.len() + 4;
+
+/// Checks a checkpoint's first [`PREFIX`] bytes: the magic and the format
+/// version.
+pub(crate) fn check_prefix(prefix: &[u8]) -> Result<(), Error> {
+    if prefix[..MAGIC.len()] != MAGIC {
+        return Err(not_a_checkpoint());
+    }
+    let version = u32::from_le_bytes(read4(&prefix[MAGIC.len()..]));
+    if version != FORMAT_VERSION {
+        return Err(Error::CheckpointVersion {
+            found: version,
+            expected: FORMAT_VERSION,
+        });
+    }
+    Ok(())
+}
+
+/// Checks the engine version a header names (its first field).
+pub(crate) fn check_engine(engine: &str) -> Result<(), Error> {
+    if engine != ENGINE_VERSION {
+        return Err(Error::CheckpointMismatch {
+            what: "engine version",
+        });
+    }
+    Ok(())
+}
+
+/// The error for bytes that are not a checkpoint at all.
+pub(crate) fn not_a_checkpoint() -> Error {
+    Error::CheckpointCorrupted {
+        reason: "not a strata checkpoint (no STRATAck header)",
+    }
+}
+
+/// The error for a checkpoint whose checksum does not match.
+pub(crate) fn damaged() -> Error {
+    Error::CheckpointCorrupted {
+        reason: "its checksum does not match (truncated or damaged)",
     }
 }
 

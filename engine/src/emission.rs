@@ -411,10 +411,21 @@ pub(crate) fn take_saved(
     resolution: Resolution,
 ) -> Result<(Option<SeenEmission>, &[u8]), Error> {
     let (saved, rest) = checkpoint::take::<Option<SeenEmission>>(bytes)?;
-    if let Some(s) = &saved
-        && !s.fits(&SeenEmission::new(channels, task), resolution)
-    {
+    if !fits(&saved, task, channels, resolution) {
         return Err(checkpoint::does_not_fit());
     }
     Ok((saved, rest))
+}
+
+/// Whether a saved state is of task `task`, `channels` and a film of
+/// `resolution` (or none).
+pub(crate) fn fits(
+    saved: &Option<SeenEmission>,
+    task: Task,
+    channels: usize,
+    resolution: Resolution,
+) -> bool {
+    saved
+        .as_ref()
+        .is_none_or(|s| s.fits(&SeenEmission::new(channels, task), resolution))
 }

@@ -145,6 +145,16 @@ pub enum Error {
     TaskRepeated {
         /// The task's index.
         task: u32,
+        /// The two parts' positions in the list given (from 0).
+        parts: [usize; 2],
+    },
+    /// A part given to [`merge`](crate::method::merge) cannot be read, is
+    /// not a checkpoint of this engine, or is damaged.
+    PartUnreadable {
+        /// The part's position in the list given (from 0).
+        part: usize,
+        /// Why.
+        reason: alloc::string::String,
     },
     /// Tasks missing from a [`merge`](crate::method::merge) of the whole
     /// render.
@@ -289,7 +299,15 @@ impl fmt::Display for Error {
                  to the end first",
                 part + 1
             ),
-            Error::TaskRepeated { task } => write!(f, "task {task} is given twice"),
+            Error::TaskRepeated { task, parts } => write!(
+                f,
+                "task {task} is given twice (parts {} and {})",
+                parts[0] + 1,
+                parts[1] + 1
+            ),
+            Error::PartUnreadable { part, reason } => {
+                write!(f, "part {} cannot be merged: {reason}", part + 1)
+            }
             Error::TasksMissing { missing, count } if *count == 0 => {
                 let _ = missing;
                 write!(f, "no part to merge")

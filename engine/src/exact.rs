@@ -15,9 +15,7 @@
 //! could overflow.
 
 use alloc::vec::Vec;
-use core::fmt;
-use serde::de::{self, DeserializeSeed, SeqAccess, Visitor};
-use serde::{Deserialize, Deserializer, Serialize};
+use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 use crate::film::{Film, check_shapes};
@@ -120,7 +118,7 @@ impl ExactSum {
 
     /// Whether the state is one that adding terms can reach (a sum read
     /// back from a file is checked).
-    fn is_valid(&self) -> bool {
+    pub(crate) fn is_valid(&self) -> bool {
         self.top <= 32
     }
 }
@@ -185,21 +183,6 @@ impl ExactFilm {
         Ok(())
     }
 
-    /// Adds the film serialized (postcard) at the front of `bytes`, without
-    /// holding a decoded copy (a merge of large parts), and returns the
-    /// bytes after it; a film of another shape, or bytes that do not decode,
-    /// are an error.
-    pub fn merge_serialized<'b>(&mut self, bytes: &'b [u8]) -> Result<&'b [u8], Error> {
-        let corrupted = |_| Error::CheckpointCorrupted {
-            reason: "its contents do not decode (or are of another film size)",
-        };
-        let mut decoder = postcard::Deserializer::from_bytes(bytes);
-        MergeInto(self)
-            .deserialize(&mut decoder)
-            .map_err(corrupted)?;
-        decoder.finalize().map_err(corrupted)
-    }
-
     /// The consecutive pieces of `pixels` pixels each (the last may be
     /// shorter), to fill in parallel.
     pub(crate) fn bands_mut(&mut self, pixels: usize) -> Vec<Band<'_>> {
@@ -220,12 +203,19 @@ impl ExactFilm {
         self.sums.iter().map(ExactSum::value)
     }
 
-    /// The sums as an f64 film, each multiplied by `scale`.
-    pub fn scaled(&self, scale: f64) -> Film {
+    /// The sums, rounded to f64, as a film.
+    pub fn rounded(&self) -> Film {
         let mut film = Film::new(self.resolution, self.channels);
         for (v, s) in film.data_mut().iter_mut().zip(&self.sums) {
-            *v = s.value() * scale;
+            *v = s.value();
         }
+        film
+    }
+
+    /// The sums as an f64 film, each multiplied by `scale`.
+    pub fn scaled(&self, scale: f64) -> Film {
+        let mut film = self.rounded();
+        film.scale(scale);
         film
     }
 
@@ -236,66 +226,6 @@ impl ExactFilm {
             && self.channels == channels
             && self.sums.len() == resolution.pixel_count() * channels
             && self.sums.iter().all(ExactSum::is_valid)
-    }
-}
-
-/// Deserializes an [`ExactFilm`] into the film it holds, merging it.
-struct MergeInto<'a>(&'a mut ExactFilm);
-
-impl<'de> DeserializeSeed<'de> for MergeInto<'_> {
-    type Value = ();
-    fn deserialize<D: Deserializer<'de>>(self, decoder: D) -> Result<(), D::Error> {
-        const FIELDS: &[&str] = &["resolution", "channels", "sums"];
-        decoder.deserialize_struct("ExactFilm", FIELDS, self)
-    }
-}
-
-impl<'de> Visitor<'de> for MergeInto<'_> {
-    type Value = ();
-    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "an exact film")
-    }
-    fn visit_seq<A: SeqAccess<'de>>(self, mut fields: A) -> Result<(), A::Error> {
-        let resolution: Option<Resolution> = fields.next_element()?;
-        let channels: Option<usize> = fields.next_element()?;
-        if resolution != Some(self.0.resolution) || channels != Some(self.0.channels) {
-            return Err(de::Error::custom("a film of another shape"));
-        }
-        fields
-            .next_element_seed(MergeSums(&mut self.0.sums))?
-            .ok_or_else(|| de::Error::custom("no sums"))
-    }
-}
-
-/// Deserializes a sequence of [`ExactSum`]s into as many, merging them.
-struct MergeSums<'a>(&'a mut [ExactSum]);
-
-impl<'de> DeserializeSeed<'de> for MergeSums<'_> {
-    type Value = ();
-    fn deserialize<D: Deserializer<'de>>(self, decoder: D) -> Result<(), D::Error> {
-        decoder.deserialize_seq(self)
-    }
-}
-
-impl<'de> Visitor<'de> for MergeSums<'_> {
-    type Value = ();
-    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{} exact sums", self.0.len())
-    }
-    fn visit_seq<A: SeqAccess<'de>>(self, mut sums: A) -> Result<(), A::Error> {
-        let mut into = self.0.iter_mut();
-        while let Some(sum) = sums.next_element::<ExactSum>()? {
-            if !sum.is_valid() {
-                return Err(de::Error::custom("a sum out of range"));
-            }
-            into.next()
-                .ok_or_else(|| de::Error::custom("too many sums"))?
-                .merge(&sum);
-        }
-        match into.next() {
-            Some(_) => Err(de::Error::custom("too few sums")),
-            None => Ok(()),
-        }
     }
 }
 
@@ -417,29 +347,12 @@ mod tests {
             whole.add(i % 6, t, &1.0f32);
             parts[i % 3].add(i % 6, t, &1.0f32);
         }
-        let all = parts.clone();
         let mut merged = parts.pop().unwrap();
         for p in parts.iter().rev() {
             merged.merge(p).unwrap();
         }
         assert_eq!(merged, whole);
         assert!(merged.merge(&ExactFilm::try_new(r, 3).unwrap()).is_err());
-        // The same, merged from their serialized bytes.
-        let mut streamed = ExactFilm::try_new(r, 1).unwrap();
-        for p in &all {
-            let mut bytes = postcard::to_allocvec(p).unwrap();
-            bytes.push(7);
-            assert_eq!(streamed.merge_serialized(&bytes).unwrap(), &[7]);
-        }
-        assert_eq!(streamed, whole);
-        let other = postcard::to_allocvec(&ExactFilm::try_new(r, 3).unwrap()).unwrap();
-        assert!(streamed.merge_serialized(&other).is_err());
-        let bytes = postcard::to_allocvec(&all[0]).unwrap();
-        assert!(
-            streamed
-                .merge_serialized(&bytes[..bytes.len() - 3])
-                .is_err()
-        );
         assert!(whole.fits(r, 1) && !whole.fits(r, 3));
         let film = whole.scaled(0.5);
         assert_eq!(film.data()[4], whole.sums[4].value() * 0.5);

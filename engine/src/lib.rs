@@ -17,7 +17,7 @@
 //! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], [`exact`], [`task`], [`purity`], `setting` | random streams; the small-step kernels whole; the mutated primary sample; importance functions; films; sums that do not depend on the order of their terms; the units of work a task of a split render owns; the purity check; what a setting is ([`method::Setting`]) |
 //! | one step | [`chain`] | the Metropolis-Hastings step with expected-values splatting, over any [`Target`](chain::Target) and [`Weights`](chain::Weights) |
 //! | set-up | [`bootstrap`] | start-up bias elimination: `b*` per level, importance-resampled chain starts |
-//! | one loop | [`drive`], [`checkpoint`] | budgets, clock, observer, the round loop, the deterministic merge, statistics; the render's state saved between rounds and resumed |
+//! | one loop | [`drive`], [`checkpoint`], [`parts`] | budgets, clock, observer, the round loop, the deterministic merge, statistics; the render's state saved between rounds and resumed; a split render's parts read piece by piece for the merge |
 //! | methods | [`method`] | [`Settings`], [`Method`], [`Output`], [`render`]; MC, PSSMLT, replica exchange, stratified MCMC, ERPT, multi-stage MLT |
 //! | method parts | [`exchange`], [`tiles`], [`reconstruct`] | replica exchange's ensembles, ladders and every move of Šik 2018, ch. 5; stratified MCMC's tiles and the reconstruction of their normalizations (Gruson et al. 2020, sec. 3.2) |
 //! | diagnostics | [`metrics`], [`diagnose`], [`convergence`], [`analytic`] | error metrics; autocorrelation, ESS, R-hat; Yu et al.'s (2025) predicted error; targets with known answers |
@@ -47,6 +47,7 @@ pub mod metrics;
 pub mod mutate;
 pub mod oracle;
 mod parallel;
+pub mod parts;
 pub mod prelude;
 pub mod purity;
 pub mod reconstruct;

@@ -9,11 +9,14 @@ pub use crate::error::Error;
 pub use crate::film::Film;
 pub use crate::method::{
     ErptSettings, Extras, Method, MultiStageSettings, Output, PssmltSettings, ReplicaSettings,
-    Settings, StratifiedSettings, Task, merge, render, render_task, resume, resume_task,
+    Settings, StratifiedSettings, Task, merge, part_of, render, render_task, resume, resume_task,
 };
 pub use crate::oracle::{
     DropSplats, FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb,
     Sampler, Splat, SplatSink, Temperature,
 };
+#[cfg(feature = "std")]
+pub use crate::parts::PartFiles;
+pub use crate::parts::PartStore;
 pub use crate::purity::check_purity;
 pub use crate::target::{FnImportance, Importance, Luminance, MaxChannel};

@@ -53,7 +53,7 @@ use strata::engine::{
     Radiance, Resolution, SetUp, SetUpStage, Settings, render, resume,
 };
 use strata::native::{PathSampler, PathTracer, builtin, native_tracer};
-use strata::prelude::{Task, merge, render_task, resume_task};
+use strata::prelude::{PartFiles, Task, merge, part_of, render_task, resume_task};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum Backend {
@@ -1002,39 +1002,27 @@ fn render_task_with<O: PathOracle>(
 /// OUT.exr.
 fn merge_parts(args: &MergeArgs) -> AnyResult<()> {
     let start = Instant::now();
-    let mut parts = Vec::with_capacity(args.parts.len());
-    for path in &args.parts {
-        let bytes = read_checkpoint(path, u64::MAX)?;
-        let part = Checkpoint::from_bytes(bytes).map_err(|e| format!("{}: {e}", path.display()))?;
-        parts.push(part);
-    }
+    let parts = PartFiles::new(args.parts.clone());
+    let path = |part: usize| args.parts[part].display().to_string();
     let merged = merge(&parts, args.partial).map_err(|e| match e {
-        Error::PartMismatch { part, .. } | Error::PartUnfinished { part, .. } => {
-            format!("{}: {e}", args.parts[part].display())
-        }
-        Error::TaskRepeated { task } => {
-            let files: Vec<String> = parts
-                .iter()
-                .zip(&args.parts)
-                .filter(|(p, _)| p.task().is_ok_and(|t| t.index == task))
-                .map(|(_, path)| path.display().to_string())
-                .collect();
-            format!("{e}: {}", files.join(", "))
-        }
+        Error::PartMismatch { part, .. }
+        | Error::PartUnfinished { part, .. }
+        | Error::PartUnreadable { part, .. } => format!("{}: {e}", path(part)),
+        Error::TaskRepeated { parts: [a, b], .. } => format!("{e}: {}, {}", path(a), path(b)),
         e => e.to_string(),
     })?;
-    let settings = parts[0].settings()?;
-    let count = parts[0].task()?.count;
+    let (settings, task) = part_of(&parts, 0)?;
+    let count = task.count;
     write(&merged.film, &args.out, args.exposure, false)?;
-    if parts.len() < count as usize {
+    if args.parts.len() < count as usize {
         warn!(
             "note: merged {} of {count} tasks: the image of those tasks only, with fewer paths than the whole render",
-            parts.len()
+            args.parts.len()
         );
     }
     say!(
         "{} of {count} tasks ({}), paths: {} (+{} bootstrap per task), merged in {:.2} s",
-        parts.len(),
+        args.parts.len(),
         settings.method.name(),
         merged.stats.samples,
         merged.stats.bootstrap_samples,

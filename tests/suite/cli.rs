@@ -469,6 +469,25 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
         stderr.contains("task 1 is given twice") && stderr.contains("part-1.part"),
         "{stderr}"
     );
+    // A part that is not there, or is damaged, is named.
+    let gone = merge(&[0, 1, 2, 7], &[]);
+    assert_eq!(gone.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&gone.stderr);
+    assert!(
+        stderr.contains("part-7.part: part 4 cannot be merged"),
+        "{stderr}"
+    );
+    let mut damaged = std::fs::read(part(1)).unwrap();
+    let middle = damaged.len() / 2;
+    damaged[middle] ^= 1;
+    std::fs::write(part(9), damaged).unwrap();
+    let damaged = merge(&[0, 9, 2], &[]);
+    assert_eq!(damaged.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&damaged.stderr);
+    assert!(
+        stderr.contains("part-9.part") && stderr.contains("checksum"),
+        "{stderr}"
+    );
     let partial = merge(&[0, 2], &["--partial"]);
     assert_eq!(partial.status.code(), Some(0));
     assert!(String::from_utf8_lossy(&partial.stderr).contains("merged 2 of 3 tasks"));

@@ -14,8 +14,8 @@ use strata::engine::{
     render,
 };
 use strata::prelude::{
-    ErptSettings, MultiStageSettings, PssmltSettings, ReplicaSettings, StratifiedSettings, Task,
-    merge, render_task, resume_task,
+    ErptSettings, MultiStageSettings, PartStore, PssmltSettings, ReplicaSettings,
+    StratifiedSettings, Task, merge, render_task, resume_task,
 };
 
 use crate::emission::Lit;
@@ -206,8 +206,26 @@ fn a_stopped_task_resumes_to_the_same_partial_result() {
     }
 }
 
+/// Parts as bytes not checked on the way in (as files are): a store of
+/// one's own.
+struct Unchecked(Vec<Vec<u8>>);
+
+impl PartStore for Unchecked {
+    fn count(&self) -> usize {
+        self.0.len()
+    }
+    fn size(&self, part: usize) -> Result<u64, Error> {
+        Ok(self.0[part].len() as u64)
+    }
+    fn read_at(&self, part: usize, offset: u64, buf: &mut [u8]) -> Result<(), Error> {
+        let at = offset as usize;
+        buf.copy_from_slice(&self.0[part][at..at + buf.len()]);
+        Ok(())
+    }
+}
+
 #[test]
-fn merges_refuse_missing_repeated_and_foreign_parts() {
+fn merges_refuse_missing_repeated_damaged_and_foreign_parts() {
     let settings = settings(&methods()[1]);
     let parts: Vec<Checkpoint> = (0..3).map(|i| task(&settings, i, 3, 2)).collect();
     let missing = merge(&parts[..2], false).unwrap_err();
@@ -222,8 +240,26 @@ fn merges_refuse_missing_repeated_and_foreign_parts() {
     let repeated = [parts[0].clone(), parts[1].clone(), parts[1].clone()];
     assert_eq!(
         merge(&repeated, false).unwrap_err(),
-        Error::TaskRepeated { task: 1 }
+        Error::TaskRepeated {
+            task: 1,
+            parts: [1, 2]
+        }
     );
+    // A damaged part, or one that is no checkpoint, is named.
+    let mut damaged = parts[1].as_bytes().to_vec();
+    let middle = damaged.len() / 2;
+    damaged[middle] ^= 1;
+    for bytes in [damaged, b"not a part".to_vec()] {
+        let unchecked = vec![
+            parts[0].as_bytes().into(),
+            bytes,
+            parts[2].as_bytes().into(),
+        ];
+        assert!(matches!(
+            merge(&Unchecked(unchecked), false),
+            Err(Error::PartUnreadable { part: 1, .. })
+        ));
+    }
     let other_seed = Settings {
         seed: 6,
         ..settings.clone()
@@ -242,7 +278,11 @@ fn merges_refuse_missing_repeated_and_foreign_parts() {
         merge(&other_count, false),
         Err(Error::PartMismatch { part: 1, .. })
     ));
-    assert!(matches!(merge(&[], false), Err(Error::TasksMissing { .. })));
+    let none: &[Checkpoint] = &[];
+    assert!(matches!(
+        merge(none, false),
+        Err(Error::TasksMissing { .. })
+    ));
     // A subset, when asked for, is the image of the tasks given: task 0's
     // chains (0, 3, ..., 36: 13 of 37), each with the whole render's steps.
     let some = merge(&parts[..1], true).unwrap();

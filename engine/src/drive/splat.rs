@@ -20,6 +20,7 @@ use crate::exact::ExactFilm;
 use crate::film::Film;
 use crate::oracle::{FilmPoint, Radiance, Resolution};
 use crate::parallel;
+use crate::parts::{FilmAt, PartReader};
 use crate::target::Evaluated;
 
 /// One weighted contribution waiting to be added to the film.
@@ -305,30 +306,31 @@ impl<W: Runs> Splatting<W> {
     }
 }
 
-/// Adds the [`SplatSums`] at the start of `bytes` (as
+/// Reads past the [`SplatSums`] where `part` is (as
 /// [`Splatting::save_sums`] wrote them: one film per layer, the visits, the
-/// units) to `films` and `visits`, each film merged as it is read; returns
-/// the units they hold and the bytes after them. Sums of another shape are
-/// [`checkpoint::does_not_fit`].
-pub(crate) fn merge_saved_sums<'b>(
-    bytes: &'b [u8],
-    films: &mut [ExactFilm],
+/// units), adding the visits to `visits`; returns where each of its
+/// `layers` films is ([`PartReader::skim_film`]) and the units they hold.
+/// Sums of another shape are an error.
+pub(crate) fn skim_saved_sums<'s>(
+    part: &mut PartReader<'s>,
+    layers: usize,
+    (resolution, channels): (Resolution, usize),
     visits: &mut [u64],
-) -> Result<(u64, &'b [u8]), Error> {
+) -> Result<(Vec<FilmAt<'s>>, u64), Error> {
     // A vector's length is a usize in postcard.
-    let (layers, mut rest) = checkpoint::take::<usize>(bytes)?;
-    if layers != films.len() {
-        return Err(checkpoint::does_not_fit());
+    if part.take::<usize>()? != layers {
+        return Err(part.damaged());
     }
-    for film in films.iter_mut() {
-        rest = film.merge_serialized(rest)?;
+    let mut films = Vec::with_capacity(layers);
+    for _ in 0..layers {
+        films.push(part.skim_film(resolution, channels)?);
     }
-    let ((v, units), rest) = checkpoint::take::<(Vec<u64>, u64)>(rest)?;
+    let (v, units): (Vec<u64>, u64) = part.take()?;
     if v.len() != visits.len() {
-        return Err(checkpoint::does_not_fit());
+        return Err(part.damaged());
     }
     visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
-    Ok((units, rest))
+    Ok((films, units))
 }
 
 impl<W: Runs> Rounds for Splatting<W> {

@@ -45,6 +45,7 @@ use crate::film::Film;
 use crate::mutate::{MutationParams, SmallStep};
 use crate::oracle::{PathOracle, Radiance, Resolution, Temperature};
 use crate::parallel;
+use crate::parts::{self, PartReader};
 use crate::rng::{self, Domain, uniform_f64};
 use crate::sample::MltSampler;
 use crate::target::{Evaluated, Importance};
@@ -174,7 +175,7 @@ where
 /// cut short) of `starts` start paths, and the counters of `totals` and the
 /// bootstrap.
 fn finish(
-    film: &ExactFilm,
+    mut sums: Film,
     passes: f64,
     starts: usize,
     totals: &[Totals],
@@ -192,13 +193,14 @@ fn finish(
         stats.invalid_samples += t.invalid;
     }
     stats.invalid_samples += bootstrap.invalid;
-    (film.scaled(scale(film, passes, starts)), stats)
+    sums.scale(scale(sums.resolution(), passes, starts));
+    (sums, stats)
 }
 
 /// The film's scale: one over the start paths per pixel done, `passes ·
 /// starts / pixels`.
-fn scale(film: &ExactFilm, passes: f64, starts: usize) -> f64 {
-    let per_pixel = (starts / film.resolution().pixel_count()) as f64;
+fn scale(resolution: Resolution, passes: f64, starts: usize) -> f64 {
+    let per_pixel = (starts / resolution.pixel_count()) as f64;
     if passes > 0.0 {
         1.0 / (passes * per_pixel)
     } else {
@@ -210,33 +212,34 @@ fn scale(film: &ExactFilm, passes: f64, starts: usize) -> f64 {
 /// [`merge`](super::merge)), in task order: their films, visits, passes and
 /// counters added.
 pub(crate) fn merge(
-    parts: &[&[u8]],
+    parts: &mut [PartReader<'_>],
     resolution: Resolution,
     channels: usize,
 ) -> Result<Output, Error> {
-    let mut film = ExactFilm::try_new(resolution, channels)?;
+    let mut films = Vec::with_capacity(parts.len());
     let mut visits = alloc::vec![0u64; resolution.pixel_count()];
     let mut totals = Vec::new();
     let mut passes = 0.0;
     let mut head = None;
-    for part in parts {
-        // `Saved`'s fields in order, its film merged as it is read.
-        let ((_, bootstrap, b, normalization), rest) =
-            checkpoint::take::<(f64, Traced, f64, Normalization)>(part)?;
-        let rest = film.merge_serialized(rest)?;
+    for part in parts.iter_mut() {
+        // `Saved`'s fields in order.
+        let (_, bootstrap, b, normalization): (f64, Traced, f64, Normalization) = part.take()?;
+        films.push(part.skim_film(resolution, channels)?);
         type Rest = (Vec<u64>, Vec<Totals>, usize, u64, usize, usize);
-        let (v, t, starts, p, done, _) = checkpoint::take::<Rest>(rest)?.0;
+        let (v, t, starts, p, done, _): Rest = part.take()?;
         let blocks = starts.div_ceil(BLOCK);
         if v.len() != visits.len() || starts < resolution.pixel_count() || done >= blocks {
-            return Err(checkpoint::does_not_fit());
+            return Err(part.damaged());
         }
         visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
         totals.extend_from_slice(&t);
         passes += p as f64 + done as f64 / blocks as f64;
         head.get_or_insert((starts, (bootstrap, b, normalization)));
+        part.release();
     }
     let (starts, bootstrap) = head.ok_or_else(checkpoint::does_not_fit)?;
-    let (film, stats) = finish(&film, passes, starts, &totals, bootstrap);
+    let sums = parts::sum_films(&films, resolution, channels)?;
+    let (film, stats) = finish(sums, passes, starts, &totals, bootstrap);
     Ok(Output {
         film,
         stats,
@@ -517,7 +520,13 @@ where
     fn finish(self, driven: Driven) -> Output {
         let passes = self.passes_done();
         let totals = self.totals();
-        let (film, stats) = finish(&self.film, passes, self.starts, &totals, self.set_up);
+        let (film, stats) = finish(
+            self.film.rounded(),
+            passes,
+            self.starts,
+            &totals,
+            self.set_up,
+        );
         Output {
             film,
             stats,
@@ -652,8 +661,11 @@ where
     }
 
     fn preview(&self) -> Film {
-        self.film
-            .scaled(scale(&self.film, self.passes_done(), self.starts))
+        self.film.scaled(scale(
+            self.film.resolution(),
+            self.passes_done(),
+            self.starts,
+        ))
     }
 }
 

@@ -19,6 +19,7 @@ use crate::oracle::{
     FilmPoint, PathOracle, PathSample, Radiance, Resolution, Sampler, Temperature,
 };
 use crate::parallel;
+use crate::parts::{self, PartReader};
 use crate::rng::{self, Domain};
 use crate::sample::IndependentSampler;
 use crate::target::{Evaluated, FnImportance, Importance};
@@ -51,7 +52,7 @@ where
     let driven = drive(&mut run, job.round_loop(position), |run, out| {
         checkpoint::append(&(&run.film, run.passes, run.invalid), out)
     })?;
-    let mut out = finish(run.film, run.passes, run.invalid);
+    let mut out = finish(run.film.rounded(), run.passes, run.invalid);
     out.cancelled = driven.cancelled;
     Ok(out)
 }
@@ -60,11 +61,12 @@ where
 /// sums, the passes summed into it, the invalid samples among them.
 type Saved = (ExactFilm, u64, u64);
 
-/// The image of `passes` passes summed into `film`.
-fn finish(film: ExactFilm, passes: u64, invalid: u64) -> Output {
-    let pixels = film.resolution().pixel_count() as u64;
+/// The image of `passes` passes whose sums are `sums`.
+fn finish(mut sums: Film, passes: u64, invalid: u64) -> Output {
+    let pixels = sums.resolution().pixel_count() as u64;
+    sums.scale(1.0 / passes.max(1) as f64);
     Output {
-        film: film.scaled(1.0 / passes.max(1) as f64),
+        film: sums,
         stats: crate::drive::RenderStats {
             samples: passes * pixels,
             invalid_samples: invalid,
@@ -79,20 +81,22 @@ fn finish(film: ExactFilm, passes: u64, invalid: u64) -> Output {
 /// The image of the tasks' saved states `parts` (see
 /// [`merge`](super::merge)): their films and counts added.
 pub(crate) fn merge(
-    parts: &[&[u8]],
+    parts: &mut [PartReader<'_>],
     resolution: Resolution,
     channels: usize,
 ) -> Result<Output, Error> {
-    let mut film = ExactFilm::try_new(resolution, channels)?;
+    let mut films = Vec::with_capacity(parts.len());
     let (mut passes, mut invalid) = (0u64, 0u64);
-    for part in parts {
-        // `Saved`, its film merged as it is read.
-        let rest = film.merge_serialized(part)?;
-        let (p, i): (u64, u64) = checkpoint::take(rest)?.0;
+    for part in parts.iter_mut() {
+        // `Saved`: the film, then the counts.
+        films.push(part.skim_film(resolution, channels)?);
+        let (p, i): (u64, u64) = part.take()?;
         passes = passes.saturating_add(p);
         invalid = invalid.saturating_add(i);
+        part.release();
     }
-    Ok(finish(film, passes, invalid))
+    let sums = parts::sum_films(&films, resolution, channels)?;
+    Ok(finish(sums, passes, invalid))
 }
 
 /// MC's state between rounds: the sums of the passes so far.

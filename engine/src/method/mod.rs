@@ -46,7 +46,7 @@ pub use replica::{ReplicaExtras, ReplicaSettings};
 pub use stratified::{
     Initialization, Solver, StratifiedExtras, StratifiedSettings, StratifiedStats,
 };
-pub use tasks::{merge, render_task, resume_task};
+pub use tasks::{merge, part_of, render_task, resume_task};
 
 use serde::de::DeserializeOwned;
 

@@ -10,7 +10,7 @@ use alloc::vec::Vec;
 use crate::chain::{ChainStats, Normalization, PathChain, Traced, splat_weights};
 use crate::checkpoint::{self, Position};
 use crate::drive::splat::{
-    RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker, merge_saved_sums,
+    RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker, skim_saved_sums,
 };
 use crate::drive::{Driven, RenderStats, Rounds, drive};
 use crate::error::Error;
@@ -19,6 +19,7 @@ use crate::film::Film;
 use crate::mutate::MutationParams;
 use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::parallel;
+use crate::parts::{self, PartReader};
 use crate::target::Importance;
 use crate::task::in_render_order;
 use serde::{Deserialize, Serialize};
@@ -82,6 +83,7 @@ where
 /// and the large steps' part (see [`image`]).
 const CHAIN_PART: usize = 0;
 const LARGE_STEP_PART: usize = 1;
+const LAYERS: usize = 2;
 
 /// PSSMLT's state: its bootstrap's counters and estimate, and its chains
 /// with their films.
@@ -128,7 +130,7 @@ where
         job: &Job<'a, O, I>,
     ) -> Result<(Self, Option<Position>), Error> {
         let (oracle, importance) = (job.oracle, job.importance);
-        let bands = SplatBands::new(job.resolution).with_layers(2);
+        let bands = SplatBands::new(job.resolution).with_layers(LAYERS);
         let work = |chain, prior| ChainWork {
             oracle,
             importance,
@@ -198,7 +200,14 @@ where
         let ((films, visits, units), work) = self.chains.into_parts();
         let chains: Vec<Summary> = work.iter().map(|w| summary(&w.chain)).collect();
         let estimates = units * chains.len() as u64;
-        let (film, stats) = finish(self.bootstrap, prior, &films, estimates, &chains, samples);
+        let pixels = visits.len();
+        let (stats, scale, r) = finish(self.bootstrap, prior, pixels, estimates, &chains, samples);
+        let film = image(
+            films[CHAIN_PART].rounded(),
+            films[LARGE_STEP_PART].values(),
+            scale,
+            r,
+        );
         Output {
             film,
             stats,
@@ -213,33 +222,40 @@ where
 /// [`merge`](super::merge)), in task order: their films and visits added,
 /// their chains in the render's order, the normalization pooled over all.
 pub(crate) fn merge(
-    parts: &[&[u8]],
+    parts: &mut [PartReader<'_>],
     resolution: Resolution,
     channels: usize,
 ) -> Result<Output, Error> {
-    let mut films = Vec::new();
-    for _ in 0..2 {
-        films.push(ExactFilm::try_new(resolution, channels)?);
-    }
     let mut visits = alloc::vec![0u64; resolution.pixel_count()];
     let mut estimates = 0u64;
-    let mut tasks = Vec::with_capacity(parts.len());
+    let (mut layers, mut tasks) = (Vec::new(), Vec::with_capacity(parts.len()));
     let mut head = None;
-    for part in parts {
+    for part in parts.iter_mut() {
         // `Saved` up to the chains (the image needs their summaries only).
-        let ((bootstrap, prior), rest) = checkpoint::take::<(Traced, Normalization)>(part)?;
-        let (units, rest) = merge_saved_sums(rest, &mut films, &mut visits)?;
-        let chains: Vec<Summary> = checkpoint::take(rest)?.0;
+        let (bootstrap, prior): (Traced, Normalization) = part.take()?;
+        let shape = (resolution, channels);
+        let (films, units) = skim_saved_sums(part, LAYERS, shape, &mut visits)?;
+        let chains: Vec<Summary> = part.take()?;
         estimates = estimates.saturating_add(units.saturating_mul(chains.len() as u64));
         head.get_or_insert((bootstrap, prior));
+        layers.push(films);
         tasks.push(chains);
+        part.release();
     }
     let (bootstrap, prior) = head.ok_or_else(checkpoint::does_not_fit)?;
     let chains = in_render_order(tasks);
+    let mut sums = |layer: usize| {
+        let films: Vec<_> = layers.iter_mut().map(|l| l.swap_remove(layer)).collect();
+        parts::sum_films(&films, resolution, channels)
+    };
+    // Taken from the back: the large steps' layer first.
+    let large = sums(LARGE_STEP_PART)?;
+    let chain = sums(CHAIN_PART)?;
     // An estimate is a chain step: one path.
-    let (film, stats) = finish(bootstrap, prior, &films, estimates, &chains, estimates);
+    let pixels = visits.len();
+    let (stats, scale, r) = finish(bootstrap, prior, pixels, estimates, &chains, estimates);
     Ok(Output {
-        film,
+        film: image(chain, large.data().iter().copied(), scale, r),
         stats,
         cancelled: false,
         visits,
@@ -247,21 +263,20 @@ pub(crate) fn merge(
     })
 }
 
-/// The image and counters of PSSMLT's `chains` (all of the render's, in
-/// its order) with their layers `films` summing `estimates` estimates of the
-/// image, `samples` paths traced after a bootstrap that traced `bootstrap`
-/// and estimated `prior`.
+/// The counters of PSSMLT's `chains` (all of the render's, in its order)
+/// summing `estimates` estimates of an image of `pixels` pixels, `samples`
+/// paths traced after a bootstrap that traced `bootstrap` and estimated
+/// `prior`; and the scale and normalization ratio of its [`image`].
 fn finish(
     bootstrap: Traced,
     prior: Normalization,
-    films: &[ExactFilm],
+    pixels: usize,
     estimates: u64,
     chains: &[Summary],
     samples: u64,
-) -> (Film, RenderStats) {
+) -> (RenderStats, f64, f64) {
     let normalization = pooled(&prior, chains.iter().map(|c| &c.1));
-    let pixels = films[0].resolution().pixel_count() as f64;
-    let scale = pixels / estimates.max(1) as f64;
+    let scale = pixels as f64 / estimates.max(1) as f64;
     let b0 = chains.first().map_or(1.0, |c| c.2);
     let mut stats = RenderStats {
         samples,
@@ -274,8 +289,7 @@ fn finish(
         stats.chains.merge(&c.0);
     }
     stats.invalid_samples = stats.chains.invalid + bootstrap.invalid;
-    let film = image(films, scale, normalization.value() / b0);
-    (film, stats)
+    (stats, scale, normalization.value() / b0)
 }
 
 /// The normalization from the bootstrap's samples and every chain's large
@@ -287,7 +301,8 @@ fn pooled<'a>(
     Normalization::pooled(core::iter::once(prior).chain(large_steps))
 }
 
-/// PSSMLT's image from its two layers, each multiplied by `scale`.
+/// PSSMLT's image from its two layers' sums `chain` and `large` (rounded
+/// to f64), each multiplied by `scale`.
 ///
 /// Every chain weights its samples with the bootstrap's normalization `b0`
 /// (Kelemen et al. 2002, sec. 4; the module docs of [`chain`](crate::chain)):
@@ -298,14 +313,11 @@ fn pooled<'a>(
 /// the normalization pooled over the bootstrap and every large step: the
 /// best estimate of `b` enters once, at the end, and no chain's weights
 /// depend on another's (a render split into tasks splats the same).
-fn image(layers: &[ExactFilm], scale: f64, r: f64) -> Film {
-    let (chain, large) = (&layers[CHAIN_PART], &layers[LARGE_STEP_PART]);
-    let mut film = Film::new(chain.resolution(), chain.channels());
-    let sums = chain.values().zip(large.values());
-    for (v, (c, l)) in film.data_mut().iter_mut().zip(sums) {
-        *v = scale * (r * c + l);
+fn image(mut chain: Film, large: impl Iterator<Item = f64>, scale: f64, r: f64) -> Film {
+    for (c, l) in chain.data_mut().iter_mut().zip(large) {
+        *c = scale * (r * *c + l);
     }
-    film
+    chain
 }
 
 /// A chain and what it produced in the current round.
@@ -372,10 +384,11 @@ where
     /// The image so far, with the normalization pooled over the bootstrap
     /// and this render's (or task's) chains.
     fn image(layers: &[ExactFilm], scale: f64, workers: &[Self]) -> Film {
-        let Some(first) = workers.first() else {
-            return image(layers, scale, 1.0);
-        };
-        let b = pooled(&first.prior, workers.iter().map(|w| w.chain.large_steps())).value();
-        image(layers, scale, b / first.chain.weights().normalization)
+        let r = workers.first().map_or(1.0, |first| {
+            let b = pooled(&first.prior, workers.iter().map(|w| w.chain.large_steps())).value();
+            b / first.chain.weights().normalization
+        });
+        let (chain, large) = (&layers[CHAIN_PART], &layers[LARGE_STEP_PART]);
+        image(chain.rounded(), large.values(), scale, r)
     }
 }

@@ -17,17 +17,17 @@ use crate::chain::{ChainStats, Normalization};
 
 use crate::checkpoint::{self, Position};
 use crate::drive::splat::{
-    RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker, merge_saved_sums,
+    RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker, skim_saved_sums,
 };
 use crate::drive::{Driven, RenderStats, Rounds, SetUpStage, drive};
 use crate::error::Error;
-use crate::exact::ExactFilm;
 use crate::exchange::{
     Ensemble, EnsembleSettings, ExchangeKind, ExchangeMove, ExchangeStats, Ladder, Tempering,
 };
 use crate::film::Film;
 use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::parallel;
+use crate::parts::{self, PartReader};
 use crate::target::Importance;
 use crate::task::in_render_order;
 
@@ -241,29 +241,32 @@ fn summary<R: Radiance>(state: &EnsembleState<R>) -> Summary {
 /// their ensembles' counters in the render's order.
 pub(crate) fn merge(
     settings: &ReplicaSettings,
-    parts: &[&[u8]],
+    parts: &mut [PartReader<'_>],
     resolution: Resolution,
     channels: usize,
 ) -> Result<Output, Error> {
-    let mut film = ExactFilm::try_new(resolution, channels)?;
+    let mut films = Vec::with_capacity(parts.len());
     let mut visits = vec![0u64; resolution.pixel_count()];
     let mut estimates = 0u64;
     let mut tasks = Vec::with_capacity(parts.len());
     let mut head = None;
-    for part in parts {
+    for part in parts.iter_mut() {
         // `Saved` up to the ensembles (the image needs their summaries only).
-        let ((set_up, ladder, priors), rest) =
-            checkpoint::take::<(SetUp, Ladder, Vec<Normalization>)>(part)?;
-        let (units, rest) = merge_saved_sums(rest, core::slice::from_mut(&mut film), &mut visits)?;
-        let ensembles: Vec<Summary> = checkpoint::take(rest)?.0;
+        let (set_up, ladder, priors): (SetUp, Ladder, Vec<Normalization>) = part.take()?;
+        let shape = (resolution, channels);
+        let (film, units) = skim_saved_sums(part, 1, shape, &mut visits)?;
+        let ensembles: Vec<Summary> = part.take()?;
         estimates = estimates.saturating_add(units.saturating_mul(ensembles.len() as u64));
         head.get_or_insert((set_up, ladder, priors));
+        films.extend(film);
         tasks.push(ensembles);
+        part.release();
     }
     let (set_up, ladder, priors) = head.ok_or_else(checkpoint::does_not_fit)?;
     let ensembles = in_render_order(tasks);
     let samples = estimates.saturating_mul(settings.traces_per_sweep());
-    let film = film.scaled(resolution.pixel_count() as f64 / estimates.max(1) as f64);
+    let mut film = parts::sum_films(&films, resolution, channels)?;
+    film.scale(resolution.pixel_count() as f64 / estimates.max(1) as f64);
     Ok(finish(
         (film, visits),
         set_up,

@@ -31,6 +31,7 @@ use crate::drive::{Beside, Budget, Clock, Observer, Progress, RenderStats, SetUp
 use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{PathOracle, Resolution};
+use crate::parts::PartReader;
 use crate::target::Importance;
 use crate::task::Task;
 
@@ -248,22 +249,22 @@ fn out_of_time<O, I: ?Sized>(job: &Job<'_, O, I>) -> bool {
 /// order. Under a sample budget every task ran all its runs; under a time
 /// budget a task may have ended before its last. The runs are decoded and
 /// pooled one at a time (run `k` is part `k mod N`'s), so the merge holds
-/// the pooled sums and one run's besides the parts.
+/// the pooled sums and one run's.
 pub(crate) fn merge<P: Pooled>(
     method: &P,
     budget: Budget,
-    parts: &[&[u8]],
+    parts: &mut [PartReader<'_>],
     resolution: Resolution,
     channels: usize,
 ) -> Result<Output, Error> {
     let count = parts.len() as u32;
-    // Each part's runs not yet decoded: the bytes of a `Vec` of partials
-    // after its length (postcard writes a sequence's length as a `usize`
-    // varint), and how many are left. The tasks test fails if these are
-    // pooled part after part instead of in run order (tried).
+    // How many of each part's runs are left to decode (after the length
+    // of their `Vec`: postcard writes it as a `usize` varint). The tasks
+    // test fails if these are pooled part after part instead of in run
+    // order (tried).
     let mut left = Vec::with_capacity(parts.len());
-    for (index, part) in parts.iter().enumerate() {
-        let (runs, rest) = checkpoint::take::<usize>(part)?;
+    for (index, part) in parts.iter_mut().enumerate() {
+        let runs: usize = part.take()?;
         let owned = Task {
             index: index as u32,
             count,
@@ -275,26 +276,31 @@ pub(crate) fn merge<P: Pooled>(
             Budget::Time(_) => (1..=owned).contains(&(runs as u64)),
         };
         if !all {
-            return Err(checkpoint::does_not_fit());
+            return Err(part.damaged());
         }
-        left.push((rest, runs));
+        left.push(runs);
     }
     let mut pooled = None;
-    while left.iter().any(|&(_, runs)| runs > 0) {
-        for (bytes, runs) in left.iter_mut().filter(|(_, runs)| *runs > 0) {
-            let (partial, rest) = checkpoint::take::<P::Partial>(bytes)?;
+    while left.iter().any(|&runs| runs > 0) {
+        for (part, runs) in parts
+            .iter_mut()
+            .zip(&mut left)
+            .filter(|(_, runs)| **runs > 0)
+        {
+            let partial: P::Partial = part.take()?;
             if !method.fits(&partial, resolution, channels) {
-                return Err(checkpoint::does_not_fit());
+                return Err(part.damaged());
             }
-            (*bytes, *runs) = (rest, *runs - 1);
+            *runs -= 1;
+            part.release();
             match &mut pooled {
                 None => pooled = Some(partial),
                 Some(pooled) => P::add(pooled, partial),
             }
         }
     }
-    if left.iter().any(|(bytes, _)| !bytes.is_empty()) {
-        return Err(checkpoint::does_not_fit());
+    if let Some(part) = parts.iter().find(|part| !part.at_end()) {
+        return Err(part.damaged());
     }
     let pooled = pooled.ok_or_else(checkpoint::does_not_fit)?;
     method.finish(pooled, resolution, channels, &|| false)

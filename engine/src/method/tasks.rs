@@ -18,15 +18,17 @@
 //! its runs whole, and the merge pools every run's sums in run order, as
 //! the render unsplit does.
 
+use alloc::string::ToString;
 use alloc::vec::Vec;
 use core::cell::OnceCell;
 
 use super::{Method, Output, Settings, erpt, mc, pssmlt, replica, run, run_resumed, runs};
-use crate::checkpoint::{Checkpoint, Header, Position, take};
+use crate::checkpoint::{self, Checkpoint, Header, Position};
 use crate::drive::{Budget, Observer};
-use crate::emission::take_saved;
+use crate::emission::{self, SeenEmission};
 use crate::error::Error;
 use crate::oracle::{PathOracle, Resolution};
+use crate::parts::{self, PartReader, PartStore};
 use crate::target::Importance;
 use crate::task::Task;
 
@@ -126,28 +128,41 @@ where
     })
 }
 
+/// The settings and task that part `part` of `parts` says it is of (its
+/// header only read: [`merge`] checks the rest).
+pub fn part_of<P: PartStore + ?Sized>(parts: &P, part: usize) -> Result<(Settings, Task), Error> {
+    let store: &dyn PartStore = &parts::Borrowed(parts);
+    let header: Header<Settings> = parts::open_unchecked(store, part)?.take()?;
+    Ok((header.settings, header.task))
+}
+
 /// The image of a render split into tasks, from the tasks' partial
-/// results: the same bytes (film and counters) as the render unsplit
-/// gives, whatever the parts' order and the threads each task ran on.
-/// Every part must be a finished task of the same render (engine, settings,
-/// scene, task count), each task once, and all of them unless `subset`
-/// (then the image is that of the tasks given: an unbiased render with
-/// fewer units, not the whole one). Otherwise [`Error::PartMismatch`],
+/// results `parts` (checkpoints in memory, or [`PartFiles`](crate::parts::PartFiles)):
+/// the same bytes (film and counters) as the render unsplit gives,
+/// whatever the parts' order and the threads each task ran on. The parts
+/// are read piece by piece (see [`crate::parts`]): the merge holds the
+/// image, not the parts. Every part must be a finished task of the same
+/// render (engine, settings, scene, task count), each task once, and all
+/// of them unless `subset` (then the image is that of the tasks given: an
+/// unbiased render with fewer units, not the whole one). Otherwise
+/// [`Error::PartUnreadable`], [`Error::PartMismatch`],
 /// [`Error::PartUnfinished`], [`Error::TaskRepeated`] or
 /// [`Error::TasksMissing`], naming the part.
-pub fn merge(parts: &[Checkpoint], subset: bool) -> Result<Output, Error> {
-    let Some(first) = parts.first() else {
-        return Err(Error::TasksMissing {
-            missing: Vec::new(),
-            count: 0,
-        });
-    };
-    let (head, _) = first.header::<Settings>()?;
-    let mut states = Vec::with_capacity(parts.len());
-    let mut seen = Vec::new();
+pub fn merge<P: PartStore + ?Sized>(parts: &P, subset: bool) -> Result<Output, Error> {
+    let store: &dyn PartStore = &parts::Borrowed(parts);
+    let mut head: Option<Header<Settings>> = None;
+    // Each part's task, where its emission and its state start, and its
+    // reader (at its state).
+    let mut found: Vec<(u32, u64, PartReader<'_>)> = Vec::with_capacity(store.count());
     let mut apart = None;
-    for (part, checkpoint) in parts.iter().enumerate() {
-        let (header, rest): (Header<Settings>, _) = checkpoint.header()?;
+    for part in 0..store.count() {
+        let mut reader = parts::open(store, part)?;
+        let header: Header<Settings> = reader.take()?;
+        checkpoint::check_engine(&header.engine).map_err(|e| Error::PartUnreadable {
+            part,
+            reason: e.to_string(),
+        })?;
+        let head = head.get_or_insert_with(|| header.clone());
         let mismatch = |what| Error::PartMismatch { part, what };
         if header.settings != head.settings {
             return Err(mismatch("settings (method, its settings, seed or budget)"));
@@ -164,48 +179,68 @@ pub fn merge(parts: &[Checkpoint], subset: bool) -> Result<Output, Error> {
                 task: header.task.index,
             });
         }
-        if seen.contains(&header.task.index) {
+        if let Some((_, _, first)) = found.iter().find(|(t, _, _)| *t == header.task.index) {
             return Err(Error::TaskRepeated {
                 task: header.task.index,
+                parts: [first.part(), part],
             });
         }
-        seen.push(header.task.index);
-        let channels = header.channels as usize;
-        let resolution = header.oracle.resolution;
-        let (emission, rest) = take_saved(rest, header.task, channels, resolution)?;
+        let (channels, resolution) = (header.channels as usize, header.oracle.resolution);
+        let emission_at = reader.position();
+        let emission: Option<SeenEmission> = reader.take()?;
+        if !emission::fits(&emission, header.task, channels, resolution) {
+            return Err(reader.damaged());
+        }
         if emission.is_some() != *apart.get_or_insert(emission.is_some()) {
             return Err(mismatch(
                 "emission seen directly (apart in some parts only)",
             ));
         }
-        states.push((header.task.index, emission, rest));
+        reader.release();
+        found.push((header.task.index, emission_at, reader));
     }
+    let Some(head) = head else {
+        return Err(Error::TasksMissing {
+            missing: Vec::new(),
+            count: 0,
+        });
+    };
     let count = head.task.count;
-    let missing: Vec<u32> = (0..count).filter(|i| !seen.contains(i)).collect();
+    let missing: Vec<u32> = (0..count)
+        .filter(|i| !found.iter().any(|(t, _, _)| t == i))
+        .collect();
     if !missing.is_empty() && !subset {
         return Err(Error::TasksMissing { missing, count });
     }
-    states.sort_by_key(|(index, _, _)| *index);
-    let (emission, states): (Vec<_>, Vec<&[u8]>) =
-        states.into_iter().map(|(_, e, s)| (e, s)).unzip();
+    found.sort_by_key(|(index, _, _)| *index);
+    let (emission, mut states): (Vec<_>, Vec<_>) =
+        found.into_iter().map(|(_, e, s)| (e, s)).unzip();
     let (resolution, channels) = (head.oracle.resolution, head.channels as usize);
     let budget = head.settings.budget;
     // The round loop's methods: their states after its position.
-    let after_position = || -> Result<Vec<&[u8]>, Error> {
-        states.iter().map(|s| Ok(take::<Position>(s)?.1)).collect()
-    };
-    let mut output = match &head.settings.method {
-        Method::Mc => mc::merge(&after_position()?, resolution, channels),
-        Method::Pssmlt(_) => pssmlt::merge(&after_position()?, resolution, channels),
-        Method::Erpt(_) => erpt::merge(&after_position()?, resolution, channels),
-        Method::Replica(s) => replica::merge(s, &after_position()?, resolution, channels),
-        Method::Stratified(s) => runs::merge(s, budget, &states, resolution, channels),
-        Method::MultiStage(s) => runs::merge(s, budget, &states, resolution, channels),
+    let method = &head.settings.method;
+    if !matches!(method, Method::Stratified(_) | Method::MultiStage(_)) {
+        for state in states.iter_mut() {
+            state.take::<Position>()?;
+        }
+    }
+    let parts = &mut states[..];
+    let mut output = match method {
+        Method::Mc => mc::merge(parts, resolution, channels),
+        Method::Pssmlt(_) => pssmlt::merge(parts, resolution, channels),
+        Method::Erpt(_) => erpt::merge(parts, resolution, channels),
+        Method::Replica(s) => replica::merge(s, parts, resolution, channels),
+        Method::Stratified(s) => runs::merge(s, budget, parts, resolution, channels),
+        Method::MultiStage(s) => runs::merge(s, budget, parts, resolution, channels),
     }?;
     // Each task traced its own rows: the sums add up to the render's
-    // unsplit, in the same operations for each pixel.
-    for seen in emission.iter().flatten() {
-        seen.add_to_output(&mut output);
+    // unsplit, in the same operations for each pixel. Read again, one part
+    // at a time.
+    for (state, at) in states.iter().zip(emission) {
+        let mut reader = state.from(at);
+        if let Some(seen) = reader.take::<Option<SeenEmission>>()? {
+            seen.add_to_output(&mut output);
+        }
     }
     Ok(output)
 }

@@ -313,8 +313,8 @@ impl<'s> PartReader<'s> {
     }
 
     /// Reads past an [`ExactFilm`](crate::exact::ExactFilm) of `resolution`
-    /// and `channels`, checking its shape and each sum, and notes where
-    /// each band of its sums starts.
+    /// and `channels`, checking its shape, and notes where each band of its
+    /// sums starts.
     pub fn skim_film(
         &mut self,
         resolution: Resolution,
@@ -327,20 +327,54 @@ impl<'s> PartReader<'s> {
         if r != resolution || c != channels || len != values {
             return Err(self.damaged());
         }
-        let mut bands = Vec::with_capacity(values.div_ceil(BAND));
-        for i in 0..values {
-            if i % BAND == 0 {
+        let mut bands = Vec::with_capacity(values.div_ceil(BAND) + 1);
+        let mut i = 0;
+        while i < values {
+            if i % BAND == 0 && bands.len() == i / BAND {
                 bands.push(self.position());
             }
-            if !self.take::<ExactSum>()?.is_valid() {
+            // The sums up to the next band, as many as the window holds.
+            let wanted = (BAND - i % BAND).min(values - i);
+            let skipped = skip_sums(&self.window[self.used..], wanted);
+            let (sums, len) = skipped.ok_or_else(|| self.damaged())?;
+            self.used += len;
+            i += sums;
+            if sums < wanted && !self.read_more()? {
                 return Err(self.damaged());
             }
         }
+        bands.push(self.position());
         Ok(FilmAt {
             part: self.from(0),
             bands,
         })
     }
+}
+
+/// How many whole [`ExactSum`]s (at most `most`) are at the front of
+/// `bytes` in postcard's format (four varints, its bins' limbs, then its
+/// top byte), and their length; `None` if one is no varint. The sums
+/// themselves are decoded and checked when they are summed.
+fn skip_sums(bytes: &[u8], most: usize) -> Option<(usize, usize)> {
+    const LONGEST: usize = 10;
+    let (mut sums, mut end) = (0, 0);
+    let (mut varints, mut run) = (0, 0);
+    for (k, &b) in bytes.iter().enumerate() {
+        if varints == 4 {
+            (sums, end) = (sums + 1, k + 1);
+            (varints, run) = (0, 0);
+            if sums == most {
+                break;
+            }
+        } else if b & 0x80 == 0 {
+            (varints, run) = (varints + 1, 0);
+        } else if run + 1 == LONGEST {
+            return None;
+        } else {
+            run += 1;
+        }
+    }
+    Some((sums, end))
 }
 
 /// Values of a film summed together, one band of each part's at a time.
@@ -351,6 +385,7 @@ const BAND: usize = 1 << 16;
 pub(crate) struct FilmAt<'s> {
     /// A reader of the part (where it is does not matter).
     part: PartReader<'s>,
+    /// Where each band starts, then where the last ends.
     bands: Vec<u64>,
 }
 
@@ -366,14 +401,30 @@ pub(crate) fn sum_films(
 ) -> Result<Film, Error> {
     let mut film = Film::try_new(resolution, channels)?;
     let mut sums = alloc::vec![ExactSum::default(); BAND];
+    let mut bytes = Vec::new();
     for (band, values) in film.data_mut().chunks_mut(BAND).enumerate() {
         let sums = &mut sums[..values.len()];
         sums.fill(ExactSum::default());
         for at in films {
-            let offset = *at.bands.get(band).ok_or_else(checkpoint::does_not_fit)?;
-            let mut part = at.part.from(offset);
+            let (part, damaged) = (&at.part, || at.part.damaged());
+            let (start, end) = match at.bands.get(band..band + 2) {
+                Some(&[start, end]) if start <= end => (start, end),
+                _ => return Err(damaged()),
+            };
+            bytes.clear();
+            let len = usize::try_from(end - start).map_err(|_| damaged())?;
+            bytes.try_reserve(len).map_err(|_| damaged())?;
+            bytes.resize(len, 0);
+            part.store.read_at(part.part, start, &mut bytes)?;
+            let mut rest = &bytes[..];
             for sum in sums.iter_mut() {
-                sum.merge(&part.take()?);
+                let (more, after) =
+                    postcard::take_from_bytes::<ExactSum>(rest).map_err(|_| damaged())?;
+                sum.merge(&more);
+                rest = after;
+            }
+            if !rest.is_empty() {
+                return Err(damaged());
             }
         }
         for (value, sum) in values.iter_mut().zip(sums.iter()) {

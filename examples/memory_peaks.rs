@@ -20,6 +20,7 @@ use clap::Parser;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::native::{PathSampler, builtin, native_tracer};
+use strata::prelude::Task;
 
 #[global_allocator]
 static ALLOCATOR: Tracking = Tracking::new();
@@ -93,6 +94,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     tracer.splats_per_path(),
                     threads,
                     settings.budget,
+                    Task::WHOLE,
                 );
                 ALLOCATOR.leave_out(bound as usize);
                 ALLOCATOR.reset_peak();

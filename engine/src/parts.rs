@@ -288,8 +288,9 @@ impl<'s> PartReader<'s> {
     }
 
     /// Reads more of the body into the window, dropping what is decoded
-    /// (twice as much as is left undecoded, when a value fills the
-    /// window); false at the body's end.
+    /// (the rest of the body when the value being decoded fills a whole
+    /// window: only a run's sums are that large, and each retry decodes it
+    /// again from its start); false at the body's end.
     fn read_more(&mut self) -> Result<bool, Error> {
         let read = self.at + self.window.len() as u64;
         if read >= self.end {
@@ -299,7 +300,12 @@ impl<'s> PartReader<'s> {
         self.at += self.used as u64;
         self.used = 0;
         let kept = self.window.len();
-        let more = (WINDOW.max(2 * kept) - kept).min((self.end - read) as usize);
+        let rest = usize::try_from(self.end - read).unwrap_or(usize::MAX);
+        let more = if kept >= WINDOW {
+            rest
+        } else {
+            (WINDOW - kept).min(rest)
+        };
         self.window
             .try_reserve_exact(more)
             .map_err(|_| Error::AllocationFailed {
@@ -500,6 +506,16 @@ mod tests {
         // Another shape, or a film cut short, is an error naming the part.
         let shape = reader(&store, 1).skim_film(Resolution::new(480, 640), channels);
         assert!(matches!(shape, Err(Error::PartUnreadable { part: 1, .. })));
+        // A value larger than two windows, then a small one.
+        let big: Vec<u64> = (0..WINDOW as u64 / 2).map(|k| k << 20).collect();
+        let mut bytes = postcard::to_allocvec(&(&big, 9u8)).unwrap();
+        assert!(bytes.len() > 2 * WINDOW);
+        bytes.extend_from_slice(&[0; 4]);
+        let large = Bytes(vec![bytes]);
+        let mut whole = reader(&large, 0);
+        assert_eq!(whole.take::<Vec<u64>>().unwrap(), big);
+        assert_eq!(whole.take::<u8>().unwrap(), 9);
+        assert!(whole.at_end());
         let mut short = store.0[2][..store.0[2].len() / 2].to_vec();
         short.extend_from_slice(&[0; 4]);
         let cut = Bytes(vec![short]);

@@ -442,13 +442,14 @@ fn read_checkpoint(path: &Path, most: u64) -> AnyResult<Vec<u8>> {
 /// four times its memory bound, and 256 MiB for its chains (measured at
 /// 128x128: stratified MCMC's checkpoint is a fifth of its bound, the other
 /// methods' less).
-fn checkpoint_limit<O: PathOracle>(settings: &Settings, oracle: &O) -> u64 {
+fn checkpoint_limit<O: PathOracle>(settings: &Settings, oracle: &O, task: Task) -> u64 {
     let bound = settings.method.memory_bound(
         oracle.resolution(),
         O::Radiance::CHANNELS,
         oracle.splats_per_path(),
         rayon::current_num_threads(),
         settings.budget,
+        task,
     );
     bound.saturating_mul(4).saturating_add(256 << 20)
 }
@@ -847,7 +848,7 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Option<Outp
     };
     let resumed = match &args.resume {
         Some(path) => {
-            let most = checkpoint_limit(&settings, oracle);
+            let most = checkpoint_limit(&settings, oracle, args.task().unwrap_or(Task::WHOLE));
             let bytes = read_checkpoint(path, most)?;
             let checkpoint = Checkpoint::from_bytes(bytes)
                 .map_err(|e| format!("in checkpoint {}: {e}", path.display()))?;

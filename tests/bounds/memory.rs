@@ -8,6 +8,7 @@ use crate::ALLOCATOR;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::native::{PathSampler, builtin, native_tracer};
+use strata::prelude::Task;
 
 /// How far the bound may be from the peak, either way.
 const WITHIN: f64 = 1.5;
@@ -37,8 +38,14 @@ fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
                     budget,
                     method: method.clone(),
                 };
-                let bound =
-                    method.memory_bound(resolution, 3, tracer.splats_per_path(), threads, budget);
+                let bound = method.memory_bound(
+                    resolution,
+                    3,
+                    tracer.splats_per_path(),
+                    threads,
+                    budget,
+                    Task::WHOLE,
+                );
                 let pool = rayon::ThreadPoolBuilder::new()
                     .num_threads(threads)
                     .build()

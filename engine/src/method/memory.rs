@@ -4,17 +4,31 @@
 use super::{Method, erpt};
 use crate::drive::Budget;
 use crate::oracle::Resolution;
+use crate::task::Task;
+
+/// The finished runs' sums a render of `runs` independent runs keeps
+/// besides the running one: a whole render's pooled as each ends (one), a
+/// task's each (all its runs but one).
+fn runs_kept(runs: u32, task: Task) -> u128 {
+    let owned = task.share(runs.max(1) as u64) as u128;
+    if task == Task::WHOLE {
+        owned.min(2) - 1
+    } else {
+        owned.saturating_sub(1)
+    }
+}
 
 impl Method {
     /// The bytes a render of `resolution` with this method holds at most:
     /// the reservation [`render`](super::render) makes before any work (a render that
     /// cannot have it is [`Error::AllocationFailed`](crate::error::Error::AllocationFailed), not an abort half
     /// way). `channels` are the radiance's, `splats_per_path` the oracle's
-    /// ([`PathOracle::splats_per_path`](crate::oracle::PathOracle::splats_per_path)), `workers` the threads.
+    /// ([`PathOracle::splats_per_path`](crate::oracle::PathOracle::splats_per_path)), `workers` the threads, `task` the
+    /// task of a split render ([`Task::WHOLE`] for a whole one).
     ///
     /// Counted: the films (exact sums, [`ExactFilm`](crate::exact::ExactFilm), and the image; the
     /// emission seen directly's sums) and per-pixel counts; the sums of
-    /// the independent runs finished (stratified MCMC, multi-stage MLT); the bootstrap's candidates
+    /// the independent runs finished (stratified MCMC, multi-stage MLT: a whole render pools them as they end, a task keeps each); the bootstrap's candidates
     /// (let go before the first round); every chain's state (its primary
     /// sample and path); stratified MCMC's tile chains, per pixel a part of
     /// its own and one per tile pixel (the state evaluated there, with its
@@ -33,6 +47,7 @@ impl Method {
         splats_per_path: f64,
         workers: usize,
         budget: Budget,
+        task: Task,
     ) -> u64 {
         use sizes::*;
         // In u128: a film of u32::MAX x u32::MAX pixels is still a number.
@@ -105,7 +120,7 @@ impl Method {
                     + emission
                     + pixels * (TILE_CHAIN + tile * per_tile_pixel)
                     + workers * CHAIN
-                    + (s.runs.max(1) as u128 - 1) * run
+                    + runs_kept(s.runs, task) * run
             }
             Method::Erpt(s) => {
                 // A block's start paths and a wave's proposals and states,
@@ -132,11 +147,12 @@ impl Method {
                     splats_per_path,
                     workers as usize,
                     budget,
+                    Task::WHOLE,
                 );
                 // The sums of the runs finished before the last: film,
                 // deviations and visits.
                 let run = film + 16 * pixels;
-                stage as u128 + 2 * film + 4 * 8 * pixels + (s.runs.max(1) as u128 - 1) * run
+                stage as u128 + 2 * film + 4 * 8 * pixels + runs_kept(s.runs, task) * run
             }
         };
         // The emission seen directly, estimated apart (`emission_rays`;

@@ -581,6 +581,7 @@ where
             oracle.splats_per_path(),
             parallel::threads(),
             settings.budget,
+            task,
         ),
         "render's films, chains and buffers (a bound for this method, film and budget)",
     )?;

@@ -422,8 +422,11 @@ impl Pooled for MultiStageSettings {
         done.stats.samples
     }
 
-    fn fits(&self, done: &StagesDone, resolution: Resolution, channels: usize) -> bool {
-        done.fits(resolution, channels, grids_of(self, resolution).len() + 1)
+    fn fits(&self, done: &StagesDone, resolution: Resolution, channels: usize, runs: u64) -> bool {
+        let stages = grids_of(self, resolution)
+            .len()
+            .saturating_mul(runs as usize);
+        done.fits(resolution, channels, stages.saturating_add(1))
     }
 
     fn add(pooled: &mut StagesDone, next: StagesDone) {

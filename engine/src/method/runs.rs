@@ -9,11 +9,11 @@
 //!
 //! A run leaves a [`Pooled::Partial`]: its sums before the method's
 //! finish (for stratified MCMC, the tiles' `G_s(k)` and the large steps'
-//! sums, before the reconstruction). The render keeps every run's partial
-//! and pools them one at a time in run order ([`Pooled::add`]), as
-//! [`merge`](super::merge) pools the tasks' runs, so the merged image has
-//! the same bytes. One run (the
-//! default) is the method as it was.
+//! sums, before the reconstruction). The runs are pooled one at a time in
+//! run order ([`Pooled::add`]): a whole render pools each as it ends, a
+//! task keeps its runs apart, and [`merge`](super::merge) pools every
+//! task's in run order, so the merged image has the same bytes. One run
+//! (the default) is the method as it was.
 
 use alloc::boxed::Box;
 use alloc::vec::Vec;
@@ -22,8 +22,8 @@ use core::cell::OnceCell;
 use core::sync::atomic::{AtomicU64, Ordering};
 use once_cell::race::OnceBox;
 
-use serde::Serialize;
 use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 
 use super::{Extras, Job, Output};
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
@@ -53,9 +53,15 @@ pub(crate) trait Pooled: Sync {
     /// The paths a run traced (bootstrap excluded).
     fn samples(partial: &Self::Partial) -> u64;
 
-    /// Whether a partial read from a checkpoint fits a film of `resolution`
-    /// and `channels`.
-    fn fits(&self, partial: &Self::Partial, resolution: Resolution, channels: usize) -> bool;
+    /// Whether a partial read from a checkpoint, of `runs` runs pooled,
+    /// fits a film of `resolution` and `channels`.
+    fn fits(
+        &self,
+        partial: &Self::Partial,
+        resolution: Resolution,
+        channels: usize,
+        runs: u64,
+    ) -> bool;
 
     /// Adds the sums of the run after those in `pooled` (runs are pooled
     /// one at a time, in run order).
@@ -70,6 +76,60 @@ pub(crate) trait Pooled: Sync {
         channels: usize,
         stop: &dyn Fn() -> bool,
     ) -> Result<Output, Error>;
+}
+
+/// The runs of a task finished so far, as its checkpoints hold them: a
+/// whole render's pooled as each ends (one partial: pooling is a fold in
+/// run order, so pooling as they come is pooling at the end), a task's
+/// kept apart (the merge pools every task's runs in run order).
+#[derive(Clone, Serialize, Deserialize)]
+struct Finished<T> {
+    runs: u64,
+    partials: Vec<T>,
+}
+
+impl<T> Default for Finished<T> {
+    fn default() -> Self {
+        Self {
+            runs: 0,
+            partials: Vec::new(),
+        }
+    }
+}
+
+impl<T> Finished<T> {
+    /// Adds the next run's partial: pooled into the one partial of a
+    /// `whole` render, kept apart in a task's.
+    fn add<P: Pooled<Partial = T>>(&mut self, partial: T, whole: bool) {
+        match self.partials.first_mut() {
+            Some(pooled) if whole => P::add(pooled, partial),
+            _ => self.partials.push(partial),
+        }
+        self.runs += 1;
+    }
+
+    /// Whether a state read from a checkpoint has at most `owned` runs,
+    /// held as a `whole` render's or a task's, each partial fitting
+    /// `method`'s film of `resolution` and `channels`.
+    fn fits<P: Pooled<Partial = T>>(
+        &self,
+        owned: u64,
+        whole: bool,
+        method: &P,
+        (resolution, channels): (Resolution, usize),
+    ) -> bool {
+        let (held, each) = if whole {
+            (self.runs.min(1), self.runs)
+        } else {
+            (self.runs, 1)
+        };
+        self.runs <= owned
+            && self.partials.len() as u64 == held
+            && self
+                .partials
+                .iter()
+                .all(|p| method.fits(p, resolution, channels, each))
+    }
 }
 
 /// `partials` (every run's, in run order) pooled into one.
@@ -111,15 +171,13 @@ where
     let runs = method.runs() as u64;
     let owned = job.task.share(runs) as usize;
     let channels = <O::Radiance as crate::oracle::Radiance>::CHANNELS;
+    let whole = job.task == Task::WHOLE;
     let (mut finished, mut resume) = match job.resume {
-        None => (Vec::new(), None),
+        None => (Finished::default(), None),
         Some(bytes) => {
-            let (finished, rest) = checkpoint::take::<Vec<P::Partial>>(bytes)?;
-            let fits = finished.len() <= owned
-                && finished
-                    .iter()
-                    .all(|p| method.fits(p, job.resolution, channels));
-            if !fits {
+            let (finished, rest) = checkpoint::take::<Finished<P::Partial>>(bytes)?;
+            let shape = (job.resolution, channels);
+            if !finished.fits(owned as u64, whole, method, shape) {
                 return Err(checkpoint::does_not_fit());
             }
             // A run was under way unless every run had finished.
@@ -127,8 +185,8 @@ where
         }
     };
     let mut cancelled = false;
-    while finished.len() < owned && !cancelled {
-        let j = finished.len();
+    while finished.runs < owned as u64 && !cancelled {
+        let j = finished.runs as usize;
         // A time budget spent ends the runs (each runs at least a unit of
         // work whatever its share: thousands of runs would overrun it).
         if j > 0 && out_of_time(job) {
@@ -143,7 +201,7 @@ where
                     .share_of_remaining(limit, 1.0 / (owned - j) as f64),
             ),
         };
-        let before: u64 = finished.iter().map(P::samples).sum();
+        let before: u64 = finished.partials.iter().map(P::samples).sum();
         let beside = job.beside.map(|outer| RunBeside {
             outer,
             before,
@@ -161,10 +219,10 @@ where
             before,
             run: j,
             owned,
-            finished: &finished,
+            finished: &finished.partials,
             pooled: OnceBox::new(),
             pool: &pool,
-            beside: (!finished.is_empty())
+            beside: (finished.runs > 0)
                 .then_some(job.beside)
                 .flatten()
                 .map(|b| {
@@ -208,9 +266,9 @@ where
             }
             _ => {}
         }
-        finished.push(partial);
+        finished.add::<P>(partial, whole);
     }
-    let samples = finished.iter().map(P::samples).sum();
+    let samples = finished.partials.iter().map(P::samples).sum();
     if let Some(last) = job.last {
         if !cancelled {
             // Every run finished: the task's partial result.
@@ -233,7 +291,7 @@ where
             extras: Extras::None,
         });
     }
-    let pooled = pool::<P>(finished)?;
+    let pooled = pool::<P>(finished.partials)?;
     let mut output = method.finish(pooled, job.resolution, channels, &job.out_of_time())?;
     output.cancelled = cancelled;
     Ok(output)
@@ -254,44 +312,46 @@ pub(crate) fn merge<P: Pooled>(
     method: &P,
     budget: Budget,
     parts: &mut [PartReader<'_>],
+    tasks: &[Task],
     resolution: Resolution,
     channels: usize,
 ) -> Result<Output, Error> {
-    let count = parts.len() as u32;
-    // How many of each part's runs are left to decode (after the length
-    // of their `Vec`: postcard writes it as a `usize` varint). The tasks
-    // test fails if these are pooled part after part instead of in run
-    // order (tried).
+    // How many of each part's partials are left to decode (after their
+    // `Finished::runs` and the length of their `Vec`: postcard writes it
+    // as a `usize` varint). The tasks test fails if these are pooled part
+    // after part instead of in run order (tried).
     let mut left = Vec::with_capacity(parts.len());
-    for (index, part) in parts.iter_mut().enumerate() {
-        let runs: usize = part.take()?;
-        let owned = Task {
-            index: index as u32,
-            count,
-        }
-        .share(method.runs() as u64);
+    for (part, &task) in parts.iter_mut().zip(tasks) {
+        let (runs, partials): (u64, usize) = (part.take()?, part.take()?);
+        let owned = task.share(method.runs() as u64);
         let all = match budget {
-            Budget::Samples(_) => runs as u64 == owned,
+            Budget::Samples(_) => runs == owned,
             #[cfg(feature = "std")]
-            Budget::Time(_) => (1..=owned).contains(&(runs as u64)),
+            Budget::Time(_) => (1..=owned).contains(&runs),
         };
-        if !all {
+        // A render of one task holds its runs pooled.
+        let (held, each) = if task == Task::WHOLE {
+            (runs.min(1), runs)
+        } else {
+            (runs, 1)
+        };
+        if !all || partials as u64 != held {
             return Err(part.damaged());
         }
-        left.push(runs);
+        left.push((partials, each));
     }
     let mut pooled = None;
-    while left.iter().any(|&runs| runs > 0) {
-        for (part, runs) in parts
+    while left.iter().any(|&(partials, _)| partials > 0) {
+        for (part, (partials, each)) in parts
             .iter_mut()
             .zip(&mut left)
-            .filter(|(_, runs)| **runs > 0)
+            .filter(|(_, (partials, _))| *partials > 0)
         {
             let partial: P::Partial = part.take()?;
-            if !method.fits(&partial, resolution, channels) {
+            if !method.fits(&partial, resolution, channels, *each) {
                 return Err(part.damaged());
             }
-            *runs -= 1;
+            *partials -= 1;
             part.release();
             match &mut pooled {
                 None => pooled = Some(partial),
@@ -309,7 +369,7 @@ pub(crate) fn merge<P: Pooled>(
 /// A run's checkpoints: the runs finished before it, then its own state.
 struct RunCheckpoints<'a, T> {
     outer: &'a dyn Checkpoints,
-    finished: &'a Vec<T>,
+    finished: &'a Finished<T>,
     /// The paths the finished runs traced.
     before: u64,
 }

@@ -213,6 +213,10 @@ pub fn merge<P: PartStore + ?Sized>(parts: &P, subset: bool) -> Result<Output, E
         return Err(Error::TasksMissing { missing, count });
     }
     found.sort_by_key(|(index, _, _)| *index);
+    let tasks: Vec<Task> = found
+        .iter()
+        .map(|&(index, _, _)| Task { index, count })
+        .collect();
     let (emission, mut states): (Vec<_>, Vec<_>) =
         found.into_iter().map(|(_, e, s)| (e, s)).unzip();
     let (resolution, channels) = (head.oracle.resolution, head.channels as usize);
@@ -230,8 +234,8 @@ pub fn merge<P: PartStore + ?Sized>(parts: &P, subset: bool) -> Result<Output, E
         Method::Pssmlt(_) => pssmlt::merge(parts, resolution, channels),
         Method::Erpt(_) => erpt::merge(parts, resolution, channels),
         Method::Replica(s) => replica::merge(s, parts, resolution, channels),
-        Method::Stratified(s) => runs::merge(s, budget, parts, resolution, channels),
-        Method::MultiStage(s) => runs::merge(s, budget, parts, resolution, channels),
+        Method::Stratified(s) => runs::merge(s, budget, parts, &tasks, resolution, channels),
+        Method::MultiStage(s) => runs::merge(s, budget, parts, &tasks, resolution, channels),
     }?;
     // Each task traced its own rows: the sums add up to the render's
     // unsplit, in the same operations for each pixel. Read again, one part

@@ -553,7 +553,8 @@ impl Pooled for StratifiedSettings {
         run.samples()
     }
 
-    fn fits(&self, run: &SweptRun, resolution: Resolution, channels: usize) -> bool {
+    /// (Pooled runs fit as one run does: their sums have its shape.)
+    fn fits(&self, run: &SweptRun, resolution: Resolution, channels: usize, _: u64) -> bool {
         let Ok(tiles) = Tiles::new(resolution, self.shape) else {
             return false;
         };

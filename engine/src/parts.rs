@@ -279,6 +279,22 @@ impl<'s> PartReader<'s> {
         }
     }
 
+    /// The next saved value, a large one (a run's sums): decoded as it is
+    /// read with `std`, without holding its bytes; like [`Self::take`]
+    /// without.
+    pub fn take_large<T: DeserializeOwned>(&mut self) -> Result<T, Error> {
+        #[cfg(feature = "std")]
+        {
+            let mut scratch = [0; 64];
+            match postcard::from_io::<T, _>((&mut *self, &mut scratch)) {
+                Ok((value, _)) => Ok(value),
+                Err(_) => Err(self.damaged()),
+            }
+        }
+        #[cfg(not(feature = "std"))]
+        self.take()
+    }
+
     /// The error for contents that do not decode or do not fit the render.
     pub fn damaged(&self) -> Error {
         unreadable(
@@ -381,6 +397,24 @@ fn skip_sums(bytes: &[u8], most: usize) -> Option<(usize, usize)> {
         }
     }
     Some((sums, end))
+}
+
+/// A part's body as a reader, through the window (for
+/// [`PartReader::take_large`]).
+#[cfg(feature = "std")]
+impl std::io::Read for PartReader<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if self.used == self.window.len() {
+            let failed = |e: Error| std::io::Error::other(e.to_string());
+            if !self.read_more().map_err(failed)? {
+                return Ok(0);
+            }
+        }
+        let n = buf.len().min(self.window.len() - self.used);
+        buf[..n].copy_from_slice(&self.window[self.used..self.used + n]);
+        self.used += n;
+        Ok(n)
+    }
 }
 
 /// Values of a film summed together, one band of each part's at a time.
@@ -516,6 +550,10 @@ mod tests {
         assert_eq!(whole.take::<Vec<u64>>().unwrap(), big);
         assert_eq!(whole.take::<u8>().unwrap(), 9);
         assert!(whole.at_end());
+        let mut streamed = reader(&large, 0);
+        assert_eq!(streamed.take_large::<Vec<u64>>().unwrap(), big);
+        assert_eq!(streamed.take::<u8>().unwrap(), 9);
+        assert!(streamed.at_end());
         let mut short = store.0[2][..store.0[2].len() / 2].to_vec();
         short.extend_from_slice(&[0; 4]);
         let cut = Bytes(vec![short]);

@@ -290,6 +290,15 @@ fn merges_refuse_missing_repeated_damaged_and_foreign_parts() {
     assert_eq!(some.stats.samples * 37, all.stats.samples * 13);
     assert!(some.film.data().iter().all(|v| v.is_finite() && *v >= 0.0));
     assert_ne!(bits(&some.film), bits(&all.film));
+    // Also for a method split by runs: tasks 0 and 2 of 3 own runs 0, 3, 6
+    // and 2, 5 of 8.
+    let stratified = self::settings(&methods()[4]);
+    let both: Vec<Checkpoint> = [0, 2].map(|i| task(&stratified, i, 3, 2)).into();
+    let some = merge(&both, true).unwrap();
+    let one_run = |i: u32| task(&stratified, i, 8, 2);
+    let run_samples = merge(&[one_run(0)], true).unwrap().stats.samples;
+    assert!(some.stats.samples > 4 * run_samples && some.stats.samples < 6 * run_samples);
+    assert!(some.film.data().iter().all(|v| v.is_finite() && *v >= 0.0));
 }
 
 #[test]

@@ -347,7 +347,7 @@ pub(crate) fn merge<P: Pooled>(
             .zip(&mut left)
             .filter(|(_, (partials, _))| *partials > 0)
         {
-            let partial: P::Partial = part.take()?;
+            let partial: P::Partial = part.take_large()?;
             if !method.fits(&partial, resolution, channels, *each) {
                 return Err(part.damaged());
             }

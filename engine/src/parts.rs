@@ -304,9 +304,10 @@ impl<'s> PartReader<'s> {
     }
 
     /// Reads more of the body into the window, dropping what is decoded
-    /// (the rest of the body when the value being decoded fills a whole
-    /// window: only a run's sums are that large, and each retry decodes it
-    /// again from its start); false at the body's end.
+    /// (twice as much as is left undecoded, when a value fills the window:
+    /// each retry decodes it again from its start, so values much larger
+    /// than a window, a run's sums, are read by [`Self::take_large`]);
+    /// false at the body's end.
     fn read_more(&mut self) -> Result<bool, Error> {
         let read = self.at + self.window.len() as u64;
         if read >= self.end {
@@ -317,11 +318,7 @@ impl<'s> PartReader<'s> {
         self.used = 0;
         let kept = self.window.len();
         let rest = usize::try_from(self.end - read).unwrap_or(usize::MAX);
-        let more = if kept >= WINDOW {
-            rest
-        } else {
-            (WINDOW - kept).min(rest)
-        };
+        let more = (WINDOW.max(2 * kept) - kept).min(rest);
         self.window
             .try_reserve_exact(more)
             .map_err(|_| Error::AllocationFailed {

@@ -314,6 +314,16 @@ enum StrataStatus strata_merge(const struct StrataPart *const *parts,
                                int32_t subset,
                                struct StrataFilm **film);
 
+// Merges the parts in the `count` files at `paths` (UTF-8 paths of parts
+// written from [`strata_part_bytes`], in any order) into a new film at
+// `*film`, as [`strata_merge`] does, reading them piece by piece: the
+// merge holds the image, not the parts. A file that cannot be read, or is
+// no part, is `STRATA_STATUS_INVALID_ARGUMENT` with a message naming it.
+enum StrataStatus strata_merge_files(const char *const *paths,
+                                     uintptr_t count,
+                                     int32_t subset,
+                                     struct StrataFilm **film);
+
 #ifdef __cplusplus
 }  // extern "C"
 #endif  // __cplusplus

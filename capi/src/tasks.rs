@@ -4,11 +4,13 @@
 //! film the render unsplit gives, byte for byte (the engine's
 //! `method::merge`).
 
+use std::ffi::c_char;
+use std::path::PathBuf;
 use std::ptr::null_mut;
 
-use strata_engine::Checkpoint;
-use strata_engine::prelude::{Task, merge, render_task};
+use strata_engine::prelude::{PartFiles, Task, merge, render_task};
 use strata_engine::target::MaxChannel;
+use strata_engine::{Checkpoint, Error, Output};
 
 use crate::*;
 
@@ -162,9 +164,58 @@ pub extern "C" fn strata_merge(
         .iter()
         .map(|&p| &unsafe { &*p }.checkpoint)
         .collect();
-    match merge(&checkpoints[..], subset != 0) {
+    // SAFETY: checked non-null above.
+    unsafe { merged(merge(&checkpoints[..], subset != 0), film) }
+}
+
+/// Merges the parts in the `count` files at `paths` (UTF-8 paths of parts
+/// written from [`strata_part_bytes`], in any order) into a new film at
+/// `*film`, as [`strata_merge`] does, reading them piece by piece: the
+/// merge holds the image, not the parts. A file that cannot be read, or is
+/// no part, is `STRATA_STATUS_INVALID_ARGUMENT` with a message naming it.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_merge_files(
+    paths: *const *const c_char,
+    count: usize,
+    subset: i32,
+    film: *mut *mut StrataFilm,
+) -> StrataStatus {
+    if paths.is_null() || film.is_null() {
+        return fail(StrataStatus::InvalidArgument, "null paths or film pointer");
+    }
+    // SAFETY: checked non-null; the caller passes room for a pointer.
+    unsafe { *film = null_mut() };
+    // SAFETY: the caller's array of `count` strings.
+    let pointers = unsafe { std::slice::from_raw_parts(paths, count) };
+    let Some(files) = pointers
+        .iter()
+        .map(|&p| text(p).map(PathBuf::from))
+        .collect::<Option<Vec<PathBuf>>>()
+    else {
+        return fail(StrataStatus::InvalidArgument, "a null or non-UTF-8 path");
+    };
+    let named = |e: Error| match &e {
+        Error::PartMismatch { part, .. }
+        | Error::PartUnfinished { part, .. }
+        | Error::PartUnreadable { part, .. } => format!("{}: {e}", files[*part].display()),
+        _ => e.to_string(),
+    };
+    let result = merge(&PartFiles::new(files.clone()), subset != 0).map_err(named);
+    // SAFETY: checked non-null above.
+    unsafe { merged(result, film) }
+}
+
+/// Puts a merge's film at `*film`, or fails with its error.
+///
+/// # Safety
+/// `film` is non-null and points to room for a pointer.
+unsafe fn merged<E: ToString>(
+    result: Result<Output, E>,
+    film: *mut *mut StrataFilm,
+) -> StrataStatus {
+    match result {
         Ok(output) => {
-            // SAFETY: checked non-null above.
+            // SAFETY: the caller's room for a pointer.
             unsafe { *film = StrataFilm::boxed(output) };
             StrataStatus::Ok
         }

@@ -2,7 +2,7 @@
 //! failing renders are status codes with a message, never undefined
 //! behaviour; the progress callback can cancel; previews and counters.
 
-use std::ffi::{CStr, c_void};
+use std::ffi::{CStr, c_char, c_void};
 use std::ptr::{null, null_mut};
 
 use strata_capi::*;
@@ -667,6 +667,36 @@ fn tasks_merge_to_the_film_of_the_unsplit_render() {
     );
     assert_eq!(film_bits(merged), film_bits(whole));
     assert_eq!(stats(merged), stats(whole));
+    // The same parts in files, merged from there; a missing file is named.
+    let dir = std::env::temp_dir().join(format!("strata-capi-parts-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut paths = Vec::new();
+    for (k, &part) in parts.iter().enumerate() {
+        let mut size = 0;
+        let bytes = strata_part_bytes(part, &mut size);
+        // SAFETY: the part's bytes, alive while the part is.
+        let bytes = unsafe { std::slice::from_raw_parts(bytes, size) };
+        let path = dir.join(format!("part-{k}.part"));
+        std::fs::write(&path, bytes).unwrap();
+        paths.push(std::ffi::CString::new(path.to_str().unwrap()).unwrap());
+    }
+    let pointers: Vec<*const c_char> = paths.iter().map(|p| p.as_ptr()).collect();
+    let mut from_files = null_mut();
+    assert_eq!(
+        strata_merge_files(pointers.as_ptr(), 3, 0, &mut from_files),
+        StrataStatus::Ok
+    );
+    assert_eq!(film_bits(from_files), film_bits(whole));
+    strata_film_free(from_files);
+    std::fs::remove_file(dir.join("part-1.part")).unwrap();
+    let mut film = null_mut();
+    assert_eq!(
+        strata_merge_files(pointers.as_ptr(), 3, 0, &mut film),
+        StrataStatus::InvalidArgument
+    );
+    assert!(film.is_null());
+    assert!(last_error().contains("part-1.part"), "{}", last_error());
+    std::fs::remove_dir_all(&dir).ok();
     // A task missing: refused, unless a subset is asked for.
     let mut film = null_mut();
     assert_eq!(

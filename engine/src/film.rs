@@ -2,6 +2,9 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use core::fmt;
+use core::ops::AddAssign;
+use serde::de::{DeserializeSeed, Deserializer, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
@@ -179,6 +182,70 @@ pub(crate) fn check_shapes(
         });
     }
     Ok(())
+}
+
+/// Adds a serialized [`Film`] of the film's shape to it as it is decoded,
+/// value by value (a merge pooling runs holds the pooled film, not the
+/// next); its value is whether the decoded film fits (its shape, and values
+/// finite and non-negative, as [`Film::fits`]).
+pub(crate) struct AddFilm<'a>(pub &'a mut Film);
+
+impl<'de> DeserializeSeed<'de> for AddFilm<'_> {
+    type Value = bool;
+    fn deserialize<D: Deserializer<'de>>(self, decoder: D) -> Result<bool, D::Error> {
+        const FIELDS: &[&str] = &["resolution", "channels", "data"];
+        decoder.deserialize_struct("Film", FIELDS, self)
+    }
+}
+
+impl<'de> Visitor<'de> for AddFilm<'_> {
+    type Value = bool;
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "a film")
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut fields: A) -> Result<bool, A::Error> {
+        let resolution: Option<Resolution> = fields.next_element()?;
+        let channels: Option<usize> = fields.next_element()?;
+        if resolution != Some(self.0.resolution) || channels != Some(self.0.channels) {
+            return Ok(false);
+        }
+        let values = AddValues {
+            into: &mut self.0.data,
+            fits: |v: &f64| v.is_finite() && *v >= 0.0,
+        };
+        Ok(fields.next_element_seed(values)?.unwrap_or(false))
+    }
+}
+
+/// Adds a serialized sequence of values to `into`, value by value, as it
+/// is decoded; its value is whether there were as many and each `fits`.
+pub(crate) struct AddValues<'a, T> {
+    pub into: &'a mut [T],
+    pub fits: fn(&T) -> bool,
+}
+
+impl<'de, T: Deserialize<'de> + AddAssign> DeserializeSeed<'de> for AddValues<'_, T> {
+    type Value = bool;
+    fn deserialize<D: Deserializer<'de>>(self, decoder: D) -> Result<bool, D::Error> {
+        decoder.deserialize_seq(self)
+    }
+}
+
+impl<'de, T: Deserialize<'de> + AddAssign> Visitor<'de> for AddValues<'_, T> {
+    type Value = bool;
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} values", self.into.len())
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut values: A) -> Result<bool, A::Error> {
+        let (mut into, mut fits) = (self.into.iter_mut(), true);
+        while let Some(value) = values.next_element::<T>()? {
+            match into.next() {
+                Some(sum) if (self.fits)(&value) => *sum += value,
+                _ => fits = false,
+            }
+        }
+        Ok(fits && into.next().is_none())
+    }
 }
 
 #[cfg(test)]

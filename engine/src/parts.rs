@@ -280,19 +280,37 @@ impl<'s> PartReader<'s> {
     }
 
     /// The next saved value, a large one (a run's sums): decoded as it is
-    /// read with `std`, without holding its bytes; like [`Self::take`]
-    /// without.
+    /// read with `std` (see [`Self::take_with`]).
     pub fn take_large<T: DeserializeOwned>(&mut self) -> Result<T, Error> {
+        self.take_with(|decoder| T::deserialize(decoder))
+    }
+
+    /// What `decode` makes of the next saved value, decoded as it is read
+    /// with `std` (postcard over the part as a [`std::io::Read`], without
+    /// holding the value's bytes), from the rest of the part read at once
+    /// without; a damaged value is an error naming the part.
+    pub fn take_with<T>(
+        &mut self,
+        decode: impl FnOnce(&mut Decoder<'_, 's>) -> postcard::Result<T>,
+    ) -> Result<T, Error> {
         #[cfg(feature = "std")]
         {
+            // Room for the largest piece read at once: an f64.
             let mut scratch = [0; 64];
-            match postcard::from_io::<T, _>((&mut *self, &mut scratch)) {
-                Ok((value, _)) => Ok(value),
-                Err(_) => Err(self.damaged()),
-            }
+            let flavor = postcard::de_flavors::io::io::IOReader::new(&mut *self, &mut scratch);
+            let mut decoder = postcard::Deserializer::from_flavor(flavor);
+            let decoded = decode(&mut decoder);
+            decoded.map_err(|_| self.damaged())
         }
         #[cfg(not(feature = "std"))]
-        self.take()
+        {
+            while self.read_more()? {}
+            let mut decoder = postcard::Deserializer::from_bytes(&self.window[self.used..]);
+            let decoded = decode(&mut decoder).and_then(|value| Ok((value, decoder.finalize()?)));
+            let (value, rest) = decoded.map_err(|_| self.damaged())?;
+            self.used = self.window.len() - rest.len();
+            Ok(value)
+        }
     }
 
     /// The error for contents that do not decode or do not fit the render.
@@ -395,6 +413,17 @@ fn skip_sums(bytes: &[u8], most: usize) -> Option<(usize, usize)> {
     }
     Some((sums, end))
 }
+
+/// A postcard decoder of a part's body, read as it decodes.
+#[cfg(feature = "std")]
+pub(crate) type Decoder<'de, 's> = postcard::Deserializer<
+    'de,
+    postcard::de_flavors::io::io::IOReader<'de, &'de mut PartReader<'s>>,
+>;
+
+/// A postcard decoder of the rest of a part's body, read at once.
+#[cfg(not(feature = "std"))]
+pub(crate) type Decoder<'de, 's> = postcard::Deserializer<'de, postcard::de_flavors::Slice<'de>>;
 
 /// A part's body as a reader, through the window (for
 /// [`PartReader::take_large`]).

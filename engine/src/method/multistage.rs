@@ -31,6 +31,7 @@
 use alloc::vec;
 use alloc::vec::Vec;
 use core::cell::OnceCell;
+use serde::de::{SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
 use core::sync::atomic::{AtomicU64, Ordering};
@@ -42,7 +43,7 @@ use super::{Extras, Job, Output};
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
 use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, SetUp, drive};
 use crate::error::Error;
-use crate::film::Film;
+use crate::film::{AddFilm, AddValues, Film};
 use crate::oracle::{
     FilmPoint, PathOracle, PathSample, Radiance, Resolution, Sampler, SplatSink, Temperature,
 };
@@ -433,6 +434,20 @@ impl Pooled for MultiStageSettings {
         pooled.pool(next);
     }
 
+    /// Value by value: a merge holds the pooled sums, not the next run's.
+    fn add_decoded<'de, D: serde::Deserializer<'de>>(
+        &self,
+        pooled: &mut StagesDone,
+        decoder: D,
+        (resolution, _): (Resolution, usize),
+        runs: u64,
+    ) -> Result<bool, D::Error> {
+        let stages = grids_of(self, resolution)
+            .len()
+            .saturating_mul(runs as usize);
+        pooled.pool_decoded(decoder, stages.saturating_add(1))
+    }
+
     fn finish(
         &self,
         done: StagesDone,
@@ -440,13 +455,58 @@ impl Pooled for MultiStageSettings {
         _: usize,
         _: &dyn Fn() -> bool,
     ) -> Result<Output, Error> {
+        // Scaled in place: the pooled sums are the image's memory.
+        let mut film = done.sum;
+        film.scale(1.0 / done.stats.samples.max(1) as f64);
         Ok(Output {
-            film: done.sum.scaled(1.0 / done.stats.samples.max(1) as f64),
+            film,
             stats: done.stats,
             cancelled: false,
             visits: done.visits,
             extras: Extras::MultiStage(done.stages),
         })
+    }
+}
+
+/// Pools a [`StagesDone`]'s fields as they are decoded, in their order.
+struct PoolStages<'a> {
+    into: &'a mut StagesDone,
+    stages: usize,
+}
+
+impl<'de> Visitor<'de> for PoolStages<'_> {
+    type Value = bool;
+
+    fn expecting(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "a multi-stage run's sums")
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut fields: A) -> Result<bool, A::Error> {
+        let into = self.into;
+        let sum = fields.next_element_seed(AddFilm(&mut into.sum))?;
+        let deviation = fields.next_element_seed(AddValues {
+            into: &mut into.deviation_sum,
+            fits: |_| true,
+        })?;
+        let stats: Option<RenderStats> = fields.next_element()?;
+        let visits = fields.next_element_seed(AddValues {
+            into: &mut into.visits,
+            fits: |_| true,
+        })?;
+        let stages: Option<Vec<Stage>> = fields.next_element()?;
+        let weight_done: Option<u64> = fields.next_element()?;
+        let (Some(true), Some(true), Some(stats), Some(true), Some(stages), Some(weight_done)) =
+            (sum, deviation, stats, visits, stages, weight_done)
+        else {
+            return Ok(false);
+        };
+        if stages.len() >= self.stages {
+            return Ok(false);
+        }
+        into.add_stats(&stats);
+        into.stages.extend(stages);
+        into.weight_done += weight_done;
+        Ok(true)
     }
 }
 
@@ -536,6 +596,25 @@ impl StagesDone {
         self.add_stats(&run.stats);
         self.stages.extend(run.stages);
         self.weight_done += run.weight_done;
+    }
+
+    /// Adds the run that `decoder` decodes next as it is read: the bits of
+    /// [`Self::pool`] of the decoded run; false if it does not fit (its
+    /// shapes, and fewer than `stages` stages), then part pooled.
+    fn pool_decoded<'de, D: serde::Deserializer<'de>>(
+        &mut self,
+        decoder: D,
+        stages: usize,
+    ) -> Result<bool, D::Error> {
+        const FIELDS: &[&str] = &[
+            "sum",
+            "deviation_sum",
+            "stats",
+            "visits",
+            "stages",
+            "weight_done",
+        ];
+        decoder.deserialize_struct("StagesDone", FIELDS, PoolStages { into: self, stages })
     }
 
     /// Adds a stage's or a run's counters.

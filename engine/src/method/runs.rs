@@ -67,6 +67,26 @@ pub(crate) trait Pooled: Sync {
     /// one at a time, in run order).
     fn add(pooled: &mut Self::Partial, next: Self::Partial);
 
+    /// Adds the run that `decoder` decodes next (a partial of `runs` runs
+    /// on a film of `shape`, resolution and channels) to `pooled`, as
+    /// [`Self::add`] of it would; false if it does not fit (then `pooled`
+    /// may be part pooled). A method may pool it as it is decoded, without
+    /// holding it.
+    fn add_decoded<'de, D: serde::Deserializer<'de>>(
+        &self,
+        pooled: &mut Self::Partial,
+        decoder: D,
+        shape: (Resolution, usize),
+        runs: u64,
+    ) -> Result<bool, D::Error> {
+        let next = Self::Partial::deserialize(decoder)?;
+        let fits = self.fits(&next, shape.0, shape.1, runs);
+        if fits {
+            Self::add(pooled, next);
+        }
+        Ok(fits)
+    }
+
     /// The image of the pooled runs; work after the sums (a
     /// reconstruction) ends early when `stop` says so.
     fn finish(
@@ -347,16 +367,22 @@ pub(crate) fn merge<P: Pooled>(
             .zip(&mut left)
             .filter(|(_, (partials, _))| *partials > 0)
         {
-            let partial: P::Partial = part.take_large()?;
-            if !method.fits(&partial, resolution, channels, *each) {
-                return Err(part.damaged());
+            match &mut pooled {
+                None => {
+                    let first: P::Partial = part.take_large()?;
+                    if !method.fits(&first, resolution, channels, *each) {
+                        return Err(part.damaged());
+                    }
+                    pooled = Some(first);
+                }
+                Some(pooled) => {
+                    if !add_next(method, part, pooled, (resolution, channels), *each)? {
+                        return Err(part.damaged());
+                    }
+                }
             }
             *partials -= 1;
             part.release();
-            match &mut pooled {
-                None => pooled = Some(partial),
-                Some(pooled) => P::add(pooled, partial),
-            }
         }
     }
     if let Some(part) = parts.iter().find(|part| !part.at_end()) {
@@ -364,6 +390,18 @@ pub(crate) fn merge<P: Pooled>(
     }
     let pooled = pooled.ok_or_else(checkpoint::does_not_fit)?;
     method.finish(pooled, resolution, channels, &|| false)
+}
+
+/// Adds the run `part` holds next to `pooled` (of `each` runs, on a film
+/// of `shape`; see [`PartReader::take_with`]); false if it does not fit.
+fn add_next<P: Pooled>(
+    method: &P,
+    part: &mut PartReader<'_>,
+    pooled: &mut P::Partial,
+    shape: (Resolution, usize),
+    each: u64,
+) -> Result<bool, Error> {
+    part.take_with(|decoder| method.add_decoded(pooled, decoder, shape, each))
 }
 
 /// A run's checkpoints: the runs finished before it, then its own state.

@@ -7,8 +7,9 @@
 //! in lockstep, one band of every part at a time (`sum_films`). So it
 //! holds neither every part's bytes nor a film of exact sums (40 bytes a
 //! value): only the image's values, a band's sums and a window of one
-//! part's bytes, however many parts there are (methods that pool runs hold
-//! the pooled sums and one run's).
+//! part's bytes, however many parts there are. Methods made of runs hold
+//! the pooled runs' sums, and the next run's unless they pool it as it is
+//! decoded (`Pooled::add_decoded`: multi-stage MLT does).
 
 use alloc::string::ToString;
 use alloc::vec::Vec;
@@ -130,13 +131,13 @@ impl PartFiles {
             reason: e.to_string(),
         };
         let mut open = self.open.borrow_mut();
-        if open.as_ref().is_none_or(|(p, _)| *p != part) {
-            *open = Some((
+        let (_, file) = match open.take() {
+            Some((p, file)) if p == part => open.insert((p, file)),
+            _ => open.insert((
                 part,
                 std::fs::File::open(&self.paths[part]).map_err(failed)?,
-            ));
-        }
-        let (_, file) = open.as_mut().expect("opened above");
+            )),
+        };
         f(file).map_err(failed)
     }
 }
@@ -295,7 +296,9 @@ impl<'s> PartReader<'s> {
     ) -> Result<T, Error> {
         #[cfg(feature = "std")]
         {
-            // Room for the largest piece read at once: an f64.
+            // Room for the largest piece read at once: an f64 (a string or
+            // byte field would be kept in it: the runs' sums have none, and
+            // the tasks test merges them through here).
             let mut scratch = [0; 64];
             let flavor = postcard::de_flavors::io::io::IOReader::new(&mut *self, &mut scratch);
             let mut decoder = postcard::Deserializer::from_flavor(flavor);

@@ -138,17 +138,23 @@ impl<T> Finished<T> {
         method: &P,
         (resolution, channels): (Resolution, usize),
     ) -> bool {
-        let (held, each) = if whole {
-            (self.runs.min(1), self.runs)
-        } else {
-            (self.runs, 1)
-        };
+        let (held, each) = held(self.runs, whole);
         self.runs <= owned
             && self.partials.len() as u64 == held
             && self
                 .partials
                 .iter()
                 .all(|p| method.fits(p, resolution, channels, each))
+    }
+}
+
+/// How `runs` finished runs are held: how many partials, and how many runs
+/// each pools (a `whole` render pools them in one, a task keeps each).
+fn held(runs: u64, whole: bool) -> (u64, u64) {
+    if whole {
+        (runs.min(1), runs)
+    } else {
+        (runs, 1)
     }
 }
 
@@ -349,12 +355,7 @@ pub(crate) fn merge<P: Pooled>(
             #[cfg(feature = "std")]
             Budget::Time(_) => (1..=owned).contains(&runs),
         };
-        // A render of one task holds its runs pooled.
-        let (held, each) = if task == Task::WHOLE {
-            (runs.min(1), runs)
-        } else {
-            (runs, 1)
-        };
+        let (held, each) = held(runs, task == Task::WHOLE);
         if !all || partials as u64 != held {
             return Err(part.damaged());
         }

@@ -540,7 +540,9 @@ fn observers_see_progress_previews_and_can_cancel() {
     }
 }
 
-/// A time budget ends the render on time, set-up included, and not early;
+/// A time budget ends the render on time, set-up included, and not much
+/// early: a round holds only the units expected to end within it (each as
+/// long as the last round's), so a render ends within a unit of its budget;
 /// stratified MCMC's reconstruction included too: its sweeps stop early by
 /// the reconstruction's timed estimate (at most half the budget), which on
 /// a film this small is up to ~2-3x its cost (its probe is mostly fixed
@@ -562,10 +564,10 @@ fn time_budgets_are_kept() {
         assert!(out.stats.samples > 0, "{}", method.name());
         let earliest = match method {
             Method::Stratified(_) => budget / 2,
-            _ => budget,
+            _ => budget * 4 / 5,
         };
         assert!(
-            elapsed >= earliest && elapsed < budget + Duration::from_millis(700),
+            elapsed >= earliest && elapsed < budget + Duration::from_millis(300),
             "{}: {elapsed:?} for a budget of {budget:?}",
             method.name()
         );

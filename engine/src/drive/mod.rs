@@ -36,7 +36,9 @@ pub enum Budget {
     /// traces count; the bootstrap never does.
     Samples(u64),
     /// Wall-clock time from the start of the render, set-up included (needs
-    /// the `std` feature).
+    /// the `std` feature). The render ends within it: after its first unit
+    /// of work, a round holds only the units expected to end in time, each
+    /// as long as the last round's were.
     #[cfg(feature = "std")]
     Time(core::time::Duration),
 }
@@ -169,6 +171,12 @@ pub(crate) trait Rounds {
     fn samples(&self) -> u64;
     /// The normalized image now (for previews).
     fn preview(&self) -> Film;
+    /// Spends the `seconds` a time budget has left after the last whole
+    /// unit that fit before the work after the rounds ([`Loop::finishing`];
+    /// a unit took `unit_seconds`). By default nothing.
+    fn spend_rest(&mut self, seconds: f64, unit_seconds: f64) {
+        let _ = (seconds, unit_seconds);
+    }
 }
 
 /// Work the round loop does beside a method's rounds, kept up with them:
@@ -202,11 +210,14 @@ pub(crate) struct Loop<'a> {
     pub observer: &'a dyn Observer,
     pub checkpoints: &'a dyn Checkpoints,
     pub resumed: Option<Position>,
-    /// Under a time budget, put in a round only the units expected to end
-    /// before the clock's limit (each as long as the last round's were),
-    /// and stop when none is: for work that must follow the rounds within
-    /// the budget.
-    pub ends_within: bool,
+    /// Under a time budget, the seconds the work after the rounds (which
+    /// must end within the budget too) is expected to take if they end
+    /// after `u` units, non-decreasing in `u` ([`nothing_after`] for none).
+    /// A round holds only the units expected to end, with that work, before
+    /// the clock's limit (each as long as the last round's were); when none
+    /// does, the rest of the time before that work goes to
+    /// [`Rounds::spend_rest`] and the loop ends.
+    pub finishing: &'a dyn Fn(u64) -> f64,
     /// Where to put a checkpoint of the state after the last round (a
     /// task's partial result, or its checkpoint if it was stopped).
     pub last: Option<&'a OnceCell<Checkpoint>>,
@@ -233,7 +244,7 @@ pub(crate) fn drive<W: Rounds>(
         observer,
         checkpoints,
         resumed,
-        ends_within,
+        finishing,
         last,
         beside,
     } = at;
@@ -291,17 +302,20 @@ pub(crate) fn drive<W: Rounds>(
             }));
         }
         if planned.is_none() {
-            if clock.expired() {
-                break;
-            }
-            if ends_within {
-                // As many units as still fit, up to a round's (a longer
-                // round would end past the clock; a shorter one uses the
-                // time a whole round would have wasted).
-                match clock.units_within(unit_seconds) {
-                    0 => break,
-                    fit => round = round.min(fit),
+            // As many units as still fit, up to a round's (a longer round
+            // would end past the clock; a shorter one uses the time a whole
+            // round would have wasted).
+            let left = clock.seconds_left();
+            let after = |u: u64| finishing(done.saturating_add(u));
+            match units_fitting(left, unit_seconds, after) {
+                0 => {
+                    let rest = left - after(0);
+                    if rest > 0.0 {
+                        work.spend_rest(rest, unit_seconds);
+                    }
+                    break;
                 }
+                fit => round = round.min(fit),
             }
         }
     }
@@ -369,33 +383,14 @@ impl Clock {
         self.fraction() >= 1.0
     }
 
-    /// How many pieces of work of `seconds` each still fit before the time
-    /// budget is spent (0 without one).
-    pub(crate) fn units_within(&self, seconds: f64) -> u64 {
+    /// Seconds left of the time budget (negative once it is overspent; 0
+    /// without one).
+    pub(crate) fn seconds_left(&self) -> f64 {
         #[cfg(feature = "std")]
         if let Some(limit) = self.limit {
-            let left = limit.as_secs_f64() - self.seconds();
-            return if left <= 0.0 {
-                0
-            } else if seconds > 0.0 {
-                // Saturating: a unit too fast to time fits any number of times.
-                libm::floor(left / seconds) as u64
-            } else {
-                u64::MAX
-            };
+            return limit.as_secs_f64() - self.seconds();
         }
-        let _ = seconds;
-        0
-    }
-
-    /// This clock (the same start) with its time budget ending `by` earlier
-    /// (at the start at the earliest).
-    #[cfg(feature = "std")]
-    pub(crate) fn ending_early(&self, by: core::time::Duration) -> Clock {
-        Clock {
-            start: self.start,
-            limit: self.limit.map(|l| l.saturating_sub(by)),
-        }
+        0.0
     }
 
     /// `share` of the time left of `limit` (a time budget started with
@@ -411,18 +406,72 @@ impl Clock {
     }
 }
 
+/// No work after the rounds ([`Loop::finishing`]).
+pub(crate) fn nothing_after(_units: u64) -> f64 {
+    0.0
+}
+
+/// The most units of `unit` seconds each that fit in `left` seconds with
+/// the work after them, `after(u)` seconds for `u` units (non-decreasing in
+/// `u`, so the time of `u` units and their work after is too: a binary
+/// search).
+fn units_fitting(left: f64, unit: f64, after: impl Fn(u64) -> f64) -> u64 {
+    let fits = |u: u64| u as f64 * unit + after(u) <= left;
+    let room = left - after(0);
+    let mut most = if room <= 0.0 {
+        return 0;
+    } else if unit > 0.0 {
+        // Saturating: a unit too fast to time fits any number of times.
+        libm::floor(room / unit) as u64
+    } else {
+        u64::MAX
+    };
+    if fits(most) {
+        return most;
+    }
+    // Invariant: `least` fits (or is 0), `most` does not.
+    let mut least = 0;
+    while most - least > 1 {
+        let mid = least + (most - least) / 2;
+        if fits(mid) {
+            least = mid;
+        } else {
+            most = mid;
+        }
+    }
+    least
+}
+
 #[cfg(all(test, feature = "std"))]
 mod tests {
     use super::*;
     use core::time::Duration;
 
     #[test]
-    fn a_clock_counts_the_units_that_still_fit() {
+    fn the_units_that_fit_leave_room_for_the_work_after_them() {
+        let nothing = |_| 0.0;
+        assert_eq!(units_fitting(999.9, 100.0, nothing), 9);
+        assert_eq!(units_fitting(1.0, 0.0, nothing), u64::MAX);
+        assert_eq!(units_fitting(-1.0, 1.0, nothing), 0);
+        assert_eq!(units_fitting(10.0, 1.0, |_| 2.5), 7);
+        // 3 s after fewer than 5 units, 6 s after 5 or more: 4 units and 3 s.
+        let step = |u| if u < 5 { 3.0 } else { 6.0 };
+        assert_eq!(units_fitting(10.0, 1.0, step), 4);
+        assert_eq!(units_fitting(11.0, 1.0, step), 5);
+        assert_eq!(units_fitting(2.0, 1.0, step), 0);
+        // 3 s after fewer than 7 units: 6 units fit in 10 s, 7 do not.
+        assert_eq!(
+            units_fitting(10.0, 1.0, |u| if u < 7 { 3.0 } else { 6.0 }),
+            6
+        );
+    }
+
+    #[test]
+    fn a_clock_says_the_time_left() {
         let clock = Clock::start(Budget::Time(Duration::from_secs(1000)));
-        assert_eq!(clock.units_within(100.0), 9, "999.9... s left");
-        assert_eq!(clock.units_within(0.0), u64::MAX);
+        assert!((999.0..=1000.0).contains(&clock.seconds_left()));
         let spent = Clock::start(Budget::Time(Duration::ZERO));
-        assert_eq!(spent.units_within(1e-9), 0);
-        assert_eq!(Clock::start(Budget::Samples(10)).units_within(1.0), 0);
+        assert!(spent.seconds_left() <= 0.0);
+        assert_eq!(Clock::start(Budget::Samples(10)).seconds_left(), 0.0);
     }
 }

@@ -51,7 +51,9 @@ pub use tasks::{merge, part_of, render_task, resume_task};
 use serde::de::DeserializeOwned;
 
 use crate::checkpoint::{self, Checkpoint, Checkpointer, Checkpoints, OracleId, Position};
-use crate::drive::{Beside, Budget, Clock, Loop, Observer, RenderStats, SetUp, SetUpStage};
+use crate::drive::{
+    Beside, Budget, Clock, Loop, Observer, RenderStats, SetUp, SetUpStage, nothing_after,
+};
 use crate::emission::{EmissionApart, WithoutSeen};
 use crate::error::Error;
 use crate::film::Film;
@@ -338,20 +340,22 @@ impl<O, I: ?Sized> Job<'_, O, I> {
             observer: self.observer,
             checkpoints: self.checkpoints,
             resumed,
-            ends_within: false,
+            finishing: &nothing_after,
             last: self.last,
             beside: self.beside,
         }
     }
 
-    /// The round loop of this job, at `resumed`, whose time budget runs out
-    /// by `clock` (one that ends before the job's, to leave time for work
-    /// after the rounds), and whose rounds hold only the units expected to
-    /// end before it.
-    pub fn round_loop_until<'c>(&'c self, resumed: Option<Position>, clock: &'c Clock) -> Loop<'c> {
+    /// The round loop of this job, at `resumed`, whose rounds leave time
+    /// for work after them within the time budget: `after(u)` seconds if
+    /// they end after `u` units ([`Loop::finishing`]).
+    pub fn round_loop_finishing<'c>(
+        &'c self,
+        resumed: Option<Position>,
+        after: &'c dyn Fn(u64) -> f64,
+    ) -> Loop<'c> {
         Loop {
-            clock,
-            ends_within: true,
+            finishing: after,
             ..self.round_loop(resumed)
         }
     }

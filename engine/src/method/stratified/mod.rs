@@ -77,7 +77,7 @@
 //! | `local.rs` | local replica exchange and state borrowing |
 //! | `init.rs` | the global chains' initialization |
 //! | `regularizer.rs` | every pixel's uniform samples (summed per pixel as they are drawn), the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the total it anchors |
-//! | `reconstruction.rs` | the normalizations, the image, the choice of `α`, the time reserved for them |
+//! | `reconstruction.rs` | the normalizations, the image, the choice of `α`, the time they are expected to take |
 //! | `sweeps.rs` | the state between rounds, a sweep (steps by tile rows in phases, exchanges from `exchange_after` on), what sweeps cost, the budget's remainder, the checkpoint; a run's sums (`SweptRun`) and their pool into the output |
 //! | this file | settings, counters, a run from a fresh start or a resumed state, the smallest budget |
 
@@ -94,7 +94,7 @@ use serde::{Deserialize, Serialize};
 
 use self::init::initialize;
 use self::light::LightTracing;
-use self::reconstruction::reserve_reconstruction;
+use self::reconstruction::ReconstructionTime;
 use self::regularizer::Samples;
 use self::sweeps::{Saved, SweepCosts, Sweeps, SweptRun, finish_runs};
 use self::tile::{Context, TileChain};
@@ -203,6 +203,9 @@ const EMISSION_RAYS: u32 = 8;
 /// of its tile steps and, once they have begun, its exchanges as if all
 /// traced; when that rounds down, what is left is
 /// traced as regularizer paths after the last sweep (`Sweeps::remainder`).
+/// Under a time budget the sweeps leave time for the reconstruction (its
+/// timed estimate, `ReconstructionTime`), and the rest after the last sweep
+/// that fits is traced the same way.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StratifiedSettings {
     /// The tile shape (cross by default).
@@ -521,14 +524,14 @@ where
     };
     sweeps.remainder = sweeps.remainder(job.budget);
     // Time for the reconstruction, if it follows this run.
-    let sweeps_clock = if job.finish_within {
-        reserve_reconstruction(job, &tiles, settings)
-    } else {
-        job.clock.clone()
-    };
+    let reconstruction = job
+        .finish_within
+        .then(|| ReconstructionTime::timed(job, &tiles, settings))
+        .flatten();
+    let after = |sweeps| reconstruction.as_ref().map_or(0.0, |r| r.seconds(sweeps));
     let driven = drive(
         &mut sweeps,
-        job.round_loop_until(position, &sweeps_clock),
+        job.round_loop_finishing(position, &after),
         |s, out| s.save(bootstrap_traces, out),
     )?;
     Ok((sweeps.into_run(bootstrap_traces), driven.cancelled))

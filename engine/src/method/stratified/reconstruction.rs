@@ -3,7 +3,7 @@
 //! regularizer `Î` (eq. 11) give each channel's normalizations `b_s`
 //! (eq. 13-16, or the log-domain image of eq. 17-20), the image (eq. 12),
 //! then the known pixels, the fallback and the anchored total (ours, see
-//! the module above); and, under a time budget, the time it reserves.
+//! the module above); and, under a time budget, the time it is expected to take.
 
 use alloc::boxed::Box;
 use alloc::vec;
@@ -15,7 +15,6 @@ use super::tile::{Draws, TileChain};
 use super::{Solver, StratifiedSettings};
 #[cfg(feature = "std")]
 use crate::drive::Budget;
-use crate::drive::Clock;
 use crate::emission::SeenEmission;
 use crate::error::Error;
 use crate::film::Film;
@@ -71,11 +70,7 @@ pub(super) fn reconstruct_image(
     let mut alpha = None;
     if let Solver::Weighted(w) = &mut solver {
         if let Some(halves) = halves {
-            let candidates = if sweeps < FEW_SWEEPS {
-                &ALPHAS[2..]
-            } else {
-                &ALPHAS[..]
-            };
+            let candidates = candidates(sweeps);
             w.alpha =
                 cross_validated_alpha(tiles, &unscaled, channels, &halves, w, candidates, stop)?;
         }
@@ -159,54 +154,77 @@ pub(super) fn preview<R: Radiance>(
     film
 }
 
-/// Under a time budget, the clock the sweeps stop by: the render's,
-/// ending early by the time the reconstruction is expected to take (at most
-/// half the budget). The expectation is timed, not guessed: the weighted
-/// solver's set-up and one block of its iterations between weight
+/// What the reconstruction is expected to take, timed, not guessed: the
+/// weighted solver's set-up and one block of its iterations between weight
 /// refreshes, on a problem of this film's size, scaled to the solves and
-/// blocks the reconstruction runs (every channel's, the
-/// cross-validation's), and a quarter more for the work around them. If it
-/// still runs late, the solver stops at the budget's end
-/// ([`reconstruct::weighted`]'s `stop`). Under a sample budget, or with the
-/// log-domain solver (direct, no iterations), the render's own clock.
-pub(super) fn reserve_reconstruction<O, I: ?Sized>(
-    job: &Job<'_, O, I>,
-    tiles: &Tiles,
-    settings: &StratifiedSettings,
-) -> Clock
-where
-    O: PathOracle,
-{
-    #[cfg(feature = "std")]
-    if let (Budget::Time(limit), Solver::Weighted(w)) = (job.budget, &settings.solver) {
-        let g = vec![1.0; tiles.count() * tiles.offsets().len()];
-        let mc = vec![1.0; tiles.resolution().pixel_count()];
-        let timed = |iterations| {
-            let probe = WeightedSettings { iterations, ..*w };
-            let start = std::time::Instant::now();
-            reconstruct::weighted(tiles, &g, &mc, &probe, None, &|| false)
-                .map(|_| start.elapsed().as_secs_f64())
-        };
-        let every = w.reweight_every.max(1);
-        if let (Ok(set_up), Ok(one_block)) = (timed(0), timed(every)) {
-            let block = (one_block - set_up).max(0.0);
-            let channels = O::Radiance::CHANNELS as f64;
-            let (mut solves, mut blocks) =
-                (channels, channels * w.iterations.div_ceil(every) as f64);
-            if settings.cross_validate_alpha {
-                solves += ALPHAS.len() as f64;
-                blocks += ALPHAS.len() as f64 * (w.iterations / 4).div_ceil(every) as f64;
-            }
-            let expected = 1.25 * (solves * set_up + blocks * block);
-            let reserve = expected.min(0.5 * limit.as_secs_f64());
-            return job
-                .clock
-                .ending_early(core::time::Duration::from_secs_f64(reserve));
+/// blocks the reconstruction runs (every channel's, the cross-validation's
+/// candidates, fewer below [`FEW_SWEEPS`]), and a quarter more for the
+/// work around them. If it still runs late, the solver stops at the
+/// budget's end ([`reconstruct::weighted`]'s `stop`).
+pub(super) struct ReconstructionTime {
+    /// Seconds of one solve's set-up.
+    set_up: f64,
+    /// Seconds of one block of iterations.
+    block: f64,
+    settings: WeightedSettings,
+    channels: f64,
+    cross_validate: bool,
+    /// At most half the time budget.
+    most: f64,
+}
+
+impl ReconstructionTime {
+    /// Under a time budget with the weighted solver, the timing for `job`'s
+    /// film (`None` under a sample budget, or for the log-domain solver:
+    /// direct, no iterations).
+    pub(super) fn timed<O, I: ?Sized>(
+        job: &Job<'_, O, I>,
+        tiles: &Tiles,
+        settings: &StratifiedSettings,
+    ) -> Option<ReconstructionTime>
+    where
+        O: PathOracle,
+    {
+        #[cfg(feature = "std")]
+        if let (Budget::Time(limit), Solver::Weighted(w)) = (job.budget, &settings.solver) {
+            let g = vec![1.0; tiles.count() * tiles.offsets().len()];
+            let mc = vec![1.0; tiles.resolution().pixel_count()];
+            let timed = |iterations| {
+                let probe = WeightedSettings { iterations, ..*w };
+                let start = std::time::Instant::now();
+                reconstruct::weighted(tiles, &g, &mc, &probe, None, &|| false)
+                    .map(|_| start.elapsed().as_secs_f64())
+            };
+            let (set_up, one_block) = (timed(0).ok()?, timed(w.reweight_every.max(1)).ok()?);
+            return Some(ReconstructionTime {
+                set_up,
+                block: (one_block - set_up).max(0.0),
+                settings: *w,
+                channels: O::Radiance::CHANNELS as f64,
+                cross_validate: settings.cross_validate_alpha,
+                most: 0.5 * limit.as_secs_f64(),
+            });
         }
+        #[cfg(not(feature = "std"))]
+        let _ = (job, tiles, settings);
+        None
     }
-    #[cfg(not(feature = "std"))]
-    let _ = (tiles, settings);
-    job.clock.clone()
+
+    /// Seconds the reconstruction is expected to take after `sweeps` sweeps.
+    pub(super) fn seconds(&self, sweeps: u64) -> f64 {
+        let w = &self.settings;
+        let every = w.reweight_every.max(1);
+        let (mut solves, mut blocks) = (
+            self.channels,
+            self.channels * w.iterations.div_ceil(every) as f64,
+        );
+        if self.cross_validate {
+            let candidates = candidates(sweeps).len() as f64;
+            solves += candidates;
+            blocks += candidates * (w.iterations / 4).div_ceil(every) as f64;
+        }
+        (1.25 * (solves * self.set_up + blocks * self.block)).min(self.most)
+    }
 }
 
 /// Per tile, offset and channel `G_s(k)` (eq. 10, over `sweeps` steps). A
@@ -255,6 +273,15 @@ const ALPHAS: [f64; 4] = [0.05, 0.2, 1.0, 5.0];
 /// scene, where `α` = 5 halves the MSE: saturated 4.99x MC's -> 2.67x, the
 /// Cornell box 6.23x -> 3.63x; docs/RESULTS.md).
 const FEW_SWEEPS: u64 = 8;
+
+/// The `α`s cross-validation chooses from after `sweeps` sweeps.
+fn candidates(sweeps: u64) -> &'static [f64] {
+    if sweeps < FEW_SWEEPS {
+        &ALPHAS[2..]
+    } else {
+        &ALPHAS[..]
+    }
+}
 
 /// The `α` of `candidates` whose channel-mean image, reconstructed with the
 /// first half of the large steps as regularizer (at `α / 2`), is closest to

@@ -83,7 +83,8 @@ where
     /// budget still has are traced as regularizer paths at every tile's
     /// centre, so the budget is spent (at 16 paths per pixel on a 96²
     /// Cornell box a third of it was left before). Returns the last sweep
-    /// and the budget; a time budget has no remainder.
+    /// and the budget. (A time budget's rest after its last whole sweep
+    /// goes the same way: [`Rounds::spend_rest`].)
     pub(super) fn remainder(&self, budget: Budget) -> Option<(u64, u64)> {
         match budget {
             Budget::Samples(total) => Some((self.planned_units(total), total)),
@@ -475,6 +476,21 @@ where
 
     fn units(&self) -> u64 {
         self.stats.sweeps
+    }
+
+    /// A time budget's rest after the last whole sweep, as a sample
+    /// budget's ([`Self::remainder`]): regularizer paths at every tile's
+    /// centre, as many as the rest would have traced of a sweep's paths.
+    fn spend_rest(&mut self, seconds: f64, unit_seconds: f64) {
+        let sweeps = self.stats.sweeps;
+        let sweep_paths = self.costs.of(sweeps.max(1)) - self.costs.of(sweeps.max(1) - 1);
+        let tiles = self.chains.len().max(1) as f64;
+        if unit_seconds > 0.0 {
+            let per_tile = libm::floor(seconds / unit_seconds * sweep_paths / tiles);
+            if per_tile >= 1.0 {
+                self.trace_remainder(per_tile.min(u32::MAX as f64) as u32);
+            }
+        }
     }
 
     fn samples(&self) -> u64 {

@@ -27,6 +27,7 @@ mod common;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+use strata::engine::RenderMethod;
 
 use clap::Parser;
 use clap::builder::PossibleValuesParser;

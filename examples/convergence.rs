@@ -12,6 +12,7 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use strata::engine::RenderMethod;
 
 use clap::Parser;
 use rayon::prelude::*;

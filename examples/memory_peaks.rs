@@ -1,4 +1,4 @@
-//! Every method's memory bound ([`Method::memory_bound`], the reservation a
+//! Every method's memory bound ([`RenderMethod::memory_bound`], the reservation a
 //! render makes before any work) against the peak of the bytes it really
 //! holds (a tracking global allocator; the reservation itself left out), on
 //! a built-in scene at several film sizes and budgets. Writes a CSV.
@@ -14,6 +14,7 @@ mod allocations;
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
+use strata::engine::RenderMethod;
 
 use allocations::Tracking;
 use clap::Parser;

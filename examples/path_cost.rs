@@ -36,6 +36,7 @@ use std::fmt::Write as _;
 use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::Instant;
+use strata::engine::RenderMethod;
 
 use clap::Parser;
 use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Tempering};

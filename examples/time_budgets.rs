@@ -10,6 +10,7 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
+use strata::engine::RenderMethod;
 
 use clap::Parser;
 use strata::engine::target::MaxChannel;

@@ -8,8 +8,8 @@ use std::process::Command;
 
 use strata_engine::target::MaxChannel;
 use strata_engine::{
-    Budget, FilmPoint, FnOracle, Method, PathSample, Resolution, Rgb, Sampler, Settings, Silent,
-    SplatSink, Temperature, render,
+    Budget, FilmPoint, FnOracle, Method, PathSample, RenderMethod, Resolution, Rgb, Sampler,
+    Settings, Silent, SplatSink, Temperature, render,
 };
 
 /// Builds the shared library (the test profile, whose dependencies are

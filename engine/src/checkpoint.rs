@@ -34,7 +34,7 @@ pub(crate) const MAGIC: [u8; 8] = *b"STRATAck";
 
 /// The checkpoint format's version. Bump it whenever a saved type changes
 /// (a field added, removed or reordered in any state a method saves).
-pub const FORMAT_VERSION: u32 = 17;
+pub const FORMAT_VERSION: u32 = 18;
 
 /// The engine's version, also saved: a checkpoint is read only by the
 /// engine that wrote it.
@@ -55,12 +55,13 @@ impl core::fmt::Debug for Checkpoint {
 /// Who rendered what: checked on resume. In the file it is followed by the
 /// round loop's [`Position`] and the method's state (for multi-stage MLT, its
 /// own state first, then its current stage's position and state).
-/// `S` is the render's settings ([`method::Settings`](crate::method::Settings)),
-/// which this module only carries.
+/// `S` is the render's settings ([`method::Settings`](crate::method::Settings)
+/// of a built-in method or one's own), which this module only carries; they
+/// come last, so that `Header<()>` reads the fields before them whatever
+/// the method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(crate) struct Header<S> {
     pub engine: String,
-    pub settings: S,
     pub oracle: OracleId,
     pub channels: u32,
     /// Paths traced so far (bootstrap excluded).
@@ -71,13 +72,16 @@ pub(crate) struct Header<S> {
     /// partial result, which [`merge`](crate::method::merge) combines (the
     /// checkpoints an observer takes between rounds never are).
     pub finished: bool,
+    pub settings: S,
 }
 
-/// Where the round loop is: units done and the current round size.
+/// Where a render's round loop is (units done and the current round size),
+/// as a checkpoint saves it: what [`Job::resumed`](crate::method::Job::resumed)
+/// gives back to [`Job::drive`](crate::method::Job::drive).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub(crate) struct Position {
-    pub done: u64,
-    pub round: u64,
+pub struct Position {
+    pub(crate) done: u64,
+    pub(crate) round: u64,
 }
 
 /// The oracle a checkpoint was made with: its resolution and a hash of what
@@ -279,8 +283,9 @@ fn read4(bytes: &[u8]) -> [u8; 4] {
 }
 
 /// Appends `value`'s postcard bytes to `out` (plain data into a vector:
-/// cannot fail).
-pub(crate) fn append(value: &impl Serialize, out: &mut Vec<u8>) {
+/// cannot fail): how a method saves its state in a checkpoint, which
+/// [`Job::resumed`](crate::method::Job::resumed) reads back.
+pub fn append(value: &impl Serialize, out: &mut Vec<u8>) {
     let taken = core::mem::take(out);
     *out = postcard::to_extend(value, taken).unwrap_or_default();
 }

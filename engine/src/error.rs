@@ -62,7 +62,7 @@ pub enum Error {
         reason: &'static str,
     },
     /// A sample budget smaller than one unit of the method's work
-    /// ([`Method::smallest_budget`](crate::Method::smallest_budget)): it
+    /// ([`RenderMethod::smallest_budget`](crate::RenderMethod::smallest_budget)): it
     /// would be overrun, not kept.
     BudgetTooSmall {
         /// The budget asked for (paths).

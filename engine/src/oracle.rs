@@ -342,7 +342,7 @@ pub trait PathOracle: Sync {
 
     /// About how many splats a path hands to `splats` on average (light
     /// tracing: one a light-subpath vertex), for the memory a render
-    /// reserves before any work ([`Method::memory_bound`](crate::Method::memory_bound)).
+    /// reserves before any work ([`RenderMethod::memory_bound`](crate::RenderMethod::memory_bound)).
     /// An oracle that never splats keeps the default, 0.
     fn splats_per_path(&self) -> f64 {
         0.0

@@ -1,10 +1,11 @@
-//! The memory bound (issue 36): every method's [`Method::memory_bound`],
+//! The memory bound (issue 36): every method's [`RenderMethod::memory_bound`],
 //! the reservation a render makes before any work, within 1.5x of the peak
 //! of the bytes the render really holds (a tracking allocator, the
 //! reservation itself left out), on the Cornell box with unidirectional and
 //! bidirectional paths, at a preview budget and a longer one.
 
 use crate::ALLOCATOR;
+use strata::engine::RenderMethod;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::native::{PathSampler, builtin, native_tracer};

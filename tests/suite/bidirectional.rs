@@ -5,6 +5,7 @@
 //! paths. Tolerances come from the spread over seeds (z-tests).
 
 use glam::Vec3;
+use strata::engine::RenderMethod;
 use strata::engine::method::PssmltSettings;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Film, Method, PathOracle, Resolution, Settings, Silent, render};

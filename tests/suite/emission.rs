@@ -5,6 +5,7 @@
 //! added, and an image whose only light is that emission renders.
 
 use rayon::prelude::*;
+use strata::engine::RenderMethod;
 use strata::engine::exchange::EnsembleSettings;
 use strata::engine::method::{
     ErptSettings, MultiStageSettings, PssmltSettings, ReplicaSettings, StratifiedSettings,

@@ -7,6 +7,7 @@
 //! diagnostics (R-hat, effective sample size).
 
 use std::f64::consts::PI;
+use strata::engine::RenderMethod;
 
 use strata::engine::analytic::{Component, GaussianMixture, ProceduralImage};
 use strata::engine::bootstrap::{Bootstrap, NEVER};

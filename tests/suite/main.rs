@@ -17,6 +17,7 @@ mod images;
 mod importance;
 mod invariance;
 mod kernels;
+mod own_method;
 mod resume;
 mod runs;
 mod scenes;

@@ -7,6 +7,7 @@
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
+use strata::engine::RenderMethod;
 
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::checkpoint::FORMAT_VERSION;

@@ -3,6 +3,7 @@
 //! known in closed form, thread-count independence, and splats that make a
 //! path invalid.
 
+use strata::engine::RenderMethod;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Film, FilmPoint, FnOracle, PathOracle, PathSample, Resolution, Rgb, Sampler, Settings,

@@ -5,6 +5,7 @@
 //! unfinished parts are typed errors.
 
 use std::sync::atomic::{AtomicU32, Ordering};
+use strata::engine::RenderMethod;
 
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::exchange::EnsembleSettings;

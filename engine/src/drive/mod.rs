@@ -156,8 +156,12 @@ pub struct RenderStats {
     pub chains: ChainStats,
 }
 
-/// A method's work, as the driver runs it.
-pub(crate) trait Rounds {
+/// A method's work in units, as the driver runs it round after round
+/// ([`Job::drive`](crate::method::Job::drive)): a unit is the least a
+/// render does (a pass over the film, a step of every chain), and the same
+/// units run in the same order give the same image, however they are
+/// split into rounds, threads or resumed renders.
+pub trait Rounds {
     /// Oracle traces one unit of work costs (expected, rounded up; at least 1).
     fn unit_cost(&self) -> u64;
     /// Units a budget of `samples` traces buys (each method's rounding; at
@@ -172,8 +176,8 @@ pub(crate) trait Rounds {
     /// The normalized image now (for previews).
     fn preview(&self) -> Film;
     /// Spends the `seconds` a time budget has left after the last whole
-    /// unit that fit before the work after the rounds ([`Loop::finishing`];
-    /// a unit took `unit_seconds`). By default nothing.
+    /// unit that fit in it (with the work after the rounds, for a method
+    /// that has some; a unit took `unit_seconds`). By default nothing.
     fn spend_rest(&mut self, seconds: f64, unit_seconds: f64) {
         let _ = (seconds, unit_seconds);
     }
@@ -187,13 +191,6 @@ pub(crate) trait Beside {
     fn keep_up(&self, samples: u64, fraction: f64);
     /// Adds its estimate to the method's normalized image `film`.
     fn add_to(&self, film: &mut Film);
-}
-
-/// What [`drive`] did.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Driven {
-    /// The observer stopped the render.
-    pub cancelled: bool,
 }
 
 /// Splat buffers are bounded by capping a round at about this many traces.
@@ -232,12 +229,12 @@ pub(crate) struct Loop<'a> {
 /// loop continues from its position with the same rounds an uninterrupted
 /// one would run (for the same sample budget); a position that does not
 /// say as many units as the resumed state holds (a forged checkpoint) is
-/// `Error::CheckpointCorrupted`.
+/// `Error::CheckpointCorrupted`. Returns whether the observer stopped it.
 pub(crate) fn drive<W: Rounds>(
     work: &mut W,
     at: Loop<'_>,
     save: impl Fn(&W, &mut Vec<u8>),
-) -> Result<Driven, Error> {
+) -> Result<bool, Error> {
     let Loop {
         budget,
         clock,
@@ -328,7 +325,7 @@ pub(crate) fn drive<W: Rounds>(
             }),
         );
     }
-    Ok(Driven { cancelled })
+    Ok(cancelled)
 }
 
 /// Wall clock for time budgets; a no-op for sample budgets or without `std`.

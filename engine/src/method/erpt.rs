@@ -38,7 +38,7 @@ use crate::bootstrap::Bootstrap;
 use crate::chain::{Chain, ChainStats, Normalization, PathTarget, Traced, Weights};
 use crate::checkpoint::{self, Position};
 use crate::drive::splat::{RoundBuffers, SplatBands, Worker};
-use crate::drive::{Driven, RenderStats, Rounds, drive};
+use crate::drive::{RenderStats, Rounds};
 use crate::error::Error;
 use crate::exact::ExactFilm;
 use crate::film::Film;
@@ -167,8 +167,8 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let (mut run, position) = Passes::start(settings, job)?;
-    let driven = drive(&mut run, job.round_loop(position), Passes::save)?;
-    Ok(run.finish(driven))
+    let cancelled = job.drive(&mut run, position, Passes::save)?;
+    Ok(run.finish(cancelled))
 }
 
 /// The image of `film`, summed over `passes` passes (a fraction for a pass
@@ -517,7 +517,7 @@ where
     }
 
     /// The normalized image and the counters.
-    fn finish(self, driven: Driven) -> Output {
+    fn finish(self, cancelled: bool) -> Output {
         let passes = self.passes_done();
         let totals = self.totals();
         let (film, stats) = finish(
@@ -530,7 +530,7 @@ where
         Output {
             film,
             stats,
-            cancelled: driven.cancelled,
+            cancelled,
             visits: self.visits,
             extras: Extras::None,
         }

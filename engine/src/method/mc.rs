@@ -11,7 +11,7 @@ use alloc::vec::Vec;
 
 use super::{Extras, Job, Output};
 use crate::checkpoint;
-use crate::drive::{Rounds, drive};
+use crate::drive::Rounds;
 use crate::error::Error;
 use crate::exact::ExactFilm;
 use crate::film::Film;
@@ -49,11 +49,11 @@ where
         passes,
         invalid,
     };
-    let driven = drive(&mut run, job.round_loop(position), |run, out| {
+    let cancelled = job.drive(&mut run, position, |run, out| {
         checkpoint::append(&(&run.film, run.passes, run.invalid), out)
     })?;
     let mut out = finish(run.film.rounded(), run.passes, run.invalid);
-    out.cancelled = driven.cancelled;
+    out.cancelled = cancelled;
     Ok(out)
 }
 

@@ -1,7 +1,8 @@
-//! What a render holds at most: [`Method::memory_bound`], the reservation
-//! a render makes before any work, and the sizes it counts with.
+//! What a render of a built-in method holds at most
+//! ([`RenderMethod::memory_bound`]), the reservation a render makes before
+//! any work, and the sizes it counts with.
 
-use super::{Method, erpt};
+use super::{Method, RenderMethod, erpt};
 use crate::drive::Budget;
 use crate::oracle::Resolution;
 use crate::task::Task;
@@ -18,151 +19,153 @@ fn runs_kept(runs: u32, task: Task) -> u128 {
     }
 }
 
-impl Method {
-    /// The bytes a render of `resolution` with this method holds at most:
-    /// the reservation [`render`](super::render) makes before any work (a render that
-    /// cannot have it is [`Error::AllocationFailed`](crate::error::Error::AllocationFailed), not an abort half
-    /// way). `channels` are the radiance's, `splats_per_path` the oracle's
-    /// ([`PathOracle::splats_per_path`](crate::oracle::PathOracle::splats_per_path)), `workers` the threads, `task` the
-    /// task of a split render ([`Task::WHOLE`] for a whole one).
-    ///
-    /// Counted: the films (exact sums, [`ExactFilm`](crate::exact::ExactFilm), and the image; the
-    /// emission seen directly's sums) and per-pixel counts; the sums of
-    /// the independent runs finished (stratified MCMC, multi-stage MLT: a whole render pools them as they end, a task keeps each); the bootstrap's candidates
-    /// (let go before the first round); every chain's state (its primary
-    /// sample and path); stratified MCMC's tile chains, per pixel a part of
-    /// its own and one per tile pixel (the state evaluated there, with its
-    /// splats); and the contributions waiting to be merged: a round's
-    /// (PSSMLT and replica exchange: a round is a 64th of a sample budget,
-    /// at most 2^21 paths, each with its proposal and state), a block's
-    /// start paths and a wave of its chains' steps (ERPT, which merges a
-    /// block's chains in waves of 2^17 steps), a pass's splats (MC). The
-    /// sizes were measured with the native tracer, unidirectional and
-    /// bidirectional, by `examples/memory_peaks` (docs/BENCHMARKS.md), and
-    /// `tests/bounds/memory.rs` checks the bound within 1.5x of the measured peak.
-    pub fn memory_bound(
-        &self,
-        resolution: Resolution,
-        channels: usize,
-        splats_per_path: f64,
-        workers: usize,
-        budget: Budget,
-        task: Task,
-    ) -> u64 {
-        use sizes::*;
-        // In u128: a film of u32::MAX x u32::MAX pixels is still a number.
-        let pixels = resolution.pixel_count() as u128;
-        let film = 8 * channels as u128 * pixels;
-        // The exact sums the films of MC, PSSMLT (two layers), replica
-        // exchange and ERPT are, beside the image they finish to.
-        let exact = crate::exact::ExactFilm::VALUE_BYTES as u128 * channels as u128 * pixels;
-        let counted = film + 8 * pixels;
-        // A queued contribution: pixel, weight and radiance.
-        let queued = (12 + 4 * channels as u128).next_multiple_of(8);
-        // Splats per path, in hundredths (a fraction of one counts).
-        let splats = if splats_per_path.is_finite() {
-            (splats_per_path.clamp(0.0, 1e6) * 100.0) as u128
-        } else {
-            0
+/// The bytes a render of `resolution` with `method` holds at most:
+/// the reservation [`render`](super::render) makes before any work (a render that
+/// cannot have it is [`Error::AllocationFailed`](crate::error::Error::AllocationFailed), not an abort half
+/// way). `channels` are the radiance's, `splats_per_path` the oracle's
+/// ([`PathOracle::splats_per_path`](crate::oracle::PathOracle::splats_per_path)), `workers` the threads, `task` the
+/// task of a split render ([`Task::WHOLE`] for a whole one).
+///
+/// Counted: the films (exact sums, [`ExactFilm`](crate::exact::ExactFilm), and the image; the
+/// emission seen directly's sums) and per-pixel counts; the sums of
+/// the independent runs finished (stratified MCMC, multi-stage MLT: a whole render pools them as they end, a task keeps each); the bootstrap's candidates
+/// (let go before the first round); every chain's state (its primary
+/// sample and path); stratified MCMC's tile chains, per pixel a part of
+/// its own and one per tile pixel (the state evaluated there, with its
+/// splats); and the contributions waiting to be merged: a round's
+/// (PSSMLT and replica exchange: a round is a 64th of a sample budget,
+/// at most 2^21 paths, each with its proposal and state), a block's
+/// start paths and a wave of its chains' steps (ERPT, which merges a
+/// block's chains in waves of 2^17 steps), a pass's splats (MC). The
+/// sizes were measured with the native tracer, unidirectional and
+/// bidirectional, by `examples/memory_peaks` (docs/BENCHMARKS.md), and
+/// `tests/bounds/memory.rs` checks the bound within 1.5x of the measured peak.
+pub(super) fn bound(
+    method: &Method,
+    resolution: Resolution,
+    channels: usize,
+    splats_per_path: f64,
+    workers: usize,
+    budget: Budget,
+    task: Task,
+) -> u64 {
+    use sizes::*;
+    // In u128: a film of u32::MAX x u32::MAX pixels is still a number.
+    let pixels = resolution.pixel_count() as u128;
+    let film = 8 * channels as u128 * pixels;
+    // The exact sums the films of MC, PSSMLT (two layers), replica
+    // exchange and ERPT are, beside the image they finish to.
+    let exact = crate::exact::ExactFilm::VALUE_BYTES as u128 * channels as u128 * pixels;
+    let counted = film + 8 * pixels;
+    // A queued contribution: pixel, weight and radiance.
+    let queued = (12 + 4 * channels as u128).next_multiple_of(8);
+    // Splats per path, in hundredths (a fraction of one counts).
+    let splats = if splats_per_path.is_finite() {
+        (splats_per_path.clamp(0.0, 1e6) * 100.0) as u128
+    } else {
+        0
+    };
+    // The contributions of `paths` paths, each with `per_path` states
+    // (proposal and current) and their splats.
+    let contributions =
+        |paths: u64, per_path: u128| paths as u128 * per_path * (100 + splats) * queued / 100;
+    let round = |unit: u64| {
+        let most = match budget {
+            Budget::Samples(n) => (n / 64).saturating_add(unit),
+            #[cfg(feature = "std")]
+            Budget::Time(_) => ROUND_PATHS,
         };
-        // The contributions of `paths` paths, each with `per_path` states
-        // (proposal and current) and their splats.
-        let contributions =
-            |paths: u64, per_path: u128| paths as u128 * per_path * (100 + splats) * queued / 100;
-        let round = |unit: u64| {
-            let most = match budget {
-                Budget::Samples(n) => (n / 64).saturating_add(unit),
-                #[cfg(feature = "std")]
-                Budget::Time(_) => ROUND_PATHS,
+        contributions(most.min(ROUND_PATHS.max(unit)), 2)
+    };
+    let workers = workers as u128;
+    let bytes = match method {
+        Method::Mc => exact + film + pixels * splats * queued / 100,
+        // The bootstrap's candidates are let go before the first round.
+        Method::Pssmlt(s) => {
+            counted
+                + 2 * exact
+                + s.chains as u128 * CHAIN
+                + (s.bootstrap_candidates as u128 * CANDIDATE).max(round(s.chains as u64))
+        }
+        Method::Replica(s) => {
+            let levels = s.ensemble.ladder.len() as u128;
+            let sweep = s.traces_per_sweep().saturating_mul(s.ensembles as u64);
+            counted
+                + exact
+                + s.ensembles as u128 * levels * CHAIN
+                + (s.ensemble.bootstrap_candidates as u128 * levels * CANDIDATE).max(round(sweep))
+        }
+        Method::Stratified(s) => {
+            let tile = match s.shape {
+                crate::tiles::TileShape::Cross => 5,
+                crate::tiles::TileShape::Square { radius } => {
+                    (2 * radius as u128 + 1) * (2 * radius as u128 + 1)
+                }
             };
-            contributions(most.min(ROUND_PATHS.max(unit)), 2)
-        };
-        let workers = workers as u128;
-        let bytes = match self {
-            Method::Mc => exact + film + pixels * splats * queued / 100,
-            // The bootstrap's candidates are let go before the first round.
-            Method::Pssmlt(s) => {
-                counted
-                    + 2 * exact
-                    + s.chains as u128 * CHAIN
-                    + (s.bootstrap_candidates as u128 * CANDIDATE).max(round(s.chains as u64))
-            }
-            Method::Replica(s) => {
-                let levels = s.ensemble.ladder.len() as u128;
-                let sweep = s.traces_per_sweep().saturating_mul(s.ensembles as u64);
-                counted
-                    + exact
-                    + s.ensembles as u128 * levels * CHAIN
-                    + (s.ensemble.bootstrap_candidates as u128 * levels * CANDIDATE)
-                        .max(round(sweep))
-            }
-            Method::Stratified(s) => {
-                let tile = match s.shape {
-                    crate::tiles::TileShape::Cross => 5,
-                    crate::tiles::TileShape::Square { radius } => {
-                        (2 * radius as u128 + 1) * (2 * radius as u128 + 1)
-                    }
-                };
-                let per_tile_pixel = TILE_PIXEL + splats * queued / 100;
-                // Light tracing's two films, made at the first splat; the
-                // emission seen directly's (counted whether or not the
-                // oracle separates it).
-                let light = if splats > 0 { 2 * film } else { 0 };
-                let emission = if s.emission_rays > 0 { film } else { 0 };
-                // The sums of the runs finished before the last (each
-                // tile's `N G_s(k)` and draws, the uniform samples' sums,
-                // its light tracing and emission), kept to be pooled.
-                let run = pixels * (8 * tile * channels as u128 + 24 + 8 * (channels as u128 + 2))
-                    + light
-                    + emission;
-                counted
-                    + light
-                    + emission
-                    + pixels * (TILE_CHAIN + tile * per_tile_pixel)
-                    + workers * CHAIN
-                    + runs_kept(s.runs, task) * run
-            }
-            Method::Erpt(s) => {
-                // A block's start paths and a wave's proposals and states,
-                // in vectors that grew by doubling while it ran: half as
-                // much again.
-                let wave = contributions(erpt::BLOCK_PATHS + erpt::WAVE_STEPS, 3);
-                counted
-                    + exact
-                    + workers * CHAIN
-                    + (s.bootstrap_candidates as u128 * CANDIDATE).max(wave)
-            }
-            Method::MultiStage(s) => {
-                // One PSSMLT stage, and beside it the estimate so far, the
-                // stages' sums and per pixel its luminance, deviation,
-                // importance and adaptation.
-                // (The emission apart counted once, below.)
-                let pssmlt = super::PssmltSettings {
-                    emission_rays: 0.0,
-                    ..s.pssmlt
-                };
-                let stage = Method::Pssmlt(pssmlt).memory_bound(
-                    resolution,
-                    channels,
-                    splats_per_path,
-                    workers as usize,
-                    budget,
-                    Task::WHOLE,
-                );
-                // The sums of the runs finished before the last: film,
-                // deviations and visits.
-                let run = film + 16 * pixels;
-                stage as u128 + 2 * film + 4 * 8 * pixels + runs_kept(s.runs, task) * run
-            }
-        };
-        // The emission seen directly, estimated apart (`emission_rays`;
-        // counted whether or not the oracle separates it).
-        let apart = if self.emission_rays() > 0.0 { film } else { 0 };
-        u64::try_from((bytes + apart).max(film)).unwrap_or(u64::MAX)
-    }
+            let per_tile_pixel = TILE_PIXEL + splats * queued / 100;
+            // Light tracing's two films, made at the first splat; the
+            // emission seen directly's (counted whether or not the
+            // oracle separates it).
+            let light = if splats > 0 { 2 * film } else { 0 };
+            let emission = if s.emission_rays > 0 { film } else { 0 };
+            // The sums of the runs finished before the last (each
+            // tile's `N G_s(k)` and draws, the uniform samples' sums,
+            // its light tracing and emission), kept to be pooled.
+            let run = pixels * (8 * tile * channels as u128 + 24 + 8 * (channels as u128 + 2))
+                + light
+                + emission;
+            counted
+                + light
+                + emission
+                + pixels * (TILE_CHAIN + tile * per_tile_pixel)
+                + workers * CHAIN
+                + runs_kept(s.runs, task) * run
+        }
+        Method::Erpt(s) => {
+            // A block's start paths and a wave's proposals and states,
+            // in vectors that grew by doubling while it ran: half as
+            // much again.
+            let wave = contributions(erpt::BLOCK_PATHS + erpt::WAVE_STEPS, 3);
+            counted
+                + exact
+                + workers * CHAIN
+                + (s.bootstrap_candidates as u128 * CANDIDATE).max(wave)
+        }
+        Method::MultiStage(s) => {
+            // One PSSMLT stage, and beside it the estimate so far, the
+            // stages' sums and per pixel its luminance, deviation,
+            // importance and adaptation.
+            // (The emission apart counted once, below.)
+            let pssmlt = super::PssmltSettings {
+                emission_rays: 0.0,
+                ..s.pssmlt
+            };
+            let stage = bound(
+                &Method::Pssmlt(pssmlt),
+                resolution,
+                channels,
+                splats_per_path,
+                workers as usize,
+                budget,
+                Task::WHOLE,
+            );
+            // The sums of the runs finished before the last: film,
+            // deviations and visits.
+            let run = film + 16 * pixels;
+            stage as u128 + 2 * film + 4 * 8 * pixels + runs_kept(s.runs, task) * run
+        }
+    };
+    // The emission seen directly, estimated apart (`emission_rays`;
+    // counted whether or not the oracle separates it).
+    let apart = if method.emission_rays() > 0.0 {
+        film
+    } else {
+        0
+    };
+    u64::try_from((bytes + apart).max(film)).unwrap_or(u64::MAX)
 }
 
-/// The sizes [`Method::memory_bound`] counts with.
+/// The sizes [`bound`] counts with.
 mod sizes {
     /// A bootstrap candidate's value at one level, and its share of the
     /// resampling tables.

@@ -52,7 +52,8 @@ use serde::de::DeserializeOwned;
 
 use crate::checkpoint::{self, Checkpoint, Checkpointer, Checkpoints, OracleId, Position};
 use crate::drive::{
-    Beside, Budget, Clock, Loop, Observer, RenderStats, SetUp, SetUpStage, nothing_after,
+    Beside, Budget, Clock, Loop, Observer, RenderStats, Rounds, SetUp, SetUpStage, drive,
+    nothing_after,
 };
 use crate::emission::{EmissionApart, WithoutSeen};
 use crate::error::Error;
@@ -61,18 +62,19 @@ use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::parallel;
 use crate::target::Importance;
 
-/// What to render and how.
+/// What to render and how: a built-in [`Method`], or a method of one's own
+/// ([`RenderMethod`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Settings {
+pub struct Settings<M = Method> {
     /// Seed of every random stream.
     pub seed: u64,
     /// When the render stops (each method's settings say which paths count).
     pub budget: Budget,
     /// The method and its own settings.
-    pub method: Method,
+    pub method: M,
 }
 
-impl Default for Settings {
+impl Default for Settings<Method> {
     /// PSSMLT with its defaults, seed 0, 2^20 paths.
     fn default() -> Self {
         Self {
@@ -83,7 +85,7 @@ impl Default for Settings {
     }
 }
 
-impl Settings {
+impl<M: RenderMethod> Settings<M> {
     /// Checks the budget (not empty: at least one path, or a time of at
     /// least a nanosecond) and every parameter of the method ([`render`]
     /// calls it first).
@@ -148,9 +150,75 @@ impl Method {
     pub fn from_name(name: &str) -> Option<Method> {
         Method::all().into_iter().find(|m| m.name() == name)
     }
+}
 
+/// A rendering method: what [`render`] runs. The built-in ones are the
+/// [`Method`]s; a crate implements this trait for a method of its own and
+/// renders it through the same [`render`] and [`resume`], with the same
+/// checks, observer, budgets, progress, previews, checkpoints and
+/// counters (`tests/suite/own_method.rs` does, from outside the engine).
+///
+/// Its [`render`](Self::render) is the method: it starts its state (or
+/// takes the one [`Job::resumed`] gives back), hands its work to
+/// [`Job::drive`] as [`Rounds`] (units of work the driver runs round
+/// after round until the budget is spent), and makes the [`Output`] of
+/// what they left. The settings are the type itself: they are saved in
+/// checkpoints (serde) and compared on resume.
+pub trait RenderMethod:
+    Clone + core::fmt::Debug + PartialEq + Serialize + DeserializeOwned + Sync
+{
     /// A short name for tables and command lines.
-    pub fn name(&self) -> &'static str {
+    fn name(&self) -> &'static str;
+
+    /// Checks every parameter ([`render`] calls it before any work).
+    fn validate(&self) -> Result<(), Error>;
+
+    /// The smallest sample budget a render of `resolution` takes: one unit
+    /// of its work. [`render`] refuses a smaller sample budget with
+    /// [`Error::BudgetTooSmall`] naming this number and
+    /// [`unit_of_work`](Self::unit_of_work).
+    fn smallest_budget(&self, resolution: Resolution) -> Result<u64, Error>;
+
+    /// What one unit of its work is (as [`Error::BudgetTooSmall`] names it).
+    fn unit_of_work(&self) -> &'static str;
+
+    /// The bytes a render of `resolution` holds at most, reserved before
+    /// any work (a render that cannot have them is
+    /// [`Error::AllocationFailed`], not an abort half way): `channels` are
+    /// the radiance's, `splats_per_path` the oracle's, `workers` the
+    /// threads, `task` the task of a split render. By default the image
+    /// alone.
+    fn memory_bound(
+        &self,
+        resolution: Resolution,
+        channels: usize,
+        splats_per_path: f64,
+        workers: usize,
+        budget: Budget,
+        task: Task,
+    ) -> u64 {
+        let _ = (splats_per_path, workers, budget, task);
+        (8 * channels as u64).saturating_mul(resolution.pixel_count() as u64)
+    }
+
+    /// Camera rays a path for the emission seen directly, estimated apart
+    /// from the method's paths by the engine when the oracle
+    /// [separates it](crate::oracle::PathOracle::separates_emission) (0 by
+    /// default: the method's paths keep it).
+    fn emission_rays(&self) -> f64 {
+        0.0
+    }
+
+    /// Renders `job`.
+    fn render<O, I>(&self, job: &Job<'_, O, I>) -> Result<Output, Error>
+    where
+        O: PathOracle,
+        I: Importance<O::Radiance> + ?Sized;
+}
+
+impl RenderMethod for Method {
+    /// A short name for tables and command lines.
+    fn name(&self) -> &'static str {
         match self {
             Method::Mc => "mc",
             Method::Pssmlt(_) => "pssmlt",
@@ -168,7 +236,7 @@ impl Method {
     /// multi-stage MLT). [`render`] refuses a smaller sample budget with
     /// [`Error::BudgetTooSmall`] naming this number; above it a method rounds
     /// its budget to whole units, at most one unit over.
-    pub fn smallest_budget(&self, resolution: Resolution) -> Result<u64, Error> {
+    fn smallest_budget(&self, resolution: Resolution) -> Result<u64, Error> {
         let pixels = resolution.pixel_count() as u64;
         Ok(match self {
             Method::Mc => pixels,
@@ -180,23 +248,9 @@ impl Method {
         })
     }
 
-    /// Camera rays a path for the emission seen directly, estimated apart
-    /// from the method's paths ([`PssmltSettings::emission_rays`]); 0 for
-    /// MC, whose paths are independent already, and for stratified MCMC,
-    /// which estimates it itself ([`StratifiedSettings::emission_rays`]).
-    pub fn emission_rays(&self) -> f64 {
-        match self {
-            Method::Mc | Method::Stratified(_) => 0.0,
-            Method::Pssmlt(s) => s.emission_rays,
-            Method::Replica(s) => s.emission_rays,
-            Method::Erpt(s) => s.emission_rays,
-            Method::MultiStage(s) => s.pssmlt.emission_rays,
-        }
-    }
-
     /// What one unit of this method's work is (as [`Error::BudgetTooSmall`]
     /// names it): the least a render does, whatever its budget.
-    pub fn unit_of_work(&self) -> &'static str {
+    fn unit_of_work(&self) -> &'static str {
         match self {
             Method::Mc => "one path per pixel",
             Method::Pssmlt(_) => "one step of every chain",
@@ -207,9 +261,43 @@ impl Method {
         }
     }
 
+    fn memory_bound(
+        &self,
+        resolution: Resolution,
+        channels: usize,
+        splats_per_path: f64,
+        workers: usize,
+        budget: Budget,
+        task: Task,
+    ) -> u64 {
+        memory::bound(
+            self,
+            resolution,
+            channels,
+            splats_per_path,
+            workers,
+            budget,
+            task,
+        )
+    }
+
+    /// Camera rays a path for the emission seen directly, estimated apart
+    /// from the method's paths ([`PssmltSettings::emission_rays`]); 0 for
+    /// MC, whose paths are independent already, and for stratified MCMC,
+    /// which estimates it itself ([`StratifiedSettings::emission_rays`]).
+    fn emission_rays(&self) -> f64 {
+        match self {
+            Method::Mc | Method::Stratified(_) => 0.0,
+            Method::Pssmlt(s) => s.emission_rays,
+            Method::Replica(s) => s.emission_rays,
+            Method::Erpt(s) => s.emission_rays,
+            Method::MultiStage(s) => s.pssmlt.emission_rays,
+        }
+    }
+
     /// Checks every parameter: each within its range in the settings table
     /// ([`settings`](Self::settings)), then the method's own conditions.
-    pub fn validate(&self) -> Result<(), Error> {
+    fn validate(&self) -> Result<(), Error> {
         self.check_ranges()?;
         match self {
             Method::Mc => Ok(()),
@@ -218,6 +306,21 @@ impl Method {
             Method::Stratified(s) => s.validate(),
             Method::Erpt(s) => s.validate(),
             Method::MultiStage(s) => s.validate(),
+        }
+    }
+
+    fn render<O, I>(&self, job: &Job<'_, O, I>) -> Result<Output, Error>
+    where
+        O: PathOracle,
+        I: Importance<O::Radiance> + ?Sized,
+    {
+        match self {
+            Method::Mc => mc::render(job),
+            Method::Pssmlt(s) => pssmlt::render(s, job),
+            Method::Replica(s) => replica::render(s, job),
+            Method::Stratified(s) => runs::render(s, job),
+            Method::Erpt(s) => erpt::render(s, job),
+            Method::MultiStage(s) => runs::render(s, job),
         }
     }
 }
@@ -279,36 +382,97 @@ impl Extras {
     }
 }
 
-/// What every method renders: the oracle, its importance, the shared
-/// settings and the observer, with the film size checked and the clock
-/// started; where its checkpoints go, and the state it resumes from.
-pub(crate) struct Job<'a, O, I: ?Sized> {
-    pub oracle: &'a O,
-    pub importance: &'a I,
-    pub seed: u64,
-    pub budget: Budget,
-    pub observer: &'a dyn Observer,
-    pub resolution: Resolution,
+/// What a method renders ([`RenderMethod::render`]): the oracle, its
+/// importance, the seed and the budget, with the settings and the film
+/// size checked and the clock started; the observer, where checkpoints go,
+/// and the state a resumed render continues from.
+pub struct Job<'a, O, I: ?Sized> {
+    pub(crate) oracle: &'a O,
+    pub(crate) importance: &'a I,
+    pub(crate) seed: u64,
+    pub(crate) budget: Budget,
+    pub(crate) observer: &'a dyn Observer,
+    pub(crate) resolution: Resolution,
     /// The task of the render this job is (the whole render, unsplit).
-    pub task: Task,
-    pub clock: Clock,
-    pub checkpoints: &'a dyn Checkpoints,
+    pub(crate) task: Task,
+    pub(crate) clock: Clock,
+    pub(crate) checkpoints: &'a dyn Checkpoints,
     /// The saved state of a resumed render: the round loop's position and
     /// the method's state, in that order.
-    pub resume: Option<&'a [u8]>,
+    pub(crate) resume: Option<&'a [u8]>,
     /// Where the round loop puts a checkpoint of the state after its last
     /// round (a task's partial result).
-    pub last: Option<&'a OnceCell<Checkpoint>>,
+    pub(crate) last: Option<&'a OnceCell<Checkpoint>>,
     /// Work the round loop keeps up with the rounds (the emission seen
     /// directly, estimated apart).
-    pub beside: Option<&'a dyn Beside>,
+    pub(crate) beside: Option<&'a dyn Beside>,
     /// Whether the method's finish (stratified MCMC's reconstruction) runs
     /// after this job's rounds, within its time budget: not for a task,
     /// whose result is its part, nor for a run that other runs follow.
-    pub finish_within: bool,
+    pub(crate) finish_within: bool,
 }
 
 impl<O, I: ?Sized> Job<'_, O, I> {
+    /// The scene.
+    pub fn oracle(&self) -> &O {
+        self.oracle
+    }
+
+    /// The importance the method samples in proportion to (MCMC methods).
+    pub fn importance(&self) -> &I {
+        self.importance
+    }
+
+    /// The seed of every random stream.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// When the render stops.
+    pub fn budget(&self) -> Budget {
+        self.budget
+    }
+
+    /// The film's size (the oracle's, checked not empty).
+    pub fn resolution(&self) -> Resolution {
+        self.resolution
+    }
+
+    /// Runs `work` round after round from `at` (a resumed render's
+    /// position, from [`resumed`](Self::resumed); `None` for a fresh
+    /// start) until the budget is spent (measured by the clock for a time
+    /// budget) or the observer stops it, reporting progress and previews;
+    /// when the observer wants a checkpoint, it holds the loop's position
+    /// followed by what `save` writes of `work`, which
+    /// [`resumed`](Self::resumed) gives back. The same sample budget gives
+    /// the same rounds whether the render was resumed or not. Returns
+    /// whether the observer stopped the render.
+    pub fn drive<W: Rounds>(
+        &self,
+        work: &mut W,
+        at: Option<Position>,
+        save: impl Fn(&W, &mut Vec<u8>),
+    ) -> Result<bool, Error> {
+        drive(work, self.round_loop(at), save)
+    }
+
+    /// [`drive`](Self::drive), leaving time for work after the rounds
+    /// within a time budget: `after(u)` seconds if they end after `u`
+    /// units ([`Loop::finishing`]).
+    pub(crate) fn drive_finishing<W: Rounds>(
+        &self,
+        work: &mut W,
+        at: Option<Position>,
+        after: &dyn Fn(u64) -> f64,
+        save: impl Fn(&W, &mut Vec<u8>),
+    ) -> Result<bool, Error> {
+        let round_loop = Loop {
+            finishing: after,
+            ..self.round_loop(at)
+        };
+        drive(work, round_loop, save)
+    }
+
     /// Reports `done` of `total` units of set-up `stage` to the observer.
     pub fn report_set_up(&self, stage: SetUpStage, done: u64, total: u64) {
         self.observer.set_up(&SetUp { stage, done, total });
@@ -333,7 +497,7 @@ impl<O, I: ?Sized> Job<'_, O, I> {
     }
 
     /// The round loop of this job, at `resumed` (or at its start).
-    pub fn round_loop(&self, resumed: Option<Position>) -> Loop<'_> {
+    pub(crate) fn round_loop(&self, resumed: Option<Position>) -> Loop<'_> {
         Loop {
             budget: self.budget,
             clock: &self.clock,
@@ -343,20 +507,6 @@ impl<O, I: ?Sized> Job<'_, O, I> {
             finishing: &nothing_after,
             last: self.last,
             beside: self.beside,
-        }
-    }
-
-    /// The round loop of this job, at `resumed`, whose rounds leave time
-    /// for work after them within the time budget: `after(u)` seconds if
-    /// they end after `u` units ([`Loop::finishing`]).
-    pub fn round_loop_finishing<'c>(
-        &'c self,
-        resumed: Option<Position>,
-        after: &'c dyn Fn(u64) -> f64,
-    ) -> Loop<'c> {
-        Loop {
-            finishing: after,
-            ..self.round_loop(resumed)
         }
     }
 
@@ -373,7 +523,9 @@ impl<O, I: ?Sized> Job<'_, O, I> {
     }
 
     /// For a resumed render, the loop's position and the method's saved
-    /// state `T`; a state that does not decode is an error.
+    /// state `T` (what the `save` of [`drive`](Self::drive) wrote); `None`
+    /// for a fresh start. A state that does not decode is
+    /// [`Error::CheckpointCorrupted`].
     pub fn resumed<T: DeserializeOwned>(&self) -> Result<Option<(Position, T)>, Error> {
         let Some(bytes) = self.resume else {
             return Ok(None);
@@ -388,15 +540,16 @@ impl<O, I: ?Sized> Job<'_, O, I> {
 /// (MCMC methods; MC ignores it). Checks every setting and the oracle's
 /// resolution before any work; the observer is called between rounds (and
 /// may take checkpoints: [`resume`] continues from one).
-pub fn render<O, I>(
+pub fn render<O, I, M>(
     oracle: &O,
     importance: &I,
-    settings: &Settings,
+    settings: &Settings<M>,
     observer: &dyn Observer,
 ) -> Result<Output, Error>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
+    M: RenderMethod,
 {
     run(
         oracle,
@@ -409,28 +562,30 @@ where
     )
 }
 
-/// What a checkpoint's header says of the render: the settings are
-/// [`Settings`] (the checkpoint module carries them without knowing them).
+/// What a checkpoint's header says of the render (the checkpoint module
+/// carries its settings without knowing them).
 impl Checkpoint {
-    /// The settings the render was started with.
+    /// The settings a render of a built-in [`Method`] was started with (a
+    /// method of one's own reads as [`Error::CheckpointCorrupted`]: its
+    /// caller knows its settings, and [`resume`] checks them).
     pub fn settings(&self) -> Result<Settings, Error> {
         Ok(self.header::<Settings>()?.0.settings)
     }
 
     /// Paths traced up to this checkpoint (bootstrap excluded).
     pub fn samples(&self) -> Result<u64, Error> {
-        Ok(self.header::<Settings>()?.0.samples)
+        Ok(self.header::<()>()?.0.samples)
     }
 
     /// The state to continue a render of `oracle` with `settings` from, after
     /// checking that the checkpoint is of that oracle, method and seed (the
     /// budget may differ).
-    fn state_for<O: PathOracle>(
+    fn state_for<O: PathOracle, M: RenderMethod>(
         &self,
         oracle: &O,
-        settings: &Settings,
+        settings: &Settings<M>,
     ) -> Result<(&[u8], Task), Error> {
-        let (header, state) = self.header::<Settings>()?;
+        let (header, state) = self.header::<Settings<M>>()?;
         let mismatch = |what| Err(Error::CheckpointMismatch { what });
         if header.settings.method != settings.method {
             return mismatch("method or its settings");
@@ -453,14 +608,14 @@ impl Checkpoint {
     /// Which task of a split render this is ([`Task::WHOLE`] for a render
     /// not split).
     pub fn task(&self) -> Result<Task, Error> {
-        Ok(self.header::<Settings>()?.0.task)
+        Ok(self.header::<()>()?.0.task)
     }
 
     /// Whether this is the state a task ended with, its budget spent (what
     /// [`render_task`] returns unless it was stopped): its partial result,
     /// for [`merge`]. Checkpoints an observer takes between rounds are not.
     pub fn finished(&self) -> Result<bool, Error> {
-        Ok(self.header::<Settings>()?.0.finished)
+        Ok(self.header::<()>()?.0.finished)
     }
 }
 
@@ -473,16 +628,17 @@ impl Checkpoint {
 /// `Error::CheckpointCorrupted`. The budget may differ: the same sample budget
 /// gives the bytes the uninterrupted render would have given, a larger one
 /// continues further, and a time budget counts from now.
-pub fn resume<O, I>(
+pub fn resume<O, I, M>(
     oracle: &O,
     importance: &I,
-    settings: &Settings,
+    settings: &Settings<M>,
     checkpoint: &Checkpoint,
     observer: &dyn Observer,
 ) -> Result<Output, Error>
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
+    M: RenderMethod,
 {
     settings.validate()?;
     let (state, task) = checkpoint.state_for(oracle, settings)?;
@@ -523,10 +679,10 @@ where
 /// that a forged state causes is caught and becomes
 /// `Error::CheckpointCorrupted` (the panic's message is still printed by
 /// the panic hook).
-fn run_resumed<O, I>(
+fn run_resumed<O, I, M>(
     oracle: &O,
     importance: &I,
-    settings: &Settings,
+    settings: &Settings<M>,
     observer: &dyn Observer,
     state: &[u8],
     (task, last): (Task, Option<&OnceCell<Checkpoint>>),
@@ -534,6 +690,7 @@ fn run_resumed<O, I>(
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
+    M: RenderMethod,
 {
     let go = || {
         run(
@@ -560,10 +717,10 @@ where
 
 /// A render, fresh or resumed from `resume`, or task `task` of it; `last`
 /// receives a checkpoint of its state after the last round.
-fn run<O, I>(
+fn run<O, I, M>(
     oracle: &O,
     importance: &I,
-    settings: &Settings,
+    settings: &Settings<M>,
     observer: &dyn Observer,
     resume: Option<&[u8]>,
     task: Task,
@@ -572,6 +729,7 @@ fn run<O, I>(
 where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
+    M: RenderMethod,
 {
     settings.validate()?;
     let resolution = oracle.resolution();
@@ -638,14 +796,7 @@ where
             beside: apart.then_some(&emission as &dyn Beside),
             finish_within: last.is_none(),
         };
-        match &settings.method {
-            Method::Mc => mc::render(&job),
-            Method::Pssmlt(s) => pssmlt::render(s, &job),
-            Method::Replica(s) => replica::render(s, &job),
-            Method::Stratified(s) => runs::render(s, &job),
-            Method::Erpt(s) => erpt::render(s, &job),
-            Method::MultiStage(s) => runs::render(s, &job),
-        }
+        settings.method.render(&job)
     };
     let mut output = match render_method(resume) {
         // The paths without the emission seen directly are black: the

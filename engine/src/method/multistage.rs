@@ -41,7 +41,7 @@ use super::pssmlt::{Pssmlt, PssmltSettings};
 use super::runs::{self, Pooled};
 use super::{Extras, Job, Output};
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
-use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, SetUp, drive};
+use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, SetUp};
 use crate::error::Error;
 use crate::film::{AddFilm, AddValues, Film};
 use crate::oracle::{
@@ -382,8 +382,8 @@ where
         };
         let (mut run, position) = Pssmlt::start(&settings.pssmlt, &stage_job)?;
         let saver = run.saver();
-        let driven = drive(&mut run.chains, stage_job.round_loop(position), saver)?;
-        let out = run.finish(driven);
+        let stopped = stage_job.drive(&mut run.chains, position, saver)?;
+        let out = run.finish(stopped);
         done.add(&out, k);
         if let Some(beside) = job.beside {
             beside.keep_up(

@@ -12,7 +12,7 @@ use crate::checkpoint::{self, Position};
 use crate::drive::splat::{
     RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker, skim_saved_sums,
 };
-use crate::drive::{Driven, RenderStats, Rounds, drive};
+use crate::drive::{RenderStats, Rounds};
 use crate::error::Error;
 use crate::exact::ExactFilm;
 use crate::film::Film;
@@ -75,8 +75,8 @@ where
 {
     let (mut run, position) = Pssmlt::start(settings, job)?;
     let saver = run.saver();
-    let driven = drive(&mut run.chains, job.round_loop(position), saver)?;
-    Ok(run.finish(driven))
+    let cancelled = job.drive(&mut run.chains, position, saver)?;
+    Ok(run.finish(cancelled))
 }
 
 /// The layers PSSMLT splats into: the chains' part of every sample's weight,
@@ -194,7 +194,7 @@ where
     }
 
     /// The normalized image and the counters.
-    pub(crate) fn finish(self, driven: Driven) -> Output {
+    pub(crate) fn finish(self, cancelled: bool) -> Output {
         let samples = self.chains.samples();
         let prior = self.prior;
         let ((films, visits, units), work) = self.chains.into_parts();
@@ -211,7 +211,7 @@ where
         Output {
             film,
             stats,
-            cancelled: driven.cancelled,
+            cancelled,
             visits,
             extras: Extras::None,
         }

@@ -19,7 +19,7 @@ use crate::checkpoint::{self, Position};
 use crate::drive::splat::{
     RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker, skim_saved_sums,
 };
-use crate::drive::{Driven, RenderStats, Rounds, SetUpStage, drive};
+use crate::drive::{RenderStats, Rounds, SetUpStage};
 use crate::error::Error;
 use crate::exchange::{
     Ensemble, EnsembleSettings, ExchangeKind, ExchangeMove, ExchangeStats, Ladder, Tempering,
@@ -117,8 +117,8 @@ where
 {
     let (mut run, position) = Replica::start(settings, job)?;
     let saver = run.saver();
-    let driven = drive(&mut run.ensembles, job.round_loop(position), saver)?;
-    Ok(run.finish(driven))
+    let cancelled = job.drive(&mut run.ensembles, position, saver)?;
+    Ok(run.finish(cancelled))
 }
 
 /// Replica exchange's state: the set-up's counters, the ladder, every
@@ -204,7 +204,7 @@ where
     }
 
     /// The normalized image, the counters and the extras.
-    fn finish(self, driven: Driven) -> Output {
+    fn finish(self, cancelled: bool) -> Output {
         let samples = self.ensembles.samples();
         let (film, visits, work) = self.ensembles.finish();
         let summaries: Vec<Summary> = work.iter().map(|w| summary(&w.state)).collect();
@@ -217,7 +217,7 @@ where
             &summaries,
             samples,
         );
-        output.cancelled = driven.cancelled;
+        output.cancelled = cancelled;
         output
     }
 }

@@ -1,14 +1,14 @@
 //! One table of every method's settings: for each, its name, what it takes
 //! (its range, or its choices) and a line of help, read and written by name
 //! through [`Method::get`], [`Method::set`] and [`Method::set_choice`].
-//! [`Method::validate`] checks every value against it, so a settings value
+//! [`RenderMethod::validate`](super::RenderMethod::validate) checks every value against it, so a settings value
 //! built field by field is bounded like one set by name; the `strata`
 //! command and the C API (`strata_settings_set`, `_set_choice`, `_name`)
 //! take their settings, defaults and bounds from here (issue 36).
 //!
 //! The ranges are what a render on this machine class can carry: a value
 //! inside them renders (memory is checked before any work, see
-//! [`Method::memory_bound`]), a value outside is
+//! [`RenderMethod::memory_bound`]), a value outside is
 //! [`Error::OutOfRange`](crate::Error::OutOfRange).
 
 use crate::error::Error;
@@ -16,7 +16,7 @@ use crate::exchange::{EnsembleSettings, ExchangeKind, Tempering};
 use crate::mutate::{Kelemen, MutationParams, SmallStep};
 use crate::tiles::TileShape;
 
-use super::{Method, Solver};
+use super::{Method, RenderMethod, Solver};
 use crate::setting::{Kind, Setting, Value, choice, flag, real, whole};
 
 impl Method {
@@ -611,6 +611,7 @@ fn rebuild_ladder(
 
 #[cfg(test)]
 mod tests {
+    use super::RenderMethod;
     use super::*;
 
     /// Every method's defaults lie in the table, and every row can be read.

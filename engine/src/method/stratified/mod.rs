@@ -102,7 +102,7 @@ use super::runs::{self, Pooled};
 use super::{Job, Output};
 use crate::chain::ChainStats;
 use crate::checkpoint;
-use crate::drive::{Budget, drive};
+use crate::drive::Budget;
 use crate::emission::SeenEmission;
 use crate::error::{Error, check_probability};
 use crate::film::Film;
@@ -529,12 +529,10 @@ where
         .then(|| ReconstructionTime::timed(job, &tiles, settings))
         .flatten();
     let after = |sweeps| reconstruction.as_ref().map_or(0.0, |r| r.seconds(sweeps));
-    let driven = drive(
-        &mut sweeps,
-        job.round_loop_finishing(position, &after),
-        |s, out| s.save(bootstrap_traces, out),
-    )?;
-    Ok((sweeps.into_run(bootstrap_traces), driven.cancelled))
+    let cancelled = job.drive_finishing(&mut sweeps, position, &after, |s, out| {
+        s.save(bootstrap_traces, out)
+    })?;
+    Ok((sweeps.into_run(bootstrap_traces), cancelled))
 }
 
 impl Pooled for StratifiedSettings {

@@ -29,7 +29,7 @@ use core::sync::atomic::{AtomicU64, Ordering};
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
-use crate::drive::{Beside, Budget};
+use crate::drive::{Beside, Budget, RenderStats};
 use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{
@@ -174,10 +174,10 @@ impl SeenEmission {
 
     /// Adds the emission to `output`'s image, its rays and the invalid
     /// ones to its counters.
-    pub fn add_to_output(&self, output: &mut crate::method::Output) {
-        self.add_to(&mut output.film);
-        output.stats.emission_rays += self.rays(output.film.resolution());
-        output.stats.invalid_samples += self.invalid;
+    pub fn add_to_output(&self, film: &mut Film, stats: &mut RenderStats) {
+        self.add_to(film);
+        stats.emission_rays += self.rays(film.resolution());
+        stats.invalid_samples += self.invalid;
     }
 
     /// Rays traced by all its pixels on a film of `resolution`.
@@ -351,9 +351,9 @@ impl<'a, O: PathOracle> EmissionApart<'a, O> {
     }
 
     /// Adds the emission to `output`'s image and its rays to its counters.
-    pub fn add_to_output(&self, output: &mut crate::method::Output) {
+    pub fn add_to_output(&self, film: &mut Film, stats: &mut RenderStats) {
         if let Some(seen) = self.state.borrow().as_ref() {
-            seen.add_to_output(output);
+            seen.add_to_output(film, stats);
         }
     }
 }

@@ -807,7 +807,7 @@ where
         }
         result => result,
     }?;
-    emission.add_to_output(&mut output);
+    emission.add_to_output(&mut output.film, &mut output.stats);
     Ok(output)
 }
 

@@ -243,7 +243,7 @@ pub fn merge<P: PartStore + ?Sized>(parts: &P, subset: bool) -> Result<Output, E
     for (state, at) in states.iter().zip(emission) {
         let mut reader = state.from(at);
         if let Some(seen) = reader.take::<Option<SeenEmission>>()? {
-            seen.add_to_output(&mut output);
+            seen.add_to_output(&mut output.film, &mut output.stats);
         }
     }
     Ok(output)

@@ -10,8 +10,8 @@ use alloc::vec;
 use alloc::vec::Vec;
 
 use super::light::LightTracing;
-use super::regularizer::{Halves, LargeSteps, Samples, anchor_total, fall_back, take_known};
-use super::tile::{Draws, TileChain};
+use super::regularizer::{Draws, Halves, LargeSteps, Samples, anchor_total, fall_back, take_known};
+use super::tile::TileChain;
 use super::{Solver, StratifiedSettings};
 #[cfg(feature = "std")]
 use crate::drive::Budget;

@@ -12,8 +12,8 @@ use serde::{Deserialize, Serialize};
 use super::light::LightTracing;
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
-use super::regularizer::Samples;
-use super::tile::{Context, Draws, Row, Start, TileChain, TileSplat, Waking};
+use super::regularizer::{Draws, Samples};
+use super::tile::{Context, Row, Start, TileChain, TileSplat, Waking};
 use super::{StratifiedExtras, StratifiedSettings, StratifiedStats};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;
@@ -344,7 +344,7 @@ pub(super) fn finish_runs(
         }),
     };
     if let Some(emission) = &emission {
-        emission.add_to_output(&mut output);
+        emission.add_to_output(&mut output.film, &mut output.stats);
     }
     Ok(output)
 }

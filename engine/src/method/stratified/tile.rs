@@ -22,7 +22,7 @@ use crate::sample::{IndependentSampler, MltSampler, PackedSample, Proposal};
 use crate::target::{Evaluated, Importance, SplatList, valid_splat};
 use crate::tiles::Tiles;
 
-use super::regularizer::SampleRows;
+use super::regularizer::{Draws, SampleRows};
 
 /// One tile pixel's evaluation of a state.
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
@@ -121,39 +121,6 @@ pub(super) struct TileChain<R> {
     pub start: Start,
     /// A global chain's state was installed and must be evaluated.
     pub pending: bool,
-}
-
-/// How many uniform samples a tile drew (each a sample of every pixel of
-/// the tile, summed into the pixels' [`Samples`](super::regularizer::Samples)).
-#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
-pub(super) struct Draws {
-    /// Coin-chosen large steps: the regularizer's samples.
-    pub large_steps: u64,
-    /// The odd-numbered coin-chosen large steps (the first is number 0):
-    /// the half of the regularizer's samples held out to choose the
-    /// solver's `α`.
-    pub odd_steps: u64,
-    /// Plain MC paths traced at the tile's centre pixel for the regularizer
-    /// ([`StratifiedSettings::regularizer_paths`](super::StratifiedSettings)),
-    /// which sample that pixel alone.
-    pub centre_paths: u64,
-}
-
-impl Draws {
-    /// Whether counts read from a checkpoint can be: the odd steps among
-    /// the large ones, and every count below `2^48` (a render could not
-    /// reach it; the pixels' sums over their tiles then cannot overflow).
-    pub fn fits(&self) -> bool {
-        const MOST: u64 = 1 << 48;
-        self.odd_steps <= self.large_steps && self.large_steps < MOST && self.centre_paths < MOST
-    }
-
-    /// Adds another run's counts of the same tile.
-    pub fn add(&mut self, other: &Draws) {
-        self.large_steps += other.large_steps;
-        self.odd_steps += other.odd_steps;
-        self.centre_paths += other.centre_paths;
-    }
 }
 
 /// The working form of a tile chain: a primary sample unpacked, the current

@@ -61,6 +61,14 @@ pub enum Error {
         /// Why.
         reason: &'static str,
     },
+    /// An exchange move that cannot be registered
+    /// ([`CustomMove::new`](crate::exchange::CustomMove::new)).
+    InvalidMove {
+        /// The move's name.
+        name: &'static str,
+        /// Why.
+        reason: &'static str,
+    },
     /// A sample budget smaller than one unit of the method's work
     /// ([`RenderMethod::smallest_budget`](crate::RenderMethod::smallest_budget)): it
     /// would be overrun, not kept.
@@ -287,6 +295,9 @@ impl fmt::Display for Error {
                     f,
                     "small-step kernel {name:?} cannot be registered: {reason}"
                 )
+            }
+            Error::InvalidMove { name, reason } => {
+                write!(f, "exchange move {name:?} cannot be registered: {reason}")
             }
             Error::PartMismatch { part, what } => write!(
                 f,

@@ -51,6 +51,7 @@ pub mod parts;
 pub mod prelude;
 pub mod purity;
 pub mod reconstruct;
+mod registry;
 pub mod rng;
 pub mod sample;
 mod setting;

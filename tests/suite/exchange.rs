@@ -17,9 +17,9 @@ use threads::{bits, in_pool};
 use strata::engine::analytic::{Component, GaussianMixture, ProceduralImage};
 use strata::engine::bootstrap::NEVER;
 use strata::engine::exchange::{
-    Decisions, EnergyLevels, Ensemble, EnsembleSettings, EquiEnergy, EquiEnergySampler, Exchange,
-    ExchangeKind, ExchangeStats, IsPermutation, IsSwap, Ladder, Move, NeighborSwap, NonReversible,
-    PermutationSampler, Tempered, Tempering, for_each_permutation,
+    CustomMove, Decisions, EnergyLevels, Ensemble, EnsembleSettings, EquiEnergy, EquiEnergySampler,
+    Exchange, ExchangeKind, ExchangeStats, IsPermutation, IsSwap, Ladder, Move, NeighborSwap,
+    NonReversible, PermutationSampler, SwapMove, Swaps, Tempered, Tempering, for_each_permutation,
 };
 use strata::engine::method::{ReplicaExtras, ReplicaSettings};
 use strata::engine::mutate::{Gaussian, MutationParams, SmallStep};
@@ -392,6 +392,82 @@ fn broken_moves_fail_the_same_check() {
         )
     });
     assert!(broken > 0.01, "unconditional swaps passed: {broken}");
+}
+
+/// An exchange move of one's own (`exchange::SwapMove`), written outside
+/// the engine: after every sweep, a Metropolis swap of a uniformly drawn
+/// pair of chains (a symmetric proposal: eq. 4.11's acceptance keeps the
+/// product invariant).
+#[derive(Debug)]
+struct RandomPair;
+
+impl SwapMove for RandomPair {
+    fn name(&self) -> &'static str {
+        "random-pair"
+    }
+    fn after_sweep(&self, ex: &mut dyn Swaps) {
+        let m = ex.chains();
+        let i = ex.decisions().uniform_index(m).unwrap();
+        let j = ex.decisions().uniform_index(m).unwrap();
+        if i != j {
+            ex.try_swap(i, j);
+        }
+    }
+}
+
+static RANDOM_PAIR: RandomPair = RandomPair;
+
+/// The move of one's own, registered by name: exact on the product spaces
+/// (the check every built-in move passes, and broken moves fail), chosen
+/// by name through the settings table, its replica-exchange images within
+/// noise of the closed-form pixels, and a stopped render resumed to the
+/// bytes of the render not stopped. A built-in's name is refused.
+#[test]
+fn an_exchange_move_of_ones_own_is_exact_and_renders_through_render() {
+    let custom = CustomMove::new(&RANDOM_PAIR).unwrap();
+    for space in [space_3x4(), space_4x3(), space_integer()] {
+        assert_invariant("random pair (own)", &space, || custom);
+    }
+    #[derive(Debug)]
+    struct Impostor;
+    impl SwapMove for Impostor {
+        fn name(&self) -> &'static str {
+            "neighbor"
+        }
+    }
+    static IMPOSTOR: Impostor = Impostor;
+    assert!(matches!(
+        CustomMove::new(&IMPOSTOR),
+        Err(Error::InvalidMove { .. })
+    ));
+
+    let mut by_name = Method::Replica(replica_settings(ExchangeKind::None));
+    by_name.set_choice("exchange", "random-pair").unwrap();
+    let Method::Replica(replica) = &by_name else {
+        unreachable!()
+    };
+    assert_eq!(replica.exchange, ExchangeKind::Custom(custom));
+    let image = ProceduralImage::showcase(Resolution::new(24, 16));
+    let runs = common::renders(&image, &MaxChannel, &by_name, 128, 0..common::RUNS);
+    common::check("random pair (own)", &runs, &image.reference());
+
+    let settings = Settings {
+        seed: 2,
+        budget: Budget::samples_per_pixel(64, image.resolution()),
+        method: by_name,
+    };
+    let whole = render(&image, &MaxChannel, &settings, &Silent).unwrap();
+    // Non-neighbouring pairs are tried: the move ran.
+    assert!(extras(&whole).exchange.attempts(0, 3) > 0);
+    let stop = crate::resume::StopAt::new(2);
+    assert!(
+        render(&image, &MaxChannel, &settings, &stop)
+            .unwrap()
+            .cancelled
+    );
+    let (checkpoint, _) = stop.checkpoint();
+    let resumed = strata::engine::resume(&image, &MaxChannel, &settings, &checkpoint, &Silent);
+    assert_eq!(bits(&resumed.unwrap().film), bits(&whole.film));
 }
 
 fn random_log_values(m: usize, seed: u64) -> Vec<f64> {

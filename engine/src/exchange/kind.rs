@@ -7,8 +7,8 @@ use serde::{Deserialize, Serialize};
 
 use super::tempered::Replica;
 use super::{
-    EnergyLevels, EquiEnergy, EquiEnergySampler, Exchange, IsPermutation, IsSwap, Jump, Move,
-    NeighborSwap, NoExchange, NonReversible,
+    CustomMove, EnergyLevels, EquiEnergy, EquiEnergySampler, Exchange, IsPermutation, IsSwap, Jump,
+    Move, NeighborSwap, NoExchange, NonReversible,
 };
 use crate::bootstrap::Bootstrap;
 use crate::error::Error;
@@ -54,6 +54,8 @@ pub enum ExchangeKind {
     },
     /// [`NonReversible`].
     NonReversible,
+    /// A move of one's own ([`SwapMove`](super::SwapMove)), registered by name.
+    Custom(CustomMove),
 }
 
 impl ExchangeKind {
@@ -100,10 +102,13 @@ impl ExchangeKind {
     /// The move called `name` (one of [`NAMES`](Self::NAMES)) with the
     /// thesis' settings ([`all`](Self::all); the equi-energy sampler records
     /// after 1000 sweeps).
+    /// A registered move of one's own ([`CustomMove`]) is found by its
+    /// name too.
     pub fn from_name(name: &str) -> Option<ExchangeKind> {
         ExchangeKind::all(1000)
             .into_iter()
             .find(|k| k.name() == name)
+            .or_else(|| CustomMove::by_name(name).map(ExchangeKind::Custom))
     }
 
     /// A short name for tables, command lines and the C API.
@@ -117,6 +122,7 @@ impl ExchangeKind {
             ExchangeKind::FrequentEquiEnergy { .. } => "frequent-eem",
             ExchangeKind::EquiEnergySampler { .. } => "ees",
             ExchangeKind::NonReversible => "non-reversible",
+            ExchangeKind::Custom(m) => m.exchange().name(),
         }
     }
 
@@ -169,6 +175,7 @@ impl ExchangeKind {
                 m, p_jump, rings, capacity, burn_in,
             )?),
             ExchangeKind::NonReversible => ExchangeMove::NonReversible(NonReversible),
+            ExchangeKind::Custom(m) => ExchangeMove::Custom(m),
         })
     }
 }
@@ -192,6 +199,8 @@ pub enum ExchangeMove<R> {
     EquiEnergySampler(EquiEnergySampler<Replica<R>>),
     /// [`ExchangeKind::NonReversible`].
     NonReversible(NonReversible),
+    /// [`ExchangeKind::Custom`].
+    Custom(CustomMove),
 }
 
 /// Calls `$call` on the move behind the variant, bound to `$m` (a match, so
@@ -206,6 +215,7 @@ macro_rules! each_move {
             ExchangeMove::EquiEnergy($m) => $call,
             ExchangeMove::EquiEnergySampler($m) => $call,
             ExchangeMove::NonReversible($m) => $call,
+            ExchangeMove::Custom($m) => $call,
         }
     };
 }

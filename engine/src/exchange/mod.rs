@@ -12,6 +12,7 @@
 //! | [`Ensemble`] | `M` chains over an oracle, swept with a move's hooks |
 //! | [`Tempering`], [`TemperedPath`] | power or oracle tempering; a state valued at every temperature, MIS weights (eq. 5.13) |
 //! | [`ExchangeKind`] | the catalogue of moves, built per ensemble from its bootstrap |
+//! | [`SwapMove`], [`CustomMove`], [`Swaps`] | a move of one's own, registered by name, and what it sees |
 //! | [`ExchangeStats`] | per-pair rates, change probabilities, round trips, level transitions |
 //!
 //! # Correctness
@@ -22,6 +23,7 @@
 //! probability, on a small discrete product space.
 use serde::{Deserialize, Serialize};
 
+mod custom;
 mod decide;
 mod ensemble;
 mod equi_energy;
@@ -32,6 +34,7 @@ mod permutation;
 mod stats;
 mod tempered;
 
+pub use custom::{CustomMove, SwapMove, Swaps};
 pub use decide::Decisions;
 pub use ensemble::{Ensemble, EnsembleSettings};
 pub use equi_energy::{EnergyLevels, EquiEnergy, EquiEnergySampler};

@@ -38,15 +38,14 @@
 //! assert_eq!(SmallStep::from_name("cauchy"), Some(step));
 //! ```
 
-use alloc::boxed::Box;
 use alloc::string::String;
 use core::fmt;
 
-use once_cell::race::OnceBox;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use super::SmallStep;
 use crate::error::Error;
+use crate::registry::{Refused, Registry};
 use crate::rng::Pcg32;
 
 /// A small-step kernel: the law of one coordinate's offset.
@@ -72,11 +71,8 @@ pub trait Kernel: Send + Sync + fmt::Debug + 'static {
 #[derive(Clone, Copy)]
 pub struct Custom(&'static dyn Kernel);
 
-/// The kernels registered so far (at most [`MOST`]).
-static REGISTERED: [OnceBox<&'static dyn Kernel>; MOST] = [const { OnceBox::new() }; MOST];
-
-/// How many kernels a process can register.
-const MOST: usize = 32;
+/// The kernels registered so far.
+static REGISTERED: Registry<dyn Kernel> = Registry::new(|k| k.name());
 
 impl Custom {
     /// `kernel`, registered under its name (again for the same kernel: the
@@ -84,36 +80,20 @@ impl Custom {
     /// name, or more than 32 kernels is
     /// [`Error::InvalidKernel`](crate::Error::InvalidKernel).
     pub fn new(kernel: &'static dyn Kernel) -> Result<Custom, Error> {
-        let name = kernel.name();
-        let taken = Error::InvalidKernel {
-            name,
-            reason: "another kernel has this name",
+        let reason = match REGISTERED.register(kernel, &SmallStep::NAMES) {
+            Ok(()) => return Ok(Custom(kernel)),
+            Err(Refused::NameTaken) => "another kernel has this name",
+            Err(Refused::Full) => "32 kernels are registered already",
         };
-        if SmallStep::NAMES.contains(&name) {
-            return Err(taken);
-        }
-        for slot in &REGISTERED {
-            let held = *slot.get_or_init(|| Box::new(kernel));
-            if core::ptr::addr_eq(held, kernel) {
-                return Ok(Custom(kernel));
-            }
-            if held.name() == name {
-                return Err(taken);
-            }
-        }
         Err(Error::InvalidKernel {
-            name,
-            reason: "32 kernels are registered already",
+            name: kernel.name(),
+            reason,
         })
     }
 
     /// The registered kernel called `name`.
     pub fn by_name(name: &str) -> Option<Custom> {
-        REGISTERED
-            .iter()
-            .map_while(OnceBox::get)
-            .find(|k| k.name() == name)
-            .map(|k| Custom(*k))
+        REGISTERED.find(name).map(Custom)
     }
 
     /// The kernel.

@@ -872,7 +872,8 @@ mod tests {
             forged.extend_from_slice(&crc.to_le_bytes());
             Checkpoint::from_bytes(forged).unwrap()
         };
-        let again = |c: &Checkpoint| resume(&image, &MaxChannel, &settings, c, &crate::Silent);
+        let again =
+            |c: &Checkpoint| resume(&image, &MaxChannel, &settings, c, &crate::drive::Silent);
         assert!(again(&forge(position.done)).is_ok());
         for done in [0, position.done + 1, u64::MAX] {
             assert!(

@@ -348,8 +348,8 @@ impl Normalization {
         self.squares += other.squares;
     }
 
-    /// The estimates pooled, their sums added exactly
-    /// ([`ExactSum`]): the same bits in any order
+    /// The estimates pooled, their sums added exactly (binned
+    /// summation): the same bits in any order
     /// and grouping of the same estimates.
     pub fn pooled<'a>(estimates: impl IntoIterator<Item = &'a Normalization>) -> Normalization {
         let (mut samples, mut sum, mut squares) = (0, ExactSum::default(), ExactSum::default());

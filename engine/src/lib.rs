@@ -14,7 +14,7 @@
 //! | layer | module | owns |
 //! |---|---|---|
 //! | contract | [`oracle`] | what a renderer implements: [`PathOracle`], [`Sampler`], [`Radiance`], [`PathSample`], [`SplatSink`]; [`FnOracle`] |
-//! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], [`exact`], [`task`], [`purity`], `setting` | random streams; the small-step kernels whole; the mutated primary sample; importance functions; films; sums that do not depend on the order of their terms; the units of work a task of a split render owns; the purity check; what a setting is ([`method::Setting`]) |
+//! | machinery | [`rng`], [`mutate`], [`sample`], [`target`], [`film`], `exact`, [`task`], [`purity`], `setting` | random streams; the small-step kernels whole; the mutated primary sample; importance functions; films; sums that do not depend on the order of their terms; the units of work a task of a split render owns; the purity check; what a setting is ([`method::Setting`]) |
 //! | one step | [`chain`] | the Metropolis-Hastings step with expected-values splatting, over any [`Target`](chain::Target) and [`Weights`](chain::Weights) |
 //! | set-up | [`bootstrap`] | start-up bias elimination: `b*` per level, importance-resampled chain starts |
 //! | one loop | [`drive`], [`checkpoint`], [`parts`] | budgets, clock, observer, the round loop, the deterministic merge, statistics; the render's state saved between rounds and resumed; a split render's parts read piece by piece for the merge |
@@ -39,7 +39,7 @@ pub mod diagnose;
 pub mod drive;
 mod emission;
 pub mod error;
-pub mod exact;
+mod exact;
 pub mod exchange;
 pub mod film;
 pub mod method;

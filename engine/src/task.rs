@@ -1,7 +1,8 @@
 //! A render split into tasks: which units of work each task owns. Every
 //! method gives task `index` of `count` the units (passes, chains,
 //! ensembles, independent runs) whose index `k` has `k mod count ==
-//! index`; their films are exact sums ([`exact`](crate::exact)), or a
+//! index`; their films are exact sums (whose bits do not depend on the
+//! order of their terms), or a
 //! method's runs pooled in run order, so [`merge`](crate::method::merge) of
 //! the tasks' partial results gives the bytes of the render unsplit.
 

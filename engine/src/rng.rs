@@ -97,7 +97,7 @@ pub enum Domain {
 }
 
 /// SplitMix64 finalizer: a bijective 64-bit mix.
-pub fn mix64(mut z: u64) -> u64 {
+pub(crate) fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)
@@ -111,7 +111,7 @@ pub fn stream(seed: u64, domain: Domain, index: u64) -> Pcg32 {
 }
 
 /// Chain `index`'s own streams: its mutations and its accept/reject decisions.
-pub fn chain_streams(seed: u64, index: u64) -> (Pcg32, Pcg32) {
+pub(crate) fn chain_streams(seed: u64, index: u64) -> (Pcg32, Pcg32) {
     (
         stream(seed, Domain::Chain, index),
         stream(seed ^ 0x5bd1_e995, Domain::Chain, index),

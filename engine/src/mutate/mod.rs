@@ -718,7 +718,7 @@ fn wrap_near(v: f64) -> f32 {
 /// `v` wrapped onto `[0, 1)` and rounded to f32. A value that rounds up to 1.0
 /// is 0.0: the two are the same point of the circle.
 #[inline(always)]
-pub fn wrap_unit(v: f64) -> f32 {
+pub(crate) fn wrap_unit(v: f64) -> f32 {
     // A value in [0, 1) moved by one step's offset lies in [-1, 2), where
     // adding or subtracting 1 is exact: the same bits as the general case,
     // without its conversions to and from an integer on the reader's path.

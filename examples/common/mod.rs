@@ -1,10 +1,11 @@
 //! What several examples share: the MC reference renders they cache.
 
 use std::path::Path;
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Instant;
 
 use strata::engine::target::MaxChannel;
-use strata::engine::{Budget, Film, Method, PathOracle, Rgb, Settings, Silent, render};
+use strata::engine::{Budget, Film, Method, Observer, PathOracle, Progress, Rgb, Settings, render};
 
 pub type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
@@ -23,13 +24,22 @@ pub fn cached_mc<O: PathOracle<Radiance = Rgb>>(
         println!("{name}: {}", path.display());
         return Ok(strata::io::read_film(&path)?);
     }
+    println!(
+        "{name}: rendering {spp} spp MC, to be cached as {}",
+        path.display()
+    );
     let start = Instant::now();
     let settings = Settings {
         seed,
         budget: Budget::samples_per_pixel(spp, r),
         method: Method::Mc,
     };
-    let film = render(oracle, &MaxChannel, &settings, &Silent)?.film;
+    let tenths = Tenths {
+        name,
+        next: AtomicU32::new(1),
+        start,
+    };
+    let film = render(oracle, &MaxChannel, &settings, &tenths)?.film;
     strata::io::write_exr(&film, &path)?;
     strata::io::write_png(&film, 0.0, path.with_extension("png"))?;
     println!(
@@ -38,4 +48,28 @@ pub fn cached_mc<O: PathOracle<Radiance = Rgb>>(
         path.display()
     );
     Ok(film)
+}
+
+/// Says how far a long render is, every tenth of it (a reference takes
+/// minutes).
+struct Tenths<'a> {
+    name: &'a str,
+    next: AtomicU32,
+    start: Instant,
+}
+
+impl Observer for Tenths<'_> {
+    fn progress(&self, p: &Progress) {
+        let tenth = (p.fraction * 10.0) as u32;
+        let next = self.next.load(Ordering::Relaxed);
+        if tenth >= next && tenth < 10 {
+            self.next.store(tenth + 1, Ordering::Relaxed);
+            println!(
+                "{}: {}0 % after {:.0} s",
+                self.name,
+                tenth,
+                self.start.elapsed().as_secs_f64()
+            );
+        }
+    }
 }

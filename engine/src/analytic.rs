@@ -397,7 +397,7 @@ impl ProceduralImage {
     }
 
     /// `g` at normalized `(x, y)`.
-    pub fn image_value(&self, x: f64, y: f64) -> Rgb {
+    pub(crate) fn image_value(&self, x: f64, y: f64) -> Rgb {
         let mut sum = [0.0f64; 3];
         for t in &self.terms {
             let (s, c) = t.value(x, y);

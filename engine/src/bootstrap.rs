@@ -56,14 +56,14 @@ pub struct Started<S> {
 /// Told `(done, total)` candidates before every block (and once at the
 /// end) and asked whether the set-up must end now (the observer cancelled,
 /// or a time budget ran out): the candidates traced so far are then the
-/// bootstrap (at least one block of [`BLOCK`]).
+/// bootstrap (at least one block of 65 536).
 pub type Halt<'a> = &'a dyn Fn(u64, u64) -> bool;
 
 /// A [`Halt`] that never ends the set-up early (sample budgets, tests).
 pub const NEVER: Halt<'static> = &|_, _| false;
 
 /// Candidates traced between two [`Halt`] checks.
-pub const BLOCK: u64 = 1 << 16;
+pub(crate) const BLOCK: u64 = 1 << 16;
 
 /// `len` zeros, or a typed error if they cannot be had (the candidate count
 /// comes from the settings).
@@ -252,7 +252,7 @@ impl Bootstrap {
     /// Whether every candidate has the same value at every level: the levels
     /// are one target (e.g. an oracle's tempering that changes nothing on
     /// this scene).
-    pub fn levels_agree(&self) -> bool {
+    pub(crate) fn levels_agree(&self) -> bool {
         self.values
             .chunks(self.levels)
             .all(|row| row.iter().all(|&v| v == row[0]))
@@ -270,7 +270,7 @@ impl Bootstrap {
 
     /// The smallest positive and the largest value of `level` over the
     /// candidates.
-    pub fn value_range(&self, level: usize) -> (f64, f64) {
+    pub(crate) fn value_range(&self, level: usize) -> (f64, f64) {
         self.ranges[level]
     }
 

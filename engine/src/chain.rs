@@ -189,13 +189,8 @@ impl<S> Chain<S> {
         &self.current
     }
 
-    /// The current state, to update it after re-evaluating it (exchanges).
-    pub fn state_mut(&mut self) -> &mut S {
-        &mut self.current
-    }
-
     /// The state the last step proposed, whether or not it was accepted.
-    pub fn last_proposal(&self) -> &S {
+    pub(crate) fn last_proposal(&self) -> &S {
         if self.last_accepted {
             &self.current
         } else {
@@ -209,13 +204,13 @@ impl<S> Chain<S> {
     }
 
     /// The primary sample, mutably (to replay it, or to swap random streams).
-    pub fn sampler_mut(&mut self) -> &mut MltSampler {
+    pub(crate) fn sampler_mut(&mut self) -> &mut MltSampler {
         &mut self.sampler
     }
 
     /// The primary sample and the current state, both mutably (to replay the
     /// sample and update the state from what it traces).
-    pub fn parts_mut(&mut self) -> (&mut MltSampler, &mut S) {
+    pub(crate) fn parts_mut(&mut self) -> (&mut MltSampler, &mut S) {
         (&mut self.sampler, &mut self.current)
     }
 
@@ -491,7 +486,7 @@ impl<R: Radiance> PathChain<R> {
     }
 
     /// The weights of its next samples, to change.
-    pub fn weights_mut(&mut self) -> &mut KelemenWeights {
+    pub(crate) fn weights_mut(&mut self) -> &mut KelemenWeights {
         &mut self.weights
     }
 

@@ -126,7 +126,7 @@ impl Film {
     }
 
     /// Adds `s ·` `other`, a film of the same size and channels.
-    pub fn add_scaled(&mut self, other: &Film, s: f64) {
+    pub(crate) fn add_scaled(&mut self, other: &Film, s: f64) {
         debug_assert_eq!(self.data.len(), other.data.len());
         for (v, o) in self.data.iter_mut().zip(&other.data) {
             *v += s * o;

@@ -4,7 +4,7 @@
 //! follows pbrt-v4's `MLTSampler`).
 //!
 //! A primary sample is an unbounded vector of numbers in `[0, 1)`, split into
-//! streams: stream [`FILM_STREAM`] holds the film position the engine chooses,
+//! streams: stream 0 holds the film position the engine chooses,
 //! the oracle's streams hold everything the oracle draws.
 //!
 //! Only the coordinates the current state read are kept; the others are
@@ -41,7 +41,7 @@ use crate::oracle::{FilmPoint, HELD_STREAM, ORACLE_STREAMS, Resolution, Sampler}
 use crate::rng::uniform_f32;
 
 /// The engine's own stream, which holds the film position.
-pub const FILM_STREAM: usize = 0;
+pub(crate) const FILM_STREAM: usize = 0;
 const STREAMS: usize = ORACLE_STREAMS + 1;
 /// The oracle's [`HELD_STREAM`] among the sampler's streams.
 const HELD: usize = HELD_STREAM as usize + 1;
@@ -116,7 +116,9 @@ impl PackedSample {
     }
 
     /// Gives `self` the random stream of `other` and `other` that of
-    /// `self` (see [`MltSampler::swap_rng`]).
+    /// `self`. Exchanging two states between chains (state borrowing in
+    /// stratified MCMC) swaps the samples, then swaps their streams back so
+    /// each chain keeps its own.
     pub(crate) fn swap_rng(&mut self, other: &mut PackedSample) {
         core::mem::swap(&mut self.rng, &mut other.rng);
     }
@@ -163,7 +165,7 @@ impl MltSampler {
     /// Starts over as [`new`](Self::new) would with the same kernel and
     /// `rng`, keeping the memory of its coordinates (a bootstrap draws
     /// thousands of candidates, each a fresh primary sample).
-    pub fn restart(&mut self, rng: Pcg32) {
+    pub(crate) fn restart(&mut self, rng: Pcg32) {
         let streams = core::mem::take(&mut self.streams);
         *self = Self {
             streams,
@@ -178,7 +180,7 @@ impl MltSampler {
     /// Replaces the random stream used for future mutations. A chain started
     /// from a bootstrap candidate replays the candidate's stream, then switches
     /// to its own so two chains starting from the same candidate diverge.
-    pub fn reseed(&mut self, rng: Pcg32) {
+    pub(crate) fn reseed(&mut self, rng: Pcg32) {
         self.rng = rng;
     }
 
@@ -189,18 +191,10 @@ impl MltSampler {
         }
     }
 
-    /// Gives `self` the mutation stream of `other` and `other` that of
-    /// `self`. Exchanging two states between chains (replica exchange, state
-    /// borrowing in stratified MCMC) swaps the samplers, then swaps their
-    /// streams back so each chain keeps its own.
-    pub fn swap_rng(&mut self, other: &mut MltSampler) {
-        core::mem::swap(&mut self.rng, &mut other.rng);
-    }
-
     /// Sets the film stream's two coordinates of the current state to `u`
     /// (each in `[0, 1)`), e.g. to re-express a film position as a jitter
     /// within a pixel. Outside a proposal only.
-    pub fn set_film(&mut self, u: [f32; 2]) {
+    pub(crate) fn set_film(&mut self, u: [f32; 2]) {
         for index in 0..2 {
             self.read_state(FILM_STREAM, index);
         }
@@ -394,7 +388,11 @@ impl Proposal<'_> {
     /// height` (stored, so the state keeps that position), i.e. a uniform
     /// point of the pixel for a large step. Leaves the cursor at the start of
     /// oracle stream 0.
-    pub fn film_point_in_pixel(&mut self, resolution: Resolution, pixel: usize) -> FilmPoint {
+    pub(crate) fn film_point_in_pixel(
+        &mut self,
+        resolution: Resolution,
+        pixel: usize,
+    ) -> FilmPoint {
         let width = resolution.width.max(1) as usize;
         let cell = [pixel % width, pixel / width];
         let size = [resolution.width, resolution.height];
@@ -413,13 +411,8 @@ impl Proposal<'_> {
     /// Restarts at the oracle's stream 0, to trace the same proposal again
     /// (e.g. at another temperature): numbers read again are the same, numbers
     /// read for the first time are mutated as usual.
-    pub fn restart(&mut self) {
+    pub(crate) fn restart(&mut self) {
         self.start_stream(0);
-    }
-
-    /// Whether this is a large step.
-    pub fn is_large_step(&self) -> bool {
-        self.sampler.large_step
     }
 
     /// Keeps the proposed state. `acceptance` is the Metropolis-Hastings
@@ -476,11 +469,6 @@ impl Replay<'_> {
         ];
         self.cursor.oracle_stream(0);
         resolution.film_point(u)
-    }
-
-    /// Restarts at the oracle's stream 0, to trace the same state again.
-    pub fn restart(&mut self) {
-        self.cursor.oracle_stream(0);
     }
 }
 
@@ -748,29 +736,6 @@ mod tests {
             (mean_square - 1.0 / 12.0).abs() < 5.0 * sd,
             "E[d²] = {mean_square}, expected 1/12"
         );
-    }
-
-    #[test]
-    fn a_restarted_replay_reads_the_same_state_again() {
-        let mut s = MltSampler::new(SmallStep::default(), stream(7, Domain::User, 0));
-        let res = Resolution::new(8, 8);
-        let mut p = s.propose(true);
-        p.film_point(res);
-        let drawn = read_n(&mut p, 5);
-        p.accept(1.0);
-        let mut r = s.replay();
-        r.film_point(res);
-        assert_eq!(read_n(&mut r, 5), drawn);
-        r.restart();
-        assert_eq!(
-            read_n(&mut r, 7)[..5],
-            drawn[..],
-            "the same state, then two fresh coordinates"
-        );
-        r.restart();
-        let again = read_n(&mut r, 7);
-        assert_eq!(again[..5], drawn[..]);
-        assert!(again[5..].iter().all(|v| (0.0..1.0).contains(v)));
     }
 
     #[test]

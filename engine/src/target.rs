@@ -99,7 +99,11 @@ impl<R> SplatSink<R> for SplatList<R> {
 
 /// Whether a splat of `radiance` at `film` is one the engine accepts on a
 /// film of `resolution`: inside it, finite and non-negative.
-pub fn valid_splat<R: Radiance>(film: FilmPoint, radiance: &R, resolution: Resolution) -> bool {
+pub(crate) fn valid_splat<R: Radiance>(
+    film: FilmPoint,
+    radiance: &R,
+    resolution: Resolution,
+) -> bool {
     film.x >= 0.0
         && film.y >= 0.0
         && film.x < resolution.width as f32

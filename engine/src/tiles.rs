@@ -119,7 +119,7 @@ impl Tiles {
     }
 
     /// The offset at which tile `tile` contains pixel `pixel`, if it does.
-    pub fn offset_of(&self, tile: usize, pixel: usize) -> Option<usize> {
+    pub(crate) fn offset_of(&self, tile: usize, pixel: usize) -> Option<usize> {
         (0..self.offsets.len()).find(|&o| self.pixel(tile, o) == Some(pixel))
     }
 

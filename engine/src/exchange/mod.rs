@@ -214,7 +214,7 @@ impl<'a, S: Tempered> Exchange<'a, S> {
 
     /// Gives chain `i` the state of chain `o[i]`, for every `i` (`o` a
     /// permutation of `0..M`); each moved pair counts as an accepted exchange.
-    pub fn permute(&mut self, o: &[usize]) {
+    pub(crate) fn permute(&mut self, o: &[usize]) {
         debug_assert_eq!(o.len(), self.chains());
         for (i, &k) in o.iter().enumerate() {
             if k != i {
@@ -250,7 +250,7 @@ impl<'a, S: Tempered> Exchange<'a, S> {
     }
 
     /// Counts an equi-energy jump proposed to `chain`.
-    pub fn record_jump(&mut self, chain: usize, accepted: bool) {
+    pub(crate) fn record_jump(&mut self, chain: usize, accepted: bool) {
         self.stats.record_jump(chain, accepted);
     }
 }

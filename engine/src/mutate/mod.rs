@@ -208,7 +208,7 @@ pub fn unit_normals<R: Rng + ?Sized>(rng: &mut R) -> [f64; 2] {
     [r * cos, r * sin]
 }
 
-/// Offsets per [`OffsetBatch`].
+/// Offsets drawn ahead of use at a time, by every kernel (a batch).
 pub const BATCH_LEN: usize = 32;
 
 /// A batch of independent random offsets drawn ahead of use (`f32` for
@@ -219,7 +219,7 @@ pub const BATCH_LEN: usize = 32;
 /// from, so that a chain at rest (stratified MCMC's tile chains) can forget
 /// the offsets and draw them again.
 #[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct OffsetBatch<T = f64> {
+pub(crate) struct OffsetBatch<T = f64> {
     values: [T; BATCH_LEN],
     next: usize,
     /// The stream as it was before the last fill.
@@ -365,7 +365,7 @@ impl Adaptive {
 
 /// The running state of an adaptive kernel.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct AdaptiveState {
+pub(crate) struct AdaptiveState {
     theta: f64,
     small_steps: u64,
     acceptance_sum: f64,
@@ -390,7 +390,7 @@ impl AdaptiveState {
     /// `acceptance`. `A_i` is the running mean of the acceptance probabilities
     /// of all small steps so far (their expected value: a Rao-Blackwellized
     /// acceptance rate). `θ` stays in `[min_theta, 1]`.
-    pub fn update(&mut self, kernel: &Adaptive, acceptance: f64) {
+    pub(crate) fn update(&mut self, kernel: &Adaptive, acceptance: f64) {
         self.small_steps += 1;
         self.acceptance_sum += acceptance;
         let i = self.small_steps as f64;

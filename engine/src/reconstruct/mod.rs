@@ -62,7 +62,7 @@ pub(super) fn check_shapes(tiles: &Tiles, g: &[f64], mc: &[f64]) -> Result<(), E
 /// `channels` values per tile and offset). A tile whose chain never found a
 /// state with `T_s > 0` has none: its zeros are no estimate of its pixels,
 /// and eq. 12 and the weighted solver leave it out.
-pub fn informative(tiles: &Tiles, g: &[f64], channels: usize) -> Vec<bool> {
+pub(crate) fn informative(tiles: &Tiles, g: &[f64], channels: usize) -> Vec<bool> {
     let per_tile = tiles.offsets().len() * channels;
     g.chunks(per_tile)
         .map(|tile| tile.iter().any(|&v| v > 0.0))
@@ -70,7 +70,7 @@ pub fn informative(tiles: &Tiles, g: &[f64], channels: usize) -> Vec<bool> {
 }
 
 /// The image of eq. 12: every pixel the mean of its tiles' `b_s G_s(j)`,
-/// channel by channel, over the [`informative`] tiles holding it. `g` holds
+/// channel by channel, over the informative tiles holding it (those with some `G_s(k) > 0`). `g` holds
 /// `channels` values per tile and offset (`(s · offsets + o) · channels +
 /// c`); the result `channels` per pixel.
 pub fn image(tiles: &Tiles, g: &[f64], b: &[f64], channels: usize) -> Vec<f64> {

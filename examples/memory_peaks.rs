@@ -14,7 +14,7 @@ mod allocations;
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
-use strata::engine::RenderMethod;
+use strata::engine::{RenderMethod, RenderShape};
 
 use allocations::Tracking;
 use clap::Parser;
@@ -89,14 +89,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     budget: Budget::Samples(paths),
                     method: method.clone(),
                 };
-                let bound = method.memory_bound(
+                let bound = method.memory_bound(&RenderShape {
                     resolution,
                     channels,
-                    tracer.splats_per_path(),
-                    threads,
-                    settings.budget,
-                    Task::WHOLE,
-                );
+                    splats_per_path: tracer.splats_per_path(),
+                    workers: threads,
+                    budget: settings.budget,
+                    task: Task::WHOLE,
+                });
                 ALLOCATOR.leave_out(bound as usize);
                 ALLOCATOR.reset_peak();
                 let before = ALLOCATOR.live();

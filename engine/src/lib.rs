@@ -63,7 +63,7 @@ pub use checkpoint::Checkpoint;
 pub use drive::{Budget, Observer, Progress, RenderStats, SetUp, SetUpStage, Silent};
 pub use error::Error;
 pub use film::Film;
-pub use method::{Extras, Method, Output, RenderMethod, Settings, render, resume};
+pub use method::{Extras, Method, Output, RenderMethod, RenderShape, Settings, render, resume};
 pub use oracle::{
     DropSplats, FilmPoint, FnOracle, HELD_STREAM, PathFlags, PathOracle, PathSample, Radiance,
     Resolution, Rgb, Sampler, Splat, SplatSink, Temperature,

@@ -9,8 +9,8 @@ pub use crate::error::Error;
 pub use crate::film::Film;
 pub use crate::method::{
     ErptSettings, Extras, Method, MultiStageSettings, Output, PssmltSettings, RenderMethod,
-    ReplicaSettings, Settings, StratifiedSettings, Task, merge, part_of, render, render_task,
-    resume, resume_task,
+    RenderShape, ReplicaSettings, Settings, StratifiedSettings, Task, merge, part_of, render,
+    render_task, resume, resume_task,
 };
 pub use crate::oracle::{
     DropSplats, FilmPoint, FnOracle, PathFlags, PathOracle, PathSample, Radiance, Resolution, Rgb,

@@ -37,7 +37,7 @@ use std::process::ExitCode;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-use strata::engine::RenderMethod;
+use strata::engine::{RenderMethod, RenderShape};
 
 use clap::builder::PossibleValuesParser;
 use clap::{Parser, Subcommand, ValueEnum};
@@ -51,7 +51,7 @@ use strata::engine::mutate::SmallStep;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Checkpoint, Error, Extras, Film, Method, Observer, Output, PathOracle, Progress,
-    Radiance, Resolution, SetUp, SetUpStage, Settings, render, resume,
+    Resolution, SetUp, SetUpStage, Settings, render, resume,
 };
 use strata::native::{PathSampler, PathTracer, builtin, native_tracer};
 use strata::prelude::{PartFiles, Task, merge, part_of, render_task, resume_task};
@@ -444,14 +444,9 @@ fn read_checkpoint(path: &Path, most: u64) -> AnyResult<Vec<u8>> {
 /// 128x128: stratified MCMC's checkpoint is a fifth of its bound, the other
 /// methods' less).
 fn checkpoint_limit<O: PathOracle>(settings: &Settings, oracle: &O, task: Task) -> u64 {
-    let bound = settings.method.memory_bound(
-        oracle.resolution(),
-        O::Radiance::CHANNELS,
-        oracle.splats_per_path(),
-        rayon::current_num_threads(),
-        settings.budget,
-        task,
-    );
+    let bound = settings
+        .method
+        .memory_bound(&RenderShape::of(oracle, settings.budget, task));
     bound.saturating_mul(4).saturating_add(256 << 20)
 }
 

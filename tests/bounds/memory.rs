@@ -5,9 +5,9 @@
 //! bidirectional paths, at a preview budget and a longer one.
 
 use crate::ALLOCATOR;
-use strata::engine::RenderMethod;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
+use strata::engine::{RenderMethod, RenderShape};
 use strata::native::{PathSampler, builtin, native_tracer};
 use strata::prelude::Task;
 
@@ -39,14 +39,14 @@ fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
                     budget,
                     method: method.clone(),
                 };
-                let bound = method.memory_bound(
+                let bound = method.memory_bound(&RenderShape {
                     resolution,
-                    3,
-                    tracer.splats_per_path(),
-                    threads,
+                    channels: 3,
+                    splats_per_path: tracer.splats_per_path(),
+                    workers: threads,
                     budget,
-                    Task::WHOLE,
-                );
+                    task: Task::WHOLE,
+                });
                 let pool = rayon::ThreadPoolBuilder::new()
                     .num_threads(threads)
                     .build()

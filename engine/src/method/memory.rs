@@ -4,8 +4,42 @@
 
 use super::{Method, RenderMethod, erpt};
 use crate::drive::Budget;
-use crate::oracle::Resolution;
+use crate::oracle::{PathOracle, Radiance, Resolution};
+use crate::parallel;
 use crate::task::Task;
+
+/// What a render's memory depends on besides its method
+/// ([`RenderMethod::memory_bound`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderShape {
+    /// The film's size.
+    pub resolution: Resolution,
+    /// The radiance's channels ([`Radiance::CHANNELS`]).
+    pub channels: usize,
+    /// The oracle's splats a path ([`PathOracle::splats_per_path`]).
+    pub splats_per_path: f64,
+    /// The threads that render.
+    pub workers: usize,
+    /// The render's budget.
+    pub budget: Budget,
+    /// The task of a split render ([`Task::WHOLE`] for a whole one).
+    pub task: Task,
+}
+
+impl RenderShape {
+    /// The shape of a render of `oracle` with `budget`, for `task`, on the
+    /// current thread pool.
+    pub fn of<O: PathOracle>(oracle: &O, budget: Budget, task: Task) -> Self {
+        Self {
+            resolution: oracle.resolution(),
+            channels: O::Radiance::CHANNELS,
+            splats_per_path: oracle.splats_per_path(),
+            workers: parallel::threads(),
+            budget,
+            task,
+        }
+    }
+}
 
 /// The finished runs' sums a render of `runs` independent runs keeps
 /// besides the running one: a whole render's pooled as each ends (one), a
@@ -19,12 +53,10 @@ fn runs_kept(runs: u32, task: Task) -> u128 {
     }
 }
 
-/// The bytes a render of `resolution` with `method` holds at most:
+/// The bytes a render of `shape` with `method` holds at most:
 /// the reservation [`render`](super::render) makes before any work (a render that
 /// cannot have it is [`Error::AllocationFailed`](crate::error::Error::AllocationFailed), not an abort half
-/// way). `channels` are the radiance's, `splats_per_path` the oracle's
-/// ([`PathOracle::splats_per_path`](crate::oracle::PathOracle::splats_per_path)), `workers` the threads, `task` the
-/// task of a split render ([`Task::WHOLE`] for a whole one).
+/// way).
 ///
 /// Counted: the films (exact sums, [`ExactFilm`](crate::exact::ExactFilm), and the image; the
 /// emission seen directly's sums) and per-pixel counts; the sums of
@@ -40,16 +72,16 @@ fn runs_kept(runs: u32, task: Task) -> u128 {
 /// sizes were measured with the native tracer, unidirectional and
 /// bidirectional, by `examples/memory_peaks` (docs/BENCHMARKS.md), and
 /// `tests/bounds/memory.rs` checks the bound within 1.5x of the measured peak.
-pub(super) fn bound(
-    method: &Method,
-    resolution: Resolution,
-    channels: usize,
-    splats_per_path: f64,
-    workers: usize,
-    budget: Budget,
-    task: Task,
-) -> u64 {
+pub(super) fn bound(method: &Method, shape: &RenderShape) -> u64 {
     use sizes::*;
+    let RenderShape {
+        resolution,
+        channels,
+        splats_per_path,
+        workers,
+        budget,
+        task,
+    } = *shape;
     // In u128: a film of u32::MAX x u32::MAX pixels is still a number.
     let pixels = resolution.pixel_count() as u128;
     let film = 8 * channels as u128 * pixels;
@@ -142,12 +174,10 @@ pub(super) fn bound(
             };
             let stage = bound(
                 &Method::Pssmlt(pssmlt),
-                resolution,
-                channels,
-                splats_per_path,
-                workers as usize,
-                budget,
-                Task::WHOLE,
+                &RenderShape {
+                    task: Task::WHOLE,
+                    ..*shape
+                },
             );
             // The sums of the runs finished before the last: film,
             // deviations and visits.

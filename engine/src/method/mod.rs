@@ -41,6 +41,7 @@ pub use crate::setting::{Kind, Setting, Value};
 pub use crate::task::Task;
 pub use erpt::ErptSettings;
 pub use job::Job;
+pub use memory::RenderShape;
 pub use multistage::{MultiStageSettings, Probed, Stage, stage_grids};
 pub use noise_aware::tvi;
 pub use pssmlt::PssmltSettings;
@@ -58,7 +59,6 @@ use crate::emission::{EmissionApart, WithoutSeen};
 use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::{PathOracle, Radiance, Resolution};
-use crate::parallel;
 use crate::target::Importance;
 
 /// What to render and how: a built-in [`Method`], or a method of one's own
@@ -181,23 +181,11 @@ pub trait RenderMethod:
     /// What one unit of its work is (as [`Error::BudgetTooSmall`] names it).
     fn unit_of_work(&self) -> &'static str;
 
-    /// The bytes a render of `resolution` holds at most, reserved before
-    /// any work (a render that cannot have them is
-    /// [`Error::AllocationFailed`], not an abort half way): `channels` are
-    /// the radiance's, `splats_per_path` the oracle's, `workers` the
-    /// threads, `task` the task of a split render. By default the image
-    /// alone.
-    fn memory_bound(
-        &self,
-        resolution: Resolution,
-        channels: usize,
-        splats_per_path: f64,
-        workers: usize,
-        budget: Budget,
-        task: Task,
-    ) -> u64 {
-        let _ = (splats_per_path, workers, budget, task);
-        (8 * channels as u64).saturating_mul(resolution.pixel_count() as u64)
+    /// The bytes a render of `shape` holds at most, reserved before any
+    /// work (a render that cannot have them is [`Error::AllocationFailed`],
+    /// not an abort half way). By default the image alone.
+    fn memory_bound(&self, shape: &RenderShape) -> u64 {
+        (8 * shape.channels as u64).saturating_mul(shape.resolution.pixel_count() as u64)
     }
 
     /// Camera rays a path for the emission seen directly, estimated apart
@@ -260,24 +248,8 @@ impl RenderMethod for Method {
         }
     }
 
-    fn memory_bound(
-        &self,
-        resolution: Resolution,
-        channels: usize,
-        splats_per_path: f64,
-        workers: usize,
-        budget: Budget,
-        task: Task,
-    ) -> u64 {
-        memory::bound(
-            self,
-            resolution,
-            channels,
-            splats_per_path,
-            workers,
-            budget,
-            task,
-        )
+    fn memory_bound(&self, shape: &RenderShape) -> u64 {
+        memory::bound(self, shape)
     }
 
     /// Camera rays a path for the emission seen directly, estimated apart
@@ -582,14 +554,9 @@ where
         return Err(Error::EmptyResolution);
     }
     check_memory(
-        settings.method.memory_bound(
-            resolution,
-            O::Radiance::CHANNELS,
-            oracle.splats_per_path(),
-            parallel::threads(),
-            settings.budget,
-            task,
-        ),
+        settings
+            .method
+            .memory_bound(&RenderShape::of(oracle, settings.budget, task)),
         "render's films, chains and buffers (a bound for this method, film and budget)",
     )?;
     let samples = match settings.budget {

@@ -172,7 +172,7 @@ pub struct Initialization {
     /// And at most this fraction of the render's budget (samples or time;
     /// table setting `init_budget`). The main cost of a short render: a
     /// smaller share leaves more tiles to start-up bias (docs/RESULTS.md,
-    /// "At MC's 64 paths a pixel, equal time").
+    /// "Every channel, and against MC").
     pub max_budget_fraction: f64,
     /// Bootstrap candidates of the global chains (capped at half of the
     /// initialization budget).

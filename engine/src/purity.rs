@@ -38,6 +38,30 @@ pub struct PurityViolation<R> {
 /// sample's [`emission`](PathSample::emission), for `trials` random number
 /// streams derived from `seed`. An oracle that passes may still be impure
 /// elsewhere, but one that fails is certainly wrong.
+///
+/// ```
+/// use strata_engine::prelude::*;
+/// use std::sync::atomic::{AtomicU32, Ordering};
+///
+/// let film = FilmPoint { x: 0.5, y: 0.5 };
+/// let pure = FnOracle::new(
+///     Resolution::new(1, 1),
+///     |_: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<f32>| {
+///         PathSample::new(s.next_1d())
+///     },
+/// );
+/// assert!(check_purity(&pure, film, Temperature::ONE, 7, 16).is_ok());
+///
+/// // An oracle with a hidden counter gives another value for the same numbers.
+/// let calls = AtomicU32::new(0);
+/// let impure = FnOracle::new(
+///     Resolution::new(1, 1),
+///     |_: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<f32>| {
+///         PathSample::new(s.next_1d() + calls.fetch_add(1, Ordering::Relaxed) as f32)
+///     },
+/// );
+/// assert!(check_purity(&impure, film, Temperature::ONE, 7, 16).is_err());
+/// ```
 pub fn check_purity<O: PathOracle>(
     oracle: &O,
     film: FilmPoint,

@@ -7,7 +7,7 @@
 //! strata render cornell --method pssmlt --spp 64 --out out/cornell
 //! strata render procedural --method pssmlt --spp 64 --out out/procedural
 //! strata render caustic --method replica --exchange is-permutation --spp 64
-//! strata render cornell --method stratified --preset seed-001 --set tile_radius=1
+//! strata render cornell --method stratified --preset gruson2020 --set tile_radius=1
 //! strata settings stratified      # every setting: default, range, help
 //! strata render ../shared/scenes/veach-ajar/scene.pbrt --method stratified --time 30
 //! ```
@@ -163,7 +163,7 @@ struct Args {
     /// Image height.
     #[arg(long)]
     height: Option<u32>,
-    /// Start from a named preset of the method's settings (seed-001: the
+    /// Start from a named preset of the method's settings (gruson2020: the
     /// stratified-MCMC paper's step sizes and large-step probability, for
     /// stratified MCMC and ERPT); the flags below override it.
     #[arg(long, value_parser = PossibleValuesParser::new(Method::PRESETS))]
@@ -1226,7 +1226,7 @@ mod tests {
             "--method",
             "stratified",
             "--preset",
-            "seed-001",
+            "gruson2020",
             "--set",
             "solver=log",
             "--set",

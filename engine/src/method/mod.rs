@@ -357,6 +357,26 @@ impl Extras {
 /// (MCMC methods; MC ignores it). Checks every setting and the oracle's
 /// resolution before any work; the observer is called between rounds (and
 /// may take checkpoints: [`resume`] continues from one).
+///
+/// ```
+/// use strata_engine::prelude::*;
+///
+/// let oracle = FnOracle::new(
+///     Resolution::new(8, 8),
+///     |film: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<f32>| {
+///         PathSample::new(if s.next_1d() < 0.5 { film.x / 8.0 } else { 0.0 })
+///     },
+/// );
+/// let settings = Settings {
+///     seed: 1,
+///     budget: Budget::Samples(64 * 64),
+///     method: Method::Pssmlt(PssmltSettings::default()),
+/// };
+/// let out = render(&oracle, &MaxChannel, &settings, &Silent)?;
+/// // The left column is dark, the right one about half of 7/8.
+/// assert!(out.film.pixel(0, 4)[0] < out.film.pixel(7, 4)[0]);
+/// # Ok::<(), Error>(())
+/// ```
 pub fn render<O, I, M>(
     oracle: &O,
     importance: &I,
@@ -445,6 +465,40 @@ impl Checkpoint {
 /// `Error::CheckpointCorrupted`. The budget may differ: the same sample budget
 /// gives the bytes the uninterrupted render would have given, a larger one
 /// continues further, and a time budget counts from now.
+///
+/// ```
+/// use std::sync::Mutex;
+/// use strata_engine::prelude::*;
+///
+/// /// Saves the state after the first round and stops.
+/// struct StopAfterOneRound(Mutex<Option<Checkpoint>>);
+/// impl Observer for StopAfterOneRound {
+///     fn wants_checkpoint(&self) -> bool {
+///         true
+///     }
+///     fn checkpoint(&self, checkpoint: Checkpoint) {
+///         *self.0.lock().unwrap() = Some(checkpoint);
+///     }
+///     fn should_stop(&self) -> bool {
+///         self.0.lock().unwrap().is_some()
+///     }
+/// }
+///
+/// let oracle = FnOracle::new(
+///     Resolution::new(8, 8),
+///     |film: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<f32>| {
+///         PathSample::new(if s.next_1d() < 0.5 { film.x / 8.0 } else { 0.0 })
+///     },
+/// );
+/// let settings = Settings { seed: 1, budget: Budget::Samples(64 * 64), ..Settings::default() };
+/// let stop = StopAfterOneRound(Mutex::new(None));
+/// assert!(render(&oracle, &MaxChannel, &settings, &stop)?.cancelled);
+/// let saved = stop.0.into_inner().unwrap().expect("a checkpoint");
+/// let resumed = resume(&oracle, &MaxChannel, &settings, &saved, &Silent)?;
+/// // The bytes of the render never stopped.
+/// assert_eq!(resumed.film, render(&oracle, &MaxChannel, &settings, &Silent)?.film);
+/// # Ok::<(), Error>(())
+/// ```
 pub fn resume<O, I, M>(
     oracle: &O,
     importance: &I,

@@ -473,9 +473,9 @@ impl Method {
     }
 
     /// The names of the presets [`apply_preset`](Self::apply_preset) knows.
-    pub const PRESETS: [&'static str; 1] = ["seed-001"];
+    pub const PRESETS: [&'static str; 1] = ["gruson2020"];
 
-    /// Sets the values of a named preset: `seed-001`, the settings of
+    /// Sets the values of a named preset: `gruson2020`, the settings of
     /// Gruson et al. (2020), sec. 4 (Kelemen steps from 1/1024 to 1/32 for
     /// stratified MCMC and ERPT, the emission seen directly left to their
     /// chains; for stratified MCMC also large steps with probability 0.3,
@@ -484,17 +484,17 @@ impl Method {
     /// Methods the preset does not concern are left as they are.
     pub fn apply_preset(&mut self, name: &str) -> Result<(), Error> {
         let values: &[(&str, f64)] = match (name, &*self) {
-            ("seed-001", Method::Stratified(_)) => &[
+            ("gruson2020", Method::Stratified(_)) => &[
                 ("small_step_max", 1.0 / 32.0),
                 ("large_step_probability", 0.3),
                 ("cross_validate_alpha", 0.0),
                 ("emission_rays", 0.0),
                 ("init_coverage", 0.3),
             ],
-            ("seed-001", Method::Erpt(_)) => {
+            ("gruson2020", Method::Erpt(_)) => {
                 &[("small_step_max", 1.0 / 32.0), ("emission_rays", 0.0)]
             }
-            ("seed-001", _) => &[],
+            ("gruson2020", _) => &[],
             _ => {
                 return Err(Error::UnknownChoice {
                     name: "preset",
@@ -760,12 +760,12 @@ mod tests {
         ));
     }
 
-    /// The seed-001 preset gives the paper's step sizes (the constant
+    /// The gruson2020 preset gives the paper's step sizes (the constant
     /// `Kelemen::SEED_001`) and leaves other methods alone.
     #[test]
     fn the_seed_001_preset_is_the_papers() {
         let mut stratified = Method::from_name("stratified").unwrap();
-        stratified.apply_preset("seed-001").unwrap();
+        stratified.apply_preset("gruson2020").unwrap();
         let Method::Stratified(s) = &stratified else {
             unreachable!()
         };
@@ -775,10 +775,10 @@ mod tests {
         assert_eq!(s.emission_rays, 0);
         assert_eq!(s.initialization.coverage, 0.3);
         let mut erpt = Method::from_name("erpt").unwrap();
-        erpt.apply_preset("seed-001").unwrap();
+        erpt.apply_preset("gruson2020").unwrap();
         assert_eq!(erpt.get("emission_rays"), Some(Value::Number(0.0)));
         let mut pssmlt = Method::from_name("pssmlt").unwrap();
-        pssmlt.apply_preset("seed-001").unwrap();
+        pssmlt.apply_preset("gruson2020").unwrap();
         assert_eq!(pssmlt, Method::from_name("pssmlt").unwrap());
         assert!(pssmlt.apply_preset("no-such-preset").is_err());
     }

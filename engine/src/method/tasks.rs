@@ -148,6 +148,26 @@ pub fn part_of<P: PartStore + ?Sized>(parts: &P, part: usize) -> Result<(Setting
 /// [`Error::PartUnreadable`], [`Error::PartMismatch`],
 /// [`Error::PartUnfinished`], [`Error::TaskRepeated`] or
 /// [`Error::TasksMissing`], naming the part.
+///
+/// ```
+/// use strata_engine::prelude::*;
+///
+/// let oracle = FnOracle::new(
+///     Resolution::new(8, 8),
+///     |film: FilmPoint, s: &mut dyn Sampler, _: Temperature, _: &mut dyn SplatSink<f32>| {
+///         PathSample::new(if s.next_1d() < 0.5 { film.x / 8.0 } else { 0.0 })
+///     },
+/// );
+/// let settings = Settings { seed: 1, budget: Budget::Samples(64 * 64), ..Settings::default() };
+/// // Each task could run on a machine of its own.
+/// let parts = (0..2)
+///     .map(|index| render_task(&oracle, &MaxChannel, &settings, Task { index, count: 2 }, &Silent))
+///     .collect::<Result<Vec<_>, _>>()?;
+/// assert_eq!(part_of(&parts, 1)?.1, Task { index: 1, count: 2 });
+/// let merged = merge(&parts, false)?;
+/// assert_eq!(merged.film, render(&oracle, &MaxChannel, &settings, &Silent)?.film);
+/// # Ok::<(), Error>(())
+/// ```
 pub fn merge<P: PartStore + ?Sized>(parts: &P, subset: bool) -> Result<Output, Error> {
     let store: &dyn PartStore = &parts::Borrowed(parts);
     let mut head: Option<Header<Settings>> = None;

@@ -184,6 +184,7 @@ impl ExchangeKind {
 /// one variant per [`ExchangeKind`]; a value, so that a checkpoint can save
 /// it.
 #[derive(Clone, Debug, Serialize, Deserialize)]
+#[non_exhaustive]
 pub enum ExchangeMove<R> {
     /// [`ExchangeKind::None`].
     None(NoExchange),

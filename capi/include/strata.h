@@ -58,6 +58,30 @@ typedef struct StrataSampler StrataSampler;
 // A method with its settings, the seed, the budget and the thread count.
 typedef struct StrataSettings StrataSettings;
 
+// A small-step kernel written in C: the law of one coordinate's offset
+// in a Metropolis small step, given by its inverse distribution function.
+// Register it with `strata_register_kernel`, then pick it by its name
+// with `strata_settings_set_choice(settings, "small_step", name)` (PSSMLT,
+// replica exchange, stratified MCMC, ERPT, multi-stage MLT). Members
+// added later go at the end: zero them.
+typedef struct StrataKernel {
+  // Its name, unique among kernels (the built-ins' included); copied.
+  const char *name;
+  // Passed to the callbacks unchanged; must outlive every render that
+  // uses the kernel.
+  void *user;
+  // The offset for a uniform number `u` in `[0, 1)`: the law's inverse
+  // distribution function, which must be symmetric about zero
+  // (`offset(1 - u) = -offset(u)`), or the chain leaves its target; a
+  // finite value (the coordinate moved is wrapped onto `[0, 1)`). Called
+  // from several threads at once; must be a pure function of `u`.
+  // Required.
+  double (*offset)(void *user, double u);
+  // `P(|d| <= x)` for `x >= 0`, for exact transition matrices (tests of
+  // the engine's kernels); required.
+  double (*abs_cdf)(void *user, double x);
+} StrataKernel;
+
 // A path tracer written in C: the film's size and `trace`, which traces one
 // path through the film point (`x`, `y` in pixels), drawing every other
 // decision from `sampler`, at `temperature` (1 is the exact target; higher
@@ -145,6 +169,12 @@ typedef struct StrataStats {
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
+
+// Registers `kernel` under its name for the rest of the process (the
+// engine keeps a copy; at most 32 kernels of one's own). A null kernel,
+// name or callback, or a name a built-in or another kernel already has, is
+// `STRATA_STATUS_INVALID_ARGUMENT`.
+enum StrataStatus strata_register_kernel(const struct StrataKernel *kernel);
 
 // Renders `oracle` with `settings`, reporting to `observer` (may be null),
 // into a new film at `*film` (free it with [`strata_film_free`]).

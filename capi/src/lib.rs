@@ -20,6 +20,7 @@
 // functions so that C sees plain functions.
 #![allow(clippy::not_unsafe_ptr_arg_deref)]
 
+mod kernel;
 mod observer;
 mod oracle;
 mod render;
@@ -28,6 +29,7 @@ mod settings;
 mod status;
 mod tasks;
 
+pub use kernel::*;
 pub use observer::*;
 pub use oracle::*;
 pub use render::*;

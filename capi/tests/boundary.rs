@@ -968,8 +968,8 @@ fn a_c_kernel_renders_as_its_rust_twin() {
         );
         let mut method = Method::from_name(name.to_str().unwrap()).unwrap();
         match &mut method {
-            Method::Pssmlt(s) => s.mutation.small_step = twin.clone(),
-            Method::Stratified(s) => s.mutation.small_step = twin.clone(),
+            Method::Pssmlt(s) => s.mutation.small_step = twin,
+            Method::Stratified(s) => s.mutation.small_step = twin,
             _ => unreachable!(),
         }
         let rust = render(

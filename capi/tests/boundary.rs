@@ -819,14 +819,30 @@ impl strata_engine::PathOracle for Lamp {
     }
 }
 
+/// The film bits of `method` rendering `oracle` from Rust at `seed`, 16
+/// paths a pixel: what the C renders of these tests must give.
+fn rust_film_bits<O: strata_engine::PathOracle>(
+    oracle: &O,
+    method: strata_engine::Method,
+    seed: u64,
+) -> Vec<u64> {
+    use strata_engine::{Budget, Settings, Silent, render, target::MaxChannel};
+    let settings = Settings {
+        seed,
+        budget: Budget::samples_per_pixel(16, oracle.resolution()),
+        method,
+    };
+    let rust = render(oracle, &MaxChannel, &settings, &Silent).unwrap();
+    rust.film.data().iter().map(|v| v.to_bits()).collect()
+}
+
 /// A C oracle with an `emission` callback that tells the emission apart
 /// with `strata_sampler_emission` renders stratified MCMC and PSSMLT
 /// exactly as the same oracle in Rust; without the callback the chains
 /// keep the emission, and the film differs.
 #[test]
 fn a_c_oracle_tells_its_emission_apart() {
-    use strata_engine::target::MaxChannel;
-    use strata_engine::{Budget, Method, PathOracle, Settings, Silent, render};
+    use strata_engine::Method;
     // Stratified MCMC's own rays a sweep, and PSSMLT's a path.
     for method in [c"stratified", c"pssmlt"] {
         let settings = strata_settings_new(method.as_ptr());
@@ -845,18 +861,8 @@ fn a_c_oracle_tells_its_emission_apart() {
             strata_render(&oracle(lamp_trace), settings, null(), &mut kept),
             StrataStatus::Ok
         );
-        let rust = render(
-            &Lamp,
-            &MaxChannel,
-            &Settings {
-                seed: 3,
-                budget: Budget::samples_per_pixel(16, Lamp.resolution()),
-                method: Method::from_name(method.to_str().unwrap()).unwrap(),
-            },
-            &Silent,
-        )
-        .unwrap();
-        let rust_bits: Vec<u64> = rust.film.data().iter().map(|v| v.to_bits()).collect();
+        let named = Method::from_name(method.to_str().unwrap()).unwrap();
+        let rust_bits = rust_film_bits(&Lamp, named, 3);
         assert_eq!(film_bits(apart), rust_bits, "{method:?}");
         assert_ne!(film_bits(kept), rust_bits, "{method:?}");
         strata_film_free(apart);
@@ -905,9 +911,8 @@ impl strata_engine::mutate::Kernel for RustCauchy {
 /// built-in's name or a missing callback is refused.
 #[test]
 fn a_c_kernel_renders_as_its_rust_twin() {
+    use strata_engine::Method;
     use strata_engine::mutate::{Custom, SmallStep};
-    use strata_engine::target::MaxChannel;
-    use strata_engine::{Budget, Method, PathOracle, Settings, Silent, render};
     let kernel = StrataKernel {
         name: c"c-cauchy".as_ptr(),
         user: null_mut(),
@@ -972,18 +977,7 @@ fn a_c_kernel_renders_as_its_rust_twin() {
             Method::Stratified(s) => s.mutation.small_step = twin,
             _ => unreachable!(),
         }
-        let rust = render(
-            &LampKept,
-            &MaxChannel,
-            &Settings {
-                seed: 5,
-                budget: Budget::samples_per_pixel(16, LampKept.resolution()),
-                method,
-            },
-            &Silent,
-        )
-        .unwrap();
-        let rust_bits: Vec<u64> = rust.film.data().iter().map(|v| v.to_bits()).collect();
+        let rust_bits = rust_film_bits(&LampKept, method, 5);
         assert_eq!(film_bits(from_c), rust_bits, "{name:?}");
         assert_ne!(film_bits(default_kernel), rust_bits, "{name:?}");
         strata_film_free(from_c);

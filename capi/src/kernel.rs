@@ -75,6 +75,7 @@ pub extern "C" fn strata_register_kernel(kernel: *const StrataKernel) -> StrataS
             "a kernel needs a UTF-8 name, `offset` and `abs_cdf`",
         );
     };
+    // Checked before the copy is leaked (`Custom::new` refuses it too).
     if Custom::by_name(name).is_some() {
         return fail(
             StrataStatus::InvalidArgument,

@@ -295,11 +295,11 @@ impl<I: Intersector> PathTracer<I> {
         // Light tracing only makes splats: skipped when they are dropped.
         let first_t = if splats.wants_splats() { 1 } else { 2 };
         for t in first_t..=paths.camera.len() {
+            let pt = temper(&paths.camera[t - 1]);
             for s in 0..=paths.light.len() {
                 if !joinable(s, t, longest) || only.is_some_and(|o| o != (s, t)) {
                     continue;
                 }
-                let pt = temper(&paths.camera[t - 1]);
                 let qs = (s > 0).then(|| temper(&paths.light[s - 1]));
                 let Some((value, raster)) = self.connect(&paths, s, t, &pt, qs.as_ref(), &camera)
                 else {
@@ -472,11 +472,11 @@ impl<I: Intersector> PathTracer<I> {
             if ns.dot(ng) < 0.0 {
                 ns = -ns;
             }
-            let prev = *path.last().expect("a walk starts from a vertex");
             let mut vertex = Vertex::new(Kind::Surface, p, ng, beta, 0.0);
             vertex.frame = Frame::new(ns);
             vertex.bsdf = scene.materials[scene.material_of[tri] as usize].bsdf(uv);
             vertex.emitter = scene.light_of[tri];
+            let prev = path.last().expect("a walk starts from a vertex");
             vertex.pdf_fwd = prev.area_density(pdf, &vertex);
             path.push(vertex);
             if path.len() == longest {

@@ -79,6 +79,9 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         let mut tracer = native_tracer(builtin::by_name("caustic", RESOLUTION).expect("built in"));
         tracer.sampler = PathSampler::Multiplexed;
         render_all("caustic-multiplexed", &tracer, &args.out)?;
+        // Every strategy but light tracing: no splats.
+        tracer.sampler = PathSampler::BidirectionalNoSplats;
+        render_all("caustic-no-splats", &tracer, &args.out)?;
         Ok(())
     })
 }

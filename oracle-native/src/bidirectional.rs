@@ -258,7 +258,7 @@ impl<I: Intersector> PathTracer<I> {
         let camera = self.projection;
         let longest = scene.max_depth as usize + 2;
         let (only, scale) = match which {
-            Strategies::All => (None, 1.0),
+            Strategies::All | Strategies::AllButLightTracing => (None, 1.0),
             Strategies::One { light, camera } => (Some((light, camera)), 1.0),
             Strategies::Multiplexed => {
                 let (s, t, scale) = multiplexed_choice(sampler, &self.lengths, longest);
@@ -288,12 +288,19 @@ impl<I: Intersector> PathTracer<I> {
             Some((0, t)) if paths.camera.len() + 1 == t => paths.environment * scale,
             Some(_) => Vec3::ZERO,
         };
-        let mut seen = match (which, paths.camera.len()) {
-            (Strategies::All, 1) => paths.environment,
+        let every = matches!(which, Strategies::All | Strategies::AllButLightTracing);
+        let mut seen = match paths.camera.len() {
+            1 if every => paths.environment,
             _ => Vec3::ZERO,
         };
-        // Light tracing only makes splats: skipped when they are dropped.
-        let first_t = if splats.wants_splats() { 1 } else { 2 };
+        // Light tracing only makes splats: skipped when they are dropped
+        // (and weighted as if made) or left out.
+        let light_tracing = which != Strategies::AllButLightTracing;
+        let first_t = if light_tracing && splats.wants_splats() {
+            1
+        } else {
+            2
+        };
         for t in first_t..=paths.camera.len() {
             let pt = temper(&paths.camera[t - 1]);
             for s in 0..=paths.light.len() {
@@ -307,7 +314,14 @@ impl<I: Intersector> PathTracer<I> {
                 };
                 let weight = match which {
                     Strategies::One { .. } => 1.0,
-                    _ => mis_weight(scene, &camera, &paths, s, t, &pt, qs.as_ref()),
+                    _ => mis_weight(
+                        scene,
+                        &camera,
+                        &paths,
+                        (s, t),
+                        (&pt, qs.as_ref()),
+                        light_tracing,
+                    ),
                 };
                 let value = value * (weight * scale);
                 match raster {
@@ -317,7 +331,7 @@ impl<I: Intersector> PathTracer<I> {
                         }
                     }
                     None => {
-                        if (s, t) == (0, 2) && which == Strategies::All {
+                        if (s, t) == (0, 2) && every {
                             seen = value;
                         }
                         radiance += value
@@ -603,15 +617,15 @@ impl<I: Intersector> PathTracer<I> {
 
 /// The power-heuristic weight of strategy `(s, t)` (Veach 1997 eq. 10.9 with
 /// `beta = 2`, computed by pbrt's walk over density ratios), with the joined
-/// vertices `pt` and `qs` as connected.
+/// vertices `pt` and `qs` as connected, over every strategy, or every one
+/// but light tracing.
 fn mis_weight(
     scene: &Scene,
     camera: &Projection,
     paths: &Subpaths,
-    s: usize,
-    t: usize,
-    pt: &Vertex,
-    qs: Option<&Vertex>,
+    (s, t): (usize, usize),
+    (pt, qs): (&Vertex, Option<&Vertex>),
+    light_tracing: bool,
 ) -> f32 {
     if s + t == 2 {
         return 1.0;
@@ -632,7 +646,9 @@ fn mis_weight(
         (Some(qs), Some(m)) => qs.pdf(camera, Some(pt), m),
         _ => 0.0,
     };
-    let camera_side = ratio_sum(&paths.camera[..t], 1, pt_rev, pt_minus_rev, 0.0);
+    // The camera side's walk down to one camera vertex (light tracing), or two.
+    let fewest = if light_tracing { 1 } else { 2 };
+    let camera_side = ratio_sum(&paths.camera[..t], fewest, pt_rev, pt_minus_rev, 0.0);
     let sum = ratio_sum(&paths.light[..s], 0, qs_rev, qs_minus_rev, camera_side);
     1.0 / (1.0 + sum)
 }

@@ -9,6 +9,9 @@ use strata_engine::{HELD_STREAM, Sampler};
 pub(crate) enum Strategies {
     /// Every one, weighted by MIS.
     All,
+    /// Every one but light tracing (`t = 1`), weighted by MIS over them:
+    /// everything lands on the traced film point, nothing splats.
+    AllButLightTracing,
     /// `(light, camera)` alone, unweighted.
     One { light: usize, camera: usize },
     /// One chosen by the path's own numbers (Hachisuka et al. 2014): a path

@@ -61,6 +61,15 @@ pub enum PathSampler {
     /// Camera and light subpaths joined in every way
     /// ([`bidirectional`](crate::bidirectional)); light tracing splats.
     Bidirectional,
+    /// Camera and light subpaths joined in every way but light tracing,
+    /// weighted by MIS over those strategies: every contribution lands on
+    /// the traced film point, none splats. For stratified MCMC: Gruson et
+    /// al. 2020 (sec. 5) find their framework "compatible with BDPT, with
+    /// the exception of the light tracing technique", which cannot be
+    /// stratified in image space. Where light tracing is the only good
+    /// strategy (a caustic seen directly) these paths are as poor as
+    /// unidirectional ones there.
+    BidirectionalNoSplats,
     /// One bidirectional strategy per path, chosen by the path's own numbers:
     /// a path length (from the stream small steps hold, favouring short
     /// paths), then one of its strategies uniformly (stream 2); its
@@ -84,7 +93,12 @@ pub enum PathSampler {
 
 impl PathSampler {
     /// Every path sampler's name.
-    pub const NAMES: [&'static str; 3] = ["unidirectional", "bidirectional", "multiplexed"];
+    pub const NAMES: [&'static str; 4] = [
+        "unidirectional",
+        "bidirectional",
+        "multiplexed",
+        "bidirectional-no-splats",
+    ];
 
     /// Its name (a single strategy is "bidirectional").
     pub fn name(self) -> &'static str {
@@ -92,6 +106,7 @@ impl PathSampler {
             PathSampler::Unidirectional => Self::NAMES[0],
             PathSampler::Bidirectional | PathSampler::Strategy { .. } => Self::NAMES[1],
             PathSampler::Multiplexed => Self::NAMES[2],
+            PathSampler::BidirectionalNoSplats => Self::NAMES[3],
         }
     }
 
@@ -101,6 +116,7 @@ impl PathSampler {
             PathSampler::Unidirectional,
             PathSampler::Bidirectional,
             PathSampler::Multiplexed,
+            PathSampler::BidirectionalNoSplats,
         ]
         .into_iter()
         .find(|s| s.name() == name)
@@ -303,7 +319,7 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
     /// multiplexed path or a single strategy at most one.
     fn splats_per_path(&self) -> f64 {
         match self.sampler {
-            PathSampler::Unidirectional => 0.0,
+            PathSampler::Unidirectional | PathSampler::BidirectionalNoSplats => 0.0,
             PathSampler::Bidirectional => 3.0,
             PathSampler::Multiplexed => 1.0,
             PathSampler::Strategy { camera, .. } => f64::from(u8::from(camera == 1)),
@@ -318,13 +334,17 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
     fn separates_emission(&self) -> bool {
         matches!(
             self.sampler,
-            PathSampler::Unidirectional | PathSampler::Bidirectional
+            PathSampler::Unidirectional
+                | PathSampler::Bidirectional
+                | PathSampler::BidirectionalNoSplats
         )
     }
 
     fn emission<S: Sampler + ?Sized>(&self, film: FilmPoint, sampler: &mut S) -> Rgb {
         let seen = match self.sampler {
-            PathSampler::Bidirectional => self.seen_emission_bidirectional(film, sampler),
+            PathSampler::Bidirectional | PathSampler::BidirectionalNoSplats => {
+                self.seen_emission_bidirectional(film, sampler)
+            }
             _ => self.seen_emission(film),
         };
         Rgb(seen.to_array())
@@ -347,6 +367,7 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
                 };
             }
             PathSampler::Bidirectional => Strategies::All,
+            PathSampler::BidirectionalNoSplats => Strategies::AllButLightTracing,
             PathSampler::Multiplexed => Strategies::Multiplexed,
             PathSampler::Strategy { light, camera } => Strategies::One {
                 light: light as usize,

@@ -225,6 +225,8 @@ fn light_subpaths_through_glass_match_camera_subpaths() {
 /// scene (specular, glass, smooth normals, the environment) and the two real
 /// ones (12 seeds, 16x16; worst z 1.7-4.5 of 48 values per scene, limit
 /// 5.5). Dropping one strategy's weight, or any factor of one, breaks it.
+/// So does the combination of every strategy but light tracing (worst z
+/// 1.7-3.4); with light tracing left in the weights it fails at z 52.
 /// Multiplexed MLT (PSSMLT on multiplexed paths, 16 seeds) renders what
 /// bidirectional MC renders (worst z 1.7-3.2); leaving the length's
 /// probability out of the weight fails at z 77.
@@ -263,6 +265,14 @@ fn bidirectional_and_unidirectional_images_agree() {
         let bidirectional = render(PathSampler::Bidirectional, 32);
         let z = worst_z(&name, &unidirectional, &bidirectional, 5.5);
         eprintln!("{name}: worst z {z:.2}");
+        let no_splats = render(PathSampler::BidirectionalNoSplats, 32);
+        let z = worst_z(
+            &format!("{name}, no splats"),
+            &unidirectional,
+            &no_splats,
+            5.5,
+        );
+        eprintln!("{name}, no splats: worst z {z:.2}");
         // Multiplexed MLT: PSSMLT's chains on multiplexed paths.
         let mut tracer = native_tracer(scene.clone());
         tracer.sampler = PathSampler::Multiplexed;
@@ -292,9 +302,9 @@ fn bidirectional_and_unidirectional_images_agree() {
 /// The furnace: inside a closed box whose walls all emit `Le` and reflect
 /// diffusely with albedo `a`, the radiance everywhere is `Le Σ a^k` over
 /// the path lengths the tracer allows (`k <= max_depth`; `Le / (1 - a)`
-/// without a limit). Every method renders it on bidirectional and on
-/// multiplexed paths, whose light subpaths start on every wall and splat
-/// everywhere.
+/// without a limit). Every method renders it on bidirectional paths (with
+/// and without light tracing) and on multiplexed ones, whose light subpaths
+/// start on every wall and splat everywhere.
 #[test]
 fn every_method_renders_the_furnace_on_bidirectional_and_multiplexed_paths() {
     let (le, albedo, max_depth) = (1.0f32, 0.5f32, 4);
@@ -314,7 +324,11 @@ fn every_method_renders_the_furnace_on_bidirectional_and_multiplexed_paths() {
         .sum::<f64>();
     let reference =
         Film::from_data(resolution, 3, vec![exact; resolution.pixel_count() * 3]).unwrap();
-    for sampler in [PathSampler::Bidirectional, PathSampler::Multiplexed] {
+    for sampler in [
+        PathSampler::Bidirectional,
+        PathSampler::BidirectionalNoSplats,
+        PathSampler::Multiplexed,
+    ] {
         tracer.sampler = sampler;
         for method in small_methods() {
             let spp = if method.name() == "stratified" {

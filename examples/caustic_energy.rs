@@ -1,6 +1,7 @@
 //! Seed 001's faint-caustic failure (Gruson et al. 2020, Fig. 9: stratified
 //! MCMC loses the energy of caustics that its tile chains rarely find),
-//! measured on the caustic scene with unidirectional and bidirectional paths.
+//! measured on the caustic scene with unidirectional and bidirectional paths
+//! (with and without light tracing).
 //!
 //! The caustic's pixels are those where light tracing through the glass
 //! sphere (the strategy `(s, t) = (4, 1)`: light, sphere, sphere, floor, then
@@ -19,6 +20,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use clap::Parser;
+use clap::builder::PossibleValuesParser;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Film, Method, Resolution, Settings, Silent, render};
 use strata::native::{PathSampler, builtin, native_tracer};
@@ -40,6 +42,11 @@ struct Args {
     /// Output directory (holds the cached references).
     #[arg(long, default_value = "out/path_samplers/caustic")]
     out: PathBuf,
+    /// Path samplers.
+    #[arg(long, value_delimiter = ',',
+          default_value = "unidirectional,bidirectional,bidirectional-no-splats",
+          value_parser = PossibleValuesParser::new(PathSampler::NAMES))]
+    samplers: Vec<String>,
 }
 
 /// The sum of the luminance of `film` over the pixels of `mask`.
@@ -74,7 +81,8 @@ fn main() -> AnyResult<()> {
 
     let mut csv = std::fs::File::create(args.out.join("caustic_energy.csv"))?;
     writeln!(csv, "sampler,spp,seed,energy_kept")?;
-    for sampler in [PathSampler::Unidirectional, PathSampler::Bidirectional] {
+    for name in &args.samplers {
+        let sampler = PathSampler::from_name(name).expect("a path sampler's name");
         tracer.sampler = sampler;
         for &spp in &args.spp {
             let kept: Vec<f64> = (0..args.seeds)
@@ -95,7 +103,7 @@ fn main() -> AnyResult<()> {
             let mean = kept.iter().sum::<f64>() / n;
             let sd = (kept.iter().map(|k| (k - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
             println!(
-                "stratified, {:>14}, {spp:>4} spp: energy kept {mean:.3} (sd over seeds {sd:.3})",
+                "stratified, {:>23}, {spp:>4} spp: energy kept {mean:.3} (sd over seeds {sd:.3})",
                 sampler.name()
             );
         }

@@ -217,7 +217,7 @@ struct Subpaths {
 
 std::thread_local! {
     /// Each thread's subpaths, their room reused from path to path: up to
-    /// `max_depth + 2` vertices of ~150 bytes each, allocations too large
+    /// `max_depth + 2` vertices of ~130 bytes each, allocations too large
     /// for the allocator's per-thread cache (they took 7 % of a
     /// bidirectional path's time on the caustic scene).
     static ROOM: Cell<Subpaths> = Cell::default();

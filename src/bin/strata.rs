@@ -639,7 +639,8 @@ fn run(args: &Args) -> AnyResult<Ended> {
         warn!(
             "note: stratified MCMC estimates light tracing apart, by Monte Carlo over its large steps; \
              on --path-sampler bidirectional-no-splats (every strategy but light tracing) its tiles \
-             see all of their pixels' light: up to 5x lower relMSE measured (docs/RESULTS.md)"
+             see all of their pixels' light: up to 5x lower relMSE measured, though a caustic seen \
+             directly is then left to camera paths (docs/RESULTS.md)"
         );
     }
     let (rendered, reference) = pool.install(|| -> AnyResult<_> {

@@ -407,3 +407,46 @@ fn stratified_mcmc_on_bidirectional_paths_agrees_with_mc_on_the_caustic() {
         eprintln!("stratified on bidirectional paths, {spp} spp: worst z {z:.2}");
     }
 }
+
+/// Bidirectional paths without light tracing never splat, and report so
+/// (`splats_per_path` 0: the memory bound reserves nothing for them), on
+/// every built-in scene; full bidirectional paths splat on each one with an
+/// area light (all but the environment-lit plane).
+#[test]
+fn paths_without_light_tracing_never_splat() {
+    use strata::engine::rng::{Domain, stream};
+    use strata::engine::sample::IndependentSampler;
+    use strata::engine::{FilmPoint, Rgb, SplatSink, Temperature};
+
+    /// Counts the splats it is given.
+    struct Count(u64);
+    impl SplatSink<Rgb> for Count {
+        fn splat(&mut self, _film: FilmPoint, _radiance: Rgb) {
+            self.0 += 1;
+        }
+    }
+
+    let resolution = Resolution::new(16, 16);
+    for name in strata::native::builtin::NAMES {
+        let scene = by_name(name, resolution).unwrap();
+        let lit = !scene.lights.is_empty();
+        let mut tracer = native_tracer(scene);
+        let mut splats = |sampler| {
+            tracer.sampler = sampler;
+            let mut numbers = IndependentSampler::new(stream(7, Domain::User, 0));
+            let mut count = Count(0);
+            for i in 0..4096u32 {
+                let film = FilmPoint {
+                    x: (i % 16) as f32 + 0.5,
+                    y: (i / 16 % 16) as f32 + 0.5,
+                };
+                tracer.trace(film, &mut numbers, Temperature::ONE, &mut count);
+            }
+            (count.0, tracer.splats_per_path())
+        };
+        let (with, _) = splats(PathSampler::Bidirectional);
+        let (without, per_path) = splats(PathSampler::BidirectionalNoSplats);
+        assert_eq!(with > 0, lit, "{name}: {with} splats");
+        assert_eq!((without, per_path), (0, 0.0), "{name}");
+    }
+}

@@ -23,7 +23,7 @@ use clap::Parser;
 use clap::builder::PossibleValuesParser;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Film, Method, Resolution, Settings, Silent, render};
-use strata::native::{PathSampler, builtin, native_tracer};
+use strata::native::{PathSampler, native_tracer};
 
 use common::{AnyResult, cached_mc};
 
@@ -61,7 +61,7 @@ fn main() -> AnyResult<()> {
     let args = Args::parse();
     std::fs::create_dir_all(&args.out)?;
     let resolution = Resolution::new(args.size, args.size);
-    let scene = builtin::by_name("caustic", resolution).expect("a built-in scene");
+    let scene = common::scene("caustic", Some(args.size), Some(args.size), 96)?;
     let mut tracer = native_tracer(scene);
     tracer.sampler = PathSampler::Bidirectional;
     let reference = cached_mc(&tracer, "reference", 4096, 1000, &args.out)?;

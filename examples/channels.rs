@@ -33,10 +33,8 @@ use std::time::{Duration, Instant};
 use clap::Parser;
 use clap::builder::PossibleValuesParser;
 use strata::engine::target::MaxChannel;
-use strata::engine::{
-    Budget, Film, Method, PathOracle, Resolution, Settings, Silent, metrics, render,
-};
-use strata::native::{PathSampler, builtin, native_tracer, pbrt};
+use strata::engine::{Budget, Film, Method, PathOracle, Settings, Silent, metrics, render};
+use strata::native::{PathSampler, native_tracer};
 
 use common::{AnyResult, cached_mc};
 
@@ -115,19 +113,7 @@ fn main() -> AnyResult<()> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("out/channels").join(&args.scene));
     std::fs::create_dir_all(&dir)?;
-    let size = Resolution::new(args.width.unwrap_or(96), args.height.unwrap_or(96));
-    let scene = match builtin::by_name(&args.scene, size) {
-        Some(scene) => scene,
-        None => {
-            let mut scene = pbrt::load_shared(&args.scene)?.scene;
-            let own = scene.camera.resolution;
-            scene.camera.resolution = Resolution::new(
-                args.width.unwrap_or(own.width),
-                args.height.unwrap_or(own.height),
-            );
-            scene
-        }
-    };
+    let scene = common::scene(&args.scene, args.width, args.height, 96)?;
     let mut tracer = native_tracer(scene);
     tracer.sampler = PathSampler::from_name(&args.path_sampler).expect("a listed name");
     let r = tracer.resolution();

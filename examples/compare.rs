@@ -37,8 +37,8 @@ use strata::engine::method::Solver;
 use strata::engine::metrics::{self, ImageErrors};
 use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
-use strata::engine::{Budget, Film, Method, PathOracle, Resolution, Settings, Silent, render};
-use strata::native::{builtin, native_tracer, pbrt};
+use strata::engine::{Budget, Film, Method, PathOracle, Settings, Silent, render};
+use strata::native::native_tracer;
 
 use common::{AnyResult, cached_mc};
 use curves::Panel;
@@ -144,24 +144,7 @@ fn main() -> AnyResult<()> {
         println!("wrote {}", dir.join("error_vs_time.png").display());
         return Ok(());
     }
-    let scene = match builtin::by_name(
-        &args.scene,
-        Resolution::new(args.width.unwrap_or(128), args.height.unwrap_or(128)),
-    ) {
-        Some(scene) => scene,
-        None => {
-            let loaded = pbrt::load_shared(&args.scene)?;
-            let mut scene = loaded.scene;
-            let own = scene.camera.resolution;
-            if args.width.is_some() || args.height.is_some() {
-                scene.camera.resolution = Resolution::new(
-                    args.width.unwrap_or(own.width),
-                    args.height.unwrap_or(own.height),
-                );
-            }
-            scene
-        }
-    };
+    let scene = common::scene(&args.scene, args.width, args.height, 128)?;
     let tracer = native_tracer(scene);
     let resolution = tracer.resolution();
     std::fs::create_dir_all(&dir)?;

@@ -17,15 +17,15 @@ use std::time::Duration;
 use clap::Parser;
 use clap::builder::PossibleValuesParser;
 use strata::engine::target::MaxChannel;
-use strata::engine::{Budget, Film, Method, Resolution, Settings, Silent, render};
-use strata::native::{PathSampler, builtin, native_tracer};
+use strata::engine::{Budget, Film, Method, Settings, Silent, render};
+use strata::native::{PathSampler, native_tracer};
 
 use common::{AnyResult, cached_mc};
 
 /// A method with and without the emission seen directly apart.
 #[derive(Parser, Debug)]
 struct Args {
-    /// A built-in scene.
+    /// A built-in scene or a directory of $STRATA_SCENES (rendered at 96x96).
     #[arg(long, default_value = "cornell")]
     scene: String,
     /// The native tracer's path sampler.
@@ -53,8 +53,7 @@ fn mse(a: &Film, b: &Film) -> f64 {
 
 fn main() -> AnyResult<()> {
     let args = Args::parse();
-    let resolution = Resolution::new(96, 96);
-    let scene = builtin::by_name(&args.scene, resolution).ok_or("a built-in scene")?;
+    let scene = common::scene(&args.scene, Some(96), Some(96), 96)?;
     let mut tracer = native_tracer(scene);
     tracer.sampler = PathSampler::from_name(&args.path_sampler).expect("a listed name");
     let dir =

@@ -29,8 +29,8 @@ use clap::Parser;
 use clap::builder::PossibleValuesParser;
 use strata::engine::metrics;
 use strata::engine::target::MaxChannel;
-use strata::engine::{Budget, Method, Resolution, Settings, Silent, render};
-use strata::native::{PathSampler, builtin, native_tracer, pbrt};
+use strata::engine::{Budget, Method, Settings, Silent, render};
+use strata::native::{PathSampler, native_tracer};
 
 use common::{AnyResult, cached_mc};
 use curves::Panel;
@@ -102,15 +102,7 @@ fn main() -> AnyResult<()> {
         PathBuf::from("out/exchange_curves").join(format!("{}-{}", args.scene, args.path_sampler))
     });
     std::fs::create_dir_all(&dir)?;
-    let resolution = Resolution::new(args.width, args.height);
-    let scene = match builtin::by_name(&args.scene, resolution) {
-        Some(scene) => scene,
-        None => {
-            let mut scene = pbrt::load_shared(&args.scene)?.scene;
-            scene.camera.resolution = resolution;
-            scene
-        }
-    };
+    let scene = common::scene(&args.scene, Some(args.width), Some(args.height), 96)?;
     let mut tracer = native_tracer(scene);
     tracer.sampler = PathSampler::Bidirectional;
     let reference = cached_mc(&tracer, "reference", args.reference_spp, 1000, &dir)?;

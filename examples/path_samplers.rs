@@ -24,8 +24,8 @@ use clap::Parser;
 use clap::builder::PossibleValuesParser;
 use strata::engine::metrics;
 use strata::engine::target::MaxChannel;
-use strata::engine::{Budget, Method, Resolution, Settings, Silent, render};
-use strata::native::{PathSampler, builtin, native_tracer, pbrt};
+use strata::engine::{Budget, Method, Settings, Silent, render};
+use strata::native::{PathSampler, native_tracer};
 
 use common::{AnyResult, cached_mc};
 
@@ -81,15 +81,7 @@ fn main() -> AnyResult<()> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("out/path_samplers").join(&args.scene));
     std::fs::create_dir_all(&dir)?;
-    let resolution = Resolution::new(args.width, args.height);
-    let scene = match builtin::by_name(&args.scene, resolution) {
-        Some(scene) => scene,
-        None => {
-            let mut scene = pbrt::load_shared(&args.scene)?.scene;
-            scene.camera.resolution = resolution;
-            scene
-        }
-    };
+    let scene = common::scene(&args.scene, Some(args.width), Some(args.height), 96)?;
     let mut tracer = native_tracer(scene);
     tracer.sampler = PathSampler::Bidirectional;
     let reference = cached_mc(&tracer, "reference", args.reference_spp, 1000, &dir)?;

@@ -1,13 +1,32 @@
-//! What several examples share: the MC reference renders they cache.
+//! What several examples share: the scenes they load by name and the MC
+//! reference renders they cache.
 
 use std::path::Path;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Instant;
 
 use strata::engine::target::MaxChannel;
-use strata::engine::{Budget, Film, Method, Observer, PathOracle, Progress, Rgb, Settings, render};
+use strata::engine::{
+    Budget, Film, Method, Observer, PathOracle, Progress, Resolution, Rgb, Settings, render,
+};
+use strata::native::{Scene, builtin, pbrt};
 
 pub type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
+
+/// The scene called `name`: a built-in at `width` x `height` (`side` each
+/// unless given), or a directory of `$STRATA_SCENES` at its own resolution
+/// unless given.
+pub fn scene(name: &str, width: Option<u32>, height: Option<u32>, side: u32) -> AnyResult<Scene> {
+    let size = Resolution::new(width.unwrap_or(side), height.unwrap_or(side));
+    if let Some(scene) = builtin::by_name(name, size) {
+        return Ok(scene);
+    }
+    let mut scene = pbrt::load_shared(name)?.scene;
+    let own = scene.camera.resolution;
+    scene.camera.resolution =
+        Resolution::new(width.unwrap_or(own.width), height.unwrap_or(own.height));
+    Ok(scene)
+}
 
 /// An MC render of `spp` paths per pixel with `seed`, cached on disk as
 /// `NAME_WxH_SPP.exr` in `dir`.

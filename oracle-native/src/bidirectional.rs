@@ -245,7 +245,8 @@ impl<I: Intersector> PathTracer<I> {
     /// light-tracing contributions handed to `splats`, by the strategies
     /// `which`; its flags; and the part of the radiance its camera ray saw
     /// directly ([`seen_emission_bidirectional`](Self::seen_emission_bidirectional)), kept apart only
-    /// for [`Strategies::All`] (zero otherwise).
+    /// when every strategy of its length is joined ([`Strategies::All`],
+    /// [`Strategies::AllButLightTracing`]; zero otherwise).
     pub(crate) fn bidirectional<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,

@@ -1,5 +1,6 @@
 //! Which strategies of bidirectional path tracing a path joins: all of them
-//! (MIS-weighted), one alone, or one chosen by the path's own numbers
+//! or all but light tracing (MIS-weighted), one alone, or one chosen by the
+//! path's own numbers
 //! (multiplexed MLT, Hachisuka et al. 2014): the length table and the choice.
 
 use strata_engine::{HELD_STREAM, Sampler};

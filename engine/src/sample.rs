@@ -82,13 +82,17 @@ struct Stream {
 
 /// A primary sample at rest, in few bytes, for methods that keep a chain per
 /// pixel (stratified MCMC): the numbers its state read, every stream's in
-/// one allocation, its random stream and its kernel's running state (see
-/// [`MltSampler::pack`]). What a working sampler holds beside them (the
-/// proposal's numbers, a batch of offsets drawn ahead) is not kept.
+/// one allocation after the streams' lengths, its random stream and its
+/// kernel's running state (see [`MltSampler::pack`]). What a working sampler
+/// holds beside them (the proposal's numbers, a batch of offsets drawn
+/// ahead) is not kept.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) struct PackedSample {
-    values: alloc::boxed::Box<[f32]>,
-    lengths: [u32; STREAMS],
+    /// The lengths of the streams up to the last one read, then their
+    /// numbers (as `f32` bits).
+    words: alloc::boxed::Box<[u32]>,
+    /// How many lengths lead `words`.
+    streams: u8,
     rng: Pcg32,
     kernel: KernelState,
 }
@@ -97,21 +101,34 @@ impl PackedSample {
     /// An empty primary sample (nothing read) mutated by `small_step`,
     /// drawing from `rng`.
     pub(crate) fn new(small_step: SmallStep, rng: Pcg32) -> Self {
+        let mut kernel = KernelState::default();
+        Mutator::new(small_step).save(&mut kernel);
         Self {
-            values: Default::default(),
-            lengths: [0; STREAMS],
+            words: Default::default(),
+            streams: 0,
             rng,
-            kernel: Mutator::new(small_step).state(),
+            kernel,
         }
     }
 
-    /// Whether a sample read from a checkpoint is sound: its streams'
-    /// lengths add up to its numbers, each in `[0, 1)`, and its kernel
-    /// state is one of `small_step`'s kind.
+    /// The streams' lengths and their numbers.
+    fn split(&self) -> (&[u32], &[u32]) {
+        self.words
+            .split_at((self.streams as usize).min(self.words.len()))
+    }
+
+    /// Whether a sample read from a checkpoint is sound: at most
+    /// [`STREAMS`] streams whose lengths add up to its numbers, each in
+    /// `[0, 1)`, and a kernel state of `small_step`'s kind.
     pub(crate) fn fits(&self, small_step: &SmallStep) -> bool {
-        let total = self.lengths.iter().map(|&l| l as u64).sum::<u64>();
-        total == self.values.len() as u64
-            && self.values.iter().all(|v| (0.0..1.0).contains(v))
+        let (lengths, numbers) = self.split();
+        let total = lengths.iter().map(|&l| l as u64).sum::<u64>();
+        self.streams as usize <= STREAMS
+            && lengths.len() == self.streams as usize
+            && total == numbers.len() as u64
+            && numbers
+                .iter()
+                .all(|&v| (0.0..1.0).contains(&f32::from_bits(v)))
             && self.kernel.fits(small_step)
     }
 
@@ -204,31 +221,44 @@ impl MltSampler {
     /// Packs the primary sample at rest (outside a proposal) into `into`,
     /// reusing its room when the state read as many numbers as before.
     pub(crate) fn pack(&self, into: &mut PackedSample) {
-        let total = self.streams.iter().map(|s| s.state.len()).sum();
-        if into.values.len() != total {
-            into.values = alloc::vec![0.0; total].into_boxed_slice();
+        let streams = self
+            .streams
+            .iter()
+            .rposition(|s| !s.state.is_empty())
+            .map_or(0, |last| last + 1);
+        let numbers: usize = self.streams.iter().map(|s| s.state.len()).sum();
+        if into.words.len() != streams + numbers {
+            into.words = alloc::vec![0; streams + numbers].into_boxed_slice();
         }
-        let mut at = 0;
-        for (stream, length) in self.streams.iter().zip(&mut into.lengths) {
-            into.values[at..at + stream.state.len()].copy_from_slice(&stream.state);
-            at += stream.state.len();
+        into.streams = streams as u8;
+        let (lengths, mut rest) = into.words.split_at_mut(streams);
+        for (length, stream) in lengths.iter_mut().zip(&self.streams) {
+            // A state of 2^32 numbers would hold 16 GiB: the length fits.
             *length = stream.state.len() as u32;
         }
+        for stream in &self.streams {
+            let (these, after) = rest.split_at_mut(stream.state.len());
+            for (word, v) in these.iter_mut().zip(&stream.state) {
+                *word = v.to_bits();
+            }
+            rest = after;
+        }
         into.rng = self.rng.clone();
-        into.kernel = self.kernel.state();
+        self.kernel.save(&mut into.kernel);
     }
 
     /// Takes the primary sample `packed` holds (packed from a sampler with a
     /// kernel of the same kind, whose parameters this one keeps).
     pub(crate) fn unpack(&mut self, packed: &PackedSample) {
-        let mut at = 0;
-        for (stream, &length) in self.streams.iter_mut().zip(&packed.lengths) {
-            let length = length as usize;
+        let (lengths, mut numbers) = packed.split();
+        for (i, stream) in self.streams.iter_mut().enumerate() {
+            let length = lengths.get(i).map_or(0, |&l| l as usize);
+            let (these, rest) = numbers.split_at(length);
             stream.state.clear();
             stream
                 .state
-                .extend_from_slice(&packed.values[at..at + length]);
-            at += length;
+                .extend(these.iter().map(|&v| f32::from_bits(v)));
+            numbers = rest;
         }
         self.rng = packed.rng.clone();
         self.kernel.restore(&packed.kernel);
@@ -580,10 +610,13 @@ mod tests {
         assert!(packed.fits(&k));
         assert!(!packed.fits(&SmallStep::Adaptive(Adaptive::DEFAULT)));
         let mut long = packed.clone();
-        long.lengths[1] += 1;
+        long.words[0] += 1;
         assert!(!long.fits(&k));
+        let mut streams = packed.clone();
+        streams.streams = STREAMS as u8 + 1;
+        assert!(!streams.fits(&k));
         let mut outside = packed.clone();
-        outside.values[0] = 1.0;
+        outside.words[outside.streams as usize] = 1.0f32.to_bits();
         assert!(!outside.fits(&k));
     }
 

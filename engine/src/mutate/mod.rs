@@ -586,28 +586,38 @@ impl Mutator {
         }
     }
 
-    /// Its running state, to keep while the chain rests.
-    pub(crate) fn state(&self) -> KernelState {
-        match self {
-            Mutator::Kelemen(_, batch) => KernelState::Batch(batch.position()),
-            Mutator::Gaussian(_, batch) => KernelState::Batch(batch.position()),
-            Mutator::Adaptive { state, .. } => KernelState::Adaptive(*state),
-            Mutator::Custom(_) => KernelState::Stateless,
+    /// Saves its running state into `kept`, to keep while the chain rests
+    /// (an adaptive kernel's box is reused).
+    pub(crate) fn save(&self, kept: &mut KernelState) {
+        match (self, &mut *kept) {
+            (Mutator::Adaptive { state, .. }, KernelState::Adaptive(into)) => **into = *state,
+            (Mutator::Kelemen(_, batch), _) => {
+                let (source, next) = batch.position();
+                *kept = KernelState::Batch { source, next };
+            }
+            (Mutator::Gaussian(_, batch), _) => {
+                let (source, next) = batch.position();
+                *kept = KernelState::Batch { source, next };
+            }
+            (Mutator::Adaptive { state, .. }, _) => {
+                *kept = KernelState::Adaptive(alloc::boxed::Box::new(*state))
+            }
+            (Mutator::Custom(_), _) => *kept = KernelState::Stateless,
         }
     }
 
-    /// Back to a running state [`state`](Self::state) gave (of a kernel of
+    /// Back to a running state [`save`](Self::save) kept (of a kernel of
     /// the same kind; another kind's is ignored).
     pub(crate) fn restore(&mut self, kept: &KernelState) {
         match (self, kept) {
-            (Mutator::Kelemen(k, batch), KernelState::Batch(at)) => {
+            (Mutator::Kelemen(k, batch), KernelState::Batch { source, next }) => {
                 let k = *k;
-                batch.restore(at.clone(), |r, b| k.fill(r, b));
+                batch.restore((source.clone(), *next), |r, b| k.fill(r, b));
             }
-            (Mutator::Gaussian(_, batch), KernelState::Batch(at)) => {
-                batch.restore(at.clone(), fill_normals)
+            (Mutator::Gaussian(_, batch), KernelState::Batch { source, next }) => {
+                batch.restore((source.clone(), *next), fill_normals)
             }
-            (Mutator::Adaptive { state, .. }, KernelState::Adaptive(kept)) => *state = *kept,
+            (Mutator::Adaptive { state, .. }, KernelState::Adaptive(kept)) => *state = **kept,
             // Checked on reading a checkpoint (`KernelState::fits`).
             _ => {}
         }
@@ -618,10 +628,15 @@ impl Mutator {
 /// one per pixel): for the batched kernels, where the batch stands (its
 /// offsets are drawn again from its source when the chain wakes), for the
 /// adaptive kernel its `θ` and counters; nothing for a custom kernel.
+/// Its fields sit beside the tag (24 bytes); the adaptive kernel's rarer
+/// state is boxed.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) enum KernelState {
-    Batch((Pcg32, u8)),
-    Adaptive(AdaptiveState),
+    Batch {
+        source: Pcg32,
+        next: u8,
+    },
+    Adaptive(alloc::boxed::Box<AdaptiveState>),
     /// A kernel that draws each offset from the chain's stream.
     Stateless,
 }
@@ -632,7 +647,7 @@ impl KernelState {
         matches!(
             (self, small_step),
             (
-                KernelState::Batch(_),
+                KernelState::Batch { .. },
                 SmallStep::Kelemen(_) | SmallStep::Gaussian(_)
             ) | (KernelState::Adaptive(_), SmallStep::Adaptive(_))
                 | (KernelState::Stateless, SmallStep::Custom(_))
@@ -642,7 +657,10 @@ impl KernelState {
 
 impl Default for KernelState {
     fn default() -> Self {
-        KernelState::Batch((Pcg32::new(0, 0), BATCH_LEN as u8))
+        KernelState::Batch {
+            source: Pcg32::new(0, 0),
+            next: BATCH_LEN as u8,
+        }
     }
 }
 

@@ -63,7 +63,7 @@ where
         let (mut traces, mut invalid) = (0, 0);
         for (_, q) in self.ctx.tiles.pixels(tile) {
             let (v, bad) = self.ctx.trace_in(sampler, q, jitter, None);
-            target = target.max(v.importance);
+            target = target.max(v.importance.into());
             traces += 1;
             invalid += bad as u64;
         }

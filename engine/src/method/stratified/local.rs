@@ -60,7 +60,7 @@ where
             count.traces = traced_a.paths + traced_b.paths;
             count.invalid = traced_a.invalid + traced_b.invalid;
             count.attempts = 1;
-            let ratio = (tb * ta) / (a.target * b.target);
+            let ratio = (tb * ta) / (f64::from(a.target) * f64::from(b.target));
             if uniform_f64(&mut a.decisions) < ratio {
                 // The states change tiles; each tile keeps its random stream.
                 core::mem::swap(&mut a.sample, &mut b.sample);

@@ -11,7 +11,6 @@ use alloc::vec::Vec;
 
 use super::light::LightTracing;
 use super::regularizer::{Draws, Halves, LargeSteps, Samples, anchor_total, fall_back, take_known};
-use super::tile::TileChain;
 use super::{Solver, StratifiedSettings};
 #[cfg(feature = "std")]
 use crate::drive::Budget;
@@ -123,20 +122,19 @@ pub(super) fn reconstruct_image(
 
 /// Eq. 12 with the initial normalizations, channel by channel: a quick
 /// reconstruction for previews.
-pub(super) fn preview<R: Radiance>(
+pub(super) fn preview<S: Copy + Into<f64>, T: AsRef<[S]>>(
     tiles: &Tiles,
-    chains: &[TileChain<R>],
+    chains: impl Iterator<Item = (Draws, T)>,
     pooled: &Samples,
     settings: &StratifiedSettings,
     sweeps: u64,
     light: &LightTracing,
     emission: Option<&SeenEmission>,
 ) -> Film {
-    let channels = R::CHANNELS;
-    let draws: Vec<Draws> = chains.iter().map(|c| c.draws).collect();
+    let channels = pooled.channels();
+    let (draws, sums): (Vec<Draws>, Vec<T>) = chains.unzip();
     let (_, regularizer) = LargeSteps::gather(tiles, &draws, pooled);
-    let sums = chains.iter().map(|c| &c.unscaled);
-    let unscaled = unscaled(tiles, sums, channels, sweeps, &regularizer);
+    let unscaled = unscaled(tiles, sums.iter(), channels, sweeps, &regularizer);
     let mut film = Film::new(tiles.resolution(), channels);
     for c in 0..channels {
         let g = channel(&unscaled, channels, c);
@@ -237,7 +235,7 @@ impl ReconstructionTime {
 /// pixels to one weakly constrained tile. A tile black for the regularizer
 /// too stays without an estimate and is left out
 /// ([`reconstruct::informative`]).
-fn unscaled<T: AsRef<[f64]>>(
+fn unscaled<S: Copy + Into<f64>, T: AsRef<[S]>>(
     tiles: &Tiles,
     sums: impl IntoIterator<Item = T>,
     channels: usize,
@@ -249,7 +247,7 @@ fn unscaled<T: AsRef<[f64]>>(
     let mut g: Vec<f64> = Vec::with_capacity(tiles.count() * per_tile);
     // Each tile's sums are let go once read.
     for tile in sums {
-        g.extend(tile.as_ref().iter().map(|v| v / sweeps as f64));
+        g.extend(tile.as_ref().iter().map(|&v| v.into() / sweeps as f64));
     }
     for (s, tile) in g.chunks_mut(per_tile).enumerate() {
         if tile.iter().all(|&v| v == 0.0) {

@@ -65,9 +65,13 @@ impl Draws {
     /// the large ones, and every count below `2^48` (a render could not
     /// reach it; the pixels' sums over their tiles then cannot overflow).
     pub fn fits(&self) -> bool {
-        const MOST: u64 = 1 << 48;
-        self.odd_steps <= self.large_steps && self.large_steps < MOST && self.centre_paths < MOST
+        self.odd_steps <= self.large_steps
+            && self.large_steps < Self::MOST
+            && self.centre_paths < Self::MOST
     }
+
+    /// Above every count a render can reach.
+    pub const MOST: u64 = 1 << 48;
 
     /// Adds another run's counts of the same tile.
     pub fn add(&mut self, other: &Draws) {
@@ -109,6 +113,11 @@ impl Samples {
             sums: vec![0.0; pixels * (channels + 2)],
             channels,
         }
+    }
+
+    /// The channels summed.
+    pub fn channels(&self) -> usize {
+        self.channels
     }
 
     /// Whether sums read from a checkpoint fit `pixels` pixels of

@@ -93,6 +93,13 @@ where
         }
     }
 
+    /// The regularizer paths each tile traced at its centre (every tile the
+    /// same: a sweep's, then the remainder's).
+    fn centre_paths(&self) -> u64 {
+        let all = self.stats.regularizer_samples + self.stats.remainder_samples;
+        all / self.chains.len().max(1) as u64
+    }
+
     /// Traces `paths` regularizer paths at every tile's centre: the budget's
     /// remainder ([`Self::remainder`]).
     fn trace_remainder(&mut self, paths: u32) {
@@ -188,6 +195,7 @@ where
     /// What the run leaves for the pool: the tiles' sums and the
     /// counters, the chains' states let go (see [`SweptRun`]).
     pub(super) fn into_run(self, bootstrap_traces: u64) -> SweptRun {
+        let centre_paths = self.centre_paths();
         let mut stats = self.stats;
         let tiles = self
             .chains
@@ -199,7 +207,7 @@ where
                     Start::Borrowed => stats.initialized_by_borrowing += 1,
                     Start::Uniform => stats.initialized_by_uniform_draws += 1,
                 }
-                (c.draws, c.unscaled)
+                (c.draws(centre_paths), c.unscaled)
             })
             .collect();
         SweptRun {
@@ -500,9 +508,12 @@ where
     /// Eq. 12 with the initial normalizations, channel by channel (a quick
     /// reconstruction).
     fn preview(&self) -> Film {
+        let centre_paths = self.centre_paths();
         preview(
             self.ctx.tiles,
-            &self.chains,
+            self.chains
+                .iter()
+                .map(|c| (c.draws(centre_paths), &c.unscaled)),
             &self.samples,
             self.settings,
             self.stats.sweeps,

@@ -24,11 +24,13 @@ use crate::tiles::Tiles;
 
 use super::regularizer::{Draws, SampleRows};
 
-/// One tile pixel's evaluation of a state.
+/// One tile pixel's evaluation of a state. The importance is kept in `f32`
+/// (the built-in ones are `f32` values; a user's is rounded once, when it is
+/// traced, so the chain's target is the rounded one throughout).
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 pub(super) struct Value<R> {
     pub radiance: R,
-    pub importance: f64,
+    pub importance: f32,
 }
 
 /// A splat of a tile trace, with the pixel the trace went through.
@@ -110,12 +112,13 @@ pub(super) struct TileChain<R> {
     /// zero where the tile is clipped).
     pub values: Box<[Value<R>]>,
     /// `T_s` of the current state, the largest importance of its values.
-    pub target: f64,
+    pub target: f32,
     pub decisions: Pcg32,
     /// `N G_s(k)` per offset and channel.
     pub unscaled: Box<[f64]>,
-    /// Its uniform samples.
-    pub draws: Draws,
+    /// Its coin-chosen large steps (its uniform samples but the regularizer
+    /// paths, which every tile of a run traces alike).
+    pub large_steps: u64,
     /// Their sampler.
     mc: IndependentSampler,
     pub start: Start,
@@ -148,7 +151,7 @@ impl<R: Radiance> Waking<R> {
         let (sampler, state) = self.chain.parts_mut();
         sampler.unpack(&tile.sample);
         state.values.copy_from_slice(&tile.values);
-        state.target = tile.target;
+        state.target = tile.target.into();
     }
 
     /// Gives `tile` back its current state.
@@ -156,7 +159,8 @@ impl<R: Radiance> Waking<R> {
         self.chain.sampler().pack(&mut tile.sample);
         let state = self.chain.state();
         tile.values.copy_from_slice(&state.values);
-        tile.target = state.target;
+        // The largest of `f32` importances: exact.
+        tile.target = state.target as f32;
     }
 }
 
@@ -232,7 +236,8 @@ where
             ..Evaluated::default()
         };
         e.value(self.importance, resolution);
-        if e.invalid || sink.invalid || emission_invalid {
+        let importance = e.importance as f32;
+        if e.invalid || sink.invalid || emission_invalid || !importance.is_finite() {
             if let Some(keep) = sink.keep {
                 keep.truncate(kept);
             }
@@ -241,7 +246,7 @@ where
         (
             Value {
                 radiance: e.sample.radiance,
-                importance: e.importance,
+                importance,
             },
             false,
         )
@@ -267,7 +272,7 @@ where
         for (o, q) in self.tiles.pixels(tile) {
             let splats = keep_splats.then_some(&mut out.splats);
             let (v, bad) = self.trace_in(sampler, q, jitter, splats);
-            out.target = out.target.max(v.importance);
+            out.target = out.target.max(v.importance.into());
             out.values[o] = v;
             traced.paths += 1;
             traced.invalid += bad as u64;
@@ -359,7 +364,7 @@ impl<R: Radiance> TileChain<R> {
             target: 0.0,
             decisions: rng::stream(seed, Domain::Tile, (tile + tiles) as u64),
             unscaled: vec![0.0; offsets * R::CHANNELS].into_boxed_slice(),
-            draws: Draws::default(),
+            large_steps: 0,
             mc: IndependentSampler::new(rng::stream(seed, Domain::Tile, (tile + 2 * tiles) as u64)),
             start: Start::None,
             pending: false,
@@ -375,7 +380,7 @@ impl<R: Radiance> TileChain<R> {
             && self.unscaled.iter().all(|x| x.is_finite() && *x >= 0.0)
             && self.target.is_finite()
             && self.sample.fits(small_step)
-            && self.draws.fits()
+            && self.large_steps < Draws::MOST
     }
 
     /// One Metropolis-Hastings step on `T_s` with coherent sampling (eq. 10),
@@ -419,13 +424,12 @@ impl<R: Radiance> TileChain<R> {
         );
         if chosen {
             let proposed = work.chain.last_proposal();
-            let odd = self.draws.large_steps % 2 == 1;
+            let odd = self.large_steps % 2 == 1;
             for (o, q) in ctx.tiles.pixels(tile) {
                 row.samples.add(q, &proposed.values[o].radiance, odd);
             }
             row.splats.extend_from_slice(&proposed.splats);
-            self.draws.odd_steps += odd as u64;
-            self.draws.large_steps += 1;
+            self.large_steps += 1;
         }
         work.rest(self);
         if outcome.accepted && dark && self.target > 0.0 && self.start == Start::None {
@@ -459,7 +463,6 @@ impl<R: Radiance> TileChain<R> {
             invalid += bad as u64;
             row.samples.add(tile, &v.radiance, false);
         }
-        self.draws.centre_paths += paths as u64;
         (paths as u64, invalid)
     }
 
@@ -516,7 +519,7 @@ impl<R: Radiance> TileChain<R> {
                     v
                 }
             };
-            target = target.max(v.importance);
+            target = target.max(v.importance.into());
             out[o] = v;
         }
         // The replay may have drawn numbers the state had forgotten.
@@ -541,6 +544,18 @@ impl<R: Radiance> TileChain<R> {
     /// Sets the current state's tile values and target (evaluated elsewhere).
     pub fn set_state(&mut self, values: &[Value<R>], target: f64) {
         self.values.copy_from_slice(values);
-        self.target = target;
+        // The largest of `f32` importances: exact.
+        self.target = target as f32;
+    }
+
+    /// Its uniform samples' counts, given the regularizer paths each tile of
+    /// the run traced.
+    pub fn draws(&self, centre_paths: u64) -> Draws {
+        Draws {
+            large_steps: self.large_steps,
+            // The odd-numbered ones, the first being number 0.
+            odd_steps: self.large_steps / 2,
+            centre_paths,
+        }
     }
 }

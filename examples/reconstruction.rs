@@ -129,7 +129,8 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     let per_channel = |b_of: &BOf| {
         let mut data = vec![0.0; tiles.count() * 3];
         for c in 0..3 {
-            let g = channel(&out.unscaled, c);
+            let unscaled: Vec<f64> = out.unscaled.iter().map(|&v| v.into()).collect();
+            let g = channel(&unscaled, c);
             let b = b_of(
                 &g,
                 &channel(out.regularizer.data(), c),

@@ -30,6 +30,19 @@ impl Pcg32 {
         pcg
     }
 
+    /// Where it stands in its stream (its state).
+    pub(crate) fn position(&self) -> u64 {
+        self.state
+    }
+
+    /// Its stream at `position` (a state [`position`](Self::position) gave).
+    pub(crate) fn at(&self, position: u64) -> Pcg32 {
+        Pcg32 {
+            state: position,
+            increment: self.increment,
+        }
+    }
+
     #[inline]
     fn step(&mut self) {
         self.state = self

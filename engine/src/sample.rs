@@ -57,6 +57,11 @@ impl IndependentSampler {
     pub fn new(rng: Pcg32) -> Self {
         Self { rng }
     }
+
+    /// Its random stream, for draws of the caller's own.
+    pub(crate) fn rng(&mut self) -> &mut Pcg32 {
+        &mut self.rng
+    }
 }
 
 impl Sampler for IndependentSampler {
@@ -82,17 +87,17 @@ struct Stream {
 
 /// A primary sample at rest, in few bytes, for methods that keep a chain per
 /// pixel (stratified MCMC): the numbers its state read, every stream's in
-/// one allocation after the streams' lengths, its random stream and its
-/// kernel's running state (see [`MltSampler::pack`]). What a working sampler
-/// holds beside them (the proposal's numbers, a batch of offsets drawn
-/// ahead) is not kept.
+/// one allocation after the streams' lengths, in 24 bits each (a sampler
+/// made [`on_grid`](MltSampler::on_grid) keeps them on that grid), its
+/// random stream and its kernel's running state (see
+/// [`MltSampler::pack`]). What a working sampler holds beside them (the
+/// proposal's numbers, a batch of offsets drawn ahead) is not kept.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) struct PackedSample {
-    /// The lengths of the streams up to the last one read, then their
-    /// numbers (as `f32` bits).
-    words: alloc::boxed::Box<[u32]>,
-    /// How many lengths lead `words`.
-    streams: u8,
+    /// How many streams it holds (up to the last one read; one byte), their
+    /// lengths (4 bytes each), then their numbers (3 bytes each: `k` for
+    /// `k / 2^24`), little-endian; empty for a sample that read nothing.
+    bytes: alloc::boxed::Box<[u8]>,
     rng: Pcg32,
     kernel: KernelState,
 }
@@ -104,40 +109,50 @@ impl PackedSample {
         let mut kernel = KernelState::default();
         Mutator::new(small_step).save(&mut kernel);
         Self {
-            words: Default::default(),
-            streams: 0,
+            bytes: Default::default(),
             rng,
             kernel,
         }
     }
 
-    /// The streams' lengths and their numbers.
-    fn split(&self) -> (&[u32], &[u32]) {
-        self.words
-            .split_at((self.streams as usize).min(self.words.len()))
+    /// The streams' lengths and the bytes of their numbers.
+    fn split(&self) -> (impl Iterator<Item = usize> + '_, &[u8]) {
+        let (streams, rest) = self.bytes.split_first().unwrap_or((&0, &[]));
+        let (lengths, numbers) = rest.split_at((4 * *streams as usize).min(rest.len()));
+        let lengths = lengths
+            .chunks_exact(4)
+            .map(|l| u32::from_le_bytes([l[0], l[1], l[2], l[3]]) as usize);
+        (lengths, numbers)
     }
 
-    /// Whether a sample read from a checkpoint is sound: at most
-    /// [`STREAMS`] streams whose lengths add up to its numbers, each in
-    /// `[0, 1)`, and a kernel state of `small_step`'s kind.
+    /// Whether a sample read from a checkpoint is sound: from 1 to
+    /// [`STREAMS`] streams, the last one read, whose lengths add up to its
+    /// numbers (or nothing at all), and a kernel state of `small_step`'s
+    /// kind.
     pub(crate) fn fits(&self, small_step: &SmallStep) -> bool {
         let (lengths, numbers) = self.split();
+        let lengths: Vec<usize> = lengths.collect();
         let total = lengths.iter().map(|&l| l as u64).sum::<u64>();
-        self.streams as usize <= STREAMS
-            && lengths.len() == self.streams as usize
-            && total == numbers.len() as u64
-            && numbers
-                .iter()
-                .all(|&v| (0.0..1.0).contains(&f32::from_bits(v)))
-            && self.kernel.fits(small_step)
+        let sound = match self.bytes.first() {
+            None => true,
+            Some(&streams) => {
+                (1..=STREAMS).contains(&(streams as usize))
+                    && lengths.len() == streams as usize
+                    && lengths.last() > Some(&0)
+                    && 3 * total == numbers.len() as u64
+            }
+        };
+        sound && self.kernel.fits(small_step)
     }
 
-    /// Gives `self` the random stream of `other` and `other` that of
-    /// `self`. Exchanging two states between chains (state borrowing in
-    /// stratified MCMC) swaps the samples, then swaps their streams back so
-    /// each chain keeps its own.
-    pub(crate) fn swap_rng(&mut self, other: &mut PackedSample) {
+    /// Gives `self` the random stream and kernel state of `other` and
+    /// `other` those of `self`. Exchanging two states between chains (state
+    /// borrowing in stratified MCMC) swaps the samples, then swaps these
+    /// back so each chain keeps its own (its kernel's batch is drawn from
+    /// its stream).
+    pub(crate) fn swap_own(&mut self, other: &mut PackedSample) {
         core::mem::swap(&mut self.rng, &mut other.rng);
+        core::mem::swap(&mut self.kernel, &mut other.kernel);
     }
 }
 
@@ -164,6 +179,9 @@ pub struct MltSampler {
     /// values were moved, or drawn, but not read).
     #[serde(skip)]
     read: [u32; STREAMS],
+    /// Whether its numbers stay on the grid of `2^-24` ([`Self::on_grid`]).
+    #[serde(skip)]
+    on_grid: bool,
 }
 
 impl MltSampler {
@@ -176,6 +194,7 @@ impl MltSampler {
             large_step: true,
             streams: Default::default(),
             read: [0; STREAMS],
+            on_grid: false,
         }
     }
 
@@ -186,6 +205,7 @@ impl MltSampler {
         let streams = core::mem::take(&mut self.streams);
         *self = Self {
             streams,
+            on_grid: self.on_grid,
             ..Self::new(self.kernel.small_step(), rng)
         };
         for stream in &mut self.streams {
@@ -227,21 +247,28 @@ impl MltSampler {
             .rposition(|s| !s.state.is_empty())
             .map_or(0, |last| last + 1);
         let numbers: usize = self.streams.iter().map(|s| s.state.len()).sum();
-        if into.words.len() != streams + numbers {
-            into.words = alloc::vec![0; streams + numbers].into_boxed_slice();
+        let size = if streams > 0 {
+            1 + 4 * streams + 3 * numbers
+        } else {
+            0
+        };
+        if into.bytes.len() != size {
+            into.bytes = alloc::vec![0; size].into_boxed_slice();
         }
-        into.streams = streams as u8;
-        let (lengths, mut rest) = into.words.split_at_mut(streams);
-        for (length, stream) in lengths.iter_mut().zip(&self.streams) {
-            // A state of 2^32 numbers would hold 16 GiB: the length fits.
-            *length = stream.state.len() as u32;
-        }
-        for stream in &self.streams {
-            let (these, after) = rest.split_at_mut(stream.state.len());
-            for (word, v) in these.iter_mut().zip(&stream.state) {
-                *word = v.to_bits();
+        if let Some((count, rest)) = into.bytes.split_first_mut() {
+            *count = streams as u8;
+            let (lengths, mut rest) = rest.split_at_mut(4 * streams);
+            for (length, stream) in lengths.chunks_exact_mut(4).zip(&self.streams) {
+                // A state of 2^32 numbers would hold 16 GiB: the length fits.
+                length.copy_from_slice(&(stream.state.len() as u32).to_le_bytes());
             }
-            rest = after;
+            for stream in &self.streams {
+                let (these, after) = rest.split_at_mut(3 * stream.state.len());
+                for (bytes, &v) in these.chunks_exact_mut(3).zip(&stream.state) {
+                    bytes.copy_from_slice(&grid_index(v).to_le_bytes()[..3]);
+                }
+                rest = after;
+            }
         }
         into.rng = self.rng.clone();
         self.kernel.save(&mut into.kernel);
@@ -250,19 +277,32 @@ impl MltSampler {
     /// Takes the primary sample `packed` holds (packed from a sampler with a
     /// kernel of the same kind, whose parameters this one keeps).
     pub(crate) fn unpack(&mut self, packed: &PackedSample) {
-        let (lengths, mut numbers) = packed.split();
-        for (i, stream) in self.streams.iter_mut().enumerate() {
-            let length = lengths.get(i).map_or(0, |&l| l as usize);
-            let (these, rest) = numbers.split_at(length);
+        let (mut lengths, mut numbers) = packed.split();
+        for stream in &mut self.streams {
+            let length = lengths.next().unwrap_or(0);
+            let (these, rest) = numbers.split_at(3 * length);
             stream.state.clear();
-            stream
-                .state
-                .extend(these.iter().map(|&v| f32::from_bits(v)));
+            stream.state.extend(
+                these
+                    .chunks_exact(3)
+                    .map(|b| u32::from_le_bytes([b[0], b[1], b[2], 0]) as f32 * GRID),
+            );
             numbers = rest;
         }
         self.rng = packed.rng.clone();
-        self.kernel.restore(&packed.kernel);
+        self.kernel.restore(&packed.kernel, &packed.rng);
         self.large_step = false;
+    }
+
+    /// The sampler, keeping every number it proposes on the grid of
+    /// [`uniform_f32`] (multiples of `2^-24`), the numbers a
+    /// [`PackedSample`] holds exactly: a small step's result is rounded to
+    /// the nearest (modulo 1). Rounding to the nearest keeps a symmetric
+    /// kernel symmetric (the cells are centred on the grid's points), so the
+    /// chain stays exact; fresh numbers are on the grid already.
+    pub(crate) fn on_grid(mut self) -> Self {
+        self.on_grid = true;
+        self
     }
 
     /// Opens a proposal: a large step (fresh uniform sample) if `large`, a
@@ -280,6 +320,11 @@ impl MltSampler {
                 stream.proposal.extend_from_slice(&stream.state);
                 if i != HELD {
                     self.kernel.step_all(&mut stream.proposal, &mut self.rng);
+                    if self.on_grid {
+                        for v in &mut stream.proposal {
+                            *v = nearest_on_grid(*v);
+                        }
+                    }
                 }
             }
         }
@@ -350,6 +395,25 @@ fn value_or_draw(values: &mut Vec<f32>, index: usize, rng: &mut Pcg32) -> f32 {
     let value = uniform_f32(rng);
     values.push(value);
     value
+}
+
+/// The spacing of [`uniform_f32`]'s numbers.
+const GRID: f32 = 1.0 / (1u32 << 24) as f32;
+
+/// `v`'s numerator on the grid: `v / 2^24` for `v` in `[0, 1)` on it
+/// (exact); rounded down for any other `v` in `[0, 1)`.
+#[inline]
+fn grid_index(v: f32) -> u32 {
+    (v / GRID) as u32
+}
+
+/// The multiple of [`GRID`] nearest to `v` in `[0, 1)`, modulo 1: each
+/// point of the grid takes the numbers within half a step of it.
+#[inline]
+fn nearest_on_grid(v: f32) -> f32 {
+    // Exact in `f64`; `as` saturates anything out of range.
+    let k = (f64::from(v) * f64::from(1u32 << 24) + 0.5) as u32;
+    (k & ((1 << 24) - 1)) as f32 * GRID
 }
 
 /// The largest f32 below 1.
@@ -574,7 +638,7 @@ mod tests {
         for k in kernels() {
             // Two chains woken in turn in one sampler, as a task's tiles are.
             let mut awake: Vec<MltSampler> = (0..2)
-                .map(|c| MltSampler::new(k, stream(2, Domain::User, c)))
+                .map(|c| MltSampler::new(k, stream(2, Domain::User, c)).on_grid())
                 .collect();
             let mut packed: Vec<PackedSample> = awake
                 .iter()
@@ -584,11 +648,14 @@ mod tests {
                     p
                 })
                 .collect();
-            let mut woken = MltSampler::new(k, stream(7, Domain::User, 7));
+            let mut woken = MltSampler::new(k, stream(7, Domain::User, 7)).on_grid();
             for i in 0..60 {
                 for (a, p) in awake.iter_mut().zip(&mut packed) {
                     woken.unpack(p);
-                    assert_eq!(step(a, i), step(&mut woken, i), "{k:?}, step {i}");
+                    let read = step(a, i);
+                    assert_eq!(read, step(&mut woken, i), "{k:?}, step {i}");
+                    let on_grid = |&v: &f32| nearest_on_grid(v) == v;
+                    assert!(read.iter().all(on_grid), "{k:?}, step {i}: {read:?}");
                     woken.pack(p);
                 }
             }
@@ -597,7 +664,7 @@ mod tests {
     }
 
     /// A packed sample read from a checkpoint is checked: lengths that do not
-    /// add up, numbers outside `[0, 1)`, another kernel's state.
+    /// add up, too many streams, another kernel's state.
     #[test]
     fn unsound_packed_samples_do_not_fit() {
         let k = SmallStep::Kelemen(Kelemen::DEFAULT);
@@ -610,14 +677,11 @@ mod tests {
         assert!(packed.fits(&k));
         assert!(!packed.fits(&SmallStep::Adaptive(Adaptive::DEFAULT)));
         let mut long = packed.clone();
-        long.words[0] += 1;
+        long.bytes[1] += 1;
         assert!(!long.fits(&k));
         let mut streams = packed.clone();
-        streams.streams = STREAMS as u8 + 1;
+        streams.bytes[0] = STREAMS as u8 + 1;
         assert!(!streams.fits(&k));
-        let mut outside = packed.clone();
-        outside.words[outside.streams as usize] = 1.0f32.to_bits();
-        assert!(!outside.fits(&k));
     }
 
     /// A restarted sampler draws what a new one on the same stream draws.

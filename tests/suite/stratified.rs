@@ -125,7 +125,7 @@ impl Checker {
 fn unscaled_estimates_have_the_pixel_ratios() {
     let checker = Checker::oracle();
     let tiles = Tiles::new(checker.resolution(), TileShape::Cross).unwrap();
-    let runs: Vec<Vec<f64>> = (0..16)
+    let runs: Vec<Vec<f32>> = (0..16)
         .map(|seed| {
             let settings = Settings {
                 seed,
@@ -140,7 +140,10 @@ fn unscaled_estimates_have_the_pixel_ratios() {
     for s in [6, 7, 8, 11, 12, 13, 16, 17, 18] {
         for (o, j) in tiles.pixels(s).skip(1) {
             let exact = Checker::value(j) / Checker::value(s);
-            let ratios: Vec<f64> = runs.iter().map(|g| g[s * 5 + o] / g[s * 5]).collect();
+            let ratios: Vec<f64> = runs
+                .iter()
+                .map(|g| f64::from(g[s * 5 + o]) / f64::from(g[s * 5]))
+                .collect();
             let n = ratios.len() as f64;
             let mean = ratios.iter().sum::<f64>() / n;
             let var = ratios.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1.0);
@@ -600,9 +603,13 @@ fn tiles_without_light_stand_for_their_monte_carlo_estimate() {
     let standing_in = (0..tiles.count())
         .filter(|&s| {
             let g = &extras.unscaled[s * per_tile..(s + 1) * per_tile];
-            tiles
-                .pixels(s)
-                .all(|(o, j)| g[o * 3..o * 3 + 3] == regularizer[j * 3..j * 3 + 3])
+            tiles.pixels(s).all(|(o, j)| {
+                let mc = &regularizer[j * 3..j * 3 + 3];
+                g[o * 3..o * 3 + 3]
+                    .iter()
+                    .zip(mc)
+                    .all(|(&g, &mc)| g == mc as f32)
+            })
         })
         .count();
     // Tiles that got a state only at the last exchange have no estimate

@@ -143,7 +143,7 @@ pub(super) fn bound(method: &Method, shape: &RenderShape) -> u64 {
             // The sums of the runs finished before the last (each
             // tile's `N G_s(k)` and draws, the uniform samples' sums,
             // its light tracing and emission), kept to be pooled.
-            let run = pixels * (8 * tile * channels as u128 + 24 + 8 * (channels as u128 + 2))
+            let run = pixels * (4 * tile * channels as u128 + 24 + 8 * (channels as u128 + 2))
                 + light
                 + emission;
             counted
@@ -203,14 +203,13 @@ mod sizes {
     /// A chain's state: its primary sample (values and proposal, per
     /// stream) and its path with splats.
     pub const CHAIN: u128 = 4096;
-    /// A tile chain of stratified MCMC at rest (200 bytes, and its primary
-    /// sample's numbers, ~30 on the Cornell box), the pixel's uniform
-    /// samples (40 bytes), and what the reconstruction takes of the chains
-    /// as it lets them go (fitted to the measured peak).
-    pub const TILE_CHAIN: u128 = 328;
-    /// Per pixel of its tile: the state's value there and the tile's
-    /// `G_s(k)`.
-    pub const TILE_PIXEL: u128 = 48;
+    /// A tile chain of stratified MCMC at rest (112 bytes, and its primary
+    /// sample's numbers, 3 bytes each, ~20 on the Cornell box) and the
+    /// pixel's uniform samples (40 bytes), fitted to the measured peak.
+    pub const TILE_CHAIN: u128 = 200;
+    /// Per pixel of its tile: the state's value there (RGB and importance
+    /// in `f32`) and the tile's `G_s(k)` (`f32`).
+    pub const TILE_PIXEL: u128 = 28;
     /// The most paths a round traces.
     pub const ROUND_PATHS: u64 = crate::drive::MAX_ROUND_SAMPLES;
 }

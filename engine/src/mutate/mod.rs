@@ -587,16 +587,19 @@ impl Mutator {
     }
 
     /// Saves its running state into `kept`, to keep while the chain rests
-    /// (an adaptive kernel's box is reused).
+    /// (an adaptive kernel's box is reused). A batch's source is kept as a
+    /// position in the chain's stream, which filled it.
     pub(crate) fn save(&self, kept: &mut KernelState) {
         match (self, &mut *kept) {
             (Mutator::Adaptive { state, .. }, KernelState::Adaptive(into)) => **into = *state,
             (Mutator::Kelemen(_, batch), _) => {
                 let (source, next) = batch.position();
+                let source = source.position();
                 *kept = KernelState::Batch { source, next };
             }
             (Mutator::Gaussian(_, batch), _) => {
                 let (source, next) = batch.position();
+                let source = source.position();
                 *kept = KernelState::Batch { source, next };
             }
             (Mutator::Adaptive { state, .. }, _) => {
@@ -607,15 +610,16 @@ impl Mutator {
     }
 
     /// Back to a running state [`save`](Self::save) kept (of a kernel of
-    /// the same kind; another kind's is ignored).
-    pub(crate) fn restore(&mut self, kept: &KernelState) {
+    /// the same kind; another kind's is ignored), its batch drawn again from
+    /// `stream`, the chain's.
+    pub(crate) fn restore(&mut self, kept: &KernelState, stream: &Pcg32) {
         match (self, kept) {
             (Mutator::Kelemen(k, batch), KernelState::Batch { source, next }) => {
                 let k = *k;
-                batch.restore((source.clone(), *next), |r, b| k.fill(r, b));
+                batch.restore((stream.at(*source), *next), |r, b| k.fill(r, b));
             }
             (Mutator::Gaussian(_, batch), KernelState::Batch { source, next }) => {
-                batch.restore((source.clone(), *next), fill_normals)
+                batch.restore((stream.at(*source), *next), fill_normals)
             }
             (Mutator::Adaptive { state, .. }, KernelState::Adaptive(kept)) => *state = **kept,
             // Checked on reading a checkpoint (`KernelState::fits`).
@@ -628,12 +632,14 @@ impl Mutator {
 /// one per pixel): for the batched kernels, where the batch stands (its
 /// offsets are drawn again from its source when the chain wakes), for the
 /// adaptive kernel its `θ` and counters; nothing for a custom kernel.
-/// Its fields sit beside the tag (24 bytes); the adaptive kernel's rarer
+/// Its fields sit beside the tag (16 bytes); the adaptive kernel's rarer
 /// state is boxed.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) enum KernelState {
+    /// The batch's source, a position in the chain's stream, and how many
+    /// of its values are used.
     Batch {
-        source: Pcg32,
+        source: u64,
         next: u8,
     },
     Adaptive(alloc::boxed::Box<AdaptiveState>),
@@ -658,7 +664,7 @@ impl KernelState {
 impl Default for KernelState {
     fn default() -> Self {
         KernelState::Batch {
-            source: Pcg32::new(0, 0),
+            source: 0,
             next: BATCH_LEN as u8,
         }
     }

@@ -61,10 +61,10 @@ where
             count.invalid = traced_a.invalid + traced_b.invalid;
             count.attempts = 1;
             let ratio = (tb * ta) / (f64::from(a.target) * f64::from(b.target));
-            if uniform_f64(&mut a.decisions) < ratio {
+            if uniform_f64(a.rng.rng()) < ratio {
                 // The states change tiles; each tile keeps its random stream.
                 core::mem::swap(&mut a.sample, &mut b.sample);
-                a.sample.swap_rng(&mut b.sample);
+                a.sample.swap_own(&mut b.sample);
                 a.set_state(b_in_s, tb);
                 b.set_state(a_in_t, ta);
                 count.accepted = 1;

@@ -434,7 +434,7 @@ pub struct StratifiedExtras {
     /// where the tile is clipped). Within a tile their ratios estimate the
     /// ratios of the pixel values. A tile whose chain never found a state
     /// with `T_s > 0` holds the regularizer's values.
-    pub unscaled: Vec<f64>,
+    pub unscaled: Vec<f32>,
     /// A time budget ran out during the weighted solver, which returned the
     /// normalizations it had (fewer iterations than
     /// [`WeightedSettings::iterations`]).

@@ -18,7 +18,7 @@ use crate::emission::SeenEmission;
 use crate::error::Error;
 use crate::film::Film;
 use crate::method::Job;
-use crate::oracle::{PathOracle, Radiance};
+use crate::oracle::PathOracle;
 use crate::reconstruct::{self, WeightedSettings};
 use crate::tiles::Tiles;
 
@@ -33,7 +33,7 @@ pub(super) struct Reconstructed {
     /// the log-domain solver).
     pub normalizations: Vec<f64>,
     /// `G_s(k)` per tile, offset and channel.
-    pub unscaled: Vec<f64>,
+    pub unscaled: Vec<f32>,
     /// The weighted solver's `α` (chosen by cross-validation or set).
     pub alpha: Option<f64>,
     /// Pixels that took their large steps' common value.
@@ -49,21 +49,21 @@ pub(super) struct Reconstructed {
 /// The image of the tiles' `sums` (their uniform samples' counts and `N
 /// G_s(k)`) after `sweeps` sweeps; the weighted solver (and
 /// cross-validation) end early when `stop` says so. Each tile's sums are
-/// let go as they are taken.
+/// let go as they are taken, the uniform samples' once gathered.
 pub(super) fn reconstruct_image(
     tiles: &Tiles,
-    sums: Vec<(Draws, Box<[f64]>)>,
-    pooled: &Samples,
+    sums: Vec<(Draws, Box<[f32]>)>,
+    pooled: Samples,
     settings: &StratifiedSettings,
     channels: usize,
     sweeps: u64,
     stop: &dyn Fn() -> bool,
 ) -> Result<Reconstructed, Error> {
     let (draws, sums): (Vec<Draws>, Vec<_>) = sums.into_iter().unzip();
-    let (samples, regularizer) = LargeSteps::gather(tiles, &draws, pooled);
+    let (samples, regularizer) = LargeSteps::gather(tiles, &draws, &pooled);
     let halves = (settings.cross_validate_alpha && matches!(settings.solver, Solver::Weighted(_)))
-        .then(|| Halves::gather(tiles, &draws, pooled, &samples));
-    drop(draws);
+        .then(|| Halves::gather(tiles, &draws, &pooled, &samples));
+    drop((draws, pooled));
     let unscaled = unscaled(tiles, sums, channels, sweeps.max(1), &regularizer);
     let mut solver = settings.solver;
     let mut alpha = None;
@@ -198,7 +198,7 @@ impl ReconstructionTime {
                 set_up,
                 block: (one_block - set_up).max(0.0),
                 settings: *w,
-                channels: O::Radiance::CHANNELS as f64,
+                channels: <O::Radiance as crate::oracle::Radiance>::CHANNELS as f64,
                 cross_validate: settings.cross_validate_alpha,
                 most: 0.5 * limit.as_secs_f64(),
             });
@@ -225,7 +225,9 @@ impl ReconstructionTime {
     }
 }
 
-/// Per tile, offset and channel `G_s(k)` (eq. 10, over `sweeps` steps). A
+/// Per tile, offset and channel `G_s(k)` (eq. 10, over `sweeps` steps), in
+/// `f32` (a render's largest array after its chains: the solver takes it a
+/// channel at a time, in `f64`). A
 /// tile whose chain never found a state with `T_s > 0` (at low budgets, one
 /// sweep leaves some) has no estimate of its own; it takes the regularizer's
 /// values `Î(k)` instead (an unscaled estimate whose normalization is 1), so
@@ -241,19 +243,25 @@ fn unscaled<S: Copy + Into<f64>, T: AsRef<[S]>>(
     channels: usize,
     sweeps: u64,
     regularizer: &Film,
-) -> Vec<f64> {
+) -> Vec<f32> {
     let per_tile = tiles.offsets().len() * channels;
     // Sized once: a vector grown by doubling would hold up to twice this.
-    let mut g: Vec<f64> = Vec::with_capacity(tiles.count() * per_tile);
+    let mut g: Vec<f32> = Vec::with_capacity(tiles.count() * per_tile);
     // Each tile's sums are let go once read.
     for tile in sums {
-        g.extend(tile.as_ref().iter().map(|&v| v.into() / sweeps as f64));
+        g.extend(
+            tile.as_ref()
+                .iter()
+                .map(|&v| (v.into() / sweeps as f64) as f32),
+        );
     }
     for (s, tile) in g.chunks_mut(per_tile).enumerate() {
         if tile.iter().all(|&v| v == 0.0) {
             for (o, pixel) in tiles.pixels(s) {
-                tile[o * channels..(o + 1) * channels]
-                    .copy_from_slice(&regularizer.data()[pixel * channels..(pixel + 1) * channels]);
+                let mc = &regularizer.data()[pixel * channels..(pixel + 1) * channels];
+                for (g, &mc) in tile[o * channels..(o + 1) * channels].iter_mut().zip(mc) {
+                    *g = mc as f32;
+                }
             }
         }
     }
@@ -288,7 +296,7 @@ fn candidates(sweeps: u64) -> &'static [f64] {
 /// settings' `α` if none).
 fn cross_validated_alpha(
     tiles: &Tiles,
-    unscaled: &[f64],
+    unscaled: &[f32],
     channels: usize,
     halves: &Halves,
     settings: &WeightedSettings,
@@ -297,7 +305,7 @@ fn cross_validated_alpha(
 ) -> Result<f64, Error> {
     let g: Vec<f64> = unscaled
         .chunks(channels)
-        .map(|v| v.iter().sum::<f64>() / channels as f64)
+        .map(|v| v.iter().map(|&x| f64::from(x)).sum::<f64>() / channels as f64)
         .collect();
     let mut best = (f64::INFINITY, settings.alpha);
     for &alpha in candidates {
@@ -326,8 +334,13 @@ fn cross_validated_alpha(
 }
 
 /// Channel `c` of values stored `channels` to an item.
-fn channel(values: &[f64], channels: usize, c: usize) -> Vec<f64> {
-    values.iter().skip(c).step_by(channels).copied().collect()
+fn channel<S: Copy + Into<f64>>(values: &[S], channels: usize, c: usize) -> Vec<f64> {
+    values
+        .iter()
+        .skip(c)
+        .step_by(channels)
+        .map(|&v| v.into())
+        .collect()
 }
 
 /// Sets channel `c` of every pixel of `film` from `values` (one per pixel).

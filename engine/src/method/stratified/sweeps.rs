@@ -232,7 +232,7 @@ where
 pub(crate) struct SweptRun {
     /// Per tile, its uniform samples' counts and `N G_s(k)` per offset and
     /// channel.
-    tiles: Vec<(Draws, Box<[f64]>)>,
+    tiles: Vec<(Draws, Box<[f32]>)>,
     samples: Samples,
     light: LightTracing,
     emission: Option<SeenEmission>,
@@ -280,7 +280,7 @@ impl SweptRun {
         for ((draws, unscaled), (more, sums)) in self.tiles.iter_mut().zip(other.tiles) {
             draws.add(&more);
             for (a, b) in unscaled.iter_mut().zip(sums.iter()) {
-                *a += b;
+                *a = (f64::from(*a) + f64::from(*b)) as f32;
             }
         }
         self.samples.pool(&other.samples);
@@ -316,6 +316,7 @@ pub(super) fn finish_runs(
         invalid,
         bootstrap_traces,
     } = run;
+    let mut image = reconstruct_image(tiles, sums, pooled, settings, channels, stats.sweeps, stop)?;
     let mut visits = vec![0u64; tiles.count()];
     for s in 0..tiles.count() {
         // Every tile steps once a sweep.
@@ -323,8 +324,6 @@ pub(super) fn finish_runs(
             visits[q] += stats.sweeps;
         }
     }
-    let mut image =
-        reconstruct_image(tiles, sums, &pooled, settings, channels, stats.sweeps, stop)?;
     light.add_to(tiles, &mut image.film, stats.sweeps);
     if let Some(alpha) = image.alpha {
         stats.alpha = alpha;

@@ -568,3 +568,19 @@ impl<R: Radiance> TileChain<R> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::oracle::Rgb;
+
+    /// A film holds a chain per pixel, so these sizes are most of
+    /// stratified MCMC's bytes a pixel (issue 40: at most 400 in all;
+    /// docs/BENCHMARKS.md).
+    #[test]
+    fn a_chain_at_rest_stays_small() {
+        assert!(size_of::<TileChain<Rgb>>() <= 112);
+        assert!(size_of::<Value<Rgb>>() <= 16);
+        assert!(size_of::<PackedSample>() <= 48);
+    }
+}

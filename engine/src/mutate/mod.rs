@@ -264,19 +264,24 @@ impl<T: Copy> OffsetBatch<T> {
         self.next = 0;
     }
 
-    /// Where the batch stands: the stream it was last filled from and how
-    /// many of its values are used.
-    fn position(&self) -> (Pcg32, u8) {
-        (self.source.clone(), self.next as u8)
+    /// Where the batch stands: the position in the chain's stream it was
+    /// last filled from and how many of its values are used.
+    fn kept(&self) -> KernelState {
+        KernelState::Batch {
+            source: self.source.position(),
+            next: self.next as u8,
+        }
     }
 
-    /// Back to `position`, the values drawn again by `fill` (the one that
-    /// drew them) if any is left.
+    /// Back to where [`kept`](Self::kept) said it stood in `stream`, the
+    /// values drawn again by `fill` (the one that drew them) if any is left.
     fn restore(
         &mut self,
-        (source, next): (Pcg32, u8),
+        (source, next): (u64, u8),
+        stream: &Pcg32,
         fill: impl FnOnce(&mut Pcg32, &mut [T; BATCH_LEN]),
     ) {
+        let source = stream.at(source);
         self.next = (next as usize).min(BATCH_LEN);
         if self.next < BATCH_LEN {
             fill(&mut source.clone(), &mut self.values);
@@ -592,16 +597,8 @@ impl Mutator {
     pub(crate) fn save(&self, kept: &mut KernelState) {
         match (self, &mut *kept) {
             (Mutator::Adaptive { state, .. }, KernelState::Adaptive(into)) => **into = *state,
-            (Mutator::Kelemen(_, batch), _) => {
-                let (source, next) = batch.position();
-                let source = source.position();
-                *kept = KernelState::Batch { source, next };
-            }
-            (Mutator::Gaussian(_, batch), _) => {
-                let (source, next) = batch.position();
-                let source = source.position();
-                *kept = KernelState::Batch { source, next };
-            }
+            (Mutator::Kelemen(_, batch), _) => *kept = batch.kept(),
+            (Mutator::Gaussian(_, batch), _) => *kept = batch.kept(),
             (Mutator::Adaptive { state, .. }, _) => {
                 *kept = KernelState::Adaptive(alloc::boxed::Box::new(*state))
             }
@@ -616,10 +613,10 @@ impl Mutator {
         match (self, kept) {
             (Mutator::Kelemen(k, batch), KernelState::Batch { source, next }) => {
                 let k = *k;
-                batch.restore((stream.at(*source), *next), |r, b| k.fill(r, b));
+                batch.restore((*source, *next), stream, |r, b| k.fill(r, b));
             }
             (Mutator::Gaussian(_, batch), KernelState::Batch { source, next }) => {
-                batch.restore((stream.at(*source), *next), fill_normals)
+                batch.restore((*source, *next), stream, fill_normals)
             }
             (Mutator::Adaptive { state, .. }, KernelState::Adaptive(kept)) => *state = **kept,
             // Checked on reading a checkpoint (`KernelState::fits`).

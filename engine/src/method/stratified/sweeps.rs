@@ -13,7 +13,7 @@ use super::light::LightTracing;
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
 use super::regularizer::{Draws, Samples};
-use super::tile::{Context, Row, Start, TileChain, TileSplat, Waking};
+use super::tile::{Context, Row, Start, TileChain, TileSplat, Waking, accumulate};
 use super::{StratifiedExtras, StratifiedSettings, StratifiedStats};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;
@@ -280,7 +280,7 @@ impl SweptRun {
         for ((draws, unscaled), (more, sums)) in self.tiles.iter_mut().zip(other.tiles) {
             draws.add(&more);
             for (a, b) in unscaled.iter_mut().zip(sums.iter()) {
-                *a = (f64::from(*a) + f64::from(*b)) as f32;
+                accumulate(a, f64::from(*b));
             }
         }
         self.samples.pool(&other.samples);

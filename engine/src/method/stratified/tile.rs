@@ -350,11 +350,16 @@ pub(super) fn add<R: Radiance>(values: &[Value<R>], weight: f64, into: &mut [f32
     let channels = R::CHANNELS;
     for (o, v) in values.iter().enumerate() {
         for c in 0..channels {
-            let sum = &mut into[o * channels + c];
-            let more = f64::from(*sum) + weight * f64::from(v.radiance.channel(c));
-            *sum = more.min(f64::from(f32::MAX)) as f32;
+            let term = weight * f64::from(v.radiance.channel(c));
+            accumulate(&mut into[o * channels + c], term);
         }
     }
+}
+
+/// `sum += term` in `f64`, rounded once to `f32` and saturated at
+/// `f32::MAX` (see [`add`]).
+pub(super) fn accumulate(sum: &mut f32, term: f64) {
+    *sum = (f64::from(*sum) + term).min(f64::from(f32::MAX)) as f32;
 }
 
 impl<R: Radiance> TileChain<R> {

@@ -24,7 +24,10 @@
 //! the third bounce on (survival: their throughput relative to their start,
 //! at most 0.95). The MIS weights use the densities without the roulette:
 //! they still sum to one over the strategies of every path (Veach 1997
-//! sec. 9.2.2), only the estimate's variance depends on them.
+//! sec. 9.2.2), only the estimate's variance depends on them. A weight
+//! costs O(1) a connection: pbrt's walk over density ratios, its terms past
+//! the two joined vertices summed once a subpath (Georgiev 2012's recursive
+//! form).
 //!
 //! Multiplexed paths (Hachisuka et al. 2014) trace one strategy: a length
 //! from the engine's held stream (`strategies::Lengths`) and a strategy from stream
@@ -84,6 +87,12 @@ struct Vertex {
     pdf_rev: f32,
     /// Sampled by a specular lobe: cannot be joined.
     delta: bool,
+    /// Unit direction to the subpath's previous vertex (zero at its start).
+    to_prev: Vec3,
+    /// What turns a solid-angle density at this vertex toward the previous
+    /// one into an area density there: its cosine over the squared distance
+    /// (the pinhole's cosine counts as 1).
+    prev_area: f32,
 }
 
 impl Vertex {
@@ -99,6 +108,8 @@ impl Vertex {
             pdf_fwd,
             pdf_rev: 0.0,
             delta: false,
+            to_prev: Vec3::ZERO,
+            prev_area: 0.0,
         }
     }
 
@@ -111,47 +122,24 @@ impl Vertex {
         }
     }
 
-    /// `pdf` (solid angle at this vertex toward `next`) as an area density
-    /// at `next` (pbrt's `ConvertDensity`).
-    fn area_density(&self, pdf: f32, next: &Vertex) -> f32 {
-        let w = next.p - self.p;
+    /// Links this vertex to `prev`, which sampled it with solid-angle
+    /// density `pdf`: its forward area density (pbrt's `ConvertDensity`),
+    /// the direction back and [`prev_area`](Self::prev_area).
+    fn link(&mut self, prev: &Vertex, pdf: f32) {
+        let w = self.p - prev.p;
         let d2 = w.length_squared();
         if d2 == 0.0 {
-            return 0.0;
+            return;
         }
-        let cos = if next.kind == Kind::Camera {
+        let w = w / d2.sqrt();
+        self.pdf_fwd = pdf * self.ng.dot(w).abs() / d2;
+        self.to_prev = -w;
+        let cos_prev = if prev.kind == Kind::Camera {
             1.0
         } else {
-            next.ng.dot(w).abs() / d2.sqrt()
+            prev.ng.dot(w).abs()
         };
-        pdf * cos / d2
-    }
-
-    /// Area density at `next` of this vertex sampling it, having been
-    /// reached from `prev` (none: this vertex starts its subpath).
-    fn pdf(&self, camera: &Projection, prev: Option<&Vertex>, next: &Vertex) -> f32 {
-        let pdf = match (self.kind, prev) {
-            (Kind::Camera, _) => camera.direction_pdf(next.p),
-            (Kind::Light(_), _) => return self.pdf_light(next),
-            (Kind::Surface, None) => return 0.0,
-            (Kind::Surface, Some(prev)) => {
-                let wo = self.frame.to_local((prev.p - self.p).normalize_or_zero());
-                let wi = self.frame.to_local((next.p - self.p).normalize_or_zero());
-                self.bsdf.pdf(wo, wi)
-            }
-        };
-        self.area_density(pdf, next)
-    }
-
-    /// Area density at `next` of this emitter emitting toward it
-    /// (cosine-weighted on the front side).
-    fn pdf_light(&self, next: &Vertex) -> f32 {
-        let w = (next.p - self.p).normalize_or_zero();
-        let cos = self.ng.dot(w);
-        if cos <= 0.0 {
-            return 0.0;
-        }
-        self.area_density(cos * FRAC_1_PI, next)
+        self.prev_area = cos_prev / d2;
     }
 
     /// Area density of this emitter point as the start of a light subpath.
@@ -160,10 +148,10 @@ impl Vertex {
         scene.light_probability(light) / scene.lights[light as usize].area
     }
 
-    /// Radiance emitted from this vertex toward `to` (front side only).
-    fn emitted(&self, scene: &Scene, to: Vec3) -> Vec3 {
+    /// Radiance emitted from this vertex along `w` (front side only).
+    fn emitted(&self, scene: &Scene, w: Vec3) -> Vec3 {
         let light = self.light();
-        if light == NO_LIGHT || self.ng.dot(to - self.p) <= 0.0 {
+        if light == NO_LIGHT || self.ng.dot(w) <= 0.0 {
             return Vec3::ZERO;
         }
         scene.lights[light as usize].radiance
@@ -213,11 +201,16 @@ struct Subpaths {
     /// Radiance of the constant environment reached by the camera subpath.
     environment: Vec3,
     flags: PathFlags,
+    /// The camera subpath's first vertex in the MIS walk (1, or 2 without
+    /// light tracing), and each subpath's [`tail_sums`].
+    camera_first: usize,
+    camera_tails: Vec<f32>,
+    light_tails: Vec<f32>,
 }
 
 std::thread_local! {
     /// Each thread's subpaths, their room reused from path to path: up to
-    /// `max_depth + 2` vertices of ~130 bytes each, allocations too large
+    /// `max_depth + 2` vertices of ~150 bytes each, allocations too large
     /// for the allocator's per-thread cache (they took 7 % of a
     /// bidirectional path's time on the caustic scene).
     static ROOM: Cell<Subpaths> = Cell::default();
@@ -275,13 +268,20 @@ impl<I: Intersector> PathTracer<I> {
         // plays roulette (Šik 2018 sec. 4.2.2: MMLT cannot use it).
         let roulette = only.is_none();
         let lengths = (camera_vertices, light_vertices);
-        let paths = self.subpaths(film, sampler, &camera, lengths, roulette);
+        let mut paths = self.subpaths(film, sampler, &camera, lengths, roulette);
+        // Tempering roughens the BSDFs of the joined vertices only: the walks
+        // are done, and from here on a BSDF is used only where it is joined.
         let floor = self.regularization.map_or(0.0, |r| r.floor());
-        let temper = |v: &Vertex| {
-            let mut v = *v;
+        for v in paths.camera.iter_mut().chain(paths.light.iter_mut()) {
             v.bsdf = v.bsdf.tempered(temperature, floor);
-            v
-        };
+        }
+        // Light tracing only makes splats: skipped when they are dropped
+        // (and weighted as if made) or left out.
+        let light_tracing = which != Strategies::AllButLightTracing;
+        let weighted = !matches!(which, Strategies::One { .. });
+        if weighted {
+            paths.weigh_tails(if light_tracing { 1 } else { 2 });
+        }
         // The environment is reached only by escaping camera subpaths
         // (`s = 0`, its one strategy): with one strategy, only at its length.
         let mut radiance = match only {
@@ -294,38 +294,26 @@ impl<I: Intersector> PathTracer<I> {
             1 if every => paths.environment,
             _ => Vec3::ZERO,
         };
-        // Light tracing only makes splats: skipped when they are dropped
-        // (and weighted as if made) or left out.
-        let light_tracing = which != Strategies::AllButLightTracing;
         let first_t = if light_tracing && splats.wants_splats() {
             1
         } else {
             2
         };
         for t in first_t..=paths.camera.len() {
-            let pt = temper(&paths.camera[t - 1]);
             for s in 0..=paths.light.len() {
                 if !joinable(s, t, longest) || only.is_some_and(|o| o != (s, t)) {
                     continue;
                 }
-                let qs = (s > 0).then(|| temper(&paths.light[s - 1]));
-                let Some((value, raster)) = self.connect(&paths, s, t, &pt, qs.as_ref(), &camera)
-                else {
+                let Some(joined) = self.connect(&paths, s, t, &camera) else {
                     continue;
                 };
-                let weight = match which {
-                    Strategies::One { .. } => 1.0,
-                    _ => mis_weight(
-                        scene,
-                        &camera,
-                        &paths,
-                        (s, t),
-                        (&pt, qs.as_ref()),
-                        light_tracing,
-                    ),
+                let weight = if weighted {
+                    paths.mis_weight((s, t), &joined.reverse)
+                } else {
+                    1.0
                 };
-                let value = value * (weight * scale);
-                match raster {
+                let value = joined.value * (weight * scale);
+                match joined.raster {
                     Some(at) => {
                         if value.max_element() > 0.0 {
                             splats.splat(at, Rgb(value.to_array()));
@@ -358,11 +346,11 @@ impl<I: Intersector> PathTracer<I> {
     ) -> Vec3 {
         let camera = self.projection;
         let paths = self.subpaths(film, sampler, &camera, (2, 0), false);
-        let seen = match paths.camera.get(1) {
-            None => paths.environment,
-            Some(pt) => self
-                .connect(&paths, 0, 2, pt, None, &camera)
-                .map_or(Vec3::ZERO, |(value, _)| value),
+        let seen = match paths.camera.len() {
+            1 => paths.environment,
+            _ => self
+                .connect(&paths, 0, 2, &camera)
+                .map_or(Vec3::ZERO, |joined| joined.value),
         };
         paths.give_back();
         seen
@@ -491,8 +479,7 @@ impl<I: Intersector> PathTracer<I> {
             vertex.frame = Frame::new(ns);
             vertex.bsdf = scene.materials[scene.material_of[tri] as usize].bsdf(uv);
             vertex.emitter = scene.light_of[tri];
-            let prev = path.last().expect("a walk starts from a vertex");
-            vertex.pdf_fwd = prev.area_density(pdf, &vertex);
+            vertex.link(path.last().expect("a walk starts from a vertex"), pdf);
             path.push(vertex);
             if path.len() == longest {
                 break;
@@ -524,7 +511,7 @@ impl<I: Intersector> PathTracer<I> {
             };
             beta *= factor;
             let n = path.len();
-            path[n - 2].pdf_rev = vertex.area_density(pdf_rev, &path[n - 2]);
+            path[n - 2].pdf_rev = pdf_rev * vertex.prev_area;
             if !(beta.max_element() > 0.0 && beta.is_finite()) {
                 break;
             }
@@ -541,26 +528,29 @@ impl<I: Intersector> PathTracer<I> {
         Vec3::ZERO
     }
 
-    /// The unweighted contribution of strategy `(s, t)` with the joined
-    /// vertices `pt` (camera side) and `qs` (light side, none for `s = 0`)
-    /// at their connection BSDFs, and where it lands if it is a splat
-    /// (`t = 1`). None when the strategy cannot join them or they are
-    /// occluded.
-    fn connect(
-        &self,
-        paths: &Subpaths,
-        s: usize,
-        t: usize,
-        pt: &Vertex,
-        qs: Option<&Vertex>,
-        camera: &Projection,
-    ) -> Option<(Vec3, Option<FilmPoint>)> {
+    /// The unweighted contribution of strategy `(s, t)`, joining the camera
+    /// subpath's vertex `t` to the light subpath's vertex `s` (none for
+    /// `s = 0`) at their (tempered) BSDFs, where it lands if it is a splat
+    /// (`t = 1`), and the reverse densities its MIS weight needs. None when
+    /// the strategy cannot join them or they are occluded.
+    fn connect(&self, paths: &Subpaths, s: usize, t: usize, camera: &Projection) -> Option<Joined> {
         let scene = &self.scene;
-        let Some(qs) = qs else {
+        let pt = &paths.camera[t - 1];
+        let Some(qs) = s.checked_sub(1).map(|i| &paths.light[i]) else {
             // s = 0: the camera subpath's last vertex is on an emitter.
-            let towards = paths.camera[t - 2].p;
-            let le = pt.emitted(scene, towards);
-            return (le.max_element() > 0.0).then_some((pt.beta * le, None));
+            let le = pt.emitted(scene, pt.to_prev);
+            if le.max_element() <= 0.0 {
+                return None;
+            }
+            return Some(Joined {
+                value: pt.beta * le,
+                raster: None,
+                reverse: Reverse {
+                    pt: pt.pdf_light_origin(scene),
+                    pt_minus: pt.ng.dot(pt.to_prev) * FRAC_1_PI * pt.prev_area,
+                    ..Reverse::default()
+                },
+            });
         };
         if !pt.connectible() || !qs.connectible() {
             return None;
@@ -570,34 +560,46 @@ impl<I: Intersector> PathTracer<I> {
         if d2 == 0.0 {
             return None;
         }
+        // From the light side to the camera side.
         let w = w / d2.sqrt();
-        // The light side: its vertex factor and the edge's cosine there.
-        let light_side = if s == 1 {
-            qs.emitted(scene, pt.p) * qs.ng.dot(w).abs()
+        let cos_q = qs.ng.dot(w).abs();
+        let cos_p = if t == 1 { 1.0 } else { pt.ng.dot(w).abs() };
+        // The light side: its vertex factor and the edge's cosine there; the
+        // solid-angle density of `qs` sampling `pt`, and the area density of
+        // `qs` sampling the vertex before it, having come from `pt`.
+        let (light_side, qs_to_pt, qs_minus) = if s == 1 {
+            let emission = qs.ng.dot(w).max(0.0) * FRAC_1_PI;
+            (qs.emitted(scene, w) * cos_q, emission, 0.0)
         } else {
-            let to_light = (paths.light[s - 2].p - qs.p).normalize_or_zero();
-            let cos_in = qs.ng.dot(to_light).abs();
+            let cos_in = qs.ng.dot(qs.to_prev).abs();
             if cos_in == 0.0 {
                 return None;
             }
             let wo = qs.frame.to_local(w);
-            let wi = qs.frame.to_local(to_light);
-            qs.bsdf.eval(wo, wi) * (wi.z.abs() / cos_in * qs.ng.dot(w).abs())
+            let wi = qs.frame.to_local(qs.to_prev);
+            (
+                qs.bsdf.eval(wo, wi) * (wi.z.abs() / cos_in * cos_q),
+                qs.bsdf.pdf(wi, wo),
+                qs.bsdf.pdf(wo, wi) * qs.prev_area,
+            )
         };
         if light_side.max_element() <= 0.0 {
             return None;
         }
-        let (camera_side, raster) = if t == 1 {
+        // The camera side, the same way.
+        let (camera_side, raster, pt_to_qs, pt_minus) = if t == 1 {
             let (at, cos) = camera.project(qs.p)?;
-            (
-                Vec3::splat(1.0 / (camera.plane_area * cos * cos * cos)),
-                Some(at),
-            )
+            let importance = 1.0 / (camera.plane_area * cos * cos * cos);
+            (Vec3::splat(importance), Some(at), importance, 0.0)
         } else {
-            let to_camera = (paths.camera[t - 2].p - pt.p).normalize_or_zero();
-            let wo = pt.frame.to_local(to_camera);
+            let wo = pt.frame.to_local(pt.to_prev);
             let wi = pt.frame.to_local(-w);
-            (pt.bsdf.eval(wo, wi) * wi.z.abs(), None)
+            (
+                pt.bsdf.eval(wo, wi) * wi.z.abs(),
+                None,
+                pt.bsdf.pdf(wo, wi),
+                pt.bsdf.pdf(wi, wo) * pt.prev_area,
+            )
         };
         if camera_side.max_element() <= 0.0 {
             return None;
@@ -611,73 +613,196 @@ impl<I: Intersector> PathTracer<I> {
         if self.accel.occluded(&Ray::between(from, to)) {
             return None;
         }
-        let value = qs.beta * light_side * camera_side * pt.beta / d2;
-        Some((value, raster))
+        Some(Joined {
+            value: qs.beta * light_side * camera_side * pt.beta / d2,
+            raster,
+            reverse: Reverse {
+                pt: qs_to_pt * cos_p / d2,
+                pt_minus,
+                qs: pt_to_qs * cos_q / d2,
+                qs_minus,
+            },
+        })
     }
 }
 
-/// The power-heuristic weight of strategy `(s, t)` (Veach 1997 eq. 10.9 with
-/// `beta = 2`, computed by pbrt's walk over density ratios), with the joined
-/// vertices `pt` and `qs` as connected, over every strategy, or every one
-/// but light tracing.
-fn mis_weight(
-    scene: &Scene,
-    camera: &Projection,
-    paths: &Subpaths,
-    (s, t): (usize, usize),
-    (pt, qs): (&Vertex, Option<&Vertex>),
-    light_tracing: bool,
-) -> f32 {
-    if s + t == 2 {
-        return 1.0;
+/// A connection's contribution before its MIS weight.
+struct Joined {
+    value: Vec3,
+    /// Where a light-tracing contribution (`t = 1`) lands.
+    raster: Option<FilmPoint>,
+    reverse: Reverse,
+}
+
+/// The area densities a connection gives the joined vertices and the ones
+/// before them, as the other subpath would sample them (pbrt's
+/// `ScopedAssignment`s in `MISWeight`).
+#[derive(Default)]
+struct Reverse {
+    pt: f32,
+    pt_minus: f32,
+    qs: f32,
+    qs_minus: f32,
+}
+
+impl Subpaths {
+    /// Each subpath's [`tail_sums`], the camera's down to vertex `fewest`
+    /// (1 with light tracing, 2 without), the light's down to its start.
+    fn weigh_tails(&mut self, fewest: usize) {
+        self.camera_first = fewest;
+        tail_sums(&self.camera, fewest, &mut self.camera_tails);
+        tail_sums(&self.light, 0, &mut self.light_tails);
     }
-    let pt_minus = (t > 1).then(|| &paths.camera[t - 2]);
-    let qs_minus = (s > 1).then(|| &paths.light[s - 2]);
-    // The densities the connection changes (pbrt's `ScopedAssignment`s).
-    let pt_rev = match qs {
-        Some(qs) => qs.pdf(camera, qs_minus, pt),
-        None => pt.pdf_light_origin(scene),
-    };
-    let pt_minus_rev = pt_minus.map_or(0.0, |m| match qs {
-        Some(qs) => pt.pdf(camera, Some(qs), m),
-        None => pt.pdf_light(m),
-    });
-    let qs_rev = qs.map_or(0.0, |qs| pt.pdf(camera, pt_minus, qs));
-    let qs_minus_rev = match (qs, qs_minus) {
-        (Some(qs), Some(m)) => qs.pdf(camera, Some(pt), m),
-        _ => 0.0,
-    };
-    // The camera side's walk down to one camera vertex (light tracing), or two.
-    let fewest = if light_tracing { 1 } else { 2 };
-    let camera_side = ratio_sum(&paths.camera[..t], fewest, pt_rev, pt_minus_rev, 0.0);
-    let sum = ratio_sum(&paths.light[..s], 0, qs_rev, qs_minus_rev, camera_side);
-    1.0 / (1.0 + sum)
+
+    /// The power-heuristic weight of strategy `(s, t)` (Veach 1997 eq. 10.9
+    /// with `beta = 2`, pbrt's walk over density ratios), joined with the
+    /// densities `reverse`, over the strategies [`weigh_tails`](Self::weigh_tails)
+    /// was told. The walk's terms past the two joined vertices of each side
+    /// come from the tail sums: O(1) a connection (the recursive form of
+    /// Georgiev 2012, "Implementing vertex connection and merging").
+    fn mis_weight(&self, (s, t): (usize, usize), reverse: &Reverse) -> f32 {
+        if s + t == 2 {
+            return 1.0;
+        }
+        let camera = joined_sum(
+            &self.camera[..t],
+            self.camera_first,
+            &self.camera_tails,
+            reverse.pt,
+            reverse.pt_minus,
+        );
+        let light = joined_sum(
+            &self.light[..s],
+            0,
+            &self.light_tails,
+            reverse.qs,
+            reverse.qs_minus,
+        );
+        let weight = 1.0 / (1.0 + camera + light);
+        // 0 x inf (a ratio underflowing where a tail overflows): no weight.
+        if weight.is_nan() { 0.0 } else { weight }
+    }
+}
+
+/// The squared ratio of the density by which the other subpath would sample
+/// vertex `i` to its own (`p_rev / p_fwd`, pbrt's `remap0` for delta
+/// vertices), and whether the walk counts vertex `i` (neither it nor the
+/// vertex before it is a delta).
+fn ratio_term(path: &[Vertex], i: usize, rev: f32) -> (f32, bool) {
+    let ratio = remap0(rev) / remap0(path[i].pdf_fwd);
+    let after_delta = i > 0 && path[i - 1].delta;
+    let counted = !path[i].delta && !after_delta;
+    (ratio * ratio, counted)
+}
+
+/// `tails[k]`: the walk's sum over vertices `first..=k` as seen from a
+/// connection past them, `Σ_i Π_{j=i..=k} r_j²` over the counted `i`
+/// (`ratio_term` with the walk's own reverse densities), by the recursion
+/// `tails[k] = r_k² (counted_k + tails[k-1])`; 0 below `first`.
+fn tail_sums(path: &[Vertex], first: usize, tails: &mut Vec<f32>) {
+    tails.clear();
+    let mut sum = 0.0f32;
+    for (i, v) in path.iter().enumerate() {
+        if i >= first {
+            let (r2, counted) = ratio_term(path, i, v.pdf_rev);
+            sum = r2 * (f32::from(u8::from(counted)) + sum);
+        }
+        tails.push(sum);
+    }
 }
 
 /// One subpath's share of the MIS denominator (pbrt's walk): from its joined
-/// end back to vertex `first`, the running product of density ratios
-/// `p_rev / p_fwd`, squared (the power heuristic) and summed where neither
-/// the vertex nor the one before it is a delta. `last_rev` and
-/// `second_rev` are the reverse densities of the two vertices at the joined
-/// end as the connection sets them; the joined vertex counts as non-delta.
-/// Adds to `sum` (the other side's share), term by term.
-fn ratio_sum(path: &[Vertex], first: usize, last_rev: f32, second_rev: f32, mut sum: f32) -> f32 {
+/// end back to vertex `first`, the running product of squared density
+/// ratios, summed where counted. `last_rev` and `second_rev` are the reverse
+/// densities of the two vertices at the joined end as the connection sets
+/// them (the joined vertex counts as non-delta); the rest is in `tails`
+/// ([`tail_sums`] from the same `first`).
+fn joined_sum(path: &[Vertex], first: usize, tails: &[f32], last_rev: f32, second_rev: f32) -> f32 {
     let n = path.len();
-    let mut ratio = 1.0f32;
-    for i in (first..n).rev() {
-        let rev = if i == n - 1 {
-            last_rev
-        } else if i == n - 2 {
-            second_rev
-        } else {
-            path[i].pdf_rev
-        };
-        ratio *= remap0(rev) / remap0(path[i].pdf_fwd);
-        let delta = i != n - 1 && path[i].delta;
-        let before_delta = i > 0 && path[i - 1].delta;
-        if !delta && !before_delta {
-            sum += ratio * ratio;
+    if n <= first {
+        return 0.0;
+    }
+    let (last, _) = ratio_term(path, n - 1, last_rev);
+    let mut sum = if n >= 2 && path[n - 2].delta {
+        0.0
+    } else {
+        last
+    };
+    if n - 1 > first {
+        let (second, counted) = ratio_term(path, n - 2, second_rev);
+        let both = last * second;
+        if counted {
+            sum += both;
+        }
+        if n - 2 > first {
+            sum += both * tails[n - 3];
         }
     }
     sum
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// pbrt's walk as written (`MISWeight`'s loop): the reference the tail
+    /// sums must reproduce.
+    fn walk(path: &[Vertex], first: usize, last_rev: f32, second_rev: f32) -> f32 {
+        let n = path.len();
+        let (mut ratio, mut sum) = (1.0f32, 0.0f32);
+        for i in (first..n).rev() {
+            let rev = match n - 1 - i {
+                0 => last_rev,
+                1 => second_rev,
+                _ => path[i].pdf_rev,
+            };
+            ratio *= remap0(rev) / remap0(path[i].pdf_fwd);
+            let delta = i != n - 1 && path[i].delta;
+            let after_delta = i > 0 && path[i - 1].delta;
+            if !delta && !after_delta {
+                sum += ratio * ratio;
+            }
+        }
+        sum
+    }
+
+    /// On subpaths of every length with random densities (zeros among them)
+    /// and delta vertices, from every first vertex, the O(1) sum at every
+    /// joined vertex equals the walk to f32 rounding.
+    #[test]
+    fn tail_sums_reproduce_pbrt_walk() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut tails = Vec::new();
+        for trial in 0..400 {
+            let len = 1 + trial % 9;
+            let path: Vec<Vertex> = (0..len)
+                .map(|_| {
+                    let density = |u: f32| if u < 0.1 { 0.0 } else { 0.05 + 4.0 * u };
+                    let mut v = Vertex::new(Kind::Surface, Vec3::ZERO, Vec3::Z, Vec3::ONE, 0.0);
+                    v.pdf_fwd = density(next());
+                    v.pdf_rev = density(next());
+                    v.delta = next() < 0.2;
+                    v
+                })
+                .collect();
+            for first in 0..3 {
+                tail_sums(&path, first, &mut tails);
+                for n in 0..=len {
+                    let (last, second) = (next() * 3.0, next() * 3.0);
+                    let expected = walk(&path[..n], first, last, second);
+                    let got = joined_sum(&path[..n], first, &tails, last, second);
+                    assert!(
+                        (got - expected).abs() <= 1e-5 * expected.max(1.0),
+                        "trial {trial}, first {first}, n {n}: {got} vs {expected}"
+                    );
+                }
+            }
+        }
+    }
 }

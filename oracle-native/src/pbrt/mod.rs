@@ -519,16 +519,20 @@ impl Parser {
                 })?;
                 let gamma = p.bool("gamma").unwrap_or(true);
                 let rgb = img.into_rgb8();
-                let decode = |c: u8| {
-                    let v = c as f32 / 255.0;
-                    if !gamma {
-                        v
-                    } else if v <= 0.04045 {
-                        v / 12.92
-                    } else {
-                        ((v + 0.055) / 1.055).powf(2.4)
-                    }
-                };
+                // The sRGB curve once per byte value, not once per texel.
+                let table: Vec<f32> = (0..=255u8)
+                    .map(|c| {
+                        let v = c as f32 / 255.0;
+                        if !gamma {
+                            v
+                        } else if v <= 0.04045 {
+                            v / 12.92
+                        } else {
+                            ((v + 0.055) / 1.055).powf(2.4)
+                        }
+                    })
+                    .collect();
+                let decode = |c: u8| table[c as usize];
                 Texture::Image {
                     width: rgb.width(),
                     height: rgb.height(),

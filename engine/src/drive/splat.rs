@@ -1,9 +1,9 @@
 //! Deterministic accumulation of weighted splats from many workers (chains,
 //! ensembles, rows of start paths).
 //!
-//! Workers run in parallel and push their contributions into per-band
-//! buffers; after each round the buffers are added to the films band by band
-//! (bands in parallel). The films hold exact sums ([`ExactFilm`]), so the
+//! Workers run in parallel and push their contributions into one buffer a
+//! layer; after each round each worker's buffers are sorted by band (in
+//! place) and added to the films band by band (bands in parallel). The films hold exact sums ([`ExactFilm`]), so the
 //! image depends neither on the thread count nor on how the workers are
 //! grouped (into rounds, or into tasks on several machines). A method may
 //! splat into several films (*layers*: PSSMLT keeps its large steps apart).
@@ -31,20 +31,64 @@ struct Splat<R> {
     radiance: R,
 }
 
-/// What one worker produced in a round: splats bucketed by band and layer,
-/// and the pixels of its states (for sample-density maps).
+/// What one worker produced in a round: per layer, its splats (in the order
+/// made, then sorted by band for the merge), and the pixels of its states
+/// (for sample-density maps).
 pub(crate) struct RoundBuffers<R> {
     bands: SplatBands,
-    splats: Vec<Vec<Splat<R>>>,
+    layers: Vec<LayerSplats<R>>,
     visited: Vec<u32>,
+}
+
+/// One layer's splats of a round, and after [`sort_by_band`](Self::sort_by_band)
+/// where each band's begin.
+struct LayerSplats<R> {
+    splats: Vec<Splat<R>>,
+    /// Band `b`'s splats are `splats[starts[b]..starts[b + 1]]` once sorted.
+    starts: Vec<usize>,
+}
+
+impl<R> LayerSplats<R> {
+    /// Sorts the splats by band in place (a counting sort that swaps each
+    /// splat into its band's range: O(n), no second buffer).
+    fn sort_by_band(&mut self, bands: &SplatBands) {
+        let starts = &mut self.starts;
+        starts.clear();
+        starts.resize(bands.count + 1, 0);
+        for s in &self.splats {
+            starts[bands.band_of(s.pixel as usize) + 1] += 1;
+        }
+        for b in 0..bands.count {
+            starts[b + 1] += starts[b];
+        }
+        let mut next: Vec<usize> = starts[..bands.count].to_vec();
+        for band in 0..bands.count {
+            while next[band] < starts[band + 1] {
+                let i = next[band];
+                let home = bands.band_of(self.splats[i].pixel as usize);
+                if home != band {
+                    self.splats.swap(i, next[home]);
+                }
+                next[home] += 1;
+            }
+        }
+    }
+
+    /// Band `band`'s splats (sorted).
+    fn band(&self, band: usize) -> &[Splat<R>] {
+        &self.splats[self.starts[band]..self.starts[band + 1]]
+    }
 }
 
 impl<R> RoundBuffers<R> {
     pub fn new(bands: SplatBands) -> Self {
         Self {
             bands,
-            splats: (0..bands.count * bands.layers)
-                .map(|_| Vec::new())
+            layers: (0..bands.layers)
+                .map(|_| LayerSplats {
+                    splats: Vec::new(),
+                    starts: Vec::new(),
+                })
                 .collect(),
             visited: Vec::new(),
         }
@@ -54,8 +98,7 @@ impl<R> RoundBuffers<R> {
     #[inline]
     pub fn splat(&mut self, layer: usize, p: FilmPoint, radiance: R, weight: f64) {
         let pixel = self.bands.resolution.pixel_index(p);
-        let bucket = self.bands.band_of(pixel) * self.bands.layers + layer;
-        self.splats[bucket].push(Splat {
+        self.layers[layer].splats.push(Splat {
             pixel: pixel as u32,
             weight,
             radiance,
@@ -154,21 +197,27 @@ impl SplatBands {
         pixel / self.pixels_per_band
     }
 
-    /// Adds every worker's splats to its layer's film in `films` and its
-    /// visits to `visits` (exact sums and integer counts: order does not
-    /// matter), then clears them.
+    /// Sorts every worker's splats by band, adds them to their layer's film
+    /// in `films` and its visits to `visits` (exact sums and integer counts:
+    /// order does not matter), then clears them.
     pub fn merge<W: Worker + Sync + Send>(
         &self,
         work: &mut [W],
         films: &mut [ExactFilm],
         visits: &mut [u64],
     ) {
+        parallel::for_each(work, |w| {
+            let buffers = w.buffers_mut();
+            for layer in &mut buffers.layers {
+                layer.sort_by_band(self);
+            }
+        });
         for (layer, film) in films.iter_mut().enumerate() {
             let mut bands = film.bands_mut(self.pixels_per_band);
             parallel::for_each(&mut bands, |values| {
-                let bucket = values.first / self.pixels_per_band * self.layers + layer;
+                let band = values.first / self.pixels_per_band;
                 for w in work.iter() {
-                    for s in &w.buffers().splats[bucket] {
+                    for s in w.buffers().layers[layer].band(band) {
                         values.add(s.pixel as usize - values.first, s.weight, &s.radiance);
                     }
                 }
@@ -180,14 +229,14 @@ impl SplatBands {
                 visits[p as usize] += 1;
             }
             buffers.visited.clear();
-            // Each band keeps room for what it took this round, no more: a
-            // worker that moves across the film (a chain, a block of start
-            // paths) would otherwise end up holding, in every band, the most
-            // it ever took there.
-            for band in &mut buffers.splats {
-                let used = band.len();
-                band.clear();
-                band.shrink_to(used);
+            // Each layer keeps room for what it took this round, no more: a
+            // worker whose round was large (a chain through a bright
+            // region, a block of start paths) would otherwise hold that
+            // room for the rest of the render.
+            for layer in &mut buffers.layers {
+                let used = layer.splats.len();
+                layer.splats.clear();
+                layer.splats.shrink_to(used);
             }
         }
     }

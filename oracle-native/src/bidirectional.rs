@@ -369,7 +369,7 @@ impl<I: Intersector> PathTracer<I> {
     ) -> Subpaths {
         let scene = &self.scene;
         let mut paths = Subpaths::take();
-        let (origin, direction) = scene.camera.ray(film.x, film.y);
+        let (origin, direction) = camera.ray(film.x, film.y);
         let pinhole = Vertex::new(Kind::Camera, origin, direction, Vec3::ONE, 1.0);
         paths.camera.push(pinhole);
         let pdf = camera.direction_pdf(origin + direction);

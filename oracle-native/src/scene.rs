@@ -96,17 +96,28 @@ impl Camera {
 
     /// The primary ray through film point `(x, y)` in pixels (row 0 at the top).
     pub fn ray(&self, x: f32, y: f32) -> (Vec3, Vec3) {
-        let (w, h) = (self.resolution.width as f32, self.resolution.height as f32);
-        let (sx, sy, tan) = self.plane();
-        let cx = (2.0 * x / w - 1.0) * sx * tan;
-        let cy = (1.0 - 2.0 * y / h) * sy * tan;
+        let film = (self.resolution.width as f32, self.resolution.height as f32);
         let origin = self.camera_to_world.transform_point3(Vec3::ZERO);
-        let dir = self
-            .camera_to_world
-            .transform_vector3(Vec3::new(cx, cy, 1.0))
-            .normalize();
-        (origin, dir)
+        primary_ray(&self.camera_to_world, self.plane(), film, origin, x, y)
     }
+}
+
+/// The ray from `origin` through film point `(x, y)` of a film of `(w, h)`
+/// pixels, on the image plane `(sx, sy, tan)` ([`Camera::plane`]).
+fn primary_ray(
+    camera_to_world: &Mat4,
+    (sx, sy, tan): (f32, f32, f32),
+    (w, h): (f32, f32),
+    origin: Vec3,
+    x: f32,
+    y: f32,
+) -> (Vec3, Vec3) {
+    let cx = (2.0 * x / w - 1.0) * sx * tan;
+    let cy = (1.0 - 2.0 * y / h) * sy * tan;
+    let dir = camera_to_world
+        .transform_vector3(Vec3::new(cx, cy, 1.0))
+        .normalize();
+    (origin, dir)
 }
 
 /// The camera seen from the scene: where points project on the film and how
@@ -115,6 +126,9 @@ impl Camera {
 #[derive(Clone, Copy, Debug)]
 pub struct Projection {
     world_to_camera: Mat4,
+    camera_to_world: Mat4,
+    /// [`Camera::plane`].
+    plane: (f32, f32, f32),
     half_plane: (f32, f32),
     film: (f32, f32),
     /// The camera's position.
@@ -126,10 +140,13 @@ pub struct Projection {
 impl Camera {
     /// The camera's [`Projection`].
     pub fn projection(&self) -> Projection {
-        let (sx, sy, tan) = self.plane();
+        let plane = self.plane();
+        let (sx, sy, tan) = plane;
         let half_plane = (sx * tan, sy * tan);
         Projection {
             world_to_camera: self.camera_to_world.inverse(),
+            camera_to_world: self.camera_to_world,
+            plane,
             half_plane,
             film: (self.resolution.width as f32, self.resolution.height as f32),
             origin: self.camera_to_world.transform_point3(Vec3::ZERO),
@@ -139,6 +156,18 @@ impl Camera {
 }
 
 impl Projection {
+    /// [`Camera::ray`], with the camera's constants computed once.
+    pub fn ray(&self, x: f32, y: f32) -> (Vec3, Vec3) {
+        primary_ray(
+            &self.camera_to_world,
+            self.plane,
+            self.film,
+            self.origin,
+            x,
+            y,
+        )
+    }
+
     /// The film point `p` projects to and the cosine between the camera's
     /// axis and the direction to `p`, if `p` is in front of the camera and
     /// projects inside the film.

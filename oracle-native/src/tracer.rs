@@ -127,7 +127,7 @@ impl PathSampler {
 pub struct PathTracer<I> {
     pub(crate) scene: Scene,
     pub(crate) accel: I,
-    /// The scene's camera as light tracing sees it, computed once.
+    /// The scene's camera as camera rays and light tracing see it, computed once.
     pub(crate) projection: Projection,
     /// Multiplexed paths' choice of a length, computed once.
     pub(crate) lengths: Lengths,
@@ -165,7 +165,7 @@ impl<I: Intersector> PathTracer<I> {
     /// to. The pinhole camera draws no numbers.
     fn seen_emission(&self, film: FilmPoint) -> Vec3 {
         let scene = &self.scene;
-        let (origin, direction) = scene.camera.ray(film.x, film.y);
+        let (origin, direction) = self.projection.ray(film.x, film.y);
         let ray = Ray::new(origin, direction);
         let Some(hit) = self.accel.closest_hit(&ray) else {
             return scene.environment.unwrap_or(Vec3::ZERO);
@@ -189,7 +189,7 @@ impl<I: Intersector> PathTracer<I> {
     ) -> (Vec3, PathFlags, Vec3) {
         let scene = &self.scene;
         let floor = self.regularization.map_or(0.0, |r| r.floor());
-        let (origin, direction) = scene.camera.ray(film.x, film.y);
+        let (origin, direction) = self.projection.ray(film.x, film.y);
         let mut ray = Ray::new(origin, direction);
         let mut beta = Vec3::ONE;
         let mut radiance = Vec3::ZERO;

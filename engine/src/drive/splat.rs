@@ -3,9 +3,10 @@
 //!
 //! Workers run in parallel and push their contributions into one buffer a
 //! layer; after each round each worker's buffers are sorted by band (in
-//! place) and added to the films band by band (bands in parallel). The films hold exact sums ([`ExactFilm`]), so the
-//! image depends neither on the thread count nor on how the workers are
-//! grouped (into rounds, or into tasks on several machines). A method may
+//! place) and added to the films band by band (bands in parallel). The
+//! films hold exact sums ([`ExactFilm`]), so the image depends neither on
+//! the thread count nor on how the workers are grouped (into rounds, or
+//! into tasks on several machines). A method may
 //! splat into several films (*layers*: PSSMLT keeps its large steps apart).
 
 use alloc::vec;
@@ -40,8 +41,8 @@ pub(crate) struct RoundBuffers<R> {
     visited: Vec<u32>,
 }
 
-/// One layer's splats of a round, and after [`sort_by_band`](Self::sort_by_band)
-/// where each band's begin.
+/// One layer's splats of a round and, once
+/// [`sort_by_band`](Self::sort_by_band) has run, where each band's begin.
 struct LayerSplats<R> {
     splats: Vec<Splat<R>>,
     /// Band `b`'s splats are `splats[starts[b]..starts[b + 1]]` once sorted.

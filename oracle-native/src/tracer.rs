@@ -315,12 +315,14 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
     }
 
     /// Bidirectional paths splat their light subpath's vertices joined to
-    /// the camera (about 3 a path on the built-in Cornell box); a
-    /// multiplexed path or a single strategy at most one.
+    /// the camera (1.3 a path on the built-in Cornell box and 1.4 on
+    /// `saturated`, the most of the built-in scenes, counted over 200 000
+    /// paths; their light subpaths play Russian roulette from the first
+    /// bounce); a multiplexed path or a single strategy at most one.
     fn splats_per_path(&self) -> f64 {
         match self.sampler {
             PathSampler::Unidirectional | PathSampler::BidirectionalNoSplats => 0.0,
-            PathSampler::Bidirectional => 3.0,
+            PathSampler::Bidirectional => 1.5,
             PathSampler::Multiplexed => 1.0,
             PathSampler::Strategy { camera, .. } => f64::from(u8::from(camera == 1)),
         }

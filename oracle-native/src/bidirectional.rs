@@ -21,8 +21,9 @@
 //! four per bounce on stream 1, so mutating one subpath does not shift the
 //! other's coordinates. Paths are at most `max_depth + 1` segments long, as
 //! with the unidirectional tracer, and subpaths play Russian roulette
-//! (survival: their throughput relative to their start, at most 0.95), camera
-//! subpaths from their third bounce on, light subpaths from their first. The MIS weights use the densities without the roulette:
+//! (survival: their throughput relative to their start, at most 0.95),
+//! camera subpaths from their third bounce on, light subpaths from their
+//! first. The MIS weights use the densities without the roulette:
 //! they still sum to one over the strategies of every path (Veach 1997
 //! sec. 9.2.2), only the estimate's variance depends on them. A weight
 //! costs O(1) a connection: pbrt's walk over density ratios, its terms past
@@ -188,7 +189,7 @@ impl Transport {
     /// Measured against the third bounce for both (4 s, 6 seeds, relMSE,
     /// `docs/RESULTS.md`): PSSMLT 1.1x better on the Cornell box and on
     /// veach-ajar, level on the pool (where roulette from the first bounce
-    /// on camera subpaths too costs MC 1.5x).
+    /// on camera subpaths too costs MC 1.4x).
     fn roulette_depth(self) -> u32 {
         match self {
             Transport::Radiance => ROULETTE_DEPTH,

@@ -317,7 +317,8 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
     /// Bidirectional paths splat their light subpath's vertices joined to
     /// the camera (1.3 a path on the built-in Cornell box and 1.4 on
     /// `saturated`, the most of the built-in scenes, counted over 200 000
-    /// paths; their light subpaths play Russian roulette from the first
+    /// paths by a throwaway test; `tests/bounds/memory.rs` checks the bound
+    /// it gives against the peak; their light subpaths play Russian roulette from the first
     /// bounce); a multiplexed path or a single strategy at most one.
     fn splats_per_path(&self) -> f64 {
         match self.sampler {

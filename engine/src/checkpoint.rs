@@ -33,8 +33,9 @@ use crate::task::Task;
 pub(crate) const MAGIC: [u8; 8] = *b"STRATAck";
 
 /// The checkpoint format's version. Bump it whenever a saved type changes
-/// (a field added, removed or reordered in any state a method saves).
-pub const FORMAT_VERSION: u32 = 20;
+/// (a field added, removed or reordered in any state a method saves, or
+/// what a saved sum means).
+pub const FORMAT_VERSION: u32 = 21;
 
 /// The engine's version, also saved: a checkpoint is read only by the
 /// engine that wrote it.

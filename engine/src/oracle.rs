@@ -188,6 +188,20 @@ pub trait SplatSink<R> {
     fn wants_splats(&self) -> bool {
         true
     }
+
+    /// Paths whose splats the caller keeps per path whose radiance it keeps
+    /// (1 for every method but stratified MCMC, whose tile chains keep the
+    /// splats of their coin-chosen large steps only). A bidirectional oracle
+    /// weights its light-tracing strategy by it in multiple importance
+    /// sampling, as Veach (1997, sec. 9.2.2-9.2.3) weights technique `i` by
+    /// its sample count `n_i`: the strategies the caller samples more carry
+    /// more of the light. The weights of each path still sum to one, so any
+    /// finite value > 0 leaves the image unbiased (the oracle reads others
+    /// as 1) as long as it is the same for every path of a render: only the
+    /// variance depends on it.
+    fn splat_rate(&self) -> f32 {
+        1.0
+    }
 }
 
 /// A sink that drops every splat: for callers that use only the radiance at

@@ -28,7 +28,13 @@
 //! sec. 9.2.2), only the estimate's variance depends on them. A weight
 //! costs O(1) a connection: pbrt's walk over density ratios, its terms past
 //! the two joined vertices summed once a subpath (Georgiev 2012's recursive
-//! form).
+//! form). Light tracing's squared density is weighted by the square of the
+//! caller's splat rate (`SplatSink::splat_rate`; Veach 1997 sec. 9.2.3's
+//! sample counts `n_i`), except on paths with a specular vertex between
+//! their ends, which keep its full weight: stratified MCMC keeps the splats
+//! of a sixth of its traces, and its tile chains carry the diffuse light
+//! better than those few splats would, while a caustic seen directly is
+//! light tracing's alone (Gruson et al. 2020, Fig. 9).
 //!
 //! Multiplexed paths (Hachisuka et al. 2014) trace one strategy: a length
 //! from the engine's held stream (`strategies::Lengths`) and a strategy from stream
@@ -167,6 +173,18 @@ impl Vertex {
     }
 }
 
+/// The factor on light tracing's squared density in the power heuristic,
+/// `n_lt²` for the caller's [`SplatSink::splat_rate`] `n_lt` (Veach 1997 sec.
+/// 9.2.3: technique `i` weighted by `(n_i p_i)²`, every other strategy one
+/// sample a path); 1 for a rate that is not finite and positive.
+fn light_tracing_factor(rate: f32) -> f32 {
+    if rate > 0.0 && rate.is_finite() {
+        rate * rate
+    } else {
+        1.0
+    }
+}
+
 /// `f`, or 1 where `f` is 0 (pbrt's `remap0`: a delta vertex's densities).
 fn remap0(f: f32) -> f32 {
     if f != 0.0 { f } else { 1.0 }
@@ -222,8 +240,17 @@ struct Subpaths {
     /// The camera subpath's first vertex in the MIS walk (1, or 2 without
     /// light tracing), and each subpath's [`tail_sums`].
     camera_first: usize,
+    /// The light-tracing strategy's factor in the MIS weights of paths
+    /// without a specular vertex ([`light_tracing_factor`]; 1 without light
+    /// tracing), the camera's tail sums with it, and with 1 (for paths with
+    /// a specular vertex, when the factor is not 1).
+    light_tracing_factor: f32,
     camera_tails: Vec<f32>,
+    camera_tails_specular: Vec<f32>,
     light_tails: Vec<f32>,
+    /// Each subpath's first specular vertex (its length if none).
+    camera_first_delta: usize,
+    light_first_delta: usize,
 }
 
 std::thread_local! {
@@ -298,7 +325,12 @@ impl<I: Intersector> PathTracer<I> {
         let light_tracing = which != Strategies::AllButLightTracing;
         let weighted = !matches!(which, Strategies::One { .. });
         if weighted {
-            paths.weigh_tails(if light_tracing { 1 } else { 2 });
+            let factor = if only.is_none() {
+                light_tracing_factor(splats.splat_rate())
+            } else {
+                1.0
+            };
+            paths.weigh_tails(if light_tracing { 1 } else { 2 }, factor);
         }
         // The environment is reached only by escaping camera subpaths
         // (`s = 0`, its one strategy): with one strategy, only at its length.
@@ -665,38 +697,62 @@ struct Reverse {
 
 impl Subpaths {
     /// Each subpath's [`tail_sums`], the camera's down to vertex `fewest`
-    /// (1 with light tracing, 2 without), the light's down to its start.
-    fn weigh_tails(&mut self, fewest: usize) {
+    /// (1 with light tracing, weighted by `factor`, 2 without), the light's
+    /// down to its start.
+    fn weigh_tails(&mut self, fewest: usize, factor: f32) {
         self.camera_first = fewest;
-        tail_sums(&self.camera, fewest, &mut self.camera_tails);
-        tail_sums(&self.light, 0, &mut self.light_tails);
+        self.light_tracing_factor = if fewest == 1 { factor } else { 1.0 };
+        tail_sums(
+            &self.camera,
+            fewest,
+            self.light_tracing_factor,
+            &mut self.camera_tails,
+        );
+        if self.light_tracing_factor != 1.0 {
+            tail_sums(&self.camera, fewest, 1.0, &mut self.camera_tails_specular);
+        }
+        tail_sums(&self.light, 0, 1.0, &mut self.light_tails);
+        let first_delta = |path: &[Vertex]| path.iter().position(|v| v.delta).unwrap_or(path.len());
+        self.camera_first_delta = first_delta(&self.camera);
+        self.light_first_delta = first_delta(&self.light);
     }
 
     /// The power-heuristic weight of strategy `(s, t)` (Veach 1997 eq. 10.9
     /// with `beta = 2`, pbrt's walk over density ratios), joined with the
     /// densities `reverse`, over the strategies [`weigh_tails`](Self::weigh_tails)
-    /// was told. The walk's terms past the two joined vertices of each side
+    /// was told, light tracing's squared density times its factor. The walk's terms past the two joined vertices of each side
     /// come from the tail sums: O(1) a connection (the recursive form of
     /// Georgiev 2012, "Implementing vertex connection and merging").
     fn mis_weight(&self, (s, t): (usize, usize), reverse: &Reverse) -> f32 {
         if s + t == 2 {
             return 1.0;
         }
+        // A specular vertex between the path's ends: light tracing keeps
+        // its full weight (caustics seen directly are its paths).
+        let specular = self.camera_first_delta + 1 < t || self.light_first_delta + 1 < s;
+        let (factor, camera_tails) = if specular && self.light_tracing_factor != 1.0 {
+            (1.0, &self.camera_tails_specular)
+        } else {
+            (self.light_tracing_factor, &self.camera_tails)
+        };
         let camera = joined_sum(
             &self.camera[..t],
             self.camera_first,
-            &self.camera_tails,
+            factor,
+            camera_tails,
             reverse.pt,
             reverse.pt_minus,
         );
         let light = joined_sum(
             &self.light[..s],
             0,
+            1.0,
             &self.light_tails,
             reverse.qs,
             reverse.qs_minus,
         );
-        let weight = 1.0 / (1.0 + camera + light);
+        let own = if t == 1 { factor } else { 1.0 };
+        let weight = own / (own + camera + light);
         // 0 x inf (a ratio underflowing where a tail overflows): no weight.
         if weight.is_nan() { 0.0 } else { weight }
     }
@@ -714,16 +770,19 @@ fn ratio_term(path: &[Vertex], i: usize, rev: f32) -> (f32, bool) {
 }
 
 /// `tails[k]`: the walk's sum over vertices `first..=k` as seen from a
-/// connection past them, `Σ_i Π_{j=i..=k} r_j²` over the counted `i`
-/// (`ratio_term` with the walk's own reverse densities), by the recursion
-/// `tails[k] = r_k² (counted_k + tails[k-1])`; 0 below `first`.
-fn tail_sums(path: &[Vertex], first: usize, tails: &mut Vec<f32>) {
+/// connection past them, `Σ_i c_i Π_{j=i..=k} r_j²` over the counted `i`
+/// (`ratio_term` with the walk's own reverse densities; `c_i` is
+/// `first_factor` for `i = first`, the strategy the walk ends on, else 1),
+/// by the recursion `tails[k] = r_k² (c_k counted_k + tails[k-1])`; 0 below
+/// `first`.
+fn tail_sums(path: &[Vertex], first: usize, first_factor: f32, tails: &mut Vec<f32>) {
     tails.clear();
     let mut sum = 0.0f32;
     for (i, v) in path.iter().enumerate() {
         if i >= first {
             let (r2, counted) = ratio_term(path, i, v.pdf_rev);
-            sum = r2 * (f32::from(u8::from(counted)) + sum);
+            let own = if i == first { first_factor } else { 1.0 };
+            sum = r2 * (if counted { own } else { 0.0 } + sum);
         }
         tails.push(sum);
     }
@@ -734,23 +793,31 @@ fn tail_sums(path: &[Vertex], first: usize, tails: &mut Vec<f32>) {
 /// ratios, summed where counted. `last_rev` and `second_rev` are the reverse
 /// densities of the two vertices at the joined end as the connection sets
 /// them (the joined vertex counts as non-delta); the rest is in `tails`
-/// ([`tail_sums`] from the same `first`).
-fn joined_sum(path: &[Vertex], first: usize, tails: &[f32], last_rev: f32, second_rev: f32) -> f32 {
+/// ([`tail_sums`] from the same `first` and `first_factor`).
+fn joined_sum(
+    path: &[Vertex],
+    first: usize,
+    first_factor: f32,
+    tails: &[f32],
+    last_rev: f32,
+    second_rev: f32,
+) -> f32 {
     let n = path.len();
     if n <= first {
         return 0.0;
     }
+    let own = |i: usize| if i == first { first_factor } else { 1.0 };
     let (last, _) = ratio_term(path, n - 1, last_rev);
     let mut sum = if n >= 2 && path[n - 2].delta {
         0.0
     } else {
-        last
+        last * own(n - 1)
     };
     if n - 1 > first {
         let (second, counted) = ratio_term(path, n - 2, second_rev);
         let both = last * second;
         if counted {
-            sum += both;
+            sum += both * own(n - 2);
         }
         if n - 2 > first {
             sum += both * tails[n - 3];
@@ -765,7 +832,7 @@ mod tests {
 
     /// pbrt's walk as written (`MISWeight`'s loop): the reference the tail
     /// sums must reproduce.
-    fn walk(path: &[Vertex], first: usize, last_rev: f32, second_rev: f32) -> f32 {
+    fn walk(path: &[Vertex], first: usize, factor: f32, last_rev: f32, second_rev: f32) -> f32 {
         let n = path.len();
         let (mut ratio, mut sum) = (1.0f32, 0.0f32);
         for i in (first..n).rev() {
@@ -778,15 +845,16 @@ mod tests {
             let delta = i != n - 1 && path[i].delta;
             let after_delta = i > 0 && path[i - 1].delta;
             if !delta && !after_delta {
-                sum += ratio * ratio;
+                sum += ratio * ratio * if i == first { factor } else { 1.0 };
             }
         }
         sum
     }
 
     /// On subpaths of every length with random densities (zeros among them)
-    /// and delta vertices, from every first vertex, the O(1) sum at every
-    /// joined vertex equals the walk to f32 rounding.
+    /// and delta vertices, from every first vertex and with a factor on its
+    /// term (light tracing's), the O(1) sum at every joined vertex equals
+    /// the walk to f32 rounding.
     #[test]
     fn tail_sums_reproduce_pbrt_walk() {
         let mut state = 0x9e37_79b9_7f4a_7c15u64;
@@ -810,11 +878,12 @@ mod tests {
                 })
                 .collect();
             for first in 0..3 {
-                tail_sums(&path, first, &mut tails);
+                let factor = if trial % 2 == 0 { 1.0 } else { 2.0 * next() };
+                tail_sums(&path, first, factor, &mut tails);
                 for n in 0..=len {
                     let (last, second) = (next() * 3.0, next() * 3.0);
-                    let expected = walk(&path[..n], first, last, second);
-                    let got = joined_sum(&path[..n], first, &tails, last, second);
+                    let expected = walk(&path[..n], first, factor, last, second);
+                    let got = joined_sum(&path[..n], first, factor, &tails, last, second);
                     assert!(
                         (got - expected).abs() <= 1e-5 * expected.max(1.0),
                         "trial {trial}, first {first}, n {n}: {got} vs {expected}"

@@ -3,23 +3,28 @@
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
-use super::tile::TileSplat;
 use crate::film::Film;
-use crate::oracle::Radiance;
+use crate::oracle::{Radiance, Splat};
 use crate::tiles::Tiles;
 
 /// Light tracing in stratified MCMC. Its splats land anywhere on the film,
 /// so it "cannot be stratified in the image space" (Gruson et al. 2020, sec. 5): the
 /// tile chains value and accumulate only the radiance at their own pixels,
 /// and the splats are estimated apart, by Monte Carlo, from the traces that
-/// are independent uniform samples: the coin-chosen large steps (each a
-/// uniform sample of every pixel of its tile) and the regularizer's paths.
-/// Pixel `p` is such a sample `m_p = p_large · |tiles ∋ p| + regularizer
-/// paths` times per sweep in expectation, whatever the paths found, so by
-/// Wald's identity each splat from `p`, weighted `1 / m_p`, summed over the
-/// sweeps and divided by their number, is an unbiased estimate of the light
-/// tracing image for one camera path per pixel; it is added to the
-/// reconstructed image.
+/// are independent uniform samples of a tile's centre pixel: the coin-chosen
+/// large steps' and the regularizer's paths. (A large step's other tile
+/// pixels replay the same primary sample; a bidirectional oracle's light
+/// subpath, and so its splats, would be the centre's again.) Every pixel is
+/// one tile's centre, a sample `m = p_large + regularizer paths` times per
+/// sweep in expectation, whatever the paths found, so by Wald's identity the
+/// splats weighted `1 / m`, summed over the sweeps and divided by their
+/// number, are an unbiased estimate of the light tracing image for one
+/// camera path per pixel; it is added to the reconstructed image. Fewer
+/// traces keep their splats than their radiance, `m` against the tile's
+/// pixels and the regularizer paths: every trace's sink reports that
+/// [`splat_rate`](Self::splat_rate), and a bidirectional oracle gives light
+/// tracing that much less of the light in its MIS weights (the tile chains
+/// the rest).
 ///
 /// A sample budget's remainder after its last whole sweep is spent on `e`
 /// more regularizer paths at every tile's centre
@@ -32,7 +37,7 @@ use crate::tiles::Tiles;
 /// never splats (a unidirectional one) costs nothing per pixel.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(super) struct LightTracing {
-    /// `p_large` and the regularizer paths per sweep, of `m_p`.
+    /// `p_large` and the regularizer paths per sweep, of `m`.
     p_large: f64,
     regularizer_paths: u32,
     channels: usize,
@@ -69,14 +74,22 @@ impl LightTracing {
             && film_fits(&self.remainder)
     }
 
-    /// `1 / m_p` of pixel `p` (0 where `m_p = 0`).
-    fn weight(&self, tiles: &Tiles, p: usize) -> f64 {
-        let m = self.p_large * tiles.tiles_of(p).count() as f64 + self.regularizer_paths as f64;
-        if m > 0.0 { 1.0 / m } else { 0.0 }
+    /// `m`, the uniform samples a tile centre takes a sweep in expectation.
+    fn samples(&self) -> f64 {
+        self.p_large + self.regularizer_paths as f64
+    }
+
+    /// The traces whose splats are kept per trace whose radiance is kept
+    /// ([`SplatSink::splat_rate`](crate::oracle::SplatSink::splat_rate)),
+    /// `m / (|tile| + regularizer paths)`: a sweep evaluates every tile pixel
+    /// once, and the regularizer's paths at the centre.
+    pub fn splat_rate(&self, tiles: &Tiles) -> f32 {
+        let evaluated = tiles.offsets().len() as f64 + self.regularizer_paths as f64;
+        (self.samples() / evaluated) as f32
     }
 
     /// Adds the splats of the remainder's paths (emptying the list).
-    pub fn add_remainder<R: Radiance>(&mut self, tiles: &Tiles, sampled: &mut Vec<TileSplat<R>>) {
+    pub fn add_remainder<R: Radiance>(&mut self, tiles: &Tiles, sampled: &mut Vec<Splat<R>>) {
         if sampled.is_empty() {
             return;
         }
@@ -85,12 +98,12 @@ impl LightTracing {
             .remainder
             .get_or_insert_with(|| Film::new(resolution, R::CHANNELS));
         for s in sampled.drain(..) {
-            film.add(resolution.pixel_index(s.splat.film), 1.0, &s.splat.radiance);
+            film.add(resolution.pixel_index(s.film), 1.0, &s.radiance);
         }
     }
 
     /// Adds a row of tile chains' sampled splats (emptying the list).
-    pub fn add<R: Radiance>(&mut self, tiles: &Tiles, sampled: &mut Vec<TileSplat<R>>) {
+    pub fn add<R: Radiance>(&mut self, tiles: &Tiles, sampled: &mut Vec<Splat<R>>) {
         if sampled.is_empty() {
             return;
         }
@@ -99,13 +112,9 @@ impl LightTracing {
             .sums
             .take()
             .unwrap_or_else(|| Film::new(resolution, R::CHANNELS));
+        let weight = 1.0 / self.samples();
         for s in sampled.drain(..) {
-            let weight = self.weight(tiles, s.source as usize);
-            sums.add(
-                resolution.pixel_index(s.splat.film),
-                weight,
-                &s.splat.radiance,
-            );
+            sums.add(resolution.pixel_index(s.film), weight, &s.radiance);
         }
         self.sums = Some(sums);
     }
@@ -123,7 +132,7 @@ impl LightTracing {
     }
 
     /// Adds the light-tracing image after `sweeps` sweeps to `film`.
-    pub fn add_to(&self, tiles: &Tiles, film: &mut Film, sweeps: u64) {
+    pub fn add_to(&self, film: &mut Film, sweeps: u64) {
         let sweeps = sweeps.max(1) as f64;
         if self.remainder_paths == 0 {
             if let Some(sums) = &self.sums {
@@ -131,13 +140,8 @@ impl LightTracing {
             }
             return;
         }
-        let per_sweep = (0..tiles.count()).map(|p| {
-            let w = self.weight(tiles, p);
-            if w > 0.0 { 1.0 / w } else { 0.0 }
-        });
-        let mean = per_sweep.sum::<f64>() / tiles.count().max(1) as f64;
         let extra = self.remainder_paths as f64;
-        let share = extra / (sweeps * mean + extra);
+        let share = extra / (sweeps * self.samples() + extra);
         if let Some(sums) = &self.sums {
             film.add_scaled(sums, (1.0 - share) / sweeps);
         }

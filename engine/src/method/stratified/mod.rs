@@ -455,17 +455,6 @@ where
     let emission_apart = settings.emission_rays > 0 && job.oracle.separates_emission();
     let fresh_emission =
         emission_apart.then(|| SeenEmission::new(O::Radiance::CHANNELS, Task::WHOLE));
-    let ctx = Context {
-        oracle: job.oracle,
-        importance: job.importance,
-        tiles: &tiles,
-        p_large: settings.mutation.large_step_probability,
-        small_step: settings.mutation.small_step,
-        emission_apart,
-    };
-    let n = tiles.count();
-    let offsets = tiles.offsets().len();
-    let costs = SweepCosts::new(&tiles, settings);
     let new_light = || {
         LightTracing::new(
             settings.mutation.large_step_probability,
@@ -473,6 +462,18 @@ where
             O::Radiance::CHANNELS,
         )
     };
+    let ctx = Context {
+        oracle: job.oracle,
+        importance: job.importance,
+        tiles: &tiles,
+        p_large: settings.mutation.large_step_probability,
+        splat_rate: new_light().splat_rate(&tiles),
+        small_step: settings.mutation.small_step,
+        emission_apart,
+    };
+    let n = tiles.count();
+    let offsets = tiles.offsets().len();
+    let costs = SweepCosts::new(&tiles, settings);
     let (position, saved) = match job.resumed::<Saved<O::Radiance>>()? {
         Some((position, saved)) => {
             let fits = saved.chains.len() == n

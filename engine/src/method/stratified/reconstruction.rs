@@ -145,7 +145,7 @@ pub(super) fn preview<S: Copy + Into<f64>, T: AsRef<[S]>>(
     if settings.anchor_total {
         anchor_total(&mut film, &regularizer, &[]);
     }
-    light.add_to(tiles, &mut film, sweeps);
+    light.add_to(&mut film, sweeps);
     if let Some(emission) = emission {
         emission.add_to(&mut film);
     }

@@ -13,7 +13,7 @@ use super::light::LightTracing;
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
 use super::regularizer::{Draws, Samples};
-use super::tile::{Context, Row, Start, TileChain, TileSplat, Waking, accumulate};
+use super::tile::{Context, Row, Start, TileChain, Waking, accumulate};
 use super::{StratifiedExtras, StratifiedSettings, StratifiedStats};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;
@@ -22,7 +22,7 @@ use crate::emission::SeenEmission;
 use crate::error::Error;
 use crate::film::Film;
 use crate::method::{Extras, Output};
-use crate::oracle::PathOracle;
+use crate::oracle::{PathOracle, Splat};
 use crate::parallel;
 use crate::target::Importance;
 use crate::tiles::Tiles;
@@ -324,7 +324,7 @@ pub(super) fn finish_runs(
             visits[q] += stats.sweeps;
         }
     }
-    light.add_to(tiles, &mut image.film, stats.sweeps);
+    light.add_to(&mut image.film, stats.sweeps);
     if let Some(alpha) = image.alpha {
         stats.alpha = alpha;
     }
@@ -525,7 +525,7 @@ where
 /// What a row of tiles gave ([`Sweeps::each_row`]).
 pub(super) struct Swept<R, C> {
     stats: ChainStats,
-    splats: Vec<TileSplat<R>>,
+    splats: Vec<Splat<R>>,
     sum: C,
 }
 

@@ -33,13 +33,6 @@ pub(super) struct Value<R> {
     pub importance: f32,
 }
 
-/// A splat of a tile trace, with the pixel the trace went through.
-#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
-pub(super) struct TileSplat<R> {
-    pub source: u32,
-    pub splat: Splat<R>,
-}
-
 /// A tile chain's state: its jitter replayed in every tile pixel.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub(super) struct TileState<R> {
@@ -48,18 +41,20 @@ pub(super) struct TileState<R> {
     pub values: Vec<Value<R>>,
     /// `T_s`, the largest importance of the values (eq. 9).
     pub target: f64,
-    /// The splats of those traces (light tracing), which the tile target
-    /// does not count (see [`LightTracing`](super::light::LightTracing)).
-    pub splats: Vec<TileSplat<R>>,
+    /// The splats of the centre pixel's trace (light tracing), which the
+    /// tile target does not count (see
+    /// [`LightTracing`](super::light::LightTracing)).
+    pub splats: Vec<Splat<R>>,
 }
 
 /// Where a tile trace's splats go: each is checked (a bad one, or one too
 /// many, makes the trace invalid, as in every method) and, if `keep` is
-/// given, kept with its source pixel.
+/// given, kept.
 struct TileSink<'a, R> {
     resolution: Resolution,
-    source: u32,
-    keep: Option<&'a mut Vec<TileSplat<R>>>,
+    keep: Option<&'a mut Vec<Splat<R>>>,
+    /// The traces whose splats are kept per trace whose radiance is.
+    rate: f32,
     made: usize,
     invalid: bool,
 }
@@ -67,6 +62,10 @@ struct TileSink<'a, R> {
 impl<R: Radiance> SplatSink<R> for TileSink<'_, R> {
     fn wants_splats(&self) -> bool {
         self.keep.is_some()
+    }
+
+    fn splat_rate(&self) -> f32 {
+        self.rate
     }
 
     fn splat(&mut self, film: FilmPoint, radiance: R) {
@@ -79,10 +78,7 @@ impl<R: Radiance> SplatSink<R> for TileSink<'_, R> {
             if keep.try_reserve(1).is_err() {
                 self.invalid = true;
             } else {
-                keep.push(TileSplat {
-                    source: self.source,
-                    splat: Splat { film, radiance },
-                });
+                keep.push(Splat { film, radiance });
             }
         }
     }
@@ -175,7 +171,7 @@ impl<R: Radiance> Waking<R> {
 pub(super) struct Row<'a, R> {
     pub samples: SampleRows<'a>,
     pub stats: ChainStats,
-    pub splats: Vec<TileSplat<R>>,
+    pub splats: Vec<Splat<R>>,
 }
 
 /// What the tile chains share.
@@ -184,6 +180,9 @@ pub(super) struct Context<'a, O, I: ?Sized> {
     pub importance: &'a I,
     pub tiles: &'a Tiles,
     pub p_large: f64,
+    /// What [`LightTracing::splat_rate`](super::light::LightTracing::splat_rate)
+    /// gives, for every trace's sink.
+    pub splat_rate: f32,
     /// The tile chains' small step.
     pub small_step: SmallStep,
     /// Whether the emission seen directly is left out of every trace
@@ -209,7 +208,7 @@ where
         sampler: &mut S,
         pixel: usize,
         jitter: FilmPoint,
-        splats: Option<&mut Vec<TileSplat<O::Radiance>>>,
+        splats: Option<&mut Vec<Splat<O::Radiance>>>,
     ) -> (Value<O::Radiance>, bool) {
         sampler.start_stream(0);
         // The same jitter in every pixel of a tile replays one primary
@@ -219,8 +218,8 @@ where
         let kept = splats.as_ref().map_or(0, |s| s.len());
         let mut sink = TileSink {
             resolution,
-            source: pixel as u32,
             keep: splats,
+            rate: self.splat_rate,
             made: 0,
             invalid: false,
         };
@@ -274,7 +273,10 @@ where
         out.splats.clear();
         let mut traced = Traced::default();
         for (o, q) in self.tiles.pixels(tile) {
-            let splats = keep_splats.then_some(&mut out.splats);
+            // The centre's splats only: every pixel of the tile replays the
+            // same primary sample, and a bidirectional oracle's light tracing
+            // depends on it alone, so the others' would be copies.
+            let splats = (keep_splats && o == 0).then_some(&mut out.splats);
             let (v, bad) = self.trace_in(sampler, q, jitter, splats);
             out.target = out.target.max(v.importance.into());
             out.values[o] = v;

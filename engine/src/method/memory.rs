@@ -63,8 +63,8 @@ fn runs_kept(runs: u32, task: Task) -> u128 {
 /// the independent runs finished (stratified MCMC, multi-stage MLT: a whole render pools them as they end, a task keeps each); the bootstrap's candidates
 /// (let go before the first round); every chain's state (its primary
 /// sample and path); stratified MCMC's tile chains, per pixel a part of
-/// its own and one per tile pixel (the state evaluated there, with its
-/// splats); and the contributions waiting to be merged: a round's
+/// its own, one per tile pixel (the state evaluated there) and the
+/// centre's splats; and the contributions waiting to be merged: a round's
 /// (PSSMLT and replica exchange: a round is a 64th of a sample budget,
 /// at most 2^21 paths, each with its proposal and state), a block's
 /// start paths and a wave of its chains' steps (ERPT, which merges a
@@ -134,7 +134,9 @@ pub(super) fn bound(method: &Method, shape: &RenderShape) -> u64 {
                     (2 * radius as u128 + 1) * (2 * radius as u128 + 1)
                 }
             };
-            let per_tile_pixel = TILE_PIXEL + splats * queued / 100;
+            // Splats: a large step's centre trace keeps them, its other
+            // tile pixels do not (`stratified::light`).
+            let per_tile = tile * TILE_PIXEL + splats * queued / 100;
             // Light tracing's two films, made at the first splat; the
             // emission seen directly's (counted whether or not the
             // oracle separates it).
@@ -149,7 +151,7 @@ pub(super) fn bound(method: &Method, shape: &RenderShape) -> u64 {
             counted
                 + light
                 + emission
-                + pixels * (TILE_CHAIN + tile * per_tile_pixel)
+                + pixels * (TILE_CHAIN + per_tile)
                 + workers * CHAIN
                 + runs_kept(s.runs, task) * run
         }

@@ -48,29 +48,34 @@ impl Subpaths {
             self.light_tracing_factor,
             &mut self.camera_tails,
         );
+        tail_sums(&self.light, 0, 1.0, &mut self.light_tails);
+        // What paths with a specular vertex need (read only at a factor
+        // other than 1).
         if self.light_tracing_factor != 1.0 {
             tail_sums(&self.camera, fewest, 1.0, &mut self.camera_tails_specular);
+            let first_delta =
+                |path: &[Vertex]| path.iter().position(|v| v.delta).unwrap_or(path.len());
+            self.camera_first_delta = first_delta(&self.camera);
+            self.light_first_delta = first_delta(&self.light);
         }
-        tail_sums(&self.light, 0, 1.0, &mut self.light_tails);
-        let first_delta = |path: &[Vertex]| path.iter().position(|v| v.delta).unwrap_or(path.len());
-        self.camera_first_delta = first_delta(&self.camera);
-        self.light_first_delta = first_delta(&self.light);
     }
 
     /// The power-heuristic weight of strategy `(s, t)` (Veach 1997 eq. 10.9
     /// with `beta = 2`, pbrt's walk over density ratios), joined with the
     /// densities `reverse`, over the strategies [`weigh_tails`](Self::weigh_tails)
-    /// was told, light tracing's squared density times its factor. The walk's terms past the two joined vertices of each side
-    /// come from the tail sums: O(1) a connection (the recursive form of
-    /// Georgiev 2012, "Implementing vertex connection and merging").
+    /// was told, light tracing's squared density times its factor. The
+    /// walk's terms past the two joined vertices of each side come from the
+    /// tail sums: O(1) a connection (the recursive form of Georgiev 2012,
+    /// "Implementing vertex connection and merging").
     pub(super) fn mis_weight(&self, (s, t): (usize, usize), reverse: &Reverse) -> f32 {
         if s + t == 2 {
             return 1.0;
         }
         // A specular vertex between the path's ends: light tracing keeps
         // its full weight (caustics seen directly are its paths).
-        let specular = self.camera_first_delta + 1 < t || self.light_first_delta + 1 < s;
-        let (factor, camera_tails) = if specular && self.light_tracing_factor != 1.0 {
+        let specular = self.light_tracing_factor != 1.0
+            && (self.camera_first_delta + 1 < t || self.light_first_delta + 1 < s);
+        let (factor, camera_tails) = if specular {
             (1.0, &self.camera_tails_specular)
         } else {
             (self.light_tracing_factor, &self.camera_tails)

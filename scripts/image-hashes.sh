@@ -16,13 +16,13 @@ record=0
 recorded=scripts/image-hashes.sha256
 out=out/fingerprints
 
-# The binary `cargo test --workspace` builds (the test profile: optimized,
+# The binary the tests build (scripts/test.sh: the test profile, optimized,
 # with debug assertions; the tests' features): after the tests, nothing is
 # rebuilt (`cargo build --example fingerprint` resolves the features without
 # the dev-dependencies' and rebuilt most of the workspace: 80-170 s of CI).
 # No optimization level changes a bit (Rust neither contracts nor reorders
 # floating point), so release builds give these hashes too.
-fingerprint=$(cargo test --workspace --no-run --message-format=json 2>/dev/null |
+fingerprint=$(scripts/test.sh --no-run --message-format=json 2>/dev/null |
   grep -o '"executable":"[^"]*/examples/fingerprint"' | sed 's/^"executable":"//; s/"$//') || true
 [ -x "$fingerprint" ] || { echo "the fingerprint example was not built" >&2; exit 1; }
 rm -rf "$out"

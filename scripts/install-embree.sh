@@ -37,7 +37,15 @@ if ! ls /usr/lib/llvm-*/lib/libclang.so* /usr/lib/*/libclang-[0-9]*.so* >/dev/nu
     fi
 fi
 
-# Embree 4.
+# Embree 4 (already here: nothing to fetch, so a second run is quick).
+if [ -e "$VENDOR/libembree4.so" ]; then
+    echo "Embree 4 already in $VENDOR"
+    exit 0
+fi
+if ldconfig -p 2>/dev/null | grep -q 'libembree4\.so '; then
+    echo "Embree 4 already on the system library path."
+    exit 0
+fi
 if [ "$apt_updated" = 0 ]; then $SUDO apt-get update -qq; apt_updated=1; fi
 embree_candidate=$(candidate libembree-dev)
 case "$embree_candidate" in
@@ -48,10 +56,6 @@ case "$embree_candidate" in
         ;;
 esac
 
-if [ -e "$VENDOR/libembree4.so" ]; then
-    echo "Embree 4 already in $VENDOR"
-    exit 0
-fi
 command -v python3 >/dev/null || apt_install python3 python3-pip
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT

@@ -224,6 +224,21 @@ enum StrataStatus strata_sampler_splat(struct StrataSampler *sampler,
                                        float y,
                                        const float *rgb);
 
+// Whether the engine keeps the splats of the path being traced. When it
+// does not (stratified MCMC's tile chains between their large steps, the
+// `emission` callback), an oracle may skip the work that only makes splats
+// (light tracing); its radiance must not change. False for a null sampler.
+bool strata_sampler_wants_splats(const struct StrataSampler *sampler);
+
+// Paths whose splats the engine keeps per path whose radiance it keeps: 1
+// for every method but stratified MCMC (0.16 at its defaults). A
+// bidirectional oracle that combines light tracing with its other
+// strategies by multiple importance sampling weights light tracing by it,
+// as Veach (1997, sec. 9.2.2-9.2.3) weights a technique by its sample
+// count; any finite value > 0, the same for every path of a render, keeps
+// the image unbiased. 1 for a null sampler.
+float strata_sampler_splat_rate(const struct StrataSampler *sampler);
+
 // Tells the engine that `rgb[0..3]` of the radiance the path being traced
 // writes is emission seen directly (the emitter its camera ray first lands
 // on, or the environment it escapes to): for an oracle with an `emission`

@@ -57,6 +57,41 @@ pub extern "C" fn strata_sampler_splat(
     StrataStatus::Ok
 }
 
+/// Whether the engine keeps the splats of the path being traced. When it
+/// does not (stratified MCMC's tile chains between their large steps, the
+/// `emission` callback), an oracle may skip the work that only makes splats
+/// (light tracing); its radiance must not change. False for a null sampler.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_sampler_wants_splats(sampler: *const StrataSampler) -> bool {
+    with_splats(sampler, |splats| splats.wants_splats()).unwrap_or(false)
+}
+
+/// Paths whose splats the engine keeps per path whose radiance it keeps: 1
+/// for every method but stratified MCMC (0.16 at its defaults). A
+/// bidirectional oracle that combines light tracing with its other
+/// strategies by multiple importance sampling weights light tracing by it,
+/// as Veach (1997, sec. 9.2.2-9.2.3) weights a technique by its sample
+/// count; any finite value > 0, the same for every path of a render, keeps
+/// the image unbiased. 1 for a null sampler.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_sampler_splat_rate(sampler: *const StrataSampler) -> f32 {
+    with_splats(sampler, |splats| splats.splat_rate()).unwrap_or(1.0)
+}
+
+/// Runs `f` on the engine's splat sink behind `sampler`.
+fn with_splats<T>(
+    sampler: *const StrataSampler,
+    f: impl FnOnce(&dyn SplatSink<Rgb>) -> T,
+) -> Option<T> {
+    if sampler.is_null() {
+        return None;
+    }
+    // SAFETY: a non-null `StrataSampler` is only ever made by `COracle` around
+    // a live `&mut dyn SplatSink<Rgb>`, and lives for that call.
+    let splats = unsafe { &*((*sampler).splats as *const &mut dyn SplatSink<Rgb>) };
+    Some(f(&**splats))
+}
+
 /// Tells the engine that `rgb[0..3]` of the radiance the path being traced
 /// writes is emission seen directly (the emitter its camera ray first lands
 /// on, or the environment it escapes to): for an oracle with an `emission`

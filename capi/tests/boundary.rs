@@ -875,6 +875,85 @@ fn a_c_oracle_tells_its_emission_apart() {
     );
 }
 
+/// What the splat sink says, as radiance: the splat rate, whether splats
+/// are kept, and a drawn number (so that the chains move).
+fn splat_state(rate: f32, wants: bool, u: f32) -> [f32; 3] {
+    [rate, if wants { 1.0 } else { 0.0 }, u]
+}
+
+extern "C" fn splat_state_trace(
+    _: *mut c_void,
+    _: f32,
+    _: f32,
+    s: *mut StrataSampler,
+    _: f32,
+    rgb: *mut f32,
+) {
+    let state = splat_state(
+        strata_sampler_splat_rate(s),
+        strata_sampler_wants_splats(s),
+        strata_sampler_next_1d(s),
+    );
+    // SAFETY: the engine passes room for three floats.
+    unsafe { std::slice::from_raw_parts_mut(rgb, 3).copy_from_slice(&state) };
+}
+
+/// The same oracle in Rust, reading its sink.
+struct SplatState;
+
+impl strata_engine::PathOracle for SplatState {
+    type Radiance = strata_engine::Rgb;
+
+    fn resolution(&self) -> strata_engine::Resolution {
+        strata_engine::Resolution::new(8, 6)
+    }
+
+    fn trace<S: strata_engine::Sampler + ?Sized>(
+        &self,
+        _: strata_engine::FilmPoint,
+        sampler: &mut S,
+        _: strata_engine::Temperature,
+        splats: &mut dyn strata_engine::SplatSink<strata_engine::Rgb>,
+    ) -> strata_engine::PathSample<strata_engine::Rgb> {
+        let state = splat_state(
+            splats.splat_rate(),
+            splats.wants_splats(),
+            sampler.next_1d(),
+        );
+        strata_engine::PathSample {
+            radiance: strata_engine::Rgb(state),
+            ..Default::default()
+        }
+    }
+}
+
+/// A C oracle reads the engine's splat rate and whether it keeps splats as
+/// a Rust oracle reads its `SplatSink`: the films agree bit for bit, for
+/// stratified MCMC (a rate below 1, splats kept on large steps' centres
+/// only) and PSSMLT (rate 1, always kept); a null sampler reads rate 1, no
+/// splats.
+#[test]
+fn a_c_oracle_reads_the_splat_rate() {
+    use strata_engine::Method;
+    for method in [c"stratified", c"pssmlt"] {
+        let settings = strata_settings_new(method.as_ptr());
+        strata_settings_set_seed(settings, 5);
+        strata_settings_set_samples_per_pixel(settings, 16);
+        let mut film = null_mut();
+        assert_eq!(
+            strata_render(&oracle(splat_state_trace), settings, null(), &mut film),
+            StrataStatus::Ok
+        );
+        let named = Method::from_name(method.to_str().unwrap()).unwrap();
+        let rust_bits = rust_film_bits(&SplatState, named, 5);
+        assert_eq!(film_bits(film), rust_bits, "{method:?}");
+        strata_film_free(film);
+        strata_settings_free(settings);
+    }
+    assert!(!strata_sampler_wants_splats(null()));
+    assert_eq!(strata_sampler_splat_rate(null()), 1.0);
+}
+
 /// Cauchy offsets of scale 0.01 from a uniform number (the inverse
 /// distribution function: symmetric about zero).
 fn cauchy(u: f64) -> f64 {

@@ -12,23 +12,21 @@ use strata_engine::{
     Settings, Silent, SplatSink, Temperature, render,
 };
 
-/// Builds the shared library (the test profile, whose dependencies are
-/// already built) and returns the directory that holds it.
+/// The directory of the shared library this test was built with: cargo
+/// builds the package's library with every crate type (the `cdylib` too)
+/// into the directory of the test's own executable. (Building it apart,
+/// `cargo build -p strata-capi`, would resolve other features and rebuild
+/// the engine: ~40 s of CI.)
 fn library_dir() -> PathBuf {
-    let workspace = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf();
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
-        .args(["build", "--profile", "test", "-p", "strata-capi", "--lib"])
-        .current_dir(&workspace)
-        .status()
-        .expect("cargo runs");
-    assert!(status.success());
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map_or_else(|| workspace.join("target"), PathBuf::from);
-    target.join("debug")
+    let exe = std::env::current_exe().expect("the test knows its path");
+    let dir = exe.parent().expect("in a directory").to_path_buf();
+    let library = dir.join(format!(
+        "{}strata_capi{}",
+        std::env::consts::DLL_PREFIX,
+        std::env::consts::DLL_SUFFIX
+    ));
+    assert!(library.exists(), "{} was not built", library.display());
+    dir
 }
 
 /// Compiles `source` with `compiler` and `flags` into `out`.

@@ -1,6 +1,6 @@
 //! Engine benchmarks: one Metropolis-Hastings step with a trivial oracle, per
 //! kernel and dimension; and MC vs PSSMLT cost per path on the procedural
-//! oracle. `cargo bench --bench engine`; summary in docs/BENCHMARKS.md.
+//! oracle. `cargo bench --features bench --bench engine`; summary in docs/BENCHMARKS.md.
 
 use std::hint::black_box;
 

@@ -1,7 +1,7 @@
 //! Replica-exchange benchmarks: importance-sampled permutations by the subset
 //! recursion of Šik 2018, App. 5.C against enumerating all `M!` permutations,
 //! and the cost of one ensemble sweep with each exchange move.
-//! `cargo bench --bench exchange`; summary in docs/BENCHMARKS.md.
+//! `cargo bench --features bench --bench exchange`; summary in docs/BENCHMARKS.md.
 
 use std::hint::black_box;
 

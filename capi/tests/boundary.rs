@@ -898,35 +898,6 @@ extern "C" fn splat_state_trace(
     unsafe { std::slice::from_raw_parts_mut(rgb, 3).copy_from_slice(&state) };
 }
 
-/// The same oracle in Rust, reading its sink.
-struct SplatState;
-
-impl strata_engine::PathOracle for SplatState {
-    type Radiance = strata_engine::Rgb;
-
-    fn resolution(&self) -> strata_engine::Resolution {
-        strata_engine::Resolution::new(8, 6)
-    }
-
-    fn trace<S: strata_engine::Sampler + ?Sized>(
-        &self,
-        _: strata_engine::FilmPoint,
-        sampler: &mut S,
-        _: strata_engine::Temperature,
-        splats: &mut dyn strata_engine::SplatSink<strata_engine::Rgb>,
-    ) -> strata_engine::PathSample<strata_engine::Rgb> {
-        let state = splat_state(
-            splats.splat_rate(),
-            splats.wants_splats(),
-            sampler.next_1d(),
-        );
-        strata_engine::PathSample {
-            radiance: strata_engine::Rgb(state),
-            ..Default::default()
-        }
-    }
-}
-
 /// A C oracle reads the engine's splat rate and whether it keeps splats as
 /// a Rust oracle reads its `SplatSink`: the films agree bit for bit, for
 /// stratified MCMC (a rate below 1, splats kept on large steps' centres
@@ -945,7 +916,21 @@ fn a_c_oracle_reads_the_splat_rate() {
             StrataStatus::Ok
         );
         let named = Method::from_name(method.to_str().unwrap()).unwrap();
-        let rust_bits = rust_film_bits(&SplatState, named, 5);
+        // The same oracle in Rust, reading its sink.
+        let rust = strata_engine::FnOracle::new(
+            strata_engine::Resolution::new(8, 6),
+            |_: strata_engine::FilmPoint,
+             sampler: &mut dyn strata_engine::Sampler,
+             _: strata_engine::Temperature,
+             splats: &mut dyn strata_engine::SplatSink<strata_engine::Rgb>| {
+                strata_engine::PathSample::new(strata_engine::Rgb(splat_state(
+                    splats.splat_rate(),
+                    splats.wants_splats(),
+                    sampler.next_1d(),
+                )))
+            },
+        );
+        let rust_bits = rust_film_bits(&rust, named, 5);
         assert_eq!(film_bits(film), rust_bits, "{method:?}");
         strata_film_free(film);
         strata_settings_free(settings);

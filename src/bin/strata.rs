@@ -635,14 +635,6 @@ fn run(args: &Args) -> AnyResult<Ended> {
             args.method
         );
     }
-    if args.path_sampler == PathSampler::Bidirectional.name() && args.method == "stratified" {
-        warn!(
-            "note: stratified MCMC estimates light tracing apart, by Monte Carlo over its large steps; \
-             on --path-sampler bidirectional-no-splats (every strategy but light tracing) its tiles \
-             see all of their pixels' light: up to 5x lower relMSE measured, though a caustic seen \
-             directly is then left to camera paths (docs/RESULTS.md)"
-        );
-    }
     let (rendered, reference) = pool.install(|| -> AnyResult<_> {
         Ok(match args.scene.as_str() {
             "procedural" => {

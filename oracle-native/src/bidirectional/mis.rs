@@ -1,7 +1,9 @@
 //! Multiple importance sampling of the bidirectional strategies (Veach 1997
 //! sec. 9.2.3, eq. 10.9, in pbrt's form): the power heuristic by a walk over
 //! density ratios, O(1) a connection by tail sums summed once a subpath
-//! (Georgiev 2012), light tracing weighted by the caller's splat rate.
+//! (Georgiev 2012), light tracing weighted by the caller's splat rate; at a
+//! rate below 1, paths through a specular vertex given whole to light
+//! tracing where it samples them well enough (O(n) a connection).
 
 use super::{Subpaths, Vertex};
 
@@ -52,7 +54,6 @@ impl Subpaths {
         // What paths with a specular vertex need (read only at a factor
         // other than 1).
         if self.light_tracing_factor != 1.0 {
-            tail_sums(&self.camera, fewest, 1.0, &mut self.camera_tails_specular);
             let first_delta =
                 |path: &[Vertex]| path.iter().position(|v| v.delta).unwrap_or(path.len());
             self.camera_first_delta = first_delta(&self.camera);
@@ -71,20 +72,19 @@ impl Subpaths {
         if s + t == 2 {
             return 1.0;
         }
-        // A specular vertex between the path's ends: light tracing keeps
-        // its full weight (caustics seen directly are its paths).
-        let specular = self.light_tracing_factor != 1.0
-            && (self.camera_first_delta + 1 < t || self.light_first_delta + 1 < s);
-        let (factor, camera_tails) = if specular {
-            (1.0, &self.camera_tails_specular)
-        } else {
-            (self.light_tracing_factor, &self.camera_tails)
-        };
+        // A specular vertex between the path's ends, light tracing
+        // weighted below its full rate: see `specular_weight`.
+        if self.light_tracing_factor != 1.0
+            && (self.camera_first_delta + 1 < t || self.light_first_delta + 1 < s)
+        {
+            return self.specular_weight((s, t), reverse);
+        }
+        let factor = self.light_tracing_factor;
         let camera = joined_sum(
             &self.camera[..t],
             self.camera_first,
             factor,
-            camera_tails,
+            &self.camera_tails,
             reverse.pt,
             reverse.pt_minus,
         );
@@ -100,6 +100,97 @@ impl Subpaths {
         let weight = own / (own + camera + light);
         // 0 x inf (a ratio underflowing where a tail overflows): no weight.
         if weight.is_nan() { 0.0 } else { weight }
+    }
+
+    /// The weight of strategy `(s, t)` on a path with a specular vertex
+    /// between its ends when light tracing has a splat rate below 1:
+    /// light tracing takes the whole path where its density is at least
+    /// [`LIGHT_TRACING_REACH`] times the largest of the path's strategies',
+    /// the others share it by the power heuristic elsewhere. Every strategy
+    /// of a path sees the same densities and makes the same choice, so the
+    /// weights still sum to one (Veach 1997 sec. 9.2: any such partition
+    /// is unbiased).
+    ///
+    /// Why: under stratified MCMC the tile chains reconstruct what camera
+    /// strategies carry, and paths through glass that they share with
+    /// light tracing by the power heuristic (a caustic seen directly, the
+    /// room seen through the glass) came back 11-17 % dark at 64-1024
+    /// paths a pixel (Gruson et al. 2020, Fig. 9's failure, in part);
+    /// light tracing, Monte Carlo over the large steps, keeps them
+    /// unbiased. Where light tracing samples a path 100x worse than the
+    /// best strategy it is left out: given every specular path it can
+    /// sample, it carries some on veach-ajar it samples a million times
+    /// worse (one render's relMSE 81). `docs/RESULTS.md`, issue 38.
+    fn specular_weight(&self, (s, t): (usize, usize), reverse: &Reverse) -> f32 {
+        let camera = Ratios::walk(
+            &self.camera[..t],
+            self.camera_first,
+            reverse.pt,
+            reverse.pt_minus,
+        );
+        let light = Ratios::walk(&self.light[..s], 0, reverse.qs, reverse.qs_minus);
+        let largest = camera.largest.max(light.largest).max(1.0);
+        // Light tracing's density over this strategy's: the camera walk's
+        // term at its first vertex.
+        let light_tracing = if t == 1 { Some(1.0) } else { camera.at_first };
+        let taken = light_tracing.is_some_and(|r| r >= LIGHT_TRACING_REACH * largest);
+        if taken || t == 1 {
+            return if taken && t == 1 { 1.0 } else { 0.0 };
+        }
+        let others = camera.squares_past_first
+            + light.squares_past_first
+            + light.at_first.map_or(0.0, |r| r * r);
+        let weight = 1.0 / (1.0 + others);
+        if weight.is_nan() { 0.0 } else { weight }
+    }
+}
+
+/// The fraction of the best strategy's density from which light tracing
+/// takes a path through a specular vertex ([`Subpaths::specular_weight`]):
+/// measured on the caustic scene and veach-ajar (`docs/RESULTS.md`).
+pub(super) const LIGHT_TRACING_REACH: f32 = 0.01;
+
+/// One subpath's density ratios `p_i / p_own` in pbrt's walk, term by term
+/// (unsquared; [`joined_sum`] sums their squares): the largest counted, the
+/// sum of squares of those past vertex `first`, and the one at `first` (if
+/// counted).
+struct Ratios {
+    largest: f32,
+    squares_past_first: f32,
+    at_first: Option<f32>,
+}
+
+impl Ratios {
+    /// The walk from the joined end of `path` back to vertex `first`, with
+    /// the joined end's reverse densities `last_rev` and `second_rev`.
+    fn walk(path: &[Vertex], first: usize, last_rev: f32, second_rev: f32) -> Self {
+        let mut out = Ratios {
+            largest: 0.0,
+            squares_past_first: 0.0,
+            at_first: None,
+        };
+        let n = path.len();
+        let mut ratio = 1.0f32;
+        for i in (first..n).rev() {
+            let rev = match n - 1 - i {
+                0 => last_rev,
+                1 => second_rev,
+                _ => path[i].pdf_rev,
+            };
+            ratio *= remap0(rev) / remap0(path[i].pdf_fwd);
+            let delta = i != n - 1 && path[i].delta;
+            let after_delta = i > 0 && path[i - 1].delta;
+            if delta || after_delta {
+                continue;
+            }
+            out.largest = out.largest.max(ratio);
+            if i == first {
+                out.at_first = Some(ratio);
+            } else {
+                out.squares_past_first += ratio * ratio;
+            }
+        }
+        out
     }
 }
 
@@ -202,7 +293,7 @@ mod tests {
     /// On subpaths of every length with random densities (zeros among them)
     /// and delta vertices, from every first vertex and with a factor on its
     /// term (light tracing's), the O(1) sum at every joined vertex equals
-    /// the walk to f32 rounding.
+    /// the walk to f32 rounding, as do the squares of `Ratios::walk`.
     #[test]
     fn tail_sums_reproduce_pbrt_walk() {
         let mut state = 0x9e37_79b9_7f4a_7c15u64;
@@ -236,6 +327,18 @@ mod tests {
                         (got - expected).abs() <= 1e-5 * expected.max(1.0),
                         "trial {trial}, first {first}, n {n}: {got} vs {expected}"
                     );
+                    // The same walk term by term: its squares sum to the
+                    // walk's at factor 1, and the largest bounds them.
+                    let ratios = Ratios::walk(&path[..n], first, last, second);
+                    let at_first = ratios.at_first.unwrap_or(0.0);
+                    let squares = ratios.squares_past_first + at_first * at_first;
+                    let unweighted = walk(&path[..n], first, 1.0, last, second);
+                    assert!(
+                        (squares - unweighted).abs() <= 1e-5 * unweighted.max(1.0),
+                        "trial {trial}, first {first}, n {n}: {squares} vs {unweighted}"
+                    );
+                    assert!(ratios.largest * ratios.largest >= at_first * at_first);
+                    assert!(ratios.largest * ratios.largest * 9.0 >= ratios.squares_past_first);
                 }
             }
         }

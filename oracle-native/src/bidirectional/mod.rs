@@ -30,11 +30,13 @@
 //! the two joined vertices summed once a subpath (Georgiev 2012's recursive
 //! form). Light tracing's squared density is weighted by the square of the
 //! caller's splat rate (`SplatSink::splat_rate`; Veach 1997 sec. 9.2.3's
-//! sample counts `n_i`), except on paths with a specular vertex between
-//! their ends, which keep its full weight: stratified MCMC keeps the splats
-//! of a sixth of its traces, and its tile chains carry the diffuse light
-//! better than those few splats would, while a caustic seen directly is
-//! light tracing's alone (Gruson et al. 2020, Fig. 9).
+//! sample counts `n_i`): stratified MCMC keeps the splats of a sixth of its
+//! traces, and its tile chains carry the diffuse light better than those
+//! few splats would. At such a rate, a path with a specular vertex between
+//! its ends is light tracing's alone wherever light tracing samples it at
+//! least 1/100 as well as the best strategy (a caustic seen directly, the
+//! room seen through glass: Gruson et al. 2020, Fig. 9's failure), and the
+//! other strategies' by the power heuristic elsewhere.
 //!
 //! Multiplexed paths (Hachisuka et al. 2014) trace one strategy: a length
 //! from the engine's held stream (`strategies::Lengths`) and a strategy from stream
@@ -228,11 +230,9 @@ struct Subpaths {
     camera_first: usize,
     /// The light-tracing strategy's factor in the MIS weights of paths
     /// without a specular vertex ([`light_tracing_factor`]; 1 without light
-    /// tracing), the camera's tail sums with it, and with 1 (for paths with
-    /// a specular vertex, when the factor is not 1).
+    /// tracing), and the camera's tail sums with it.
     light_tracing_factor: f32,
     camera_tails: Vec<f32>,
-    camera_tails_specular: Vec<f32>,
     light_tails: Vec<f32>,
     /// Each subpath's first specular vertex (its length if none).
     camera_first_delta: usize,

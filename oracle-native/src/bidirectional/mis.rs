@@ -148,7 +148,7 @@ impl Subpaths {
 /// The fraction of the best strategy's density from which light tracing
 /// takes a path through a specular vertex ([`Subpaths::specular_weight`]):
 /// measured on the caustic scene and veach-ajar (`docs/RESULTS.md`).
-pub(super) const LIGHT_TRACING_REACH: f32 = 0.01;
+const LIGHT_TRACING_REACH: f32 = 0.01;
 
 /// One subpath's density ratios `p_i / p_own` in pbrt's walk, term by term
 /// (unsquared; [`joined_sum`] sums their squares): the largest counted, the

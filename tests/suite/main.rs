@@ -5,6 +5,8 @@
 mod common;
 mod threads;
 
+#[cfg(feature = "embree")]
+mod backends;
 mod bidirectional;
 mod chains;
 mod channels;

@@ -3,6 +3,7 @@
 
 use crate::error::Error;
 use crate::film::Film;
+use alloc::vec::Vec;
 
 /// The `ε` of MAPE and relMSE (Gruson et al. 2020: "ε = 0.01").
 pub const EPSILON: f64 = 0.01;
@@ -44,6 +45,35 @@ pub fn compare(image: &Film, reference: &Film) -> Result<ImageErrors, Error> {
     Ok(e)
 }
 
+/// relMSE over the pixels left when the `outliers` fraction (0 to 1) with
+/// the largest terms `(I - R)^2 / (R^2 + ε)` is set aside: how the bulk of
+/// the image compares when a few pixels (a Markov chain stuck on one
+/// pixel, a firefly) carry much of [`ImageErrors::rel_mse`]. The mean is
+/// over the pixels kept.
+pub fn rel_mse_without_outliers(
+    image: &Film,
+    reference: &Film,
+    outliers: f64,
+) -> Result<f64, Error> {
+    image.check_shape(reference)?;
+    if !(0.0..1.0).contains(&outliers) {
+        return Err(Error::invalid(
+            "outliers",
+            outliers,
+            "a fraction from 0 to below 1",
+        ));
+    }
+    let mut terms: Vec<f64> = (0..image.resolution().pixel_count())
+        .map(|i| {
+            let (v, r) = (image.luminance(i), reference.luminance(i));
+            (v - r) * (v - r) / (r * r + EPSILON)
+        })
+        .collect();
+    terms.sort_unstable_by(f64::total_cmp);
+    let kept = terms.len() - libm::floor(outliers * terms.len() as f64) as usize;
+    Ok(terms[..kept].iter().sum::<f64>() / kept.max(1) as f64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -66,5 +96,12 @@ mod tests {
             ImageErrors::default()
         );
         assert!(compare(&image, &Film::new(Resolution::new(1, 2), 1)).is_err());
+        // The 0.01 / 0.01 term is the larger: half the pixels set aside
+        // leave the other.
+        let kept = rel_mse_without_outliers(&image, &reference, 0.5).unwrap();
+        assert!((kept - 0.25 / 1.01).abs() < 1e-12);
+        let all = rel_mse_without_outliers(&image, &reference, 0.0).unwrap();
+        assert!((all - e.rel_mse).abs() < 1e-12);
+        assert!(rel_mse_without_outliers(&image, &reference, 1.0).is_err());
     }
 }

@@ -583,7 +583,7 @@ fn mc_at_splat_rate<O: PathOracle<Radiance = strata::engine::Rgb>>(
 /// with its defaults) renders what it renders at rate 1, per block and
 /// channel (12 seeds each, 24x24, 32 paths a pixel: worst z 3.4 on the
 /// Cornell box, where light tracing's weight falls, 1.4 on the caustic,
-/// 2.6 on the smooth glass slab, whose paths through the glass light
+/// 1.6 on the smooth glass slab, whose paths through the glass light
 /// tracing takes whole at a rate below 1, and 2.7 on the floor seen through
 /// glass, whose paths the other strategies share; limit 5.5). With light
 /// tracing's own weight left at rate 1 the Cornell box fails at z 45; with

@@ -117,10 +117,12 @@ impl Subpaths {
     /// room seen through the glass) came back 11-17 % dark at 64-1024
     /// paths a pixel (Gruson et al. 2020, Fig. 9's failure, in part);
     /// light tracing, Monte Carlo over the large steps, keeps them
-    /// unbiased. Where light tracing samples a path 100x worse than the
+    /// unbiased. Where light tracing samples a path much worse than the
     /// best strategy it is left out: given every specular path it can
     /// sample, it carries some on veach-ajar it samples a million times
-    /// worse (one render's relMSE 81). `docs/RESULTS.md`, issue 38.
+    /// worse (one render's relMSE 81), and from 1/100 of the best density
+    /// on, veach-ajar at 30 s has twice the relMSE (bright pixels).
+    /// `docs/RESULTS.md`, issue 38.
     fn specular_weight(&self, (s, t): (usize, usize), reverse: &Reverse) -> f32 {
         let camera = Ratios::walk(
             &self.camera[..t],
@@ -147,8 +149,10 @@ impl Subpaths {
 
 /// The fraction of the best strategy's density from which light tracing
 /// takes a path through a specular vertex ([`Subpaths::specular_weight`]):
-/// measured on the caustic scene and veach-ajar (`docs/RESULTS.md`).
-const LIGHT_TRACING_REACH: f32 = 0.01;
+/// measured on the caustic scene and veach-ajar at 30 s (`docs/RESULTS.md`;
+/// 0.01 gave veach-ajar bright pixels, 1, the maximum heuristic, left the
+/// caustic dark).
+const LIGHT_TRACING_REACH: f32 = 0.3;
 
 /// One subpath's density ratios `p_i / p_own` in pbrt's walk, term by term
 /// (unsquared; [`joined_sum`] sums their squares): the largest counted, the

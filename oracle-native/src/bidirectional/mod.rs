@@ -34,7 +34,7 @@
 //! traces, and its tile chains carry the diffuse light better than those
 //! few splats would. At such a rate, a path with a specular vertex between
 //! its ends is light tracing's alone wherever light tracing samples it at
-//! least 1/100 as well as the best strategy (a caustic seen directly, the
+//! least 0.3 times as well as the best strategy (a caustic seen directly, the
 //! room seen through glass: Gruson et al. 2020, Fig. 9's failure), and the
 //! other strategies' by the power heuristic elsewhere.
 //!

@@ -143,29 +143,48 @@ fn embree_ray(ray: &Ray) -> rtc::RTCRay {
     }
 }
 
-/// Embree recommends flush-to-zero and denormals-are-zero on every thread
-/// that traces (denormal arithmetic is slow in its kernels); set once per
-/// thread.
-fn set_flush_denormals() {
-    thread_local!(static SET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) });
-    SET.with(|set| {
-        if !set.get() {
-            #[cfg(target_arch = "x86_64")]
-            // SAFETY: only sets the FTZ (bit 15) and DAZ (bit 6) flags of this
-            // thread's MXCSR register.
-            #[allow(deprecated)]
-            unsafe {
-                use std::arch::x86_64::{_mm_getcsr, _mm_setcsr};
-                _mm_setcsr(_mm_getcsr() | 0x8040);
-            }
-            set.set(true);
+/// Flush-to-zero and denormals-are-zero while Embree traces, as it
+/// recommends (denormal arithmetic is slow in its kernels), and the
+/// thread's own flags back when dropped. Left on, they changed the caller's
+/// arithmetic on every thread Embree had run on (subnormals read as zero):
+/// on a shared thread pool, results then depended on which threads had
+/// traced.
+struct FlushDenormals {
+    #[cfg(target_arch = "x86_64")]
+    saved: u32,
+}
+
+impl FlushDenormals {
+    fn new() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: reads this thread's MXCSR register and sets its FTZ (bit
+        // 15) and DAZ (bit 6) flags; `drop` puts the register back.
+        #[allow(deprecated)]
+        unsafe {
+            use std::arch::x86_64::{_mm_getcsr, _mm_setcsr};
+            let saved = _mm_getcsr();
+            _mm_setcsr(saved | 0x8040);
+            FlushDenormals { saved }
         }
-    });
+        #[cfg(not(target_arch = "x86_64"))]
+        FlushDenormals {}
+    }
+}
+
+impl Drop for FlushDenormals {
+    fn drop(&mut self) {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: restores the MXCSR value read in `new` on this thread.
+        #[allow(deprecated)]
+        unsafe {
+            std::arch::x86_64::_mm_setcsr(self.saved)
+        };
+    }
 }
 
 impl Intersector for EmbreeIntersector {
     fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
-        set_flush_denormals();
+        let _flags = FlushDenormals::new();
         let mut padded = PaddedRayHit {
             ray_hit: rtc::RTCRayHit {
                 ray: embree_ray(ray),
@@ -193,7 +212,7 @@ impl Intersector for EmbreeIntersector {
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        set_flush_denormals();
+        let _flags = FlushDenormals::new();
         let mut r = AlignedRay(embree_ray(ray));
         // SAFETY: the scene is committed; RTCRay has the same 48-byte layout in
         // Embree 4.2 and 4.4, 16-aligned here. Embree sets tfar to -inf when
@@ -237,6 +256,22 @@ mod tests {
         let e = EmbreeIntersector::new(&[]).unwrap();
         assert!(e.closest_hit(&Ray::new(Vec3::ZERO, Vec3::X)).is_none());
         assert!(!e.occluded(&Ray::new(Vec3::ZERO, Vec3::X)));
+    }
+
+    /// Subnormals survive arithmetic on a thread after it traced: the
+    /// flags Embree wants are its calls' alone (left set, the replica
+    /// bootstrap's replay check failed in a test process that had run
+    /// Embree on the shared thread pool).
+    #[test]
+    fn tracing_leaves_the_threads_floating_point_flags_as_they_were() {
+        let e = EmbreeIntersector::new(&[[Vec3::ZERO, Vec3::X, Vec3::Y]]).unwrap();
+        let ray = Ray::new(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z);
+        assert!(e.closest_hit(&ray).is_some() && e.occluded(&ray));
+        let subnormal = std::hint::black_box(1.0e-39f32);
+        // Bits, not `==`: under denormals-are-zero a comparison reads a
+        // subnormal as zero too.
+        let doubled = subnormal * std::hint::black_box(2.0f32);
+        assert_eq!(doubled.to_bits(), 2.0e-39f32.to_bits());
     }
 
     #[test]

@@ -290,7 +290,7 @@ fn stencil_row_avx2(out: &mut [f32], linear: &Linear, at: usize, src: &[f32], wi
 }
 
 /// [`stencil_row`] for the target's baseline instruction set (inlined into
-/// the AVX2 version, which compiles it with wider vectors).
+/// the AVX2 version, which compiles it with wider vectors), chunk by chunk.
 #[inline(always)]
 fn stencil_row_portable(
     out: &mut [f32],
@@ -300,33 +300,53 @@ fn stencil_row_portable(
     window: &[usize],
 ) {
     let (lanes, per_tile) = (linear.chunks.lanes, linear.per_tile());
-    if lanes < LANES {
-        let value = |p: usize, i: usize| linear.terms[at + p * lanes + i];
-        for (i, v) in out.iter_mut().enumerate() {
-            let mut sum = value(0, i);
-            for (p, &(row, dx)) in linear.moves.iter().enumerate() {
-                sum += value(p + 1, i) * src[(window[row] + i).wrapping_add_signed(dx)];
-            }
-            *v = sum.max(0.0);
-        }
-        return;
-    }
+    let mut acc = [0.0f32; LANES];
     for c in 0..linear.chunks.count {
         let start = linear.chunks.start(c);
-        let block = &linear.terms[at + c * per_tile * LANES..][..per_tile * LANES];
-        let mut acc = [0.0f32; LANES];
-        acc.copy_from_slice(&block[..LANES]);
-        for (p, &(row, dx)) in linear.moves.iter().enumerate() {
-            let c = &block[(p + 1) * LANES..(p + 2) * LANES];
-            let first = (window[row] + start).wrapping_add_signed(dx);
-            let b = &src[first..first + LANES];
-            for l in 0..LANES {
-                acc[l] += c[l] * b[l];
-            }
+        let terms = &linear.terms[at + c * per_tile * lanes..][..per_tile * lanes];
+        let out = &mut out[start..][..lanes];
+        // A whole chunk's length known to the compiler keeps its
+        // accumulators in registers.
+        if lanes == LANES {
+            stencil_chunk(out, &mut acc, terms, &linear.moves, src, window, start);
+        } else {
+            stencil_chunk(
+                out,
+                &mut acc[..lanes],
+                terms,
+                &linear.moves,
+                src,
+                window,
+                start,
+            );
         }
-        for (v, a) in out[start..start + LANES].iter_mut().zip(acc) {
-            *v = a.max(0.0);
+    }
+}
+
+/// One chunk of [`stencil_row`]: the tiles `start..` of the row, as many as
+/// `acc` holds, their `terms` (`r`, then each move's coefficients) summed
+/// move by move.
+#[inline(always)]
+fn stencil_chunk(
+    out: &mut [f32],
+    acc: &mut [f32],
+    terms: &[f32],
+    moves: &[(usize, isize)],
+    src: &[f32],
+    window: &[usize],
+    start: usize,
+) {
+    let lanes = acc.len();
+    let (constant, coefficients) = terms.split_at(lanes);
+    acc.copy_from_slice(constant);
+    for (&(row, dx), c) in moves.iter().zip(coefficients.chunks_exact(lanes)) {
+        let first = window[row].wrapping_add(start).wrapping_add_signed(dx);
+        for ((a, &c), &b) in acc.iter_mut().zip(c).zip(&src[first..][..lanes]) {
+            *a += c * b;
         }
+    }
+    for (v, &a) in out.iter_mut().zip(acc.iter()) {
+        *v = a.max(0.0);
     }
 }
 

@@ -23,6 +23,13 @@ pub struct ImageErrors {
     pub mse: f64,
 }
 
+/// One pixel's relMSE term, `(I - R)^2 / (R^2 + ε)`, of luminances `image`
+/// and `reference`.
+fn rel_mse_term(image: f64, reference: f64) -> f64 {
+    let d = image - reference;
+    d * d / (reference * reference + EPSILON)
+}
+
 /// Compares `image` with `reference` (same shape).
 pub fn compare(image: &Film, reference: &Film) -> Result<ImageErrors, Error> {
     image.check_shape(reference)?;
@@ -32,7 +39,7 @@ pub fn compare(image: &Film, reference: &Film) -> Result<ImageErrors, Error> {
         let (v, r) = (image.luminance(i), reference.luminance(i));
         let d = v - r;
         e.mape += d.abs() / (r.abs() + EPSILON);
-        e.rel_mse += d * d / (r * r + EPSILON);
+        e.rel_mse += rel_mse_term(v, r);
         e.l1 += d.abs();
         e.mse += d * d;
     }
@@ -64,10 +71,7 @@ pub fn rel_mse_without_outliers(
         ));
     }
     let mut terms: Vec<f64> = (0..image.resolution().pixel_count())
-        .map(|i| {
-            let (v, r) = (image.luminance(i), reference.luminance(i));
-            (v - r) * (v - r) / (r * r + EPSILON)
-        })
+        .map(|i| rel_mse_term(image.luminance(i), reference.luminance(i)))
         .collect();
     terms.sort_unstable_by(f64::total_cmp);
     let kept = terms.len() - libm::floor(outliers * terms.len() as f64) as usize;

@@ -613,10 +613,11 @@ impl<I: Intersector> PathTracer<I> {
             }
             let wo = qs.frame.to_local(w);
             let wi = qs.frame.to_local(qs.to_prev);
+            let (f, pdf) = qs.bsdf.eval_pdf(wo, wi);
             (
-                qs.bsdf.eval(wo, wi) * (wi.z.abs() / cos_in * cos_q),
+                f * (wi.z.abs() / cos_in * cos_q),
                 qs.bsdf.pdf(wi, wo),
-                qs.bsdf.pdf(wo, wi) * qs.prev_area,
+                pdf * qs.prev_area,
             )
         };
         if light_side.max_element() <= 0.0 {
@@ -630,10 +631,11 @@ impl<I: Intersector> PathTracer<I> {
         } else {
             let wo = pt.frame.to_local(pt.to_prev);
             let wi = pt.frame.to_local(-w);
+            let (f, pdf) = pt.bsdf.eval_pdf(wo, wi);
             (
-                pt.bsdf.eval(wo, wi) * wi.z.abs(),
+                f * wi.z.abs(),
                 None,
-                pt.bsdf.pdf(wo, wi),
+                pdf,
                 pt.bsdf.pdf(wi, wo) * pt.prev_area,
             )
         };

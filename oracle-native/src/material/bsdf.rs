@@ -6,7 +6,8 @@ use std::f32::consts::FRAC_1_PI;
 use glam::Vec3;
 
 use super::microfacet::{
-    Ggx, conductor_fresnel, fr_dielectric, reflect, refract, rough_dielectric, smooth_dielectric,
+    Ggx, conductor_fresnel, fr_dielectric, reflect, refract, rough_dielectric,
+    rough_dielectric_pdf, smooth_dielectric,
 };
 use super::{ConductorFresnel, MIN_TEMPERED_ROUGHNESS};
 
@@ -159,7 +160,7 @@ impl Bsdf {
                 if alpha == 0.0 {
                     return 0.0;
                 }
-                rough_dielectric(eta, alpha, wo, wi).map_or(0.0, |d| d.pdf)
+                rough_dielectric_pdf(eta, alpha, wo, wi)
             }
             Bsdf::Plastic { alpha, .. } => {
                 if wo.z <= 0.0 || wi.z <= 0.0 {
@@ -167,6 +168,16 @@ impl Bsdf {
                 }
                 0.5 * (wi.z * FRAC_1_PI + Ggx(alpha).reflection_pdf(wo, (wo + wi).normalize()))
             }
+        }
+    }
+
+    /// `(eval(wo, wi), pdf(wo, wi))`, the same numbers, with a rough
+    /// dielectric's shared work done once (a connection needs both).
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
+        match *self {
+            Bsdf::Dielectric { eta, alpha } if alpha > 0.0 => rough_dielectric(eta, alpha, wo, wi)
+                .map_or((Vec3::ZERO, 0.0), |d| (Vec3::splat(d.f), d.pdf)),
+            _ => (self.eval(wo, wi), self.pdf(wo, wi)),
         }
     }
 

@@ -161,48 +161,88 @@ pub(super) struct DielectricEval {
     pub pdf: f32,
 }
 
+/// What a rough dielectric's value and density share for the pair `(wo,
+/// wi)`: the microfacet normal that joins them (Walter et al.'s generalized
+/// half vector), its Fresnel reflectance and the density of sampling it.
+struct HalfVector {
+    m: Vec3,
+    /// 1 for a reflection, else the relative index `wi` is refracted across.
+    etap: f32,
+    reflect: bool,
+    fresnel: f32,
+    /// `D(m) cos θ_m`.
+    pdf_m: f32,
+}
+
+impl HalfVector {
+    fn new(eta: f32, alpha: f32, wo: Vec3, wi: Vec3) -> Option<Self> {
+        let (co, ci) = (wo.z, wi.z);
+        if co == 0.0 || ci == 0.0 {
+            return None;
+        }
+        let reflect = co * ci > 0.0;
+        let etap = if reflect {
+            1.0
+        } else if co > 0.0 {
+            eta
+        } else {
+            1.0 / eta
+        };
+        let mut m = wi * etap + wo;
+        if m.length_squared() == 0.0 {
+            return None;
+        }
+        m = m.normalize();
+        if m.z < 0.0 {
+            m = -m;
+        }
+        if m.dot(wi) * ci < 0.0 || m.dot(wo) * co < 0.0 {
+            return None;
+        }
+        Some(Self {
+            m,
+            etap,
+            reflect,
+            fresnel: fr_dielectric(wo.dot(m), eta),
+            pdf_m: Ggx(alpha).d(m) * m.z,
+        })
+    }
+
+    /// The density of sampling `wi` from `wo`.
+    fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        let (m, r) = (self.m, self.fresnel);
+        if self.reflect {
+            self.pdf_m / (4.0 * wo.dot(m).abs()) * r
+        } else {
+            let denom = wi.dot(m) + wo.dot(m) / self.etap;
+            self.pdf_m * wi.dot(m).abs() / (denom * denom) * (1.0 - r)
+        }
+    }
+}
+
 /// Value and density of a rough dielectric (Walter et al. 2007, in the form
 /// of pbrt-v4's `DielectricBxDF`, with `D(m) cos θ_m` sampling of normals).
 pub(super) fn rough_dielectric(eta: f32, alpha: f32, wo: Vec3, wi: Vec3) -> Option<DielectricEval> {
-    let (co, ci) = (wo.z, wi.z);
-    if co == 0.0 || ci == 0.0 {
-        return None;
-    }
-    let reflect = co * ci > 0.0;
-    let etap = if reflect {
-        1.0
-    } else if co > 0.0 {
-        eta
-    } else {
-        1.0 / eta
-    };
-    let mut m = wi * etap + wo;
-    if m.length_squared() == 0.0 {
-        return None;
-    }
-    m = m.normalize();
-    if m.z < 0.0 {
-        m = -m;
-    }
-    if m.dot(wi) * ci < 0.0 || m.dot(wo) * co < 0.0 {
-        return None;
-    }
+    let h = HalfVector::new(eta, alpha, wo, wi)?;
+    let (m, r, etap) = (h.m, h.fresnel, h.etap);
     let ggx = Ggx(alpha);
-    let r = fr_dielectric(wo.dot(m), eta);
-    let pdf_m = ggx.d(m) * m.z;
-    if reflect {
-        let f = ggx.d(m) * ggx.g(wo, wi) * r / (4.0 * ci * co).abs();
-        let pdf = pdf_m / (4.0 * wo.dot(m).abs()) * r;
-        Some(DielectricEval { f, pdf })
+    let (co, ci) = (wo.z, wi.z);
+    let f = if h.reflect {
+        ggx.d(m) * ggx.g(wo, wi) * r / (4.0 * ci * co).abs()
     } else {
         let denom = wi.dot(m) + wo.dot(m) / etap;
         let denom2 = denom * denom;
-        let f = ggx.d(m)
-            * (1.0 - r)
-            * ggx.g(wo, wi)
-            * (wi.dot(m) * wo.dot(m) / (denom2 * ci * co)).abs()
-            / (etap * etap);
-        let pdf = pdf_m * wi.dot(m).abs() / denom2 * (1.0 - r);
-        Some(DielectricEval { f, pdf })
-    }
+        ggx.d(m) * (1.0 - r) * ggx.g(wo, wi) * (wi.dot(m) * wo.dot(m) / (denom2 * ci * co)).abs()
+            / (etap * etap)
+    };
+    Some(DielectricEval {
+        f,
+        pdf: h.pdf(wo, wi),
+    })
+}
+
+/// The density alone of [`rough_dielectric`] (the same number, without the
+/// value's masking and shadowing).
+pub(super) fn rough_dielectric_pdf(eta: f32, alpha: f32, wo: Vec3, wi: Vec3) -> f32 {
+    HalfVector::new(eta, alpha, wo, wi).map_or(0.0, |h| h.pdf(wo, wi))
 }

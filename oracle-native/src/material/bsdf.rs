@@ -425,6 +425,27 @@ mod tests {
         }
     }
 
+    /// `eval_pdf` gives exactly `eval` and `pdf` (a connection's MIS
+    /// weights and value must not depend on which it calls).
+    #[test]
+    fn eval_pdf_is_eval_and_pdf() {
+        for (name, bsdf) in bsdfs() {
+            for wo in directions() {
+                for wi in directions() {
+                    for wi in [wi, Vec3::new(wi.x, wi.y, -wi.z)] {
+                        let (f, pdf) = bsdf.eval_pdf(wo, wi);
+                        assert_eq!(f, bsdf.eval(wo, wi), "{name}: {wo} {wi}");
+                        assert_eq!(
+                            pdf.to_bits(),
+                            bsdf.pdf(wo, wi).to_bits(),
+                            "{name}: {wo} {wi}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn reflection_is_reciprocal() {
         let mut rng = stream(2, Domain::User, 0);

@@ -163,15 +163,15 @@ pub(super) struct DielectricEval {
 
 /// What a rough dielectric's value and density share for the pair `(wo,
 /// wi)`: the microfacet normal that joins them (Walter et al.'s generalized
-/// half vector), its Fresnel reflectance and the density of sampling it.
+/// half vector), its Fresnel reflectance and its distribution's value.
 struct HalfVector {
     m: Vec3,
     /// 1 for a reflection, else the relative index `wi` is refracted across.
     etap: f32,
     reflect: bool,
     fresnel: f32,
-    /// `D(m) cos θ_m`.
-    pdf_m: f32,
+    /// `D(m)`.
+    d: f32,
 }
 
 impl HalfVector {
@@ -204,18 +204,21 @@ impl HalfVector {
             etap,
             reflect,
             fresnel: fr_dielectric(wo.dot(m), eta),
-            pdf_m: Ggx(alpha).d(m) * m.z,
+            d: Ggx(alpha).d(m),
         })
     }
 
     /// The density of sampling `wi` from `wo`.
     fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         let (m, r) = (self.m, self.fresnel);
+        // The normal's density `D(m) cos θ_m`, then the reflection's or
+        // refraction's Jacobian.
+        let pdf_m = self.d * m.z;
         if self.reflect {
-            self.pdf_m / (4.0 * wo.dot(m).abs()) * r
+            pdf_m / (4.0 * wo.dot(m).abs()) * r
         } else {
             let denom = wi.dot(m) + wo.dot(m) / self.etap;
-            self.pdf_m * wi.dot(m).abs() / (denom * denom) * (1.0 - r)
+            pdf_m * wi.dot(m).abs() / (denom * denom) * (1.0 - r)
         }
     }
 }
@@ -224,15 +227,15 @@ impl HalfVector {
 /// of pbrt-v4's `DielectricBxDF`, with `D(m) cos θ_m` sampling of normals).
 pub(super) fn rough_dielectric(eta: f32, alpha: f32, wo: Vec3, wi: Vec3) -> Option<DielectricEval> {
     let h = HalfVector::new(eta, alpha, wo, wi)?;
-    let (m, r, etap) = (h.m, h.fresnel, h.etap);
+    let (m, r, etap, d) = (h.m, h.fresnel, h.etap, h.d);
     let ggx = Ggx(alpha);
     let (co, ci) = (wo.z, wi.z);
     let f = if h.reflect {
-        ggx.d(m) * ggx.g(wo, wi) * r / (4.0 * ci * co).abs()
+        d * ggx.g(wo, wi) * r / (4.0 * ci * co).abs()
     } else {
         let denom = wi.dot(m) + wo.dot(m) / etap;
         let denom2 = denom * denom;
-        ggx.d(m) * (1.0 - r) * ggx.g(wo, wi) * (wi.dot(m) * wo.dot(m) / (denom2 * ci * co)).abs()
+        d * (1.0 - r) * ggx.g(wo, wi) * (wi.dot(m) * wo.dot(m) / (denom2 * ci * co)).abs()
             / (etap * etap)
     };
     Some(DielectricEval {

@@ -429,11 +429,15 @@ fn black_scenes_and_empty_films_end_with_a_typed_error_or_a_black_image() {
                 method.name()
             ),
         }
+        // Also with no paths: a budget per pixel of an empty film (`strata
+        // render --width 0`) is empty too, and the film is the error.
         let empty = black(Resolution::new(0, 5));
-        assert_eq!(
-            render(&empty, &MaxChannel, &settings(3, 100, &method), &Silent).unwrap_err(),
-            Error::EmptyResolution
-        );
+        for paths in [100, 0] {
+            assert_eq!(
+                render(&empty, &MaxChannel, &settings(3, paths, &method), &Silent).unwrap_err(),
+                Error::EmptyResolution
+            );
+        }
     }
 }
 

@@ -602,11 +602,13 @@ where
     I: Importance<O::Radiance> + ?Sized,
     M: RenderMethod,
 {
-    settings.validate()?;
+    // The film first: a budget given per pixel is empty on an empty film,
+    // and the film is what the caller got wrong.
     let resolution = oracle.resolution();
     if resolution.pixel_count() == 0 {
         return Err(Error::EmptyResolution);
     }
+    settings.validate()?;
     check_memory(
         settings
             .method

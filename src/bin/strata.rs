@@ -138,7 +138,7 @@ struct Args {
     spp: u64,
     /// Time budget in seconds instead of --spp (set-up included).
     #[arg(long, value_parser = positive_seconds)]
-    time: Option<f64>,
+    time: Option<Duration>,
     /// Seed of every random stream.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -579,15 +579,15 @@ fn output(out: &Path, ext: &str) -> PathBuf {
     name.into()
 }
 
-/// `--time`: a finite number of seconds above zero.
-fn positive_seconds(text: &str) -> Result<f64, String> {
+/// `--time`: a number of seconds from a nanosecond to `Duration`'s largest.
+fn positive_seconds(text: &str) -> Result<Duration, String> {
     let t: f64 = text.parse().map_err(|e| format!("{e}"))?;
-    if t.is_finite() && t >= 1e-9 {
-        Ok(t)
-    } else {
-        Err(format!(
-            "{t} is not a time budget: give seconds from 1e-9 on"
-        ))
+    match Duration::try_from_secs_f64(t) {
+        Ok(d) if t >= 1e-9 => Ok(d),
+        _ => Err(format!(
+            "{t} is not a time budget: give seconds from 1e-9 to {:e}",
+            Duration::MAX.as_secs_f64()
+        )),
     }
 }
 
@@ -838,7 +838,7 @@ fn applies(method: &Method, flag: &str, name: &str) -> AnyResult<()> {
 fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Option<Output>, Ended)> {
     let resolution = oracle.resolution();
     let budget = match args.time {
-        Some(t) => Budget::Time(Duration::try_from_secs_f64(t)?),
+        Some(t) => Budget::Time(t),
         None => Budget::samples_per_pixel(args.spp, resolution),
     };
     let mut settings = Settings {

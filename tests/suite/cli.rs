@@ -143,6 +143,8 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
         (&["--time", "0"], 2, "time budget"),
         (&["--time", "1e-300"], 2, "time budget"),
         (&["--time", "nan"], 2, "time budget"),
+        // Beyond `Duration`'s range (it was exit 1 after the scene loaded).
+        (&["--time", "1e30"], 2, "time budget"),
         (&["--exposure", "nan"], 2, "exposure"),
         (&["--exposure", "1e30"], 2, "exposure"),
         (&["--stack-size", "0"], 2, "stack-size"),

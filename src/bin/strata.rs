@@ -469,6 +469,22 @@ fn prepare_outputs(args: &Args) -> AnyResult<()> {
             return Err(format!("{}: not a regular file: not replaced", file.display()).into());
         }
     }
+    // Another task's part is not replaced: tasks given one --out would
+    // overwrite each other's work.
+    if let Some(task) = args.task() {
+        let part = output(&args.out, "part");
+        if let Some(other) = held_task(&part).filter(|&other| other != task) {
+            return Err(format!(
+                "{} holds task {} of {}: each task needs its own --out (e.g. --out DIR/part-{}); \
+                 move the part away to use the name",
+                part.display(),
+                other.index,
+                other.count,
+                task.index
+            )
+            .into());
+        }
+    }
     for file in files {
         let dir = match file.parent() {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
@@ -563,6 +579,27 @@ fn checkpoint_path(args: &Args) -> PathBuf {
     args.checkpoint
         .clone()
         .unwrap_or_else(|| output(&args.out, "ckpt"))
+}
+
+/// The task whose part the file `path` holds, if it holds one.
+fn held_task(path: &Path) -> Option<Task> {
+    if !path.is_file() {
+        return None;
+    }
+    part_of(&PartFiles::new(vec![path.to_path_buf()]), 0)
+        .ok()
+        .map(|(_, task)| task)
+}
+
+/// Where task `task` writes its part: OUT.part, or OUT.task-I.part if
+/// another task's part took OUT.part while this one rendered (tasks started
+/// at once with one --out; `prepare_outputs` refuses the name otherwise).
+fn part_path(out: &Path, task: Task) -> PathBuf {
+    let part = output(out, "part");
+    match held_task(&part) {
+        Some(other) if other != task => output(out, &format!("task-{}.part", task.index)),
+        _ => part,
+    }
 }
 
 /// `out` with the extension `ext` appended (after dropping one of the
@@ -983,7 +1020,14 @@ fn render_task_with<O: PathOracle>(
         };
         return Ok((None, Ended::Stopped(saved)));
     }
-    let part = output(&args.out, "part");
+    let part = part_path(&args.out, task);
+    if part != output(&args.out, "part") {
+        warn!(
+            "note: {} holds another task's part (tasks started with one --out): this one goes to {}",
+            output(&args.out, "part").display(),
+            part.display()
+        );
+    }
     replace(&part, |path| std::fs::write(path, checkpoint.as_bytes()))?;
     say!(
         "{} {}, task {} of {}: {} paths in {:.2} s; wrote {} ({:.1} MB)",
@@ -1122,6 +1166,35 @@ mod tests {
             Command::Render(args) => *args,
             _ => unreachable!(),
         }
+    }
+
+    /// A task whose OUT.part another task took while it rendered writes
+    /// OUT.task-I.part; its own part, or none, is replaced.
+    #[test]
+    fn a_task_does_not_replace_another_tasks_part() {
+        let dir = std::env::temp_dir().join(format!("strata-part-path-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let out = dir.join("render");
+        let task = |index| Task { index, count: 2 };
+        assert_eq!(part_path(&out, task(1)), dir.join("render.part"));
+        let oracle = ProceduralImage::showcase(Resolution::new(4, 4));
+        let settings = Settings {
+            seed: 1,
+            budget: Budget::Samples(64),
+            method: Method::Mc,
+        };
+        let part = render_task(
+            &oracle,
+            &MaxChannel,
+            &settings,
+            task(0),
+            &strata::engine::Silent,
+        )
+        .unwrap();
+        std::fs::write(dir.join("render.part"), part.as_bytes()).unwrap();
+        assert_eq!(part_path(&out, task(0)), dir.join("render.part"));
+        assert_eq!(part_path(&out, task(1)), dir.join("render.task-1.part"));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// Without flags the command renders each method with the engine's

@@ -408,7 +408,8 @@ fn a_time_budget_below_one_unit_of_work_is_reported() {
 /// A render split into 3 tasks run by `jobs/task.sh` through `xargs -P 2`
 /// (as a scheduler would run them) and merged by `strata merge` writes the
 /// PNG and EXR of the render unsplit, byte for byte; a merge with a task
-/// missing is refused naming it, and done with `--partial`.
+/// missing is refused naming it, and done with `--partial`; a task never
+/// replaces another task's part.
 #[test]
 fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
     let dir = std::env::temp_dir().join(format!("strata-tasks-{}", std::process::id()));
@@ -502,5 +503,22 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
         .status()
         .unwrap();
     assert!(again.success());
+    // Another task given the --out of a finished one is refused before any
+    // work, and the part is kept (every task of a job array given one --out
+    // overwrote the part before).
+    let before = std::fs::read(part(0)).unwrap();
+    let mut line: Vec<&str> = vec!["render", "cornell"];
+    line.extend(render_args.split(' '));
+    let out = dir.join("part-0");
+    line.extend(["--task-index", "1", "--task-count", "3"]);
+    line.extend(["--out", out.to_str().unwrap()]);
+    let refused = strata(&line);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("part-0.part holds task 0 of 3: each task needs its own --out"),
+        "{stderr}"
+    );
+    assert!(std::fs::read(part(0)).unwrap() == before);
     std::fs::remove_dir_all(&dir).ok();
 }

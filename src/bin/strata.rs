@@ -893,6 +893,18 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Option<Outp
             // with: a flag that differs is an error naming it.
             let inside = |e: Error| format!("in checkpoint {}: {e}", path.display());
             let saved = checkpoint.settings().map_err(inside)?;
+            let task = checkpoint.task().map_err(inside)?;
+            if task != Task::WHOLE && args.task().is_none() {
+                return Err(format!(
+                    "{} is task {} of {}'s: resume it with --task-index {} --task-count {}",
+                    path.display(),
+                    task.index,
+                    task.count,
+                    task.index,
+                    task.count
+                )
+                .into());
+            }
             let differ = differences(&saved.method, &settings.method);
             if !differ.is_empty() {
                 return Err(format!(

@@ -520,5 +520,20 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
         "{stderr}"
     );
     assert!(std::fs::read(part(0)).unwrap() == before);
+    // A task's part (or checkpoint) resumed as a whole render: the error
+    // names the flags that resume it.
+    let mut line: Vec<&str> = vec!["render", "cornell"];
+    line.extend(render_args.split(' '));
+    let out = dir.join("whole-again");
+    let first = part(0);
+    line.extend(["--resume", first.to_str().unwrap()]);
+    line.extend(["--out", out.to_str().unwrap()]);
+    let refused = strata(&line);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("is task 0 of 3's: resume it with --task-index 0 --task-count 3"),
+        "{stderr}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -469,20 +469,21 @@ fn prepare_outputs(args: &Args) -> AnyResult<()> {
             return Err(format!("{}: not a regular file: not replaced", file.display()).into());
         }
     }
-    // Another task's part is not replaced: tasks given one --out would
-    // overwrite each other's work.
+    // Another task's part or checkpoint is not replaced: tasks given one
+    // --out would overwrite each other's work.
     if let Some(task) = args.task() {
-        let part = output(&args.out, "part");
-        if let Some(other) = held_task(&part).filter(|&other| other != task) {
-            return Err(format!(
-                "{} holds task {} of {}: each task needs its own --out (e.g. --out DIR/part-{}); \
-                 move the part away to use the name",
-                part.display(),
-                other.index,
-                other.count,
-                task.index
-            )
-            .into());
+        for file in [output(&args.out, "part"), checkpoint_path(args)] {
+            if let Some(other) = held_task(&file).filter(|&other| other != task) {
+                return Err(format!(
+                    "{} holds task {} of {}: each task needs its own --out (e.g. --out DIR/part-{}); \
+                     move the file away to use the name",
+                    file.display(),
+                    other.index,
+                    other.count,
+                    task.index
+                )
+                .into());
+            }
         }
     }
     for file in files {
@@ -581,7 +582,7 @@ fn checkpoint_path(args: &Args) -> PathBuf {
         .unwrap_or_else(|| output(&args.out, "ckpt"))
 }
 
-/// The task whose part the file `path` holds, if it holds one.
+/// The task whose part (or checkpoint) the file `path` holds, if it holds one.
 fn held_task(path: &Path) -> Option<Task> {
     if !path.is_file() {
         return None;

@@ -409,7 +409,7 @@ fn a_time_budget_below_one_unit_of_work_is_reported() {
 /// (as a scheduler would run them) and merged by `strata merge` writes the
 /// PNG and EXR of the render unsplit, byte for byte; a merge with a task
 /// missing is refused naming it, and done with `--partial`; a task never
-/// replaces another task's part.
+/// replaces another task's part or checkpoint.
 #[test]
 fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
     let dir = std::env::temp_dir().join(format!("strata-tasks-{}", std::process::id()));
@@ -520,12 +520,27 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
         "{stderr}"
     );
     assert!(std::fs::read(part(0)).unwrap() == before);
+    // The same for a checkpoint (a part is one): not replaced by another
+    // task's.
+    let first = part(0);
+    let other_out = dir.join("part-1-again");
+    let refused = strata(
+        &[
+            &line[..line.len() - 2],
+            &["--checkpoint", first.to_str().unwrap()],
+            &["--out", other_out.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("part-0.part holds task 0 of 3"), "{stderr}");
+    assert!(std::fs::read(part(0)).unwrap() == before);
     // A task's part (or checkpoint) resumed as a whole render: the error
     // names the flags that resume it.
     let mut line: Vec<&str> = vec!["render", "cornell"];
     line.extend(render_args.split(' '));
     let out = dir.join("whole-again");
-    let first = part(0);
     line.extend(["--resume", first.to_str().unwrap()]);
     line.extend(["--out", out.to_str().unwrap()]);
     let refused = strata(&line);

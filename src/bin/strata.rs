@@ -469,21 +469,29 @@ fn prepare_outputs(args: &Args) -> AnyResult<()> {
             return Err(format!("{}: not a regular file: not replaced", file.display()).into());
         }
     }
-    // Another task's part or checkpoint is not replaced: tasks given one
-    // --out would overwrite each other's work.
-    if let Some(task) = args.task() {
-        for file in [output(&args.out, "part"), checkpoint_path(args)] {
-            if let Some(other) = held_task(&file).filter(|&other| other != task) {
-                return Err(format!(
-                    "{} holds task {} of {}: each task needs its own --out (e.g. --out DIR/part-{}); \
-                     move the file away to use the name",
-                    file.display(),
-                    other.index,
-                    other.count,
-                    task.index
-                )
-                .into());
-            }
+    // Another task's part or checkpoint (or a whole render's checkpoint) is
+    // not replaced: tasks given one --out would overwrite each other's work.
+    let task = args.task().unwrap_or(Task::WHOLE);
+    let part = args.task().map(|_| output(&args.out, "part"));
+    for file in part.into_iter().chain([checkpoint_path(args)]) {
+        if let Some(other) = held_task(&file).filter(|&other| other != task) {
+            let held = if other == Task::WHOLE {
+                "a whole render's checkpoint".to_string()
+            } else {
+                format!("task {} of {}", other.index, other.count)
+            };
+            let own = match args.task() {
+                Some(t) => format!(
+                    "each task needs its own --out (e.g. --out DIR/part-{})",
+                    t.index
+                ),
+                None => "give this render another --out or --checkpoint".to_string(),
+            };
+            return Err(format!(
+                "{} holds {held}: {own}; move the file away to use the name",
+                file.display()
+            )
+            .into());
         }
     }
     for file in files {

@@ -536,6 +536,19 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
     assert_eq!(refused.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("part-0.part holds task 0 of 3"), "{stderr}");
     assert!(std::fs::read(part(0)).unwrap() == before);
+    // Nor by a whole render's.
+    let mut whole_line: Vec<&str> = vec!["render", "cornell"];
+    whole_line.extend(render_args.split(' '));
+    whole_line.extend(["--checkpoint", first.to_str().unwrap()]);
+    whole_line.extend(["--out", other_out.to_str().unwrap()]);
+    let refused = strata(&whole_line);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("holds task 0 of 3: give this render another --out or --checkpoint"),
+        "{stderr}"
+    );
+    assert!(std::fs::read(part(0)).unwrap() == before);
     // A task's part (or checkpoint) resumed as a whole render: the error
     // names the flags that resume it.
     let mut line: Vec<&str> = vec!["render", "cornell"];

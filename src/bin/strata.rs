@@ -161,10 +161,12 @@ struct Args {
     /// stratified MCMC, whose tiles then see all of their pixels' light).
     #[arg(long, default_value = "unidirectional", value_parser = PossibleValuesParser::new(PathSampler::NAMES))]
     path_sampler: String,
-    /// Image width (a .pbrt file's own resolution is used unless given).
+    /// Image width (256 for a built-in scene; a .pbrt file's own unless
+    /// given, and given --height alone, the width that keeps its aspect).
     #[arg(long)]
     width: Option<u32>,
-    /// Image height.
+    /// Image height (256 for a built-in scene; a .pbrt file's own unless
+    /// given, and given --width alone, the height that keeps its aspect).
     #[arg(long)]
     height: Option<u32>,
     /// Start from a named preset of the method's settings (gruson2020: the
@@ -590,6 +592,22 @@ fn checkpoint_path(args: &Args) -> PathBuf {
         .unwrap_or_else(|| output(&args.out, "ckpt"))
 }
 
+/// A scene file's resolution `own` with the `--width` and `--height`
+/// given: one side alone keeps `own`'s aspect ratio (rounded, at least 1).
+fn keep_aspect(own: Resolution, width: Option<u32>, height: Option<u32>) -> Resolution {
+    // `given * to / from`, rounded; `from` is never 0 for a loaded scene.
+    let scaled = |given: u32, to: u32, from: u32| {
+        let side = (given as u64 * to as u64 + from as u64 / 2) / (from as u64).max(1);
+        side.clamp(1, u32::MAX as u64) as u32
+    };
+    match (width, height) {
+        (Some(w), Some(h)) => Resolution::new(w, h),
+        (Some(w), None) => Resolution::new(w, scaled(w, own.height, own.width)),
+        (None, Some(h)) => Resolution::new(scaled(h, own.width, own.height), h),
+        (None, None) => own,
+    }
+}
+
 /// The task whose part (or checkpoint) the file `path` holds, if it holds one.
 fn held_task(path: &Path) -> Option<Task> {
     if !path.is_file() {
@@ -700,9 +718,8 @@ fn run(args: &Args) -> AnyResult<Ended> {
                             warn!("note: {name}: ignored {skipped}");
                         }
                         let mut scene = loaded.scene;
-                        if args.width.is_some() || args.height.is_some() {
-                            scene.camera.resolution = resolution;
-                        }
+                        scene.camera.resolution =
+                            keep_aspect(scene.camera.resolution, args.width, args.height);
                         scene
                     }
                 };
@@ -1187,6 +1204,25 @@ mod tests {
             Command::Render(args) => *args,
             _ => unreachable!(),
         }
+    }
+
+    /// One of `--width` and `--height` given for a scene file keeps its
+    /// aspect ratio (it took 256 for the other side: veach-ajar's 1280x720
+    /// at `--width 320` rendered 320x256).
+    #[test]
+    fn one_side_given_keeps_a_scene_files_aspect() {
+        let own = Resolution::new(1280, 720);
+        let r = |w, h| Resolution::new(w, h);
+        assert_eq!(keep_aspect(own, Some(320), None), r(320, 180));
+        assert_eq!(keep_aspect(own, None, Some(90)), r(160, 90));
+        assert_eq!(keep_aspect(own, Some(100), None), r(100, 56));
+        assert_eq!(keep_aspect(own, Some(1), None), r(1, 1));
+        assert_eq!(keep_aspect(own, Some(7), Some(3)), r(7, 3));
+        assert_eq!(keep_aspect(own, None, None), own);
+        assert_eq!(
+            keep_aspect(r(1, 4), Some(u32::MAX), None),
+            r(u32::MAX, u32::MAX)
+        );
     }
 
     /// A task whose OUT.part another task took while it rendered writes

@@ -503,65 +503,43 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
         .status()
         .unwrap();
     assert!(again.success());
-    // Another task given the --out of a finished one is refused before any
-    // work, and the part is kept (every task of a job array given one --out
-    // overwrote the part before).
+    // What would replace another task's part or checkpoint is refused before
+    // any work, the part kept (every task of a job array given one --out
+    // overwrote the part before); so is resuming a task's part as a whole
+    // render, naming the flags that resume it.
     let before = std::fs::read(part(0)).unwrap();
-    let mut line: Vec<&str> = vec!["render", "cornell"];
-    line.extend(render_args.split(' '));
-    let out = dir.join("part-0");
-    line.extend(["--task-index", "1", "--task-count", "3"]);
-    line.extend(["--out", out.to_str().unwrap()]);
-    let refused = strata(&line);
-    let stderr = String::from_utf8_lossy(&refused.stderr);
-    assert_eq!(refused.status.code(), Some(1), "{stderr}");
-    assert!(
-        stderr.contains("part-0.part holds task 0 of 3: each task needs its own --out"),
-        "{stderr}"
-    );
-    assert!(std::fs::read(part(0)).unwrap() == before);
-    // The same for a checkpoint (a part is one): not replaced by another
-    // task's.
     let first = part(0);
+    let first = first.to_str().unwrap();
+    let same_out = dir.join("part-0");
     let other_out = dir.join("part-1-again");
-    let refused = strata(
-        &[
-            &line[..line.len() - 2],
-            &["--checkpoint", first.to_str().unwrap()],
-            &["--out", other_out.to_str().unwrap()],
-        ]
-        .concat(),
-    );
-    let stderr = String::from_utf8_lossy(&refused.stderr);
-    assert_eq!(refused.status.code(), Some(1), "{stderr}");
-    assert!(stderr.contains("part-0.part holds task 0 of 3"), "{stderr}");
-    assert!(std::fs::read(part(0)).unwrap() == before);
-    // Nor by a whole render's.
-    let mut whole_line: Vec<&str> = vec!["render", "cornell"];
-    whole_line.extend(render_args.split(' '));
-    whole_line.extend(["--checkpoint", first.to_str().unwrap()]);
-    whole_line.extend(["--out", other_out.to_str().unwrap()]);
-    let refused = strata(&whole_line);
-    let stderr = String::from_utf8_lossy(&refused.stderr);
-    assert_eq!(refused.status.code(), Some(1), "{stderr}");
-    assert!(
-        stderr.contains("holds task 0 of 3: give this render another --out or --checkpoint"),
-        "{stderr}"
-    );
-    assert!(std::fs::read(part(0)).unwrap() == before);
-    // A task's part (or checkpoint) resumed as a whole render: the error
-    // names the flags that resume it.
-    let mut line: Vec<&str> = vec!["render", "cornell"];
-    line.extend(render_args.split(' '));
-    let out = dir.join("whole-again");
-    line.extend(["--resume", first.to_str().unwrap()]);
-    line.extend(["--out", out.to_str().unwrap()]);
-    let refused = strata(&line);
-    let stderr = String::from_utf8_lossy(&refused.stderr);
-    assert_eq!(refused.status.code(), Some(1), "{stderr}");
-    assert!(
-        stderr.contains("is task 0 of 3's: resume it with --task-index 0 --task-count 3"),
-        "{stderr}"
-    );
+    let (same_out, other_out) = (same_out.to_str().unwrap(), other_out.to_str().unwrap());
+    let task_1 = ["--task-index", "1", "--task-count", "3"];
+    for (extra, says) in [
+        (
+            [&task_1[..], &["--out", same_out]].concat(),
+            "part-0.part holds task 0 of 3: each task needs its own --out",
+        ),
+        (
+            [&task_1[..], &["--checkpoint", first, "--out", other_out]].concat(),
+            "part-0.part holds task 0 of 3: each task needs its own --out",
+        ),
+        (
+            vec!["--checkpoint", first, "--out", other_out],
+            "holds task 0 of 3: give this render another --out or --checkpoint",
+        ),
+        (
+            vec!["--resume", first, "--out", other_out],
+            "is task 0 of 3's: resume it with --task-index 0 --task-count 3",
+        ),
+    ] {
+        let mut line: Vec<&str> = vec!["render", "cornell"];
+        line.extend(render_args.split(' '));
+        line.extend(&extra);
+        let refused = strata(&line);
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(1), "{extra:?}: {stderr}");
+        assert!(stderr.contains(says), "{extra:?}: {stderr}");
+        assert!(std::fs::read(part(0)).unwrap() == before, "{extra:?}");
+    }
     std::fs::remove_dir_all(&dir).ok();
 }

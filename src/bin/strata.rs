@@ -249,8 +249,11 @@ struct Args {
     #[arg(long, value_name = "FILE")]
     resume: Option<PathBuf>,
     /// Render only task I (from 0) of --task-count tasks and write its
-    /// partial result to OUT.part, for `strata merge` (MC, PSSMLT, replica, ERPT; a
-    /// sample budget is the whole render's, a time budget each task's).
+    /// partial result to OUT.part, for `strata merge` (a sample budget is the
+    /// whole render's, a time budget each task's). Tasks share the render's
+    /// units of work: MC's and ERPT's passes, PSSMLT's chains, replica
+    /// exchange's ensembles, and the runs of stratified MCMC and multi-stage
+    /// MLT (1 unless `--set runs=N`).
     #[arg(long, value_name = "I", requires = "task_count")]
     task_index: Option<u32>,
     /// The number of tasks the render is split into.
@@ -310,8 +313,10 @@ struct Watch<'a> {
     args: &'a Args,
     previews: Option<Every>,
     checkpoints: Option<Every>,
-    /// Where the checkpoint goes, and whether one was written.
-    checkpoint: PathBuf,
+    /// Where the checkpoint goes (a task's moves to its [`own_file`] if
+    /// another task's checkpoint takes the name), and whether one was
+    /// written.
+    checkpoint: Mutex<PathBuf>,
     saved: AtomicBool,
     /// A checkpoint write failed.
     failed: AtomicBool,
@@ -321,6 +326,22 @@ struct Watch<'a> {
 }
 
 impl Watch<'_> {
+    /// Whether a checkpoint was written, and where the checkpoints go.
+    fn saved(&self) -> Saved {
+        let file = self
+            .checkpoint
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone();
+        if self.saved.load(Ordering::Relaxed) {
+            Saved::Yes(file)
+        } else if self.failed.load(Ordering::Relaxed) {
+            Saved::Failed(file)
+        } else {
+            Saved::NothingYet
+        }
+    }
+
     /// Reports a failed write without stopping the render, on stderr
     /// whether or not it is a terminal (the bar's own `println` drops
     /// lines when it is hidden).
@@ -372,15 +393,27 @@ impl Observer for Watch<'_> {
     }
     fn checkpoint(&self, checkpoint: Checkpoint) {
         let start = Instant::now();
-        match replace(&self.checkpoint, |path| {
-            std::fs::write(path, checkpoint.as_bytes())
-        }) {
+        let mut file = self.checkpoint.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(task) = self.args.task() {
+            let own = own_file(&file, task);
+            if own != *file {
+                self.bar.suspend(|| {
+                    warn!(
+                        "note: {} holds another task's checkpoint (tasks started with one --out): this one's go to {}",
+                        file.display(),
+                        own.display()
+                    )
+                });
+                *file = own;
+            }
+        }
+        match replace(&file, |path| std::fs::write(path, checkpoint.as_bytes())) {
             Ok(()) => {
                 self.saved.store(true, Ordering::Relaxed);
                 self.bar.suspend(|| {
                     warn!(
                         "checkpoint: {} ({:.1} MB, written in {:.2} s)",
-                        self.checkpoint.display(),
+                        file.display(),
                         checkpoint.as_bytes().len() as f64 / 1e6,
                         start.elapsed().as_secs_f64()
                     )
@@ -517,12 +550,11 @@ enum Ended {
     Stopped(Saved),
 }
 
-/// Whether a stopped render's checkpoint was written.
-#[derive(Clone, Copy, PartialEq)]
+/// Whether a stopped render's checkpoint was written, and where.
 enum Saved {
-    Yes,
+    Yes(PathBuf),
     /// Writing it failed (the warning says why).
-    Failed,
+    Failed(PathBuf),
     /// No round ended before the stop: nothing to save.
     NothingYet,
 }
@@ -560,13 +592,12 @@ fn main() -> ExitCode {
     match run(&args) {
         Ok(Ended::Finished) => ExitCode::SUCCESS,
         Ok(Ended::Stopped(saved)) => {
-            let checkpoint = checkpoint_path(&args);
             match saved {
-                Saved::Yes => warn!(
+                Saved::Yes(checkpoint) => warn!(
                     "stopped; the checkpoint is in {0}: run the same command with --resume {0} to continue",
                     checkpoint.display()
                 ),
-                Saved::Failed => warn!(
+                Saved::Failed(checkpoint) => warn!(
                     "stopped; the checkpoint could not be written to {} (see the warning above): the work is lost",
                     checkpoint.display()
                 ),
@@ -618,14 +649,30 @@ fn held_task(path: &Path) -> Option<Task> {
         .map(|(_, task)| task)
 }
 
-/// Where task `task` writes its part: OUT.part, or OUT.task-I.part if
-/// another task's part took OUT.part while this one rendered (tasks started
-/// at once with one --out; `prepare_outputs` refuses the name otherwise).
+/// Where task `task` writes its part: OUT.part, or [`own_file`]'s
+/// OUT.task-I.part if another task's part took OUT.part while this one
+/// rendered.
 fn part_path(out: &Path, task: Task) -> PathBuf {
-    let part = output(out, "part");
-    match held_task(&part) {
-        Some(other) if other != task => output(out, &format!("task-{}.part", task.index)),
-        _ => part,
+    own_file(&output(out, "part"), task)
+}
+
+/// The file `path` if it is free or holds task `task`'s own part or
+/// checkpoint, else the task's name beside it (`render.ckpt` gives
+/// `render.task-I.ckpt`): tasks started at once with one --out would
+/// otherwise replace each other's files (`prepare_outputs` refuses a name
+/// another task's file holds at the start).
+fn own_file(path: &Path, task: Task) -> PathBuf {
+    match held_task(path) {
+        Some(other) if other != task => {
+            let mut name = path.with_extension("").into_os_string();
+            name.push(format!(".task-{}", task.index));
+            if let Some(ext) = path.extension() {
+                name.push(".");
+                name.push(ext);
+            }
+            name.into()
+        }
+        _ => path.to_path_buf(),
     }
 }
 
@@ -957,7 +1004,7 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Option<Outp
         args,
         previews: Every::new(args.preview_every)?,
         checkpoints: Every::new(args.checkpoint_every)?,
-        checkpoint: checkpoint_path(args),
+        checkpoint: Mutex::new(checkpoint_path(args)),
         saved: AtomicBool::new(false),
         failed: AtomicBool::new(false),
         spent: AtomicBool::new(false),
@@ -1004,16 +1051,7 @@ fn render_with<O: PathOracle>(oracle: &O, args: &Args) -> AnyResult<(Option<Outp
     }
     report_extras(&output.extras);
     let ended = if output.cancelled {
-        Ended::Stopped(
-            match (
-                observer.saved.load(Ordering::Relaxed),
-                observer.failed.load(Ordering::Relaxed),
-            ) {
-                (true, _) => Saved::Yes,
-                (false, true) => Saved::Failed,
-                (false, false) => Saved::NothingYet,
-            },
-        )
+        Ended::Stopped(observer.saved())
     } else {
         Ended::Finished
     };
@@ -1049,14 +1087,7 @@ fn render_task_with<O: PathOracle>(
     };
     observer.bar.finish_and_clear();
     if !checkpoint.finished()? {
-        let saved = if observer.saved.load(Ordering::Relaxed) {
-            Saved::Yes
-        } else if observer.failed.load(Ordering::Relaxed) {
-            Saved::Failed
-        } else {
-            Saved::NothingYet
-        };
-        return Ok((None, Ended::Stopped(saved)));
+        return Ok((None, Ended::Stopped(observer.saved())));
     }
     let part = part_path(&args.out, task);
     if part != output(&args.out, "part") {
@@ -1225,8 +1256,9 @@ mod tests {
         );
     }
 
-    /// A task whose OUT.part another task took while it rendered writes
-    /// OUT.task-I.part; its own part, or none, is replaced.
+    /// A task whose OUT.part (or checkpoint) another task took while it
+    /// rendered writes OUT.task-I.part (OUT.task-I.ckpt); its own, or none,
+    /// is replaced.
     #[test]
     fn a_task_does_not_replace_another_tasks_part() {
         let dir = std::env::temp_dir().join(format!("strata-part-path-{}", std::process::id()));
@@ -1251,6 +1283,17 @@ mod tests {
         std::fs::write(dir.join("render.part"), part.as_bytes()).unwrap();
         assert_eq!(part_path(&out, task(0)), dir.join("render.part"));
         assert_eq!(part_path(&out, task(1)), dir.join("render.task-1.part"));
+        // A part is its task's finished checkpoint: as one in OUT.ckpt.
+        let checkpoint = dir.join("render.ckpt");
+        std::fs::rename(dir.join("render.part"), &checkpoint).unwrap();
+        assert_eq!(own_file(&checkpoint, task(0)), checkpoint);
+        assert_eq!(
+            own_file(&checkpoint, task(1)),
+            dir.join("render.task-1.ckpt")
+        );
+        let bare = dir.join("bare");
+        std::fs::rename(&checkpoint, &bare).unwrap();
+        assert_eq!(own_file(&bare, task(1)), dir.join("bare.task-1"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -65,8 +65,9 @@ fn check_task(settings: &Settings, task: Task, resolution: Resolution) -> Result
         return Err(Error::invalid(
             "task_count",
             task.count as f64,
-            "at most the render's units of work (MC and ERPT: passes; PSSMLT: chains; replica \
-             exchange: ensembles; stratified MCMC and multi-stage MLT: runs)",
+            "at most the render's units of work (MC and ERPT: passes; PSSMLT: its setting \
+             `chains`; replica exchange: `ensembles`; stratified MCMC and multi-stage MLT: \
+             `runs`, 1 by default)",
         ));
     }
     Ok(())

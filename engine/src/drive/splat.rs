@@ -47,6 +47,8 @@ struct LayerSplats<R> {
     splats: Vec<Splat<R>>,
     /// Band `b`'s splats are `splats[starts[b]..starts[b + 1]]` once sorted.
     starts: Vec<usize>,
+    /// The sort's room: each band's next free place.
+    next: Vec<usize>,
 }
 
 impl<R> LayerSplats<R> {
@@ -62,7 +64,9 @@ impl<R> LayerSplats<R> {
         for b in 0..bands.count {
             starts[b + 1] += starts[b];
         }
-        let mut next: Vec<usize> = starts[..bands.count].to_vec();
+        let next = &mut self.next;
+        next.clear();
+        next.extend_from_slice(&starts[..bands.count]);
         for band in 0..bands.count {
             while next[band] < starts[band + 1] {
                 let i = next[band];
@@ -89,6 +93,7 @@ impl<R> RoundBuffers<R> {
                 .map(|_| LayerSplats {
                     splats: Vec::new(),
                     starts: Vec::new(),
+                    next: Vec::new(),
                 })
                 .collect(),
             visited: Vec::new(),

@@ -16,10 +16,8 @@ pub(crate) enum Strategies {
     /// `(light, camera)` alone, unweighted.
     One { light: usize, camera: usize },
     /// One chosen by the path's own numbers (Hachisuka et al. 2014): a path
-    /// length of at least three vertices by [`Lengths`], then one of its
-    /// strategies uniformly, weighted by MIS over the probability of the
-    /// choice; plus, on every path, the emission its camera ray sees
-    /// directly (the one strategy of two vertices, `(0, 2)`).
+    /// length uniformly, then one of its strategies uniformly, weighted by
+    /// MIS over the probability of the choice.
     Multiplexed,
 }
 
@@ -31,11 +29,7 @@ pub(crate) fn joinable(s: usize, t: usize, longest: usize) -> bool {
 }
 
 /// Multiplexed MLT's choice of a path length (Hachisuka et al. 2014): `n`
-/// vertices in `3..=longest` with probability proportional to `1/(n-1)²`.
-/// Paths of two vertices, the emission the camera ray sees directly, are
-/// not chosen: every multiplexed path carries theirs (one strategy, weight
-/// 1), so a renderer can estimate it apart (`PathOracle::separates_emission`)
-/// and a chain never stops on the light's own pixels.
+/// vertices in `2..=longest` with probability proportional to `1/(n-1)²`.
 ///
 /// Under MLT the chain spends time on each length in proportion to the
 /// light it carries whatever these probabilities are (the target includes
@@ -45,17 +39,16 @@ pub(crate) fn joinable(s: usize, t: usize, longest: usize) -> bool {
 /// uniform and `1/(n-1)^{1, 1.5, 2, 3}` (docs/RESULTS.md, issue 38).
 #[derive(Clone, Debug)]
 pub(crate) struct Lengths {
-    /// `P(n <= k + 3)` at index `k`.
+    /// `P(n <= k + 2)` at index `k`.
     cumulative: Vec<f32>,
-    /// `P(n = k + 3)` at index `k`.
+    /// `P(n = k + 2)` at index `k`.
     probability: Vec<f32>,
 }
 
 impl Lengths {
-    /// The choice among paths of 3 to `longest` vertices (none if
-    /// `longest < 3`).
+    /// The choice among paths of 2 to `longest` vertices.
     pub(crate) fn new(longest: usize) -> Self {
-        let weights: Vec<f64> = (2..longest).map(|k| 1.0 / (k * k) as f64).collect();
+        let weights: Vec<f64> = (1..longest).map(|k| 1.0 / (k * k) as f64).collect();
         let total: f64 = weights.iter().sum();
         let mut sum = 0.0;
         let cumulative = weights
@@ -72,12 +65,11 @@ impl Lengths {
         }
     }
 
-    /// The length `u` in `[0, 1)` selects, and its probability; `None`
-    /// when there is no length to choose.
-    fn choose(&self, u: f32) -> Option<(usize, f32)> {
-        let last = self.cumulative.len().checked_sub(1)?;
+    /// The length `u` in `[0, 1)` selects, and its probability.
+    fn choose(&self, u: f32) -> (usize, f32) {
+        let last = self.cumulative.len() - 1;
         let k = self.cumulative.partition_point(|&c| c <= u).min(last);
-        Some((k + 3, self.probability[k]))
+        (k + 2, self.probability[k])
     }
 }
 
@@ -87,41 +79,42 @@ impl Lengths {
 /// chain's depth), then `t` uniformly among the strategies `(n - t, t)` that
 /// can join it, from stream 2 (small steps move it: the chain moves to the
 /// strategies that carry the light). Returns `(s, t)` and one over the
-/// choice's probability, or `None` if paths have at most two vertices.
+/// choice's probability.
 pub(crate) fn multiplexed_choice<S: Sampler + ?Sized>(
     sampler: &mut S,
     lengths: &Lengths,
     longest: usize,
-) -> Option<(usize, usize, f32)> {
+) -> (usize, usize, f32) {
     sampler.start_stream(HELD_STREAM);
-    let chosen = lengths.choose(sampler.next_1d());
+    let (n, p_length) = lengths.choose(sampler.next_1d());
     sampler.start_stream(2);
     let u_strategy = sampler.next_1d();
-    sampler.start_stream(0);
-    let (n, p_length) = chosen?;
-    // Every `t` in `1..=n` joins a path of `n >= 3` vertices.
-    let t = 1 + ((u_strategy * n as f32) as usize).min(n - 1);
+    // Two vertices: only `(0, 2)`; more: every `t` in `1..=n`.
+    let (strategies, t) = if n == 2 {
+        (1, 2)
+    } else {
+        (n, 1 + ((u_strategy * n as f32) as usize).min(n - 1))
+    };
     debug_assert!(joinable(n - t, t, longest));
-    Some((n - t, t, n as f32 / p_length))
+    sampler.start_stream(0);
+    (n - t, t, strategies as f32 / p_length)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// Every length in `3..=longest` has its probability `∝ 1/(n-1)²`, and
-    /// the numbers that select it are an interval of that width; paths of at
-    /// most two vertices leave nothing to choose.
+    /// Every length in `2..=longest` has its probability `∝ 1/(n-1)²`, and
+    /// the numbers that select it are an interval of that width.
     #[test]
     fn lengths_are_chosen_with_their_probabilities() {
-        assert_eq!(Lengths::new(2).choose(0.5), None);
-        for longest in [3, 18, 67] {
+        for longest in [2, 3, 18, 67] {
             let lengths = Lengths::new(longest);
-            let total: f64 = (2..longest).map(|k| 1.0 / (k * k) as f64).sum();
+            let total: f64 = (1..longest).map(|k| 1.0 / (k * k) as f64).sum();
             let mut hits = vec![0u32; longest + 1];
             let draws = 100_000;
             for i in 0..draws {
-                let (n, p) = lengths.choose((i as f32 + 0.5) / draws as f32).unwrap();
+                let (n, p) = lengths.choose((i as f32 + 0.5) / draws as f32);
                 let expected = 1.0 / ((n - 1) * (n - 1)) as f64 / total;
                 assert!(
                     (p as f64 - expected).abs() < 1e-6 * expected.max(1e-3),
@@ -129,9 +122,9 @@ mod tests {
                 );
                 hits[n] += 1;
             }
-            assert_eq!(lengths.choose(0.0).unwrap().0, 3);
-            assert_eq!(lengths.choose(1.0f32.next_down()).unwrap().0, longest);
-            for (n, &h) in hits.iter().enumerate().skip(3) {
+            assert_eq!(lengths.choose(0.0).0, 2);
+            assert_eq!(lengths.choose(1.0f32.next_down()).0, longest);
+            for (n, &h) in hits.iter().enumerate().skip(2) {
                 let p = 1.0 / ((n - 1) * (n - 1)) as f64 / total;
                 // A regular grid of `draws` numbers: within one draw.
                 let share = h as f64 / draws as f64;

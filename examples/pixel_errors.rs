@@ -6,13 +6,25 @@
 //! the pixels, each block's share (the image cut into `--blocks`² blocks)
 //! and, with `--region`, the region's mean luminance and share. Then, for
 //! each `--pixel`, the reference's value, each render's, their mean, and
-//! how many renders read it more than 2x dark or bright. The caustic's
-//! smear in docs/RESULTS.md came from:
+//! how many renders read it more than 2x dark or bright. Each render's MSE
+//! (over pixels and channels) too, and with `--light L` its share in the
+//! pixels whose reference's channel mean exceeds `L`; `--reference-box K`
+//! box-filters a reference `K` times finer first. The caustic's smear in
+//! docs/RESULTS.md came from:
 //!
 //! ```text
 //! cargo run --release --features studies --example pixel_errors -- \
 //!     --reference out/g3/caustic/reference_96x96_16384.exr out/s15/{unidirectional,bidirectional}-[012].exr \
 //!     --pixel 51,49 --pixel 54,50 --region 57:66,21:32
+//! ```
+//!
+//! and the MSEs of MMLT on the Cornell box against Tungsten's image from
+//! (and against strata's own, `--reference out/tg/ref.exr`):
+//!
+//! ```text
+//! cargo run --release --features studies --example pixel_errors -- \
+//!     --reference ../shared/scenes/cornell-box/TungstenRender.exr --reference-box 8 \
+//!     --light 5 out/tg/multiplexed-[0123].exr
 //! ```
 
 use std::path::PathBuf;
@@ -21,6 +33,10 @@ use clap::Parser;
 use strata::engine::Film;
 use strata::engine::metrics::EPSILON;
 use strata::io::read_film;
+
+#[path = "common/filter.rs"]
+mod filter;
+use filter::downsample;
 
 type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
@@ -42,6 +58,13 @@ struct Args {
     /// Blocks per side for the error's map.
     #[arg(long, default_value_t = 6)]
     blocks: usize,
+    /// Box-filter the reference down by this factor first.
+    #[arg(long, default_value_t = 1)]
+    reference_box: u32,
+    /// Report the MSE's share in the pixels whose reference's channel mean
+    /// exceeds this (a light seen directly).
+    #[arg(long)]
+    light: Option<f64>,
 }
 
 fn pixel(text: &str) -> Result<(usize, usize), String> {
@@ -74,7 +97,7 @@ fn luminance(film: &Film) -> Vec<f64> {
 
 fn main() -> AnyResult<()> {
     let args = Args::parse();
-    let reference = read_film(&args.reference)?;
+    let reference = downsample(&read_film(&args.reference)?, args.reference_box);
     let width = reference.resolution().width as usize;
     let height = reference.resolution().height as usize;
     let r = luminance(&reference);
@@ -96,6 +119,33 @@ fn main() -> AnyResult<()> {
             .map(|(v, r)| (v - r) * (v - r) / (r * r + EPSILON))
             .collect();
         let total: f64 = terms.iter().sum();
+        let channels = reference.channels();
+        let squares: Vec<f64> = (0..r.len())
+            .map(|i| {
+                let range = i * channels..(i + 1) * channels;
+                let (a, b) = (&film.data()[range.clone()], &reference.data()[range]);
+                a.iter().zip(b).map(|(a, b)| (a - b) * (a - b)).sum::<f64>()
+            })
+            .collect();
+        let mse = squares.iter().sum::<f64>() / (squares.len() * channels) as f64;
+        match args.light {
+            Some(light) => {
+                let lit: Vec<usize> = (0..r.len())
+                    .filter(|&i| {
+                        let p = &reference.data()[i * channels..(i + 1) * channels];
+                        p.iter().sum::<f64>() / channels as f64 > light
+                    })
+                    .collect();
+                let share =
+                    lit.iter().map(|&i| squares[i]).sum::<f64>() / squares.iter().sum::<f64>();
+                println!(
+                    "{}: MSE {mse:.3e}, {share:.2} of it in the {} pixels brighter than {light}",
+                    path.display(),
+                    lit.len()
+                );
+            }
+            None => println!("{}: MSE {mse:.3e}", path.display()),
+        }
         let mut sorted = terms.clone();
         sorted.sort_by(|a, b| b.total_cmp(a));
         let worst: f64 = sorted[..(sorted.len() / 100).max(1)].iter().sum();

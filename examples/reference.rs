@@ -25,6 +25,10 @@ use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Film, Method, Resolution, Settings, Silent, metrics, render};
 use strata::native::{native_tracer, pbrt};
 
+#[path = "common/filter.rs"]
+mod filter;
+use filter::downsample;
+
 /// Render cornell-box and compare with Tungsten's converged image.
 #[derive(Parser, Debug)]
 struct Args {
@@ -50,24 +54,6 @@ struct Args {
     /// Output directory.
     #[arg(long, default_value = "out/reference")]
     out: PathBuf,
-}
-
-/// Box-filters `film` down by an integer factor.
-fn downsample(film: &Film, factor: u32) -> Film {
-    let r = film.resolution();
-    let out_res = Resolution::new(r.width / factor, r.height / factor);
-    let c = film.channels();
-    let mut data = vec![0.0; out_res.pixel_count() * c];
-    let w = 1.0 / (factor * factor) as f64;
-    for y in 0..r.height {
-        for x in 0..r.width {
-            let o = ((y / factor) * out_res.width + x / factor) as usize * c;
-            for (k, v) in film.pixel(x, y).iter().enumerate() {
-                data[o + k] += v * w;
-            }
-        }
-    }
-    Film::from_data(out_res, c, data).expect("shape computed above")
 }
 
 /// The mean luminance of `film`.

@@ -16,8 +16,10 @@ pub(crate) enum Strategies {
     /// `(light, camera)` alone, unweighted.
     One { light: usize, camera: usize },
     /// One chosen by the path's own numbers (Hachisuka et al. 2014): a path
-    /// length uniformly, then one of its strategies uniformly, weighted by
-    /// MIS over the probability of the choice.
+    /// length by [`Lengths`], then one of its strategies uniformly, weighted
+    /// by MIS over the probability of the choice; plus, on every path, the
+    /// emission its camera ray sees directly (the one strategy of two
+    /// vertices, `(0, 2)`, which the choice of that length then leaves out).
     Multiplexed,
 }
 
@@ -79,25 +81,29 @@ impl Lengths {
 /// chain's depth), then `t` uniformly among the strategies `(n - t, t)` that
 /// can join it, from stream 2 (small steps move it: the chain moves to the
 /// strategies that carry the light). Returns `(s, t)` and one over the
-/// choice's probability.
+/// choice's probability; `None` for two vertices, the emission seen
+/// directly, which every multiplexed path carries apart from its choice (so
+/// a renderer can estimate it apart, `PathOracle::separates_emission`). The
+/// length is still chosen with its probability: those large steps are cheap
+/// (a camera ray), and proposing long paths more often instead made MMLT's
+/// heavy seeds heavier (docs/RESULTS.md, issue 38).
 pub(crate) fn multiplexed_choice<S: Sampler + ?Sized>(
     sampler: &mut S,
     lengths: &Lengths,
     longest: usize,
-) -> (usize, usize, f32) {
+) -> Option<(usize, usize, f32)> {
     sampler.start_stream(HELD_STREAM);
     let (n, p_length) = lengths.choose(sampler.next_1d());
     sampler.start_stream(2);
     let u_strategy = sampler.next_1d();
-    // Two vertices: only `(0, 2)`; more: every `t` in `1..=n`.
-    let (strategies, t) = if n == 2 {
-        (1, 2)
-    } else {
-        (n, 1 + ((u_strategy * n as f32) as usize).min(n - 1))
-    };
-    debug_assert!(joinable(n - t, t, longest));
     sampler.start_stream(0);
-    (n - t, t, strategies as f32 / p_length)
+    if n == 2 {
+        return None;
+    }
+    // Every `t` in `1..=n` joins a path of `n >= 3` vertices.
+    let t = 1 + ((u_strategy * n as f32) as usize).min(n - 1);
+    debug_assert!(joinable(n - t, t, longest));
+    Some((n - t, t, n as f32 / p_length))
 }
 
 #[cfg(test)]

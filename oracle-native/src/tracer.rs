@@ -329,25 +329,19 @@ impl<I: Intersector> PathOracle for PathTracer<I> {
         }
     }
 
-    /// Unidirectional and bidirectional paths tell apart the emission
-    /// their camera ray sees (for bidirectional ones, the strategy
-    /// `(s, t) = (0, 2)`, weight 1). A multiplexed path or a single strategy
-    /// carries it only when that strategy is chosen, scaled by the choice:
-    /// not the camera ray's alone.
+    /// Unidirectional, bidirectional and multiplexed paths tell apart the
+    /// emission their camera ray sees (for bidirectional ones the strategy
+    /// `(s, t) = (0, 2)`, weight 1, which a multiplexed path carries besides
+    /// its chosen strategy). A single strategy does not.
     fn separates_emission(&self) -> bool {
-        matches!(
-            self.sampler,
-            PathSampler::Unidirectional
-                | PathSampler::Bidirectional
-                | PathSampler::BidirectionalNoSplats
-        )
+        !matches!(self.sampler, PathSampler::Strategy { .. })
     }
 
     fn emission<S: Sampler + ?Sized>(&self, film: FilmPoint, sampler: &mut S) -> Rgb {
         let seen = match self.sampler {
-            PathSampler::Bidirectional | PathSampler::BidirectionalNoSplats => {
-                self.seen_emission_bidirectional(film, sampler)
-            }
+            PathSampler::Bidirectional
+            | PathSampler::BidirectionalNoSplats
+            | PathSampler::Multiplexed => self.seen_emission_bidirectional(film, sampler),
             _ => self.seen_emission(film),
         };
         Rgb(seen.to_array())

@@ -271,9 +271,11 @@ impl<I: Intersector> PathTracer<I> {
     /// A bidirectional path through `film`: its radiance there, with its
     /// light-tracing contributions handed to `splats`, by the strategies
     /// `which`; its flags; and the part of the radiance its camera ray saw
-    /// directly ([`seen_emission_bidirectional`](Self::seen_emission_bidirectional)), kept apart only
-    /// when every strategy of its length is joined ([`Strategies::All`],
-    /// [`Strategies::AllButLightTracing`]; zero otherwise).
+    /// directly ([`seen_emission_bidirectional`](Self::seen_emission_bidirectional)):
+    /// the strategy `(0, 2)`'s value, whose MIS weight is 1, or the
+    /// environment if the camera ray escapes. A multiplexed path carries it
+    /// on every path, besides its chosen strategy (of three or more
+    /// vertices, or none); a single strategy keeps it zero.
     pub(crate) fn bidirectional<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,
@@ -289,12 +291,20 @@ impl<I: Intersector> PathTracer<I> {
             Strategies::All | Strategies::AllButLightTracing => (None, 1.0),
             Strategies::One { light, camera } => (Some((light, camera)), 1.0),
             Strategies::Multiplexed => {
-                let (s, t, scale) = multiplexed_choice(sampler, &self.lengths, longest);
-                (Some((s, t)), scale)
+                match multiplexed_choice(sampler, &self.lengths, longest) {
+                    Some((s, t, scale)) => (Some((s, t)), scale),
+                    // Two vertices: the emission seen directly alone
+                    // (added below), nothing chosen.
+                    None => (Some((0, 2)), 0.0),
+                }
             }
         };
+        let multiplexed = which == Strategies::Multiplexed;
         let (camera_vertices, light_vertices) = match only {
             None => (longest, longest - 1),
+            // Its camera ray is traced even for light tracing (`t = 1`): it
+            // carries the emission seen directly.
+            Some((s, t)) if multiplexed => (t.max(2), s),
             Some((s, t)) => (t, s),
         };
         // One strategy fixes both subpaths' lengths: a walk cut short by
@@ -330,9 +340,17 @@ impl<I: Intersector> PathTracer<I> {
         };
         let every = matches!(which, Strategies::All | Strategies::AllButLightTracing);
         let mut seen = match paths.camera.len() {
-            1 if every => paths.environment,
+            1 if every || multiplexed => paths.environment,
             _ => Vec3::ZERO,
         };
+        if multiplexed {
+            if paths.camera.len() > 1 {
+                seen = self
+                    .connect(&paths, 0, 2, &camera)
+                    .map_or(Vec3::ZERO, |joined| joined.value);
+            }
+            radiance += seen;
+        }
         let first_t = if light_tracing && splats.wants_splats() {
             1
         } else {

@@ -105,6 +105,9 @@ pub enum Domain {
     Pass = 0x3c79_ac49_2ba7_b653,
     /// The emission seen directly: pixel `i`'s camera rays (`emission`).
     Emission = 0x8ebc_6af0_9c88_c6e3,
+    /// The emission seen directly: pixel `i`'s pilot ray, which decides
+    /// how many rays the estimate traces (`emission`).
+    EmissionPilot = 0x1656_67b1_9e37_79f9,
     /// Anything a test or caller wants to seed.
     User = 0xa076_1d64_78bd_642f,
 }

@@ -17,7 +17,7 @@ use strata::engine::{
     Resolution, Rgb, Sampler, Settings, Silent, SplatSink, Temperature, render, resume,
 };
 
-use crate::emission::Lit;
+use crate::emission::{Lamp, Lit};
 use crate::threads;
 use threads::{bits, in_pool, small_methods};
 
@@ -71,6 +71,7 @@ impl Observer for StopAt {
 fn image() -> Lit<ProceduralImage> {
     Lit {
         inner: ProceduralImage::showcase(Resolution::new(48, 32)),
+        lamp: Lamp::EDGES,
         nan: true,
     }
 }

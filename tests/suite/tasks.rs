@@ -19,7 +19,7 @@ use strata::prelude::{
     StratifiedSettings, Task, merge, render_task, resume_task,
 };
 
-use crate::emission::Lit;
+use crate::emission::{Lamp, Lit};
 use crate::threads;
 use threads::{bits, in_pool};
 
@@ -29,6 +29,7 @@ use threads::{bits, in_pool};
 fn image() -> Lit<ProceduralImage> {
     Lit {
         inner: ProceduralImage::showcase(Resolution::new(48, 32)),
+        lamp: Lamp::EDGES,
         nan: true,
     }
 }

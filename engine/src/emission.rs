@@ -23,18 +23,20 @@
 //! the same whoever traces them, so a render split into tasks (each tracing
 //! its own rows) merges to the same bytes.
 //!
-//! A scene may never show an emitter to the camera (veach-ajar: its lamp
-//! is behind the door); there those rays only confirm a black image, at one
-//! camera ray a path. Before the first round a pilot of one camera ray a
-//! pixel, over the whole film and with numbers of its own, looks for any
-//! emission; when it sees none the render traces a sixteenth of the rays
-//! ([`UNSEEN`]). The pilot's rays are not in the estimate and the rays
-//! never stop, so an emitter the pilot missed is still estimated without
-//! bias, only with more noise.
+//! Most pixels never see an emitter (all of veach-ajar's: its lamp is
+//! behind the door; all but the light's on the Cornell box), and there
+//! those rays only confirm black, at one camera ray a path. Before a render
+//! a pilot of one camera ray a pixel, at points of its own that depend on
+//! the scene alone, marks the pixels that see emission or whose neighbours
+//! do ([`sightings`]); the others trace one ray in [`UNSEEN`] (rays `k`
+//! with `k mod UNSEEN = 0`: the same points whoever traces them). Every
+//! pixel's rate is fixed before its rays are drawn and is never zero, so
+//! an emitter the pilot missed (smaller than a pixel, alone) is still
+//! estimated without bias, with fewer rays.
 
 use alloc::vec::Vec;
 use core::cell::RefCell;
-use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use core::sync::atomic::{AtomicU64, Ordering};
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
@@ -54,46 +56,44 @@ use crate::task::Task;
 /// bidirectional PSSMLT's MSE to 0.22, 0.06 and 0.08 of the method's whole).
 pub(crate) const EMISSION_RAYS: f64 = 1.0;
 
-/// One over the share of a method's `emission_rays` a render traces when
-/// its pilot ([`pilot_sees_emission`]) saw no emission: on a scene whose
-/// emitters the camera never sees (veach-ajar) those rays only confirm a
-/// black image, at one camera ray a path (a sixth of multiplexed MLT's
-/// time there; docs/RESULTS.md); the share left still estimates, without
-/// bias, an emitter the pilot missed.
+/// A pixel that neither sees emission in the pilot nor has a neighbour that
+/// does traces one ray in `UNSEEN` ([`sightings`]). Every ray cost a sixth
+/// of multiplexed MLT's time on veach-ajar, whose emitters the camera never
+/// sees, and a fifth of bidirectional PSSMLT's paths on the Cornell box,
+/// whose light covers 0.5 % of the film (docs/RESULTS.md).
 pub(crate) const UNSEEN: u64 = 16;
 
-/// Whether the camera sees any emission, or an invalid value: one camera
-/// ray a pixel at a uniform point of it, over the whole film (every task of
-/// a render decides alike), stopping at the first row that sees some. The
-/// pilot's numbers are its own ([`Domain::EmissionPilot`]) and its rays are
-/// not in the estimate, so what it decides (how many rays the estimate
-/// traces, never none) leaves the estimate unbiased.
-pub(crate) fn pilot_sees_emission<O: PathOracle>(
-    oracle: &O,
-    resolution: Resolution,
-    seed: u64,
-) -> bool {
-    let seen = AtomicBool::new(false);
-    let width = resolution.width as usize;
-    parallel::map_indices(resolution.height as usize, |y| {
-        if seen.load(Ordering::Relaxed) {
-            return;
-        }
-        for p in y * width..(y + 1) * width {
-            let mut numbers = rng::stream(seed, Domain::EmissionPilot, p as u64);
-            let jitter = FilmPoint {
-                x: rng::uniform_f32(&mut numbers),
-                y: rng::uniform_f32(&mut numbers),
-            };
-            let film = resolution.pixel_point(p, jitter);
-            let e = oracle.emission(film, &mut IndependentSampler::new(numbers));
-            if !e.is_valid() || (0..O::Radiance::CHANNELS).any(|c| e.channel(c) != 0.0) {
-                seen.store(true, Ordering::Relaxed);
-                return;
-            }
-        }
+/// Per pixel of a film of `resolution`, whether the emission rays trace
+/// every ray there: the pixel or one of its eight neighbours saw emission
+/// (or an invalid value) in a pilot of one camera ray a pixel. The pilot's
+/// points and numbers depend on the pixel alone ([`Domain::EmissionPilot`]),
+/// so every seed, run and task of a render of one scene marks the same
+/// pixels. The neighbours keep the whole rate at an emitter's edge, whose
+/// pixels it covers in part and the pilot may miss; an emitter smaller than
+/// a pixel, alone, may go unmarked.
+pub(crate) fn sightings<O: PathOracle>(oracle: &O, resolution: Resolution) -> Vec<bool> {
+    let (width, height) = (resolution.width as usize, resolution.height as usize);
+    let seen: Vec<Vec<bool>> = parallel::map_indices(height, |y| {
+        (y * width..(y + 1) * width)
+            .map(|p| {
+                let mut numbers = rng::stream(0, Domain::EmissionPilot, p as u64);
+                let jitter = FilmPoint {
+                    x: rng::uniform_f32(&mut numbers),
+                    y: rng::uniform_f32(&mut numbers),
+                };
+                let film = resolution.pixel_point(p, jitter);
+                let e = oracle.emission(film, &mut IndependentSampler::new(numbers));
+                !e.is_valid() || (0..O::Radiance::CHANNELS).any(|c| e.channel(c) != 0.0)
+            })
+            .collect()
     });
-    seen.into_inner()
+    let near = |a: usize, n: usize| a.saturating_sub(1)..(a + 2).min(n);
+    (0..width * height)
+        .map(|p| {
+            let (x, y) = (p % width, p / width);
+            near(y, height).any(|yy| near(x, width).any(|xx| seen[yy][xx]))
+        })
+        .collect()
 }
 
 /// `1/g` and `1/g²`, `g` the plastic number (the `R2` sequence's steps).
@@ -107,25 +107,63 @@ pub(crate) struct SeenEmission {
     /// The rows traced: those whose index `y` has `y mod count == index`
     /// (a task's share; all of them for a whole render).
     rows: Task,
+    /// One bit per pixel of its rows, in the order of its sums: set where
+    /// every ray is traced, clear where one in [`UNSEEN`] is
+    /// ([`sightings`]).
+    sighted: Vec<u64>,
     /// Every pixel's sum of its rays' emission, its rows one after the
     /// other (made at the first pass).
     sums: Option<Vec<f64>>,
-    /// Rays each pixel of its rows has traced.
+    /// Rays each sighted pixel of its rows has traced (the rays' index
+    /// `k` runs to it).
     traced: u64,
+    /// Rays each other pixel has traced: the `k < traced` with
+    /// `k mod UNSEEN = 0` of every pass (runs pooled add theirs).
+    traced_unsighted: u64,
     /// Rays whose emission was NaN, infinite or negative (not added).
     invalid: u64,
 }
 
 impl SeenEmission {
-    /// Nothing traced yet, over `rows`.
-    pub fn new(channels: usize, rows: Task) -> Self {
+    /// Nothing traced yet, over `rows` of a film of `resolution`, every
+    /// ray traced where `sightings` (of the whole film) says so.
+    pub fn new(channels: usize, rows: Task, resolution: Resolution, sightings: &[bool]) -> Self {
+        let width = resolution.width as usize;
+        let mut sighted = Self::empty(channels, rows, resolution);
+        let pixels = Self::rows_of(rows, resolution).flat_map(|y| y * width..(y + 1) * width);
+        for (i, p) in pixels.enumerate() {
+            if sightings.get(p).copied().unwrap_or(true) {
+                sighted.sighted[i / 64] |= 1 << (i % 64);
+            }
+        }
+        sighted
+    }
+
+    /// Nothing traced and nothing sighted: the shape a saved state must
+    /// have ([`fits`](Self::fits)).
+    pub fn empty(channels: usize, rows: Task, resolution: Resolution) -> Self {
+        let pixels = rows.share(u64::from(resolution.height)) as usize * resolution.width as usize;
         Self {
             channels,
             rows,
+            sighted: alloc::vec![0; pixels.div_ceil(64)],
             sums: None,
             traced: 0,
+            traced_unsighted: 0,
             invalid: 0,
         }
+    }
+
+    /// Whether the `i`-th pixel of its rows traces every ray.
+    fn is_sighted(&self, i: usize) -> bool {
+        self.sighted[i / 64] >> (i % 64) & 1 == 1
+    }
+
+    /// Its sighted pixels, and its pixels, on a film of `resolution`.
+    fn pixels(&self, resolution: Resolution) -> (u64, u64) {
+        let sighted = self.sighted.iter().map(|w| u64::from(w.count_ones())).sum();
+        let rows = self.rows.share(u64::from(resolution.height));
+        (sighted, rows * u64::from(resolution.width))
     }
 
     /// Rays each pixel of its rows has traced.
@@ -136,8 +174,13 @@ impl SeenEmission {
     /// The image rows it traces on a film of `resolution`, in the order of
     /// its sums.
     fn image_rows(&self, resolution: Resolution) -> impl Iterator<Item = usize> + use<> {
-        let count = self.rows.count.max(1) as usize;
-        (self.rows.index as usize..resolution.height as usize).step_by(count)
+        Self::rows_of(self.rows, resolution)
+    }
+
+    /// The image rows `rows` holds on a film of `resolution`.
+    fn rows_of(rows: Task, resolution: Resolution) -> impl Iterator<Item = usize> + use<> {
+        let count = rows.count.max(1) as usize;
+        (rows.index as usize..resolution.height as usize).step_by(count)
     }
 
     /// Values in its sums on a film of `resolution`.
@@ -152,6 +195,8 @@ impl SeenEmission {
     pub fn fits(&self, fresh: &SeenEmission, resolution: Resolution) -> bool {
         self.rows == fresh.rows
             && self.channels == fresh.channels
+            && self.sighted.len() == fresh.sighted.len()
+            && self.traced_unsighted <= self.traced
             && self.sums.as_ref().is_none_or(|sums| {
                 sums.len() == self.len(resolution)
                     && sums.iter().all(|v| v.is_finite() && *v >= 0.0)
@@ -167,10 +212,12 @@ impl SeenEmission {
             (Some(_), None) => {}
         }
         self.traced += other.traced;
+        self.traced_unsighted += other.traced_unsighted;
         self.invalid += other.invalid;
     }
 
-    /// Traces `rays` more rays at every pixel of its rows.
+    /// Traces `rays` more rays at every sighted pixel of its rows, and those
+    /// of them whose index is a multiple of [`UNSEEN`] at the others.
     pub fn trace<O: PathOracle>(
         &mut self,
         oracle: &O,
@@ -187,6 +234,7 @@ impl SeenEmission {
         let sums = self.sums.get_or_insert_with(|| alloc::vec![0.0; len]);
         let width = resolution.width as usize;
         let invalid = AtomicU64::new(0);
+        let sighted = |i: usize| self.sighted[i / 64] >> (i % 64) & 1 == 1;
         parallel::for_each_chunk(sums, width * channels, |j, row| {
             let y = index + j * count;
             let mut bad = 0;
@@ -194,7 +242,8 @@ impl SeenEmission {
                 let p = y * width + x;
                 let mut offset = rng::stream(seed, Domain::Emission, p as u64);
                 let o = [rng::uniform_f64(&mut offset), rng::uniform_f64(&mut offset)];
-                for k in first..first + rays {
+                let step = if sighted(j * width + x) { 1 } else { UNSEEN };
+                for k in (first.next_multiple_of(step)..first + rays).step_by(step as usize) {
                     let jitter = |a: usize| {
                         let v = libm::fmod(o[a] + k as f64 * STEPS[a], 1.0) as f32;
                         v.min(f32::from_bits(1.0f32.to_bits() - 1))
@@ -219,6 +268,7 @@ impl SeenEmission {
             }
             invalid.fetch_add(bad, Ordering::Relaxed);
         });
+        self.traced_unsighted += (first + rays).div_ceil(UNSEEN) - first.div_ceil(UNSEEN);
         self.traced += rays;
         self.invalid += invalid.into_inner();
     }
@@ -233,8 +283,8 @@ impl SeenEmission {
 
     /// Rays traced by all its pixels on a film of `resolution`.
     pub fn rays(&self, resolution: Resolution) -> u64 {
-        let rows = self.rows.share(u64::from(resolution.height));
-        self.traced * rows * u64::from(resolution.width)
+        let (sighted, pixels) = self.pixels(resolution);
+        self.traced * sighted + self.traced_unsighted * (pixels - sighted)
     }
 
     /// Adds each pixel's mean emission to `film` (of the resolution it
@@ -243,14 +293,20 @@ impl SeenEmission {
         let Some(sums) = &self.sums else {
             return;
         };
-        let scale = 1.0 / self.traced.max(1) as f64;
+        let scales = [self.traced_unsighted, self.traced].map(|n| 1.0 / n.max(1) as f64);
         let resolution = film.resolution();
-        let row = resolution.width as usize * self.channels;
+        let (width, channels) = (resolution.width as usize, self.channels);
+        let row = width * channels;
         let rows = self.image_rows(resolution);
-        for (y, sums) in rows.zip(sums.chunks(row)) {
+        for (j, (y, sums)) in rows.zip(sums.chunks(row)).enumerate() {
             let pixels = &mut film.data_mut()[y * row..(y + 1) * row];
-            for (v, o) in pixels.iter_mut().zip(sums) {
-                *v += scale * o;
+            for (x, (v, o)) in pixels
+                .chunks_mut(channels)
+                .zip(sums.chunks(channels))
+                .enumerate()
+            {
+                let scale = scales[usize::from(self.is_sighted(j * width + x))];
+                v.iter_mut().zip(o).for_each(|(v, o)| *v += scale * o);
             }
         }
     }
@@ -362,16 +418,12 @@ impl<'a, O: PathOracle> EmissionApart<'a, O> {
                 (saved, Some(rest))
             }
             None => (
-                apart.then(|| SeenEmission::new(O::Radiance::CHANNELS, task)),
+                apart.then(|| {
+                    let sightings = sightings(oracle, resolution);
+                    SeenEmission::new(O::Radiance::CHANNELS, task, resolution, &sightings)
+                }),
                 None,
             ),
-        };
-        // The pilot only where the emission is apart (a resumed render
-        // decides as the fresh one did: the same rays).
-        let rate = if state.is_some() && !pilot_sees_emission(oracle, resolution, seed) {
-            rate / UNSEEN as f64
-        } else {
-            rate
         };
         let schedule = match budget {
             Budget::Samples(n) => {
@@ -485,5 +537,5 @@ pub(crate) fn fits(
 ) -> bool {
     saved
         .as_ref()
-        .is_none_or(|s| s.fits(&SeenEmission::new(channels, task), resolution))
+        .is_none_or(|s| s.fits(&SeenEmission::empty(channels, task, resolution), resolution))
 }

@@ -145,7 +145,7 @@ pub struct RenderStats {
     /// Camera rays traced for the emission seen directly, estimated apart
     /// from the paths (each method's `emission_rays`; not paths, not
     /// counted in `samples`; nor the pilot's one ray a pixel that sets
-    /// their rate, traced by every task of a split render alike).
+    /// each pixel's rate, traced by every task of a split render alike).
     pub emission_rays: u64,
     /// The normalization `b`, the integral of the importance (MCMC methods
     /// with a bootstrap): the mean importance of the bootstrap candidates and,

@@ -141,7 +141,11 @@ pub(super) fn bound(method: &Method, shape: &RenderShape) -> u64 {
             // emission seen directly's (counted whether or not the
             // oracle separates it).
             let light = if splats > 0 { 2 * film } else { 0 };
-            let emission = if s.emission_rays > 0 { film } else { 0 };
+            let emission = if s.emission_rays > 0 {
+                film + 2 * pixels
+            } else {
+                0
+            };
             // The sums of the runs finished before the last (each
             // tile's `N G_s(k)` and draws, the uniform samples' sums,
             // its light tracing and emission), kept to be pooled.
@@ -188,9 +192,10 @@ pub(super) fn bound(method: &Method, shape: &RenderShape) -> u64 {
         }
     };
     // The emission seen directly, estimated apart (`emission_rays`;
-    // counted whether or not the oracle separates it).
+    // counted whether or not the oracle separates it), and its pilot's
+    // two maps of the film, a byte a pixel each (`emission::sightings`).
     let apart = if method.emission_rays() > 0.0 {
-        film
+        film + 2 * pixels
     } else {
         0
     };

@@ -52,8 +52,8 @@ pub struct ReplicaSettings {
     /// the paths then leave it out and each pixel's emission is the mean of
     /// its rays (as Veach and Guibas 1997 and Mitsuba's PSSMLT render paths of one
     /// segment apart from the chains); 0 keeps it in the paths.
-    /// A sixteenth of them when a pilot of one camera ray a pixel saw no
-    /// emission (`emission.rs`).
+    /// A sixteenth of them at pixels where a pilot of one camera ray a pixel
+    /// saw no emission, nor at their neighbours (`emission.rs`).
     pub emission_rays: f64,
 }
 

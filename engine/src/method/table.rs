@@ -99,7 +99,7 @@ const EMISSION_RAYS: Setting = real(
     "emission_rays",
     0.0,
     256.0,
-    "camera rays per path for the emission seen directly (0: the chains keep it; a sixteenth when a pilot ray per pixel sees none)",
+    "camera rays per path for the emission seen directly (0: the chains keep it; a sixteenth where a pilot ray per pixel sees none nearby)",
 );
 
 /// Independent runs: the units of work of the methods whose work is coupled
@@ -219,7 +219,7 @@ const STRATIFIED: &[Setting] = &[
         "emission_rays",
         0,
         4096,
-        "camera rays per pixel and sweep for the emission seen directly (0: the tile chains keep it; every sixteenth sweep when a pilot ray per pixel sees none)",
+        "camera rays per pixel and sweep for the emission seen directly (0: the tile chains keep it; a sixteenth where a pilot ray per pixel sees none nearby)",
     ),
     RUNS,
     LARGE_STEP,

@@ -103,7 +103,7 @@ use super::{Job, Output};
 use crate::chain::ChainStats;
 use crate::checkpoint;
 use crate::drive::Budget;
-use crate::emission::{SeenEmission, UNSEEN, pilot_sees_emission};
+use crate::emission::{SeenEmission, sightings};
 use crate::error::{Error, check_probability};
 use crate::film::Film;
 use crate::mutate::MutationParams;
@@ -275,9 +275,10 @@ pub struct StratifiedSettings {
     /// Camera rays per pixel and sweep for the emission seen directly, when
     /// the oracle [separates it](crate::oracle::PathOracle::separates_emission)
     /// (8 by default; 0: the tile chains keep it, as in Gruson et al. 2020),
-    /// every sixteenth sweep only when a pilot of one camera ray a pixel saw
-    /// no emission. Ours: tiles straddling an emitter's edge have bimodal
-    /// targets, and one ray costs a fraction of a path (see `emission.rs`).
+    /// a sixteenth of them at pixels where a pilot of one camera ray a pixel
+    /// saw no emission, nor at their neighbours. Ours: tiles straddling an
+    /// emitter's edge have bimodal targets, and one ray costs a fraction of
+    /// a path (see `emission.rs`).
     pub emission_rays: u32,
     /// Independent runs, each of its own tile chains with a share of the
     /// budget, whose sums are pooled before one reconstruction (1 by
@@ -454,14 +455,15 @@ where
 {
     let tiles = Tiles::new(job.resolution, settings.shape)?;
     let emission_apart = settings.emission_rays > 0 && job.oracle.separates_emission();
-    let fresh_emission =
-        emission_apart.then(|| SeenEmission::new(O::Radiance::CHANNELS, Task::WHOLE));
-    let emission_every =
-        if emission_apart && !pilot_sees_emission(job.oracle, job.resolution, job.seed) {
-            UNSEEN
-        } else {
-            1
-        };
+    let fresh_emission = emission_apart.then(|| {
+        let sightings = sightings(job.oracle, job.resolution);
+        SeenEmission::new(
+            O::Radiance::CHANNELS,
+            Task::WHOLE,
+            job.resolution,
+            &sightings,
+        )
+    });
     let new_light = || {
         LightTracing::new(
             settings.mutation.large_step_probability,
@@ -527,7 +529,6 @@ where
         costs,
         light,
         emission,
-        emission_every,
         seed: job.seed,
         remainder: None,
     };
@@ -573,7 +574,7 @@ impl Pooled for StratifiedSettings {
             self.regularizer_paths,
             channels,
         );
-        let emission = SeenEmission::new(channels, Task::WHOLE);
+        let emission = SeenEmission::empty(channels, Task::WHOLE, resolution);
         run.fits(&tiles, channels, &light, Some(&emission))
             || run.fits(&tiles, channels, &light, None)
     }

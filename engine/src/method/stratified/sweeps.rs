@@ -65,9 +65,6 @@ pub(super) struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
     pub(super) light: LightTracing,
     /// The emission seen directly, if estimated apart.
     pub(super) emission: Option<SeenEmission>,
-    /// Its rays are traced every this many sweeps: 1, or
-    /// [`UNSEEN`](crate::emission::UNSEEN) when the pilot saw no emission.
-    pub(super) emission_every: u64,
     /// The render's seed (the emission's rays).
     pub(super) seed: u64,
     /// A sample budget's last sweep and the budget, whose remainder is
@@ -455,9 +452,7 @@ where
                 traced = traced + row.sum;
             }
             self.invalid += traced.regularizer.invalid;
-            if let Some(emission) = &mut self.emission
-                && self.stats.sweeps.is_multiple_of(self.emission_every)
-            {
+            if let Some(emission) = &mut self.emission {
                 let rays = u64::from(self.settings.emission_rays);
                 let resolution = ctx.tiles.resolution();
                 emission.trace(ctx.oracle, resolution, self.seed, rays);

@@ -633,6 +633,8 @@ where
     }
     let oracle_id = || OracleId::of(oracle);
     let checkpoints = Checkpointer::new(settings, task, O::Radiance::CHANNELS, &oracle_id);
+    // A time budget counts the emission's pilot too (`emission::sightings`).
+    let clock = Clock::start(settings.budget);
     let (emission, resume) = EmissionApart::new(
         oracle,
         settings.method.emission_rays(),
@@ -642,7 +644,6 @@ where
         &checkpoints,
         resume,
     )?;
-    let clock = Clock::start(settings.budget);
     let render_method = |resume| {
         let apart = emission.apart();
         let oracle = WithoutSeen {

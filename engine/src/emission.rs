@@ -154,9 +154,10 @@ impl SeenEmission {
         }
     }
 
-    /// Whether the `i`-th pixel of its rows traces every ray.
-    fn is_sighted(&self, i: usize) -> bool {
-        self.sighted[i / 64] >> (i % 64) & 1 == 1
+    /// Whether the `i`-th pixel of the rows of `sighted` (its bits)
+    /// traces every ray.
+    fn is_sighted(sighted: &[u64], i: usize) -> bool {
+        sighted[i / 64] >> (i % 64) & 1 == 1
     }
 
     /// Its sighted pixels, and its pixels, on a film of `resolution`.
@@ -234,7 +235,7 @@ impl SeenEmission {
         let sums = self.sums.get_or_insert_with(|| alloc::vec![0.0; len]);
         let width = resolution.width as usize;
         let invalid = AtomicU64::new(0);
-        let sighted = |i: usize| self.sighted[i / 64] >> (i % 64) & 1 == 1;
+        let sighted = &self.sighted;
         parallel::for_each_chunk(sums, width * channels, |j, row| {
             let y = index + j * count;
             let mut bad = 0;
@@ -242,7 +243,11 @@ impl SeenEmission {
                 let p = y * width + x;
                 let mut offset = rng::stream(seed, Domain::Emission, p as u64);
                 let o = [rng::uniform_f64(&mut offset), rng::uniform_f64(&mut offset)];
-                let step = if sighted(j * width + x) { 1 } else { UNSEEN };
+                let step = if Self::is_sighted(sighted, j * width + x) {
+                    1
+                } else {
+                    UNSEEN
+                };
                 for k in (first.next_multiple_of(step)..first + rays).step_by(step as usize) {
                     let jitter = |a: usize| {
                         let v = libm::fmod(o[a] + k as f64 * STEPS[a], 1.0) as f32;
@@ -305,7 +310,7 @@ impl SeenEmission {
                 .zip(sums.chunks(channels))
                 .enumerate()
             {
-                let scale = scales[usize::from(self.is_sighted(j * width + x))];
+                let scale = scales[usize::from(Self::is_sighted(&self.sighted, j * width + x))];
                 v.iter_mut().zip(o).for_each(|(v, o)| *v += scale * o);
             }
         }

@@ -160,6 +160,12 @@ impl SeenEmission {
         sighted[i / 64] >> (i % 64) & 1 == 1
     }
 
+    /// Whether the bits past its pixels on a film of `resolution` are clear.
+    fn no_bit_past_its_pixels(&self, resolution: Resolution) -> bool {
+        let used = (self.pixels(resolution).1 % 64) as u32;
+        used == 0 || self.sighted.last().is_none_or(|w| w >> used == 0)
+    }
+
     /// Its sighted pixels, and its pixels, on a film of `resolution`.
     fn pixels(&self, resolution: Resolution) -> (u64, u64) {
         let sighted = self.sighted.iter().map(|w| u64::from(w.count_ones())).sum();
@@ -167,7 +173,7 @@ impl SeenEmission {
         (sighted, rows * u64::from(resolution.width))
     }
 
-    /// Rays each pixel of its rows has traced.
+    /// Rays each sighted pixel of its rows has traced: its passes.
     pub fn traced(&self) -> u64 {
         self.traced
     }
@@ -191,12 +197,13 @@ impl SeenEmission {
     }
 
     /// Whether a state read from a checkpoint (`self`) is of the same shape
-    /// as `fresh` on a film of `resolution`, its sums finite and
-    /// non-negative.
+    /// as `fresh` on a film of `resolution` (no bit set past its pixels),
+    /// its sums finite and non-negative.
     pub fn fits(&self, fresh: &SeenEmission, resolution: Resolution) -> bool {
         self.rows == fresh.rows
             && self.channels == fresh.channels
             && self.sighted.len() == fresh.sighted.len()
+            && self.no_bit_past_its_pixels(resolution)
             && self.traced_unsighted <= self.traced
             && self.sums.as_ref().is_none_or(|sums| {
                 sums.len() == self.len(resolution)
@@ -289,7 +296,7 @@ impl SeenEmission {
     /// Rays traced by all its pixels on a film of `resolution`.
     pub fn rays(&self, resolution: Resolution) -> u64 {
         let (sighted, pixels) = self.pixels(resolution);
-        self.traced * sighted + self.traced_unsighted * (pixels - sighted)
+        self.traced * sighted + self.traced_unsighted * pixels.saturating_sub(sighted)
     }
 
     /// Adds each pixel's mean emission to `film` (of the resolution it
@@ -543,4 +550,24 @@ pub(crate) fn fits(
     saved
         .as_ref()
         .is_none_or(|s| s.fits(&SeenEmission::empty(channels, task, resolution), resolution))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A saved state fits only with its bits inside its pixels: a forged
+    /// one with a bit past them (which would count a pixel that is not
+    /// there) is refused.
+    #[test]
+    fn a_saved_state_with_bits_past_its_pixels_does_not_fit() {
+        let resolution = Resolution::new(10, 7);
+        let fresh = SeenEmission::empty(3, Task::WHOLE, resolution);
+        let mut saved = fresh.clone();
+        saved.sighted[1] |= 1 << 5; // pixel 69, the last
+        assert!(saved.fits(&fresh, resolution));
+        assert_eq!(saved.pixels(resolution), (1, 70));
+        saved.sighted[1] |= 1 << 6; // past the pixels
+        assert!(!saved.fits(&fresh, resolution));
+    }
 }

@@ -455,15 +455,21 @@ where
 {
     let tiles = Tiles::new(job.resolution, settings.shape)?;
     let emission_apart = settings.emission_rays > 0 && job.oracle.separates_emission();
-    let fresh_emission = emission_apart.then(|| {
-        let sightings = sightings(job.oracle, job.resolution);
-        SeenEmission::new(
-            O::Radiance::CHANNELS,
-            Task::WHOLE,
-            job.resolution,
-            &sightings,
-        )
-    });
+    // The emission's state: its shape to check a resumed one against, or
+    // a fresh one with its pilot's sightings.
+    let emission_shape = emission_apart
+        .then(|| SeenEmission::empty(O::Radiance::CHANNELS, Task::WHOLE, job.resolution));
+    let fresh_emission = || {
+        emission_apart.then(|| {
+            let sightings = sightings(job.oracle, job.resolution);
+            SeenEmission::new(
+                O::Radiance::CHANNELS,
+                Task::WHOLE,
+                job.resolution,
+                &sightings,
+            )
+        })
+    };
     let new_light = || {
         LightTracing::new(
             settings.mutation.large_step_probability,
@@ -492,8 +498,8 @@ where
                     .all(|c| c.fits(offsets, &settings.mutation.small_step))
                 && saved.samples.fits(n, O::Radiance::CHANNELS);
             let light_fits = saved.light.fits(&new_light(), &tiles)
-                && match (&saved.emission, &fresh_emission) {
-                    (Some(saved), Some(fresh)) => saved.fits(fresh, job.resolution),
+                && match (&saved.emission, &emission_shape) {
+                    (Some(saved), Some(shape)) => saved.fits(shape, job.resolution),
                     (saved, fresh) => saved.is_none() && fresh.is_none(),
                 };
             if !fits || !light_fits {
@@ -503,7 +509,7 @@ where
         }
         None => (
             None,
-            start(&ctx, job, settings, new_light(), fresh_emission)?,
+            start(&ctx, job, settings, new_light(), fresh_emission())?,
         ),
     };
     let Saved {

@@ -18,8 +18,9 @@ pub(crate) enum Strategies {
     /// One chosen by the path's own numbers (Hachisuka et al. 2014): a path
     /// length by [`Lengths`], then one of its strategies uniformly, weighted
     /// by MIS over the probability of the choice; plus, on every path, the
-    /// emission its camera ray sees directly (the one strategy of two
-    /// vertices, `(0, 2)`, which the choice of that length then leaves out).
+    /// emission its camera ray sees directly or through specular vertices
+    /// alone (the strategies `(0, t)` whose MIS weight is 1, the two-vertex
+    /// one `(0, 2)` among them), which the choice then leaves out.
     Multiplexed,
 }
 

@@ -42,7 +42,10 @@
 //! from the engine's held stream (`strategies::Lengths`) and a strategy from stream
 //! 2, subpaths just long enough for it and without roulette (a subpath cut
 //! short could not make the chosen strategy), weighted by its MIS weight
-//! over the probability of the choice.
+//! over the probability of the choice. Besides it, every multiplexed path
+//! carries what its camera ray sees directly or through specular vertices
+//! alone (the strategies `(0, t)` of MIS weight 1), its camera subpath
+//! walked on through them; the choice leaves those out.
 //!
 //! Tempering (Šik 2018, sec. 5.2, eq. 5.2-5.5): at temperature `T` the BSDFs
 //! of the two vertices of each connection, `x_{L,s}` and `x_{C,t}`, are
@@ -251,6 +254,14 @@ std::thread_local! {
 }
 
 impl Subpaths {
+    /// Whether strategy `(0, t)` reaches its emitter (or, at `t` one past
+    /// the camera subpath, the environment) through specular camera
+    /// vertices alone: those between the camera and vertex `t - 1`.
+    fn seen_through(&self) -> impl Fn(usize) -> bool + use<> {
+        let specular = self.camera.iter().skip(1).take_while(|v| v.delta).count();
+        move |t| t <= specular + 2
+    }
+
     /// Empty subpaths, in this thread's room.
     fn take() -> Box<Self> {
         let mut paths = ROOM.take().unwrap_or_default();
@@ -302,17 +313,30 @@ impl<I: Intersector> PathTracer<I> {
         let multiplexed = which == Strategies::Multiplexed;
         let (camera_vertices, light_vertices) = match only {
             None => (longest, longest - 1),
-            // Its camera ray is traced even for light tracing (`t = 1`): it
-            // carries the emission seen directly.
+            // Its camera ray is traced even for light tracing (`t = 1`), and
+            // on through specular vertices: it carries the emission seen
+            // through them.
             Some((s, t)) if multiplexed => (t.max(2), s),
             Some((s, t)) => (t, s),
+        };
+        let camera_reach = match multiplexed {
+            true => Reach {
+                vertices: camera_vertices,
+                through_specular: longest,
+            },
+            false => Reach::exactly(camera_vertices),
         };
         // One strategy fixes both subpaths' lengths: a walk cut short by
         // Russian roulette could not make it, so only the MIS combination
         // plays roulette (Šik 2018 sec. 4.2.2: MMLT cannot use it).
         let roulette = only.is_none();
-        let lengths = (camera_vertices, light_vertices);
-        let mut paths = self.subpaths(film, sampler, &camera, lengths, roulette);
+        let mut paths = self.subpaths(
+            film,
+            sampler,
+            &camera,
+            (camera_reach, light_vertices),
+            roulette,
+        );
         // Tempering roughens the BSDFs of the joined vertices only: the walks
         // are done, and from here on a BSDF is used only where it is joined.
         let floor = self.regularization.map_or(0.0, |r| r.floor());
@@ -331,25 +355,26 @@ impl<I: Intersector> PathTracer<I> {
             };
             paths.weigh_tails(if light_tracing { 1 } else { 2 }, factor);
         }
+        // What the camera sees through specular vertices alone is carried
+        // by every multiplexed path: its choice leaves it out.
+        let seen_through = paths.seen_through();
+        let chosen = |s: usize, t: usize| {
+            only.is_none_or(|o| o == (s, t)) && !(multiplexed && s == 0 && seen_through(t))
+        };
         // The environment is reached only by escaping camera subpaths
         // (`s = 0`, its one strategy): with one strategy, only at its length.
+        let escaped = paths.camera.len() + 1;
         let mut radiance = match only {
             None => paths.environment,
-            Some((0, t)) if paths.camera.len() + 1 == t => paths.environment * scale,
+            Some(_) if chosen(0, escaped) => paths.environment * scale,
             Some(_) => Vec3::ZERO,
         };
-        let every = matches!(which, Strategies::All | Strategies::AllButLightTracing);
-        let mut seen = match paths.camera.len() {
-            1 if every || multiplexed => paths.environment,
-            _ => Vec3::ZERO,
+        let seen = match which {
+            Strategies::One { .. } => Vec3::ZERO,
+            _ => self.seen_directly(&paths, &camera),
         };
         if multiplexed {
-            if paths.camera.len() > 1 {
-                seen = self
-                    .connect(&paths, 0, 2, &camera)
-                    .map_or(Vec3::ZERO, |joined| joined.value);
-            }
-            radiance += seen;
+            radiance += self.seen_through_specular(&paths, &camera);
         }
         let first_t = if light_tracing && splats.wants_splats() {
             1
@@ -358,7 +383,7 @@ impl<I: Intersector> PathTracer<I> {
         };
         for t in first_t..=paths.camera.len() {
             for s in 0..=paths.light.len() {
-                if !joinable(s, t, longest) || only.is_some_and(|o| o != (s, t)) {
+                if !joinable(s, t, longest) || !chosen(s, t) {
                     continue;
                 }
                 let Some(joined) = self.connect(&paths, s, t, &camera) else {
@@ -376,12 +401,7 @@ impl<I: Intersector> PathTracer<I> {
                             splats.splat(at, Rgb(value.to_array()));
                         }
                     }
-                    None => {
-                        if (s, t) == (0, 2) && every {
-                            seen = value;
-                        }
-                        radiance += value
-                    }
+                    None => radiance += value,
                 }
             }
         }
@@ -391,37 +411,66 @@ impl<I: Intersector> PathTracer<I> {
     }
 
     /// The emission the camera ray through `film` sees directly, as
-    /// [`bidirectional`](Self::bidirectional) over every strategy counts it:
-    /// the environment if the ray escapes, else the strategy `(0, 2)`'s
-    /// value, the emitter it lands on (a path of one segment has no other
-    /// strategy: its MIS weight is 1, `joinable`). Draws the camera's
-    /// numbers of one bounce.
+    /// [`bidirectional`](Self::bidirectional) counts it
+    /// ([`seen_directly`](Self::seen_directly)). Draws the camera's numbers
+    /// of one bounce.
     pub(crate) fn seen_emission_bidirectional<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,
         sampler: &mut S,
     ) -> Vec3 {
         let camera = self.projection;
-        let paths = self.subpaths(film, sampler, &camera, (2, 0), false);
-        let seen = match paths.camera.len() {
-            1 => paths.environment,
-            _ => self
-                .connect(&paths, 0, 2, &camera)
-                .map_or(Vec3::ZERO, |joined| joined.value),
-        };
+        let paths = self.subpaths(film, sampler, &camera, (Reach::exactly(2), 0), false);
+        let seen = self.seen_directly(&paths, &camera);
         paths.give_back();
         seen
     }
 
-    /// Both subpaths, of at most `(camera, light)` vertices: the camera's
-    /// from `film` (stream 0), the light's from a light chosen by power
-    /// (stream 1); with Russian roulette if `roulette`.
+    /// The emission the camera ray sees directly: the environment if it
+    /// escapes, else the strategy `(0, 2)`'s value, the emitter it lands on
+    /// (a path of one segment has no other strategy: its MIS weight is 1,
+    /// `joinable`).
+    fn seen_directly(&self, paths: &Subpaths, camera: &Projection) -> Vec3 {
+        match paths.camera.len() {
+            1 => paths.environment,
+            _ => self
+                .connect(paths, 0, 2, camera)
+                .map_or(Vec3::ZERO, |joined| joined.value),
+        }
+    }
+
+    /// The strategies `(0, t)` whose camera vertices between the camera and
+    /// the emitter are all specular, summed: the emission seen directly
+    /// (`t = 2`) or through mirrors and glass, and the environment if the
+    /// subpath escapes after specular vertices alone. Their MIS weight is 1:
+    /// no other strategy joins a path at a specular vertex (the walk counts
+    /// none, `mis.rs`). A multiplexed path carries them besides its choice:
+    /// chosen, they would carry the choice's inverse probability (a few
+    /// hundred on the caustic scene's sphere), and chains that found such
+    /// a path in their start-up could not leave it (docs/RESULTS.md).
+    fn seen_through_specular(&self, paths: &Subpaths, camera: &Projection) -> Vec3 {
+        let seen_through = paths.seen_through();
+        let emitters: Vec3 = (2..=paths.camera.len())
+            .take_while(|&t| seen_through(t))
+            .filter_map(|t| self.connect(paths, 0, t, camera))
+            .map(|joined| joined.value)
+            .sum();
+        if seen_through(paths.camera.len() + 1) {
+            emitters + paths.environment
+        } else {
+            emitters
+        }
+    }
+
+    /// Both subpaths, the camera's as far as `camera_reach` from `film`
+    /// (stream 0), the light's of at most `light_vertices` from a light
+    /// chosen by power (stream 1); with Russian roulette if `roulette`.
     fn subpaths<S: Sampler + ?Sized>(
         &self,
         film: FilmPoint,
         sampler: &mut S,
         camera: &Projection,
-        (camera_vertices, light_vertices): (usize, usize),
+        (camera_reach, light_vertices): (Reach, usize),
         roulette: bool,
     ) -> Box<Subpaths> {
         let scene = &self.scene;
@@ -436,7 +485,7 @@ impl<I: Intersector> PathTracer<I> {
             ray,
             Vec3::ONE,
             pdf,
-            camera_vertices,
+            camera_reach,
             Transport::Radiance,
             roulette,
             &mut paths.camera,
@@ -488,7 +537,7 @@ impl<I: Intersector> PathTracer<I> {
             ray,
             beta,
             pdf_direction,
-            light_vertices,
+            Reach::exactly(light_vertices),
             Transport::Importance,
             roulette,
             &mut paths.light,
@@ -497,9 +546,8 @@ impl<I: Intersector> PathTracer<I> {
     }
 
     /// Extends `path` along `ray` (leaving its last vertex with direction
-    /// density `pdf`, throughput `beta`) up to `longest` vertices, four
-    /// numbers per bounce (pbrt's `RandomWalk`, with Russian roulette if
-    /// `roulette`).
+    /// density `pdf`, throughput `beta`) as far as `reach`, four numbers per
+    /// bounce (pbrt's `RandomWalk`, with Russian roulette if `roulette`).
     /// Returns the environment's radiance if a radiance walk escapes.
     #[allow(clippy::too_many_arguments)]
     fn walk<S: Sampler + ?Sized>(
@@ -508,7 +556,7 @@ impl<I: Intersector> PathTracer<I> {
         mut ray: Ray,
         mut beta: Vec3,
         mut pdf: f32,
-        longest: usize,
+        reach: Reach,
         transport: Transport,
         roulette: bool,
         path: &mut Vec<Vertex>,
@@ -516,7 +564,12 @@ impl<I: Intersector> PathTracer<I> {
         let scene = &self.scene;
         let start = beta.max_element();
         let mut bounces = 0;
-        while path.len() < longest {
+        // Every vertex this walk added so far is specular.
+        let mut specular = true;
+        let room = |len: usize, specular: bool| {
+            len < reach.vertices || (specular && len < reach.through_specular)
+        };
+        while room(path.len(), specular) {
             let u_lobe = sampler.next_1d();
             let u_direction = sampler.next_2d();
             let u_roulette = sampler.next_1d();
@@ -538,7 +591,7 @@ impl<I: Intersector> PathTracer<I> {
             vertex.emitter = scene.light_of[tri];
             vertex.link(path.last().expect("a walk starts from a vertex"), pdf);
             path.push(vertex);
-            if path.len() == longest {
+            if !room(path.len(), specular) {
                 break;
             }
             let back = -ray.direction.normalize();
@@ -554,6 +607,7 @@ impl<I: Intersector> PathTracer<I> {
                 path.last_mut().expect("pushed").delta = true;
             } else {
                 pdf = s.pdf;
+                specular = false;
             }
             let factor = match transport {
                 Transport::Radiance => s.f * (s.wi.z.abs() / s.pdf),
@@ -682,6 +736,24 @@ impl<I: Intersector> PathTracer<I> {
                 qs_minus,
             },
         })
+    }
+}
+
+/// How far a walk goes: `vertices`, and on to `through_specular` while
+/// every vertex it added is specular.
+#[derive(Clone, Copy)]
+struct Reach {
+    vertices: usize,
+    through_specular: usize,
+}
+
+impl Reach {
+    /// `vertices`, specular or not.
+    fn exactly(vertices: usize) -> Self {
+        Self {
+            vertices,
+            through_specular: vertices,
+        }
     }
 }
 

@@ -104,12 +104,18 @@ fn main() -> AnyResult<()> {
                 method.set_text(key, value)?;
             }
         }
-        let mut means = Vec::new();
-        for sampler in &args.samplers {
-            let sampler = PathSampler::from_name(sampler).expect("a path sampler's name");
-            tracer.sampler = sampler;
-            let (mut sum, mut bulk_sum) = (0.0, 0.0);
-            for seed in 0..args.seeds {
+        // Seeds outside, samplers inside: this machine's speed drifts by
+        // several percent over minutes, which equal-time renders of one
+        // sampler after another would read as a difference of samplers.
+        let samplers: Vec<PathSampler> = args
+            .samplers
+            .iter()
+            .map(|name| PathSampler::from_name(name).expect("a path sampler's name"))
+            .collect();
+        let mut sums = vec![(0.0, 0.0); samplers.len()];
+        for seed in 0..args.seeds {
+            for (&sampler, (sum, bulk_sum)) in samplers.iter().zip(&mut sums) {
+                tracer.sampler = sampler;
                 let settings = Settings {
                     seed,
                     budget: Budget::Time(Duration::from_secs_f64(args.time)),
@@ -129,12 +135,12 @@ fn main() -> AnyResult<()> {
                     e.mape,
                     e.mse
                 )?;
-                sum += e.rel_mse;
-                bulk_sum += bulk;
+                *sum += e.rel_mse;
+                *bulk_sum += bulk;
             }
-            let n = args.seeds as f64;
-            means.push((sum / n, bulk_sum / n));
         }
+        let n = args.seeds as f64;
+        let means: Vec<(f64, f64)> = sums.iter().map(|(s, b)| (s / n, b / n)).collect();
         let mut line = format!("{name:>10}: relMSE");
         for (sampler, (mean, bulk)) in args.samplers.iter().zip(&means) {
             line += &format!(" {sampler} {mean:.3e} ({bulk:.3e})");

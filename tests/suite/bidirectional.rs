@@ -321,7 +321,7 @@ fn light_subpaths_through_glass_match_camera_subpaths() {
 /// 1.7-3.4); with light tracing left in the weights it fails at z 52.
 /// Multiplexed MLT (PSSMLT on multiplexed paths, 16 seeds at 256 spp: at
 /// 128 the pool's chains find one block's light late, z 5.7) renders what
-/// bidirectional MC renders (worst z 1.6-3.4); leaving the length's
+/// bidirectional MC renders (worst z 2.0-3.4); leaving the length's
 /// probability out of the weight fails at z 99, counting the emission seen
 /// directly 1.5 times at z -12.
 #[test]

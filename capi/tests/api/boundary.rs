@@ -939,6 +939,86 @@ fn a_c_oracle_reads_the_splat_rate() {
     assert_eq!(strata_sampler_splat_rate(null()), 1.0);
 }
 
+/// Multiplexed MLT's choice (Hachisuka et al. 2014) as a C oracle makes it:
+/// a "length" from stream `choice`, a number from stream 0, as radiance.
+fn multiplexed_state(s: *mut StrataSampler, choice: u8) -> [f32; 3] {
+    assert_eq!(strata_sampler_start_stream(s, choice), StrataStatus::Ok);
+    let length = 1.0 + (strata_sampler_next_1d(s) * 3.0).floor();
+    assert_eq!(strata_sampler_start_stream(s, 0), StrataStatus::Ok);
+    let u = strata_sampler_next_1d(s);
+    [length * u, length, u]
+}
+
+extern "C" fn held_choice_trace(
+    _: *mut c_void,
+    _: f32,
+    _: f32,
+    s: *mut StrataSampler,
+    _: f32,
+    rgb: *mut f32,
+) {
+    let state = multiplexed_state(s, STRATA_HELD_STREAM);
+    // SAFETY: the engine passes room for three floats.
+    unsafe { std::slice::from_raw_parts_mut(rgb, 3).copy_from_slice(&state) };
+}
+
+/// The same choice drawn from stream 5, which small steps move.
+extern "C" fn moved_choice_trace(
+    _: *mut c_void,
+    _: f32,
+    _: f32,
+    s: *mut StrataSampler,
+    _: f32,
+    rgb: *mut f32,
+) {
+    let state = multiplexed_state(s, 5);
+    // SAFETY: as above.
+    unsafe { std::slice::from_raw_parts_mut(rgb, 3).copy_from_slice(&state) };
+}
+
+/// Multiplexed MLT from C: a C oracle that draws its path length from
+/// `STRATA_HELD_STREAM` (which only large steps move) renders PSSMLT bit
+/// for bit as the same oracle in Rust drawing it from `HELD_STREAM`; the
+/// same length drawn from a stream small steps move renders another film.
+#[test]
+fn a_c_oracle_holds_multiplexed_mlts_choice() {
+    let settings = strata_settings_new(c"pssmlt".as_ptr());
+    strata_settings_set_seed(settings, 7);
+    strata_settings_set_samples_per_pixel(settings, 16);
+    let (mut held, mut moved) = (null_mut(), null_mut());
+    assert_eq!(
+        strata_render(&oracle(held_choice_trace), settings, null(), &mut held),
+        StrataStatus::Ok
+    );
+    assert_eq!(
+        strata_render(&oracle(moved_choice_trace), settings, null(), &mut moved),
+        StrataStatus::Ok
+    );
+    let rust = strata_engine::FnOracle::new(
+        strata_engine::Resolution::new(8, 6),
+        |_: strata_engine::FilmPoint,
+         sampler: &mut dyn strata_engine::Sampler,
+         _: strata_engine::Temperature,
+         _: &mut dyn strata_engine::SplatSink<strata_engine::Rgb>| {
+            sampler.start_stream(strata_engine::HELD_STREAM);
+            let length = 1.0 + (sampler.next_1d() * 3.0).floor();
+            sampler.start_stream(0);
+            let u = sampler.next_1d();
+            strata_engine::PathSample::new(strata_engine::Rgb([length * u, length, u]))
+        },
+    );
+    let rust_bits = rust_film_bits(
+        &rust,
+        strata_engine::Method::from_name("pssmlt").unwrap(),
+        7,
+    );
+    assert_eq!(film_bits(held), rust_bits);
+    assert_ne!(film_bits(moved), rust_bits);
+    strata_film_free(held);
+    strata_film_free(moved);
+    strata_settings_free(settings);
+}
+
 /// Cauchy offsets of scale 0.01 from a uniform number (the inverse
 /// distribution function: symmetric about zero).
 fn cauchy(u: f64) -> f64 {

@@ -17,10 +17,17 @@ pub(crate) enum Strategies {
     One { light: usize, camera: usize },
     /// One chosen by the path's own numbers (Hachisuka et al. 2014): a path
     /// length by [`Lengths`], then one of its strategies uniformly, weighted
-    /// by MIS over the probability of the choice; plus, on every path, the
-    /// emission its camera ray sees directly or through specular vertices
-    /// alone (the strategies `(0, t)` whose MIS weight is 1, the two-vertex
-    /// one `(0, 2)` among them), which the choice then leaves out.
+    /// by MIS over the probability of the choice. A strategy with light
+    /// vertices does not count the pure-specular vertices the camera subpath
+    /// starts with (the glass the camera looks through, which its walk
+    /// crosses for free): what the camera sees through glass is proposed as
+    /// often as what it sees directly. The camera subpath alone, `(0, n)`,
+    /// counts them all (the paths only it samples, a caustic seen through
+    /// glass, keep their rarer choice), and MIS weighs it by its own
+    /// choice's probability ([`Lengths::camera_alone_factor`]). Plus, on
+    /// every path, the emission its camera ray sees directly or through
+    /// those vertices alone (the strategies `(0, t)` whose MIS weight is 1,
+    /// the two-vertex one `(0, 2)` among them), which the choice leaves out.
     Multiplexed,
 }
 
@@ -68,6 +75,28 @@ impl Lengths {
         }
     }
 
+    /// The factor of a multiplexed path's strategy `(0, n)` (the camera
+    /// subpath alone) in its MIS weights, against its strategies with light
+    /// vertices: `(c_0 / c)²`, each strategy's squared density weighted by
+    /// the square of its choice's probability (Veach 1997 sec. 9.2.3, the
+    /// power heuristic over techniques with their own sample counts).
+    /// `(0, n)` counts all `n` vertices, `c_0 = p(n) / n`; the others do
+    /// not count the `free` specular vertices the camera sees through
+    /// first, `c = p(n - free) / (n - free)`. 1 without them, or where the
+    /// others cannot be chosen.
+    pub(crate) fn camera_alone_factor(&self, vertices: usize, free: usize) -> f32 {
+        let choice = |n: usize| {
+            n.checked_sub(2)
+                .and_then(|k| self.probability.get(k))
+                .map_or(0.0, |p| p / n as f32)
+        };
+        let others = choice(vertices.saturating_sub(free));
+        if free == 0 || others == 0.0 {
+            return 1.0;
+        }
+        (choice(vertices) / others).powi(2)
+    }
+
     /// The length `u` in `[0, 1)` selects, and its probability.
     fn choose(&self, u: f32) -> (usize, f32) {
         let last = self.cumulative.len() - 1;
@@ -81,7 +110,10 @@ impl Lengths {
 /// its length until a large step, as pbrt-v4's `MLTIntegrator` keeps a
 /// chain's depth), then `t` uniformly among the strategies `(n - t, t)` that
 /// can join it, from stream 2 (small steps move it: the chain moves to the
-/// strategies that carry the light). Returns `(s, t)` and one over the
+/// strategies that carry the light); for `t < n` (light vertices), `n` and
+/// `t` do not count the camera subpath's leading specular vertices
+/// ([`Strategies::Multiplexed`]).
+/// Returns `(s, t)` and one over the
 /// choice's probability; `None` for two vertices, the emission seen
 /// directly, which every multiplexed path carries apart from its choice (so
 /// a renderer can estimate it apart, `PathOracle::separates_emission`). The
@@ -141,5 +173,26 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The camera-alone strategy's MIS factor is the square of its choice's
+    /// probability over the others', `p(n) / n` against `p(n - free) / (n -
+    /// free)` with `p(n) ∝ 1/(n-1)²`; 1 where the camera sees through
+    /// nothing or the others cannot be chosen, 0 past the longest path.
+    #[test]
+    fn the_camera_alone_strategy_is_weighted_by_its_choice() {
+        let lengths = Lengths::new(18);
+        let choice = |n: usize| 1.0 / ((n - 1) * (n - 1) * n) as f64;
+        for (vertices, free) in [(7, 2), (5, 1), (12, 7), (18, 4)] {
+            let expected = (choice(vertices) / choice(vertices - free)).powi(2);
+            let got = lengths.camera_alone_factor(vertices, free) as f64;
+            assert!(
+                (got - expected).abs() < 1e-5 * expected,
+                "{vertices}, {free}: {got}"
+            );
+        }
+        assert_eq!(lengths.camera_alone_factor(9, 0), 1.0);
+        assert_eq!(lengths.camera_alone_factor(3, 2), 1.0);
+        assert_eq!(lengths.camera_alone_factor(19, 4), 0.0);
     }
 }

@@ -72,11 +72,12 @@ pub enum PathSampler {
     BidirectionalNoSplats,
     /// One bidirectional strategy per path, chosen by the path's own numbers:
     /// a path length (from the stream small steps hold, favouring short
-    /// paths), then one of its strategies uniformly (stream 2); its
-    /// MIS-weighted contribution over the choice's probability, with no
-    /// Russian roulette (the strategy fixes the subpaths' lengths), plus
-    /// what its camera sees directly or through specular vertices alone,
-    /// which the choice leaves out. Under
+    /// paths; a strategy with light vertices not counting the specular
+    /// vertices the camera looks through first), then one of its strategies
+    /// uniformly (stream 2); its MIS-weighted contribution over the choice's
+    /// probability, with no Russian roulette (the strategy fixes the
+    /// subpaths' lengths), plus what its camera sees directly or through
+    /// those specular vertices alone, which the choice leaves out. Under
     /// MLT the chain's state carries the choice, which mutations change:
     /// multiplexed MLT (Hachisuka, Kaplanyan and Dachsbacher 2014; Šik 2018
     /// sec. 4.2.2), as `strata render --method pssmlt --path-sampler

@@ -40,17 +40,19 @@ pub(super) struct Reverse {
 impl Subpaths {
     /// Each subpath's [`tail_sums`], the camera's down to vertex `fewest`
     /// (1 with light tracing, weighted by `factor`, 2 without), the light's
-    /// down to its start.
-    pub(super) fn weigh_tails(&mut self, fewest: usize, factor: f32) {
+    /// down to its start, the strategy of the camera subpath alone
+    /// (`s = 0`) weighted by `origin`.
+    pub(super) fn weigh_tails(&mut self, fewest: usize, factor: f32, origin: f32) {
         self.camera_first = fewest;
         self.light_tracing_factor = if fewest == 1 { factor } else { 1.0 };
+        self.camera_alone_factor = origin;
         tail_sums(
             &self.camera,
             fewest,
             self.light_tracing_factor,
             &mut self.camera_tails,
         );
-        tail_sums(&self.light, 0, 1.0, &mut self.light_tails);
+        tail_sums(&self.light, 0, origin, &mut self.light_tails);
         // What paths with a specular vertex need (read only at a factor
         // other than 1).
         if self.light_tracing_factor != 1.0 {
@@ -91,12 +93,16 @@ impl Subpaths {
         let light = joined_sum(
             &self.light[..s],
             0,
-            1.0,
+            self.camera_alone_factor,
             &self.light_tails,
             reverse.qs,
             reverse.qs_minus,
         );
-        let own = if t == 1 { factor } else { 1.0 };
+        let own = match (s, t) {
+            (_, 1) => factor,
+            (0, _) => self.camera_alone_factor,
+            _ => 1.0,
+        };
         let weight = own / (own + camera + light);
         // 0 x inf (a ratio underflowing where a tail overflows): no weight.
         if weight.is_nan() { 0.0 } else { weight }

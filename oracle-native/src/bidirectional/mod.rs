@@ -236,6 +236,10 @@ struct Subpaths {
     /// tracing), and the camera's tail sums with it.
     light_tracing_factor: f32,
     camera_tails: Vec<f32>,
+    /// The factor of the camera subpath alone (`s = 0`) in the MIS
+    /// weights (`Lengths::camera_alone_factor`; 1 but on multiplexed paths
+    /// the camera sees through specular vertices).
+    camera_alone_factor: f32,
     light_tails: Vec<f32>,
     /// Each subpath's first specular vertex (its length if none).
     camera_first_delta: usize,
@@ -254,12 +258,14 @@ std::thread_local! {
 }
 
 impl Subpaths {
-    /// Whether strategy `(0, t)` reaches its emitter (or, at `t` one past
-    /// the camera subpath, the environment) through specular camera
-    /// vertices alone: those between the camera and vertex `t - 1`.
-    fn seen_through(&self) -> impl Fn(usize) -> bool + use<> {
-        let specular = self.camera.iter().skip(1).take_while(|v| v.delta).count();
-        move |t| t <= specular + 2
+    /// How many camera vertices after the camera no connection joins (pure
+    /// specular at the tempered BSDFs), one after the other.
+    fn free_camera_vertices(&self) -> usize {
+        self.camera
+            .iter()
+            .skip(1)
+            .take_while(|v| !v.connectible())
+            .count()
     }
 
     /// Empty subpaths, in this thread's room.
@@ -311,18 +317,21 @@ impl<I: Intersector> PathTracer<I> {
             }
         };
         let multiplexed = which == Strategies::Multiplexed;
+        let floor = self.regularization.map_or(0.0, |r| r.floor());
         let (camera_vertices, light_vertices) = match only {
             None => (longest, longest - 1),
-            // Its camera ray is traced even for light tracing (`t = 1`), and
-            // on through specular vertices: it carries the emission seen
-            // through them.
+            // Its camera ray is traced even for light tracing (`t = 1`): it
+            // carries the emission seen through specular vertices.
             Some((s, t)) if multiplexed => (t.max(2), s),
             Some((s, t)) => (t, s),
         };
+        // A multiplexed camera subpath goes through the specular vertices it
+        // starts with for free: they do not count in its length.
         let camera_reach = match multiplexed {
             true => Reach {
                 vertices: camera_vertices,
-                through_specular: longest,
+                free: Some((temperature, floor)),
+                cap: longest,
             },
             false => Reach::exactly(camera_vertices),
         };
@@ -339,7 +348,6 @@ impl<I: Intersector> PathTracer<I> {
         );
         // Tempering roughens the BSDFs of the joined vertices only: the walks
         // are done, and from here on a BSDF is used only where it is joined.
-        let floor = self.regularization.map_or(0.0, |r| r.floor());
         for v in paths.camera.iter_mut().chain(paths.light.iter_mut()) {
             v.bsdf = v.bsdf.tempered(temperature, floor);
         }
@@ -347,19 +355,30 @@ impl<I: Intersector> PathTracer<I> {
         // (and weighted as if made) or left out.
         let light_tracing = which != Strategies::AllButLightTracing;
         let weighted = !matches!(which, Strategies::One { .. });
+        // A multiplexed strategy with light vertices counts its camera
+        // vertex `t` from the free ones on (light tracing, `t = 1`, joins
+        // the camera itself); `(0, t)` counts every vertex.
+        let free = paths.free_camera_vertices();
+        let only = match only {
+            Some((s, t)) if multiplexed && s >= 1 && t >= 2 => Some((s, t + free)),
+            only => only,
+        };
         if weighted {
             let factor = if only.is_none() {
                 light_tracing_factor(splats.splat_rate())
             } else {
                 1.0
             };
-            paths.weigh_tails(if light_tracing { 1 } else { 2 }, factor);
+            let origin = match only {
+                Some((s, t)) if multiplexed => self.lengths.camera_alone_factor(s + t, free),
+                _ => 1.0,
+            };
+            paths.weigh_tails(if light_tracing { 1 } else { 2 }, factor, origin);
         }
-        // What the camera sees through specular vertices alone is carried
+        // What the camera sees through the free vertices alone is carried
         // by every multiplexed path: its choice leaves it out.
-        let seen_through = paths.seen_through();
         let chosen = |s: usize, t: usize| {
-            only.is_none_or(|o| o == (s, t)) && !(multiplexed && s == 0 && seen_through(t))
+            only.is_none_or(|o| o == (s, t)) && !(multiplexed && s == 0 && t <= free + 2)
         };
         // The environment is reached only by escaping camera subpaths
         // (`s = 0`, its one strategy): with one strategy, only at its length.
@@ -440,22 +459,22 @@ impl<I: Intersector> PathTracer<I> {
     }
 
     /// The strategies `(0, t)` whose camera vertices between the camera and
-    /// the emitter are all specular, summed: the emission seen directly
-    /// (`t = 2`) or through mirrors and glass, and the environment if the
-    /// subpath escapes after specular vertices alone. Their MIS weight is 1:
+    /// the emitter are all pure specular (at the tempered BSDFs), summed:
+    /// the emission seen directly (`t = 2`) or through mirrors and glass,
+    /// and the environment if the subpath escapes after such vertices
+    /// alone. Their MIS weight is 1:
     /// no other strategy joins a path at a specular vertex (the walk counts
     /// none, `mis.rs`). A multiplexed path carries them besides its choice:
     /// chosen, they would carry the choice's inverse probability (a few
     /// hundred on the caustic scene's sphere), and chains that found such
     /// a path in their start-up could not leave it (docs/RESULTS.md).
     fn seen_through_specular(&self, paths: &Subpaths, camera: &Projection) -> Vec3 {
-        let seen_through = paths.seen_through();
-        let emitters: Vec3 = (2..=paths.camera.len())
-            .take_while(|&t| seen_through(t))
+        let last = paths.free_camera_vertices() + 2;
+        let emitters: Vec3 = (2..=paths.camera.len().min(last))
             .filter_map(|t| self.connect(paths, 0, t, camera))
             .map(|joined| joined.value)
             .sum();
-        if seen_through(paths.camera.len() + 1) {
+        if paths.camera.len() < last {
             emitters + paths.environment
         } else {
             emitters
@@ -564,12 +583,12 @@ impl<I: Intersector> PathTracer<I> {
         let scene = &self.scene;
         let start = beta.max_element();
         let mut bounces = 0;
-        // Every vertex this walk added so far is specular.
-        let mut specular = true;
-        let room = |len: usize, specular: bool| {
-            len < reach.vertices || (specular && len < reach.through_specular)
-        };
-        while room(path.len(), specular) {
+        // The leading vertices this walk added that do not count, and
+        // whether the next one may be one of them.
+        let mut free = 0;
+        let mut leading = reach.free.is_some();
+        let room = |len: usize, free: usize| len - free < reach.vertices && len < reach.cap;
+        while room(path.len(), free) {
             let u_lobe = sampler.next_1d();
             let u_direction = sampler.next_2d();
             let u_roulette = sampler.next_1d();
@@ -590,8 +609,12 @@ impl<I: Intersector> PathTracer<I> {
             vertex.bsdf = scene.materials[scene.material_of[tri] as usize].bsdf(uv);
             vertex.emitter = scene.light_of[tri];
             vertex.link(path.last().expect("a walk starts from a vertex"), pdf);
+            if let Some((temperature, floor)) = reach.free.filter(|_| leading) {
+                leading = vertex.bsdf.tempered(temperature, floor).is_specular();
+                free += usize::from(leading);
+            }
             path.push(vertex);
-            if !room(path.len(), specular) {
+            if !room(path.len(), free) {
                 break;
             }
             let back = -ray.direction.normalize();
@@ -607,7 +630,6 @@ impl<I: Intersector> PathTracer<I> {
                 path.last_mut().expect("pushed").delta = true;
             } else {
                 pdf = s.pdf;
-                specular = false;
             }
             let factor = match transport {
                 Transport::Radiance => s.f * (s.wi.z.abs() / s.pdf),
@@ -739,20 +761,26 @@ impl<I: Intersector> PathTracer<I> {
     }
 }
 
-/// How far a walk goes: `vertices`, and on to `through_specular` while
-/// every vertex it added is specular.
+/// How far a walk goes: `vertices`, not counting the leading vertices no
+/// connection can join if `free` (multiplexed paths' camera subpaths,
+/// [`Strategies::Multiplexed`]), and never past `cap` vertices.
 #[derive(Clone, Copy)]
 struct Reach {
     vertices: usize,
-    through_specular: usize,
+    /// The temperature and roughness floor of the BSDFs that decide which
+    /// vertices no connection joins (pure specular ones): those are joined
+    /// only at these (`Vertex::connectible`).
+    free: Option<(f32, f32)>,
+    cap: usize,
 }
 
 impl Reach {
-    /// `vertices`, specular or not.
+    /// `vertices`, whatever they are.
     fn exactly(vertices: usize) -> Self {
         Self {
             vertices,
-            through_specular: vertices,
+            free: None,
+            cap: vertices,
         }
     }
 }

@@ -112,8 +112,7 @@ impl Lengths {
 /// can join it, from stream 2 (small steps move it: the chain moves to the
 /// strategies that carry the light); for `t < n` (light vertices), `n` and
 /// `t` do not count the camera subpath's leading specular vertices
-/// ([`Strategies::Multiplexed`]).
-/// Returns `(s, t)` and one over the
+/// ([`Strategies::Multiplexed`]). Returns `(s, t)` and one over the
 /// choice's probability; `None` for two vertices, the emission seen
 /// directly, which every multiplexed path carries apart from its choice (so
 /// a renderer can estimate it apart, `PathOracle::separates_emission`). The

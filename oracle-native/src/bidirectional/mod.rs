@@ -42,10 +42,13 @@
 //! from the engine's held stream (`strategies::Lengths`) and a strategy from stream
 //! 2, subpaths just long enough for it and without roulette (a subpath cut
 //! short could not make the chosen strategy), weighted by its MIS weight
-//! over the probability of the choice. Besides it, every multiplexed path
-//! carries what its camera ray sees directly or through specular vertices
-//! alone (the strategies `(0, t)` of MIS weight 1), its camera subpath
-//! walked on through them; the choice leaves those out.
+//! over the probability of the choice. Their camera subpath crosses the
+//! pure-specular vertices it starts with for free: a strategy with light
+//! vertices does not count them in its length, and MIS weighs the camera
+//! subpath alone, which counts them, by its own choice's probability.
+//! Besides its choice, every multiplexed path carries what its camera ray
+//! sees directly or through those vertices alone (the strategies `(0, t)` of
+//! MIS weight 1); the choice leaves those out.
 //!
 //! Tempering (Šik 2018, sec. 5.2, eq. 5.2-5.5): at temperature `T` the BSDFs
 //! of the two vertices of each connection, `x_{L,s}` and `x_{C,t}`, are
@@ -358,7 +361,11 @@ impl<I: Intersector> PathTracer<I> {
         // A multiplexed strategy with light vertices counts its camera
         // vertex `t` from the free ones on (light tracing, `t = 1`, joins
         // the camera itself); `(0, t)` counts every vertex.
-        let free = paths.free_camera_vertices();
+        let free = if multiplexed {
+            paths.free_camera_vertices()
+        } else {
+            0
+        };
         let only = match only {
             Some((s, t)) if multiplexed && s >= 1 && t >= 2 => Some((s, t + free)),
             only => only,
@@ -393,7 +400,7 @@ impl<I: Intersector> PathTracer<I> {
             _ => self.seen_directly(&paths, &camera),
         };
         if multiplexed {
-            radiance += self.seen_through_specular(&paths, &camera);
+            radiance += self.seen_through_specular(&paths, free, &camera);
         }
         let first_t = if light_tracing && splats.wants_splats() {
             1
@@ -462,14 +469,15 @@ impl<I: Intersector> PathTracer<I> {
     /// the emitter are all pure specular (at the tempered BSDFs), summed:
     /// the emission seen directly (`t = 2`) or through mirrors and glass,
     /// and the environment if the subpath escapes after such vertices
-    /// alone. Their MIS weight is 1:
-    /// no other strategy joins a path at a specular vertex (the walk counts
-    /// none, `mis.rs`). A multiplexed path carries them besides its choice:
+    /// alone; `free` is how many the subpath starts with
+    /// ([`Subpaths::free_camera_vertices`]). Their MIS weight is 1: no other
+    /// strategy joins a path at a specular vertex (the walk counts none,
+    /// `mis.rs`). A multiplexed path carries them besides its choice:
     /// chosen, they would carry the choice's inverse probability (a few
     /// hundred on the caustic scene's sphere), and chains that found such
     /// a path in their start-up could not leave it (docs/RESULTS.md).
-    fn seen_through_specular(&self, paths: &Subpaths, camera: &Projection) -> Vec3 {
-        let last = paths.free_camera_vertices() + 2;
+    fn seen_through_specular(&self, paths: &Subpaths, free: usize, camera: &Projection) -> Vec3 {
+        let last = free + 2;
         let emitters: Vec3 = (2..=paths.camera.len().min(last))
             .filter_map(|t| self.connect(paths, 0, t, camera))
             .map(|joined| joined.value)
@@ -767,9 +775,9 @@ impl<I: Intersector> PathTracer<I> {
 #[derive(Clone, Copy)]
 struct Reach {
     vertices: usize,
-    /// The temperature and roughness floor of the BSDFs that decide which
-    /// vertices no connection joins (pure specular ones): those are joined
-    /// only at these (`Vertex::connectible`).
+    /// The temperature and roughness floor of the tempered BSDFs that tell
+    /// a free vertex: pure specular there, so no connection joins it
+    /// (`Vertex::connectible`).
     free: Option<(f32, f32)>,
     cap: usize,
 }

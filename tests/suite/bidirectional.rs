@@ -325,13 +325,6 @@ fn light_subpaths_through_glass_match_camera_subpaths() {
     }
 }
 
-/// The MIS combination of every strategy renders what the unidirectional
-/// tracer renders, block by block and channel by channel, on every built-in
-/// scene (specular, glass, smooth normals, the environment) and the two real
-/// ones (12 seeds, 16x16; worst z 1.7-4.5 of 48 values per scene, limit
-/// 5.5). Dropping one strategy's weight, or any factor of one, breaks it.
-/// So does the combination of every strategy but light tracing (worst z
-/// 1.7-3.4); with light tracing left in the weights it fails at z 52.
 /// Numbers for one multiplexed path: `held` first on the held stream (the
 /// length), `strategy` first on stream 2, 0.5 everywhere else.
 struct Chosen {
@@ -406,6 +399,13 @@ fn multiplexed_strategies_join_past_the_glass_the_camera_looks_through() {
     );
 }
 
+/// The MIS combination of every strategy renders what the unidirectional
+/// tracer renders, block by block and channel by channel, on every built-in
+/// scene (specular, glass, smooth normals, the environment) and the two real
+/// ones (12 seeds, 16x16; worst z 1.7-4.5 of 48 values per scene, limit
+/// 5.5). Dropping one strategy's weight, or any factor of one, breaks it.
+/// So does the combination of every strategy but light tracing (worst z
+/// 1.7-3.4); with light tracing left in the weights it fails at z 52.
 /// Multiplexed MLT (PSSMLT on multiplexed paths, 16 seeds at 256 spp: at
 /// 128 the pool's chains find one block's light late, z 5.7) renders what
 /// bidirectional MC renders (worst z 2.0-3.4); leaving the length's

@@ -62,6 +62,14 @@ pub fn check(label: &str, runs: &[Film], reference: &Film) -> f64 {
     worst
 }
 
+/// The mean of `values` and its standard error.
+pub fn mean_and_standard_error(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
 /// `method` on `oracle` (importance: the largest channel) at `seed` with
 /// `spp` paths per pixel.
 pub fn run<O: PathOracle>(oracle: &O, seed: u64, spp: u64, method: Method) -> Output {

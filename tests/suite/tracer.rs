@@ -24,11 +24,7 @@ use threads::{bits, in_pool};
 
 /// Mean and standard error over runs of a statistic of each film.
 fn mean_se(films: &[Film], stat: impl Fn(&Film) -> f64) -> (f64, f64) {
-    let v: Vec<f64> = films.iter().map(stat).collect();
-    let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    (mean, (var / n).sqrt())
+    common::mean_and_standard_error(&films.iter().map(stat).collect::<Vec<_>>())
 }
 
 /// Every channel's image mean agrees between MC runs and `other` runs within

@@ -1,6 +1,6 @@
 //! Native path tracer throughput: BVH build, closest-hit and occlusion rays,
 //! paths per second on the built-in scenes, veach-ajar (when
-//! `$STRATA_SCENES` has it) and a ~1M-triangle mesh.
+//! `scenes/` has it) and a ~1M-triangle mesh.
 //! `cargo bench --features bench --bench tracer`; summary in docs/BENCHMARKS.md.
 
 use std::hint::black_box;

@@ -22,7 +22,7 @@
 //! cargo run --release --features studies --example channels -- --scene cornell --time 2,8 --seeds 3
 //! cargo run --release --features studies --example channels -- --scene caustic --path-sampler bidirectional
 //! ```
-//! Scenes: the built-ins or a directory of `$STRATA_SCENES`.
+//! Scenes: the built-ins or a scene of `scenes/` (or `$STRATA_SCENES`).
 
 mod common;
 
@@ -41,7 +41,7 @@ use common::{AnyResult, cached_mc};
 /// Per-channel and per-region errors of every method over several seeds.
 #[derive(Parser, Debug)]
 struct Args {
-    /// A built-in scene or a directory of $STRATA_SCENES.
+    /// A built-in scene or a scene of scenes/ (or $STRATA_SCENES).
     #[arg(long, default_value = "saturated")]
     scene: String,
     /// Image width (default 96, or the pbrt file's own).

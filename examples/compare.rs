@@ -19,7 +19,7 @@
 //! ```
 //!
 //! Scenes: the built-ins (`cornell`, `door`, `envplane`, `caustic`, `saturated`) or a
-//! directory of `$STRATA_SCENES` (default `../shared/scenes`): `cornell-box`,
+//! directory of `$STRATA_SCENES` (default: the repository's `scenes/`): `cornell-box`,
 //! `veach-ajar`. The plot needs a TrueType font (`--font`, default DejaVu Sans).
 
 mod common;
@@ -46,7 +46,7 @@ use curves::Panel;
 /// Equal-time comparison against a cached MC reference.
 #[derive(Parser, Debug)]
 struct Args {
-    /// A built-in scene or a directory of $STRATA_SCENES.
+    /// A built-in scene or a scene of scenes/ (or $STRATA_SCENES).
     #[arg(long, default_value = "envplane")]
     scene: String,
     /// Image width (default: 128, or the pbrt file's own).

@@ -25,7 +25,7 @@ use common::{AnyResult, cached_mc};
 /// A method with and without the emission seen directly apart.
 #[derive(Parser, Debug)]
 struct Args {
-    /// A built-in scene or a directory of $STRATA_SCENES (rendered at 96x96).
+    /// A built-in scene or a scene of scenes/ (or $STRATA_SCENES), rendered at 96x96.
     #[arg(long, default_value = "cornell")]
     scene: String,
     /// The native tracer's path sampler.

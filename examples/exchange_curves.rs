@@ -15,7 +15,7 @@
 //! cargo run --release --features studies --example exchange_curves -- --path-sampler multiplexed
 //! ```
 //!
-//! Scenes: the built-ins or a directory of `$STRATA_SCENES`. The plot needs
+//! Scenes: the built-ins or a scene of `scenes/` (or `$STRATA_SCENES`). The plot needs
 //! a TrueType font (`--font`, default DejaVu Sans).
 
 mod common;
@@ -38,7 +38,7 @@ use curves::Panel;
 /// Every exchange move at several time budgets.
 #[derive(Parser, Debug)]
 struct Args {
-    /// A built-in scene or a directory of $STRATA_SCENES.
+    /// A built-in scene or a scene of scenes/ (or $STRATA_SCENES).
     #[arg(long, default_value = "caustic")]
     scene: String,
     /// Image width.

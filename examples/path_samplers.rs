@@ -15,7 +15,7 @@
 //! ```
 //!
 //! Scenes: the built-ins (`cornell`, `caustic`, `pool`, ...) or a directory
-//! of `$STRATA_SCENES` (`cornell-box`, `veach-ajar`).
+//! of `scenes/` (`cornell-box`, `veach-ajar`).
 
 mod common;
 
@@ -35,7 +35,7 @@ use common::{AnyResult, cached_mc};
 /// Every method x {unidirectional, bidirectional, multiplexed} at equal time.
 #[derive(Parser, Debug)]
 struct Args {
-    /// A built-in scene or a directory of $STRATA_SCENES.
+    /// A built-in scene or a scene of scenes/ (or $STRATA_SCENES).
     #[arg(long, default_value = "caustic")]
     scene: String,
     /// Image width.

@@ -23,7 +23,7 @@
 //!
 //! ```text
 //! cargo run --release --features studies --example pixel_errors -- \
-//!     --reference ../shared/scenes/cornell-box/TungstenRender.exr --reference-box 8 \
+//!     --reference scenes/cornell-box/TungstenRender.exr --reference-box 8 \
 //!     --light 5 out/tg/multiplexed-[0123].exr
 //! ```
 

@@ -45,7 +45,7 @@ use strata::native::{builtin, native_tracer, pbrt};
     about = "Stratified MCMC's error, with the tile normalizations reconstructed in several ways"
 )]
 struct Args {
-    /// A built-in scene or a directory of $STRATA_SCENES.
+    /// A built-in scene or a scene of scenes/ (or $STRATA_SCENES).
     #[arg(long, default_value = "veach-ajar")]
     scene: String,
     /// Image width (default: 128, or the pbrt file's own).

@@ -11,7 +11,7 @@
 //! cargo run --release --features studies --example reference -- --spp 1024 --size 256
 //! cargo run --release --features studies --example reference -- --method stratified --spp 8,16,32,64 --seeds 4
 //! ```
-//! Scenes are found in `$STRATA_SCENES` (default `../shared/scenes`).
+//! Scenes are found in `$STRATA_SCENES` (default: the repository's `scenes/`).
 
 use std::path::PathBuf;
 

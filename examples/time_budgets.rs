@@ -20,7 +20,7 @@ use strata::native::{builtin, native_tracer, pbrt};
 /// Time budgets kept by every method.
 #[derive(Parser, Debug)]
 struct Args {
-    /// A built-in scene or a directory of $STRATA_SCENES (cornell-box, veach-ajar).
+    /// A built-in scene, or cornell-box or veach-ajar of scenes/ (or $STRATA_SCENES).
     #[arg(long, default_value = "cornell")]
     scene: String,
     /// Image width (default: 128, or the pbrt file's own).

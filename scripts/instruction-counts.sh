@@ -23,7 +23,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 command -v valgrind >/dev/null || { echo "valgrind is not installed" >&2; exit 2; }
-scene="${STRATA_SCENES:-../shared/scenes}/cornell-box/scene.pbrt"
+scene="${STRATA_SCENES:-scenes}/cornell-box/scene.pbrt"
 step=false
 if [ "${1:-}" = --step ]; then
   step=true

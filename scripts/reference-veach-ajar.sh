@@ -10,7 +10,7 @@
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 bin="${STRATA_BIN:-$root/target/release/strata}"
-scene="${STRATA_SCENES:-$root/../shared/scenes}/veach-ajar/scene.pbrt"
+scene="${STRATA_SCENES:-$root/scenes}/veach-ajar/scene.pbrt"
 mkdir -p "$root/out/reference" && cd "$root/out/reference"
 for seed in $(seq 5000 5999); do
   out=veach-ajar-1280x720-bdpt-mc-s$seed-64spp

@@ -14,7 +14,7 @@ use strata::native::{Scene, builtin, pbrt};
 pub type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
 /// The scene called `name`: a built-in at `width` x `height` (`side` each
-/// unless given), or a directory of `$STRATA_SCENES` at its own resolution
+/// unless given), or a scene of `scenes/` (or `$STRATA_SCENES`) at its own resolution
 /// unless given.
 pub fn scene(name: &str, width: Option<u32>, height: Option<u32>, side: u32) -> AnyResult<Scene> {
     let size = Resolution::new(width.unwrap_or(side), height.unwrap_or(side));

@@ -256,7 +256,7 @@ fn cornell_room(resolution: Resolution, white: Vec3, left: Vec3, right: Vec3) ->
     (s, [white, left, right, black])
 }
 
-/// The Cornell box of `../shared/scenes/cornell-box` (same geometry, camera
+/// The Cornell box of `scenes/cornell-box` (same geometry, camera
 /// and light), built procedurally.
 pub fn cornell(resolution: Resolution) -> Scene {
     let (mut s, [white, _, _, black]) = cornell_room(

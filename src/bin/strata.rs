@@ -9,7 +9,7 @@
 //! strata render caustic --method replica --exchange is-permutation --spp 64
 //! strata render cornell --method stratified --preset gruson2020 --set tile_radius=1
 //! strata settings stratified      # every setting: default, range, help
-//! strata render ../shared/scenes/veach-ajar/scene.pbrt --method stratified --time 30
+//! strata render scenes/veach-ajar/scene.pbrt --method stratified --time 30
 //! ```
 //!
 //! Long renders in steps: `--checkpoint-every SECONDS` saves the render's

@@ -216,7 +216,7 @@ fn hostile_scene_files_give_typed_errors_or_finite_images() {
     let _alone = crate::allocations::alone();
     // The pbrt parser, end to end.
     let path = scenes().join("cornell-box/scene.pbrt");
-    let original = std::fs::read(&path).expect("the shared scenes");
+    let original = std::fs::read(&path).expect("the scenes of scenes/");
     let tally = std::cell::RefCell::new(Tally::default());
     let mut run = runner();
     let strategy = prop::collection::vec(edit(), 1..4);

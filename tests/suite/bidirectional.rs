@@ -419,14 +419,9 @@ fn bidirectional_and_unidirectional_images_agree() {
         .map(|name| (name.to_string(), by_name(name, resolution).unwrap()))
         .collect();
     for name in ["cornell-box", "veach-ajar"] {
-        match strata::native::pbrt::load_shared(name) {
-            Ok(loaded) => {
-                let mut scene = loaded.scene;
-                scene.camera.resolution = resolution;
-                scenes.push((name.to_string(), scene));
-            }
-            Err(e) => eprintln!("SKIPPED {name}: {e}"),
-        }
+        let mut scene = strata::native::pbrt::load_shared(name).unwrap().scene;
+        scene.camera.resolution = resolution;
+        scenes.push((name.to_string(), scene));
     }
     let multiplexed_mlt = Method::Pssmlt(PssmltSettings {
         chains: 64,

@@ -1,31 +1,20 @@
-//! The real pbrt-v3 scenes in `$STRATA_SCENES` (default `../shared/scenes`):
-//! they load, and their contents are what the files say. When the directory
-//! is absent the tests say so and pass (the scenes are not ours to ship).
+//! The real pbrt-v3 scenes the repository carries in `scenes/` (or
+//! `$STRATA_SCENES`): they load, and their contents are what the files say.
 
 use std::path::PathBuf;
 
 use strata::engine::Resolution;
 use strata::native::pbrt;
 
-fn scene_file(name: &str) -> Option<PathBuf> {
-    let dir = pbrt::scenes_dir();
-    let path = dir.join(name).join("scene.pbrt");
-    if path.exists() {
-        Some(path)
-    } else {
-        eprintln!(
-            "SKIPPED: {} not found; set STRATA_SCENES to the scenes directory",
-            path.display()
-        );
-        None
-    }
+fn scene_file(name: &str) -> PathBuf {
+    let path = pbrt::scenes_dir().join(name).join("scene.pbrt");
+    assert!(path.is_file(), "{} not found", path.display());
+    path
 }
 
 #[test]
 fn cornell_box_loads() {
-    let Some(path) = scene_file("cornell-box") else {
-        return;
-    };
+    let path = scene_file("cornell-box");
     let loaded = pbrt::load(&path).unwrap();
     let s = &loaded.scene;
     assert_eq!(s.camera.resolution, Resolution::new(1024, 1024));
@@ -39,9 +28,7 @@ fn cornell_box_loads() {
 
 #[test]
 fn veach_ajar_loads_with_textures_and_ply_meshes() {
-    let Some(path) = scene_file("veach-ajar") else {
-        return;
-    };
+    let path = scene_file("veach-ajar");
     let loaded = pbrt::load(&path).unwrap();
     let s = &loaded.scene;
     assert_eq!(s.camera.resolution, Resolution::new(1280, 720));

@@ -24,12 +24,15 @@ use crate::{SceneError, ply};
 mod syntax;
 use syntax::{Params, Token, Value, tokenize};
 
-/// Where the shared test scenes live: `$STRATA_SCENES`, or `../shared/scenes`
-/// (relative to the working directory, as when running from the repository
-/// root). They are not part of this repository.
+/// Where the real test scenes live: `$STRATA_SCENES` if set, else the
+/// repository's `scenes/` (Bitterli's Cornell box with Tungsten's
+/// reference, and veach-ajar; CC0, with their licence files), found from
+/// this crate's source directory whatever the working directory.
 pub fn scenes_dir() -> PathBuf {
-    std::env::var_os("STRATA_SCENES")
-        .map_or_else(|| PathBuf::from("../shared/scenes"), PathBuf::from)
+    std::env::var_os("STRATA_SCENES").map_or_else(
+        || PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes")),
+        PathBuf::from,
+    )
 }
 
 /// Loads `name/scene.pbrt` from [`scenes_dir`].

@@ -24,6 +24,7 @@ mod resume;
 mod runs;
 mod scenes;
 mod splats;
+mod stopped;
 mod stratified;
 mod tasks;
 mod tracer;

@@ -23,11 +23,14 @@
 //! one bright start path (a path through veach-ajar's door gap starts dozens)
 //! spread over the threads, and no thread waits on another's long start
 //! path; what a chain computes depends on neither the thread count nor the
-//! split. A pass visits its blocks in a rotation drawn
-//! per pass, so the blocks done when a time budget or the observer stops the
-//! render inside a pass are a uniform sample of the pass's blocks: each block
-//! is in it with probability `m / B` (`m` done of `B`), and the film divided
-//! by `passes + m / B` stays an unbiased image (cluster sampling).
+//! split. A pass visits its start pixels in a pseudo-random order drawn per
+//! pass, so the blocks done when a time budget or the observer stops the
+//! render inside a pass are a uniform sample of the film's pixels, spread
+//! over the whole image: each start is in them with probability `m / S`
+//! (`m` start paths done of the pass's `S`; its last block may be short),
+//! and the film divided by `passes + m / S` stays an unbiased image with no
+//! bands (blocks of consecutive pixels left whole rows at 0 or 2x of their
+//! value in a pass cut at its middle).
 
 use alloc::vec::Vec;
 use core::ops::Range;
@@ -46,10 +49,11 @@ use crate::mutate::{MutationParams, SmallStep};
 use crate::oracle::{PathOracle, Radiance, Resolution, Temperature};
 use crate::parallel;
 use crate::parts::{self, PartReader};
-use crate::rng::{self, Domain, uniform_f64};
+use crate::rng::{self, Domain, Permutation, uniform_f64};
 use crate::sample::MltSampler;
 use crate::target::{Evaluated, Importance};
 use crate::task::Task;
+use rand_core::Rng;
 
 /// Settings of ERPT. The budget counts MC paths and chain steps, rounded to
 /// whole passes (at least one) at the expected cost of a pass; a pass has at
@@ -227,15 +231,15 @@ pub(crate) fn merge(
         // `Saved`'s fields in order.
         let (_, bootstrap, b, normalization): (f64, Traced, f64, Normalization) = part.take()?;
         films.push(part.skim_film(resolution, channels)?);
-        type Rest = (Vec<u64>, Vec<Totals>, usize, u64, usize, usize);
-        let (v, t, starts, p, done, _): Rest = part.take()?;
+        type Rest = (Vec<u64>, Vec<Totals>, usize, u64, usize);
+        let (v, t, starts, p, done): Rest = part.take()?;
         let blocks = starts.div_ceil(BLOCK);
         if v.len() != visits.len() || starts < resolution.pixel_count() || done >= blocks {
             return Err(part.damaged());
         }
         visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
         totals.extend_from_slice(&t);
-        passes += p as f64 + done as f64 / blocks as f64;
+        passes += p as f64 + part_of_pass(done, starts);
         head.get_or_insert((starts, (bootstrap, b, normalization)));
         part.release();
     }
@@ -266,7 +270,6 @@ struct Saved {
     starts: usize,
     passes: u64,
     done: usize,
-    rotation: usize,
 }
 
 /// What ERPT's tasks read of the job (shared between threads).
@@ -401,9 +404,9 @@ struct Passes<'a, O: PathOracle, I: ?Sized> {
     starts: usize,
     /// Passes completed.
     passes: u64,
-    /// Blocks done of the current pass, and the block it started at.
+    /// Blocks done of the current pass, and the order of its start pixels.
     done: usize,
-    rotation: usize,
+    order: Permutation,
     /// The current block's start paths that start chains, in start order, and
     /// the running count of their chains (scratch of [`run_block`](Self::run_block)).
     block_starts: Vec<Start<O::Radiance>>,
@@ -428,7 +431,6 @@ where
                     && saved.visits.len() == resolution.pixel_count()
                     && saved.totals.len() == TASKS
                     && saved.starts >= resolution.pixel_count()
-                    && saved.rotation < saved.starts.div_ceil(BLOCK)
                     && saved.done < saved.starts.div_ceil(BLOCK);
                 if !fits {
                     return Err(checkpoint::does_not_fit());
@@ -456,7 +458,6 @@ where
                     starts: starts(resolution),
                     passes: 0,
                     done: 0,
-                    rotation: 0,
                 };
                 (saved, None)
             }
@@ -485,7 +486,7 @@ where
             starts: saved.starts,
             passes: saved.passes,
             done: saved.done,
-            rotation: saved.rotation,
+            order: pass_order(job.seed, job.task.unit(saved.passes), saved.starts),
             block_starts: Vec::new(),
             chain_ends: Vec::new(),
         };
@@ -507,7 +508,6 @@ where
                 self.starts,
                 self.passes,
                 self.done,
-                self.rotation,
             ),
             out,
         )
@@ -543,14 +543,15 @@ where
         self.starts.div_ceil(BLOCK)
     }
 
-    /// Passes done, `passes + m / B` for a pass cut short after `m` of its
-    /// `B` blocks.
+    /// Passes done, `passes + m / S` for a pass of `S` start paths cut
+    /// short after `m` of them.
     fn passes_done(&self) -> f64 {
-        self.passes as f64 + self.done as f64 / self.blocks() as f64
+        self.passes as f64 + part_of_pass(self.done, self.starts)
     }
 
-    /// The start paths of block `block` of the current pass, then the chains
-    /// they start, each phase in tasks run in parallel; merged in task order.
+    /// The start paths of block `block` of the current pass (its starts in
+    /// the pass's order), then the chains they start, each phase in tasks
+    /// run in parallel; merged in task order.
     fn run_block(&mut self, block: usize) {
         let (pixels, starts) = (self.scene.resolution.pixel_count(), self.starts);
         let first = block * BLOCK;
@@ -559,10 +560,10 @@ where
             w.pixels = PIXELS_PER_TASK.min(starts - w.first);
         }
         let pass = self.task.unit(self.passes) * starts as u64;
-        let (scene, settings, energy) = (self.scene, self.settings, self.energy);
+        let (scene, settings, energy, order) = (self.scene, self.settings, self.energy, self.order);
         parallel::for_each(&mut self.work, |w| {
             for start in w.first..w.first + w.pixels {
-                let pixel = start % pixels;
+                let pixel = order.at(start as u64) as usize % pixels;
                 if let Some(start) =
                     trace_start(&scene, settings, energy, pass + start as u64, w, pixel)
                 {
@@ -640,16 +641,13 @@ where
     fn run(&mut self, units: u64) {
         let blocks = self.blocks();
         for _ in 0..units {
-            if self.done == 0 {
-                let pass = self.task.unit(self.passes);
-                let mut order = rng::stream(self.scene.seed, Domain::Pass, pass);
-                self.rotation = (uniform_f64(&mut order) * blocks as f64) as usize % blocks;
-            }
-            self.run_block((self.rotation + self.done) % blocks);
+            self.run_block(self.done);
             self.done += 1;
             if self.done == blocks {
                 self.done = 0;
                 self.passes += 1;
+                let pass = self.task.unit(self.passes);
+                self.order = pass_order(self.scene.seed, pass, self.starts);
             }
         }
     }
@@ -669,6 +667,18 @@ where
             self.starts,
         ))
     }
+}
+
+/// The part of a pass of `starts` start paths its first `blocks` blocks
+/// hold.
+fn part_of_pass(blocks: usize, starts: usize) -> f64 {
+    (blocks * BLOCK).min(starts) as f64 / starts as f64
+}
+
+/// The order in which pass `pass` visits its `starts` start paths.
+fn pass_order(seed: u64, pass: u64, starts: usize) -> Permutation {
+    let key = rng::stream(seed, Domain::Pass, pass).next_u64();
+    Permutation::new(starts as u64, key)
 }
 
 /// One MC path in pixel `pixel` (the `index`-th of the render), and the

@@ -13,7 +13,8 @@
 //! ```
 //!
 //! Long renders in steps: `--checkpoint-every SECONDS` saves the render's
-//! state to `--checkpoint FILE` (default `OUT.ckpt`); Ctrl-C stops after the
+//! state to `--checkpoint FILE` (default `OUT.ckpt`); Ctrl-C (or SIGTERM, as a
+//! scheduler stops a job, or SIGHUP) stops after the
 //! current round, writes the checkpoint and the image so far and exits with
 //! 130; the same command with `--resume FILE` continues (with the same
 //! `--spp`, the image is the one an uninterrupted render gives, bit for bit).
@@ -273,7 +274,7 @@ impl Args {
 
 type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
-/// Set by Ctrl-C: the render stops after its current round.
+/// Set by Ctrl-C, SIGTERM or SIGHUP: the render stops after its current round.
 static STOP: AtomicBool = AtomicBool::new(false);
 
 /// Something to do at most every `every`.
@@ -356,7 +357,7 @@ impl Observer for Watch<'_> {
         self.spent.store(p.fraction >= 1.0, Ordering::Relaxed);
         self.bar.set_position((p.fraction * 1000.0) as u64);
         let stopping = if STOP.load(Ordering::Relaxed) {
-            " (stopping: Ctrl-C)"
+            " (stopping: signal)"
         } else {
             ""
         };
@@ -546,7 +547,7 @@ fn prepare_outputs(args: &Args) -> AnyResult<()> {
 /// How a render ended.
 enum Ended {
     Finished,
-    /// Ctrl-C stopped it, with its checkpoint written or not.
+    /// Ctrl-C or SIGTERM stopped it, with its checkpoint written or not.
     Stopped(Saved),
 }
 
@@ -580,7 +581,8 @@ fn main() -> ExitCode {
             return ExitCode::SUCCESS;
         }
     };
-    // The first Ctrl-C stops after the current round; a second one at once.
+    // The first Ctrl-C (SIGINT, SIGTERM or SIGHUP) stops after the current
+    // round; a second one at once.
     let handler = ctrlc::set_handler(|| {
         if STOP.swap(true, Ordering::Relaxed) {
             std::process::exit(130);

@@ -317,57 +317,65 @@ fn ctrl_c_saves_a_checkpoint_and_resume_finishes_the_same_image() {
     );
     assert_eq!(whole.status.code(), Some(0));
 
-    // A preview and a checkpoint after every round; Ctrl-C as soon as the
-    // first checkpoint is there (the preview comes first).
-    let args = with(&[
-        "--out",
-        &path("run"),
-        "--checkpoint-every",
-        "0",
-        "--preview-every",
-        "0",
-    ]);
-    let child = Command::new(env!("CARGO_BIN_EXE_strata"))
-        .args(&args)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    wait_for(&dir.join("run.ckpt"));
-    assert!(dir.join("run.png").is_file() && dir.join("run.exr").is_file());
-    let killed = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(killed.success());
-    let stopped = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&stopped.stderr);
-    assert_eq!(stopped.status.code(), Some(130), "{stderr}");
-    assert!(stderr.contains("--resume"), "{stderr}");
+    // A preview and a checkpoint after every round; Ctrl-C (or a
+    // scheduler's SIGTERM) as soon as the first checkpoint is there (the
+    // preview comes first).
+    for signal in ["INT", "TERM"] {
+        let run = format!("run-{signal}");
+        let args = with(&[
+            "--out",
+            &path(&run),
+            "--checkpoint-every",
+            "0",
+            "--preview-every",
+            "0",
+        ]);
+        let child = Command::new(env!("CARGO_BIN_EXE_strata"))
+            .args(&args)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let checkpoint = dir.join(format!("{run}.ckpt"));
+        wait_for(&checkpoint);
+        assert!(
+            dir.join(format!("{run}.png")).is_file() && dir.join(format!("{run}.exr")).is_file()
+        );
+        let killed = Command::new("kill")
+            .args([&format!("-{signal}"), &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(killed.success());
+        let stopped = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&stopped.stderr);
+        assert_eq!(stopped.status.code(), Some(130), "SIG{signal}: {stderr}");
+        assert!(stderr.contains("--resume"), "SIG{signal}: {stderr}");
 
-    // Another method cannot continue it; the same command can.
-    let mut other = with(&["--out", &path("run"), "--resume", &path("run.ckpt")]);
-    other[3] = "pssmlt".into();
-    let refused = strata(&other.iter().map(String::as_str).collect::<Vec<_>>());
-    assert_eq!(refused.status.code(), Some(1));
-    assert!(
-        String::from_utf8_lossy(&refused.stderr).contains("method=stratified"),
-        "{}",
-        String::from_utf8_lossy(&refused.stderr)
-    );
-    let resume = with(&["--out", &path("run"), "--resume", &path("run.ckpt")]);
-    let resumed = strata(&resume.iter().map(String::as_str).collect::<Vec<_>>());
-    assert_eq!(
-        resumed.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&resumed.stderr)
-    );
-    let read = |name: &str| std::fs::read(dir.join(name)).unwrap();
-    assert!(
-        read("run.exr") == read("whole.exr"),
-        "the resumed image differs"
-    );
+        // Another method cannot continue it; the same command can.
+        let checkpoint = checkpoint.to_str().unwrap();
+        let mut other = with(&["--out", &path(&run), "--resume", checkpoint]);
+        other[3] = "pssmlt".into();
+        let refused = strata(&other.iter().map(String::as_str).collect::<Vec<_>>());
+        assert_eq!(refused.status.code(), Some(1));
+        assert!(
+            String::from_utf8_lossy(&refused.stderr).contains("method=stratified"),
+            "{}",
+            String::from_utf8_lossy(&refused.stderr)
+        );
+        let resume = with(&["--out", &path(&run), "--resume", checkpoint]);
+        let resumed = strata(&resume.iter().map(String::as_str).collect::<Vec<_>>());
+        assert_eq!(
+            resumed.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&resumed.stderr)
+        );
+        let read = |name: &str| std::fs::read(dir.join(name)).unwrap();
+        assert!(
+            read(&format!("{run}.exr")) == read("whole.exr"),
+            "SIG{signal}: the resumed image differs"
+        );
+    }
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -22,6 +22,7 @@ use strata::engine::{
     Temperature, render,
 };
 
+use crate::common;
 use crate::threads;
 use threads::{bits, in_pool, small_methods as methods};
 
@@ -545,44 +546,33 @@ fn observers_see_progress_previews_and_can_cancel() {
     }
 }
 
-/// A time budget ends the render on time, set-up included, and not much
-/// early: a round holds only the units expected to end within it (each as
-/// long as the last round's), so a render ends within a unit of its budget;
-/// stratified MCMC's reconstruction included too: its sweeps stop early by
-/// the reconstruction's timed estimate (at most half the budget), which on
-/// a film this small is up to ~2-3x its cost (its probe is mostly fixed
-/// overhead, and grows on a loaded machine), so it may end early, but not
-/// before half the budget.
+/// A time budget ends every method's render, set-up included, with work
+/// done and the render not cancelled (how closely each keeps its budget,
+/// which a busy machine changes, is measured by `examples/time_budgets.rs`:
+/// a round holds only the units expected to end within the budget, so a
+/// render ends within a unit of it; the unit tests of `drive` check that
+/// arithmetic).
 #[test]
-fn time_budgets_are_kept() {
+fn time_budgets_end_the_render() {
     let image = ProceduralImage::showcase(Resolution::new(64, 48));
-    let budget = Duration::from_millis(300);
     for method in methods() {
         let s = Settings {
             seed: 1,
-            budget: Budget::Time(budget),
+            budget: Budget::Time(Duration::from_millis(300)),
             method: method.clone(),
         };
         let start = Instant::now();
         let out = render(&image, &MaxChannel, &s, &Silent).unwrap();
-        let elapsed = start.elapsed();
-        assert!(out.stats.samples > 0, "{}", method.name());
-        let earliest = match method {
-            Method::Stratified(_) => budget / 2,
-            _ => budget * 4 / 5,
-        };
-        assert!(
-            elapsed >= earliest && elapsed < budget + Duration::from_millis(300),
-            "{}: {elapsed:?} for a budget of {budget:?}",
-            method.name()
-        );
+        assert!(start.elapsed() < common::HANG, "{}", method.name());
+        assert!(out.stats.samples > 0 && !out.cancelled, "{}", method.name());
     }
 }
 
-/// Set-up loops keep the time budget and listen to cancel (issue 36: a
-/// large bootstrap or ladder tuning ran to its end, whatever the budget):
-/// with every setting at its table's largest, the render still ends
-/// within a second of its 300 ms budget, and a cancelled one at once.
+/// Set-up loops keep the time budget and listen to cancel (a large
+/// bootstrap or ladder tuning ran to its end, whatever the budget): with
+/// every setting at its table's largest, a render of 50 ms and a cancelled
+/// one end before their 2^24 bootstrap candidates (on 2 cores, ~350 000 of
+/// them in the 50 ms, 65 536 before the cancel is heard).
 #[test]
 fn set_up_keeps_the_time_budget_and_listens_to_cancel() {
     let image = ProceduralImage::showcase(Resolution::new(16, 12));
@@ -599,20 +589,19 @@ fn set_up_keeps_the_time_budget_and_listens_to_cancel() {
     let mut erpt = Method::from_name("erpt").unwrap();
     erpt.set("bootstrap_candidates", (1u64 << 24) as f64)
         .unwrap();
-    let budget = Duration::from_millis(300);
     for method in [pssmlt, replica, erpt] {
         let name = method.name();
         let timed = Settings {
             seed: 1,
-            budget: Budget::Time(budget),
+            budget: Budget::Time(Duration::from_millis(50)),
             method: method.clone(),
         };
         let start = Instant::now();
-        render(&image, &MaxChannel, &timed, &Silent).unwrap();
-        let elapsed = start.elapsed();
+        let out = render(&image, &MaxChannel, &timed, &Silent).unwrap();
+        assert!(start.elapsed() < common::HANG, "{name}");
         assert!(
-            elapsed < budget + Duration::from_secs(1),
-            "{name}: {elapsed:?}"
+            out.stats.bootstrap_samples < 1 << 24,
+            "{name}: the bootstrap ran to its end in a budget of 50 ms"
         );
 
         let cancelled = Settings {
@@ -621,11 +610,11 @@ fn set_up_keeps_the_time_budget_and_listens_to_cancel() {
         };
         let start = Instant::now();
         let out = render(&image, &MaxChannel, &cancelled, &stop_after(0)).unwrap();
-        let elapsed = start.elapsed();
         assert!(out.cancelled, "{name}");
+        assert!(start.elapsed() < common::HANG, "{name} cancelled");
         assert!(
-            elapsed < Duration::from_secs(1),
-            "{name} cancelled: {elapsed:?}"
+            out.stats.bootstrap_samples < 1 << 24,
+            "{name}: the cancelled bootstrap ran to its end"
         );
     }
 }

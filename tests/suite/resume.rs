@@ -5,7 +5,7 @@
 //! another render are typed errors.
 
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::time::Duration;
 use strata::engine::RenderMethod;
 
@@ -161,6 +161,61 @@ fn a_render_resumes_with_a_new_budget() {
             "{}: {} paths after resuming at {samples}",
             method.name(),
             resumed.stats.samples
+        );
+    }
+}
+
+/// Wants a checkpoint once the budget is spent, as `strata render
+/// --checkpoint-every` does, and keeps the last one.
+#[derive(Default)]
+struct SaveWhenSpent {
+    spent: AtomicBool,
+    last: Mutex<Option<Checkpoint>>,
+}
+
+impl Observer for SaveWhenSpent {
+    fn progress(&self, p: &Progress) {
+        self.spent.store(p.fraction >= 1.0, Ordering::Relaxed);
+    }
+    fn wants_checkpoint(&self) -> bool {
+        self.spent.load(Ordering::Relaxed)
+    }
+    fn checkpoint(&self, checkpoint: Checkpoint) {
+        *self.last.lock().unwrap() = Some(checkpoint);
+    }
+}
+
+/// Stops a render before its first round.
+struct StopAtOnce;
+
+impl Observer for StopAtOnce {
+    fn should_stop(&self) -> bool {
+        true
+    }
+}
+
+/// Every method under a time budget tells its observer when the budget is
+/// spent and saves its last state then (the rest of a round stratified
+/// MCMC spends after its last sweep included): that checkpoint, resumed
+/// and stopped at once, holds every path the timed render traced. A
+/// time budget used to end its rounds with the progress short of 1, and no
+/// checkpoint of the last state.
+#[test]
+fn a_timed_render_saves_its_last_state() {
+    let image = image();
+    for method in small_methods() {
+        let mut settings = settings(&method);
+        settings.budget = Budget::Time(Duration::from_millis(150));
+        let observer = SaveWhenSpent::default();
+        let timed = render(&image, &MaxChannel, &settings, &observer).unwrap();
+        let checkpoint = observer.last.into_inner().unwrap();
+        let checkpoint = checkpoint.unwrap_or_else(|| panic!("{}: no checkpoint", method.name()));
+        let resumed = resume(&image, &MaxChannel, &settings, &checkpoint, &StopAtOnce);
+        assert_eq!(
+            resumed.unwrap().stats.samples,
+            timed.stats.samples,
+            "{}",
+            method.name()
         );
     }
 }

@@ -261,6 +261,15 @@ pub(crate) fn drive<W: Rounds>(
     let mut round = resumed.map_or(first_round, |p| p.round.clamp(1, max_round));
     let mut done = resumed.map_or(0, |p| p.done);
     let mut cancelled = false;
+    let checkpoint = |work: &W, done: u64, round: u64, complete: bool| {
+        let position = Position { done, round };
+        checkpoints.checkpoint(work.samples(), complete, &mut |out| {
+            append(&position, out);
+            save(work, out);
+        })
+    };
+    // Whether the observer holds a checkpoint of the state as it is now.
+    let mut saved;
     loop {
         if planned.is_some_and(|n| done >= n) {
             break;
@@ -272,6 +281,7 @@ pub(crate) fn drive<W: Rounds>(
         let units = planned.map_or(round, |n| round.min(n - done));
         let round_clock = Clock::start(budget);
         work.run(units);
+        saved = false;
         done += units;
         let unit_seconds = round_clock.seconds() / units as f64;
         let fraction = planned.map_or_else(|| clock.fraction(), |n| done as f64 / n as f64);
@@ -293,11 +303,8 @@ pub(crate) fn drive<W: Rounds>(
             round = (round * 2).min(max_round);
         }
         if observer.wants_checkpoint() {
-            let position = Position { done, round };
-            observer.checkpoint(checkpoints.checkpoint(work.samples(), false, &mut |out| {
-                append(&position, out);
-                save(work, out);
-            }));
+            observer.checkpoint(checkpoint(work, done, round, false));
+            saved = true;
         }
         if planned.is_none() {
             // As many units as still fit, up to a round's (a longer round
@@ -310,6 +317,16 @@ pub(crate) fn drive<W: Rounds>(
                     let rest = left - after(0);
                     if rest > 0.0 {
                         work.spend_rest(rest, unit_seconds);
+                        saved = false;
+                    }
+                    // The time budget is spent: said to the observer, which
+                    // may want the last state saved (to extend the render).
+                    observer.progress(&Progress {
+                        samples: work.samples(),
+                        fraction: 1.0,
+                    });
+                    if !saved && observer.wants_checkpoint() {
+                        observer.checkpoint(checkpoint(work, done, round, false));
                     }
                     break;
                 }
@@ -318,13 +335,7 @@ pub(crate) fn drive<W: Rounds>(
         }
     }
     if let Some(cell) = last {
-        let position = Position { done, round };
-        let _ = cell.set(
-            checkpoints.checkpoint(work.samples(), !cancelled, &mut |out| {
-                append(&position, out);
-                save(work, out);
-            }),
-        );
+        let _ = cell.set(checkpoint(work, done, round, !cancelled));
     }
     Ok(cancelled)
 }

@@ -3,8 +3,9 @@
  * is below 1/4 also splat it, in red, half the film to the right) with the
  * method named by argv[1] at 160 paths per pixel (above every method's
  * smallest budget on this film: ERPT's pass is 101, multi-stage MLT's 154),
- * seed 7, 2 threads, and writes the film's doubles to argv[2]. capi/tests/c_program.rs builds and runs it and
- * compares the file with the Rust API's render, bit for bit. */
+ * seed 7, 2 threads, and writes the film's doubles to argv[2].
+ * capi/tests/api/c_program.rs builds and runs it and compares the file with
+ * the Rust API's render, bit for bit. */
 #include <stdio.h>
 #include "strata.h"
 

@@ -1,6 +1,6 @@
 // strata from C++: the same oracle as gradient.c, written as a lambda and
 // wrapped by a small adapter (the header is plain C with extern "C").
-// capi/tests/c_program.rs builds it with the system C++ compiler and checks
+// capi/tests/api/c_program.rs builds it with the system C++ compiler and checks
 // its film against the Rust API's, bit for bit.
 #include <cstdio>
 #include <memory>

@@ -58,8 +58,14 @@ impl Kernel for CKernel {
 
 /// Registers `kernel` under its name for the rest of the process (the
 /// engine keeps a copy; at most 32 kernels of one's own). A null kernel,
-/// name or callback, or a name a built-in or another kernel already has, is
-/// `STRATA_STATUS_INVALID_ARGUMENT`.
+/// name or callback, an empty name, a name a built-in or another kernel
+/// already has, or callbacks that fail the checks below, is
+/// `STRATA_STATUS_INVALID_ARGUMENT`, and nothing is kept.
+///
+/// The checks, at 256 evenly spaced `u` in `(0, 1)`: `offset(u)` finite and
+/// symmetric (`offset(1 - u) = -offset(u)`, to a part in a million), and
+/// `abs_cdf` in `[0, 1]` and non-decreasing at those offsets' sizes. A
+/// value that is not finite at another `u` moves nothing.
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_register_kernel(kernel: *const StrataKernel) -> StrataStatus {
     if kernel.is_null() {
@@ -75,23 +81,68 @@ pub extern "C" fn strata_register_kernel(kernel: *const StrataKernel) -> StrataS
             "a kernel needs a UTF-8 name, `offset` and `abs_cdf`",
         );
     };
-    // Checked before the copy is leaked (`Custom::new` refuses it too).
-    if Custom::by_name(name).is_some() {
+    let candidate = CKernel {
+        name: "",
+        user: kernel.user as usize,
+        offset,
+        abs_cdf,
+    };
+    if let Err(reason) = candidate.check() {
         return fail(
             StrataStatus::InvalidArgument,
-            format!("a kernel called \"{name}\" is registered already"),
+            format!("kernel \"{name}\" is refused: {reason}"),
         );
     }
     // Registered kernels live as long as the process: the engine knows
     // them by name in settings and checkpoints.
-    let registered: &'static CKernel = Box::leak(Box::new(CKernel {
-        name: Box::leak(name.to_owned().into_boxed_str()),
-        user: kernel.user as usize,
-        offset,
-        abs_cdf,
-    }));
+    let name: &'static str = Box::leak(name.to_owned().into_boxed_str());
+    let registered: &'static CKernel = Box::leak(Box::new(CKernel { name, ..candidate }));
     match Custom::new(registered) {
         Ok(_) => StrataStatus::Ok,
-        Err(e) => fail(StrataStatus::InvalidArgument, e.to_string()),
+        Err(e) => {
+            let message = e.to_string();
+            drop(e);
+            // SAFETY: refused, the engine kept no reference to either box
+            // (`Custom::new`), and the error that named it is gone: both
+            // are this function's again.
+            unsafe {
+                drop(Box::from_raw(core::ptr::from_ref(registered).cast_mut()));
+                drop(Box::from_raw(core::ptr::from_ref(name).cast_mut()));
+            }
+            fail(StrataStatus::InvalidArgument, message)
+        }
+    }
+}
+
+impl CKernel {
+    /// The registration's checks of the callbacks (see
+    /// [`strata_register_kernel`]).
+    fn check(&self) -> Result<(), String> {
+        let user = self.user as *mut c_void;
+        let mut previous = (0.0, 0.0);
+        let mut sizes: Vec<f64> = Vec::with_capacity(256);
+        for i in 0..256 {
+            let u = (i as f64 + 0.5) / 256.0;
+            let (d, mirror) = ((self.offset)(user, u), (self.offset)(user, 1.0 - u));
+            if !(d.is_finite() && mirror.is_finite()) {
+                return Err(format!("offset({u}) or offset({}) is not finite", 1.0 - u));
+            }
+            if (d + mirror).abs() > 1e-6 * d.abs().max(1.0) {
+                return Err(format!(
+                    "offset is not symmetric: offset({u}) = {d}, offset({}) = {mirror}",
+                    1.0 - u
+                ));
+            }
+            sizes.push(d.abs());
+        }
+        sizes.sort_by(f64::total_cmp);
+        for x in sizes {
+            let p = (self.abs_cdf)(user, x);
+            if !(0.0..=1.0).contains(&p) || (x > previous.0 && p < previous.1) {
+                return Err(format!("abs_cdf({x}) = {p}: not a distribution function"));
+            }
+            previous = (x, p);
+        }
+        Ok(())
     }
 }

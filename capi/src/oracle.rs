@@ -16,6 +16,10 @@ use crate::*;
 /// the film to `strata_sampler_splat`. Called from several threads at once;
 /// must be a pure function of its inputs. Members added later go at the
 /// end: zero them.
+///
+/// Film points are continuous pixel coordinates: `x` in `[0, width)` from
+/// the left edge, `y` in `[0, height)` from the top edge; pixel `(i, j)`
+/// covers `[i, i + 1) x [j, j + 1)`, and the film stores rows from the top.
 #[repr(C)]
 pub struct StrataOracle {
     /// The film's width in pixels.

@@ -133,3 +133,39 @@ impl Tracking {
         self.peak.load(Ordering::Relaxed)
     }
 }
+
+/// A kernel the C API refuses keeps nothing: 1000 refused registrations
+/// (a built-in's name, which the engine refuses after the C API copied the
+/// kernel) leave the bytes live as they were. Each leaked 47 bytes before.
+#[test]
+fn a_refused_c_kernel_is_not_leaked() {
+    use std::ffi::c_void;
+    use strata_capi::{StrataKernel, StrataStatus, strata_register_kernel};
+    extern "C" fn offset(_: *mut c_void, u: f64) -> f64 {
+        0.02 * (u - 0.5)
+    }
+    extern "C" fn abs_cdf(_: *mut c_void, x: f64) -> f64 {
+        (x / 0.01).min(1.0)
+    }
+    let _alone = alone();
+    let kernel = StrataKernel {
+        name: c"kelemen".as_ptr(),
+        user: std::ptr::null_mut(),
+        offset: Some(offset),
+        abs_cdf: Some(abs_cdf),
+    };
+    // The first refusal sets the thread's last-error message.
+    assert_eq!(
+        strata_register_kernel(&kernel),
+        StrataStatus::InvalidArgument
+    );
+    let before = crate::ALLOCATOR.live();
+    for _ in 0..1000 {
+        assert_eq!(
+            strata_register_kernel(&kernel),
+            StrataStatus::InvalidArgument
+        );
+    }
+    let after = crate::ALLOCATOR.live();
+    assert!(after <= before, "{} bytes kept", after - before);
+}

@@ -1052,7 +1052,9 @@ impl strata_engine::mutate::Kernel for RustCauchy {
 /// A small-step kernel written in C, registered by name and chosen like a
 /// built-in one, renders PSSMLT and stratified MCMC exactly as the same
 /// kernel written in Rust (and not as the default kernel); a taken name, a
-/// built-in's name or a missing callback is refused.
+/// built-in's name, an empty name, a missing callback, and callbacks that
+/// return NaN, are not symmetric or whose `abs_cdf` is no distribution
+/// function, are refused with a message that says why.
 #[test]
 fn a_c_kernel_renders_as_its_rust_twin() {
     use strata_engine::Method;
@@ -1069,7 +1071,7 @@ fn a_c_kernel_renders_as_its_rust_twin() {
         StrataStatus::InvalidArgument
     );
     assert!(
-        last_error().contains("registered already"),
+        last_error().contains("another kernel has this name"),
         "{}",
         last_error()
     );
@@ -1094,6 +1096,54 @@ fn a_c_kernel_renders_as_its_rust_twin() {
         strata_register_kernel(null()),
         StrataStatus::InvalidArgument
     );
+    extern "C" fn nan_offset(_: *mut c_void, u: f64) -> f64 {
+        if u > 0.9 { f64::NAN } else { cauchy(u) }
+    }
+    extern "C" fn drifting_offset(_: *mut c_void, u: f64) -> f64 {
+        cauchy(u) + 0.001
+    }
+    extern "C" fn no_distribution(_: *mut c_void, x: f64) -> f64 {
+        1.0 - x.min(1.0)
+    }
+    for (refused, says) in [
+        (
+            StrataKernel {
+                name: c"".as_ptr(),
+                ..kernel
+            },
+            "empty",
+        ),
+        (
+            StrataKernel {
+                name: c"c-nan".as_ptr(),
+                offset: Some(nan_offset),
+                ..kernel
+            },
+            "not finite",
+        ),
+        (
+            StrataKernel {
+                name: c"c-drifting".as_ptr(),
+                offset: Some(drifting_offset),
+                ..kernel
+            },
+            "not symmetric",
+        ),
+        (
+            StrataKernel {
+                name: c"c-no-cdf".as_ptr(),
+                abs_cdf: Some(no_distribution),
+                ..kernel
+            },
+            "not a distribution function",
+        ),
+    ] {
+        assert_eq!(
+            strata_register_kernel(&refused),
+            StrataStatus::InvalidArgument
+        );
+        assert!(last_error().contains(says), "{says}: {}", last_error());
+    }
 
     static RUST_CAUCHY: RustCauchy = RustCauchy;
     let twin = SmallStep::Custom(Custom::new(&RUST_CAUCHY).unwrap());

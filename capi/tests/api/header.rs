@@ -21,6 +21,6 @@ fn the_committed_header_matches_the_code() {
     let committed = std::fs::read(&path).unwrap_or_default();
     assert!(
         committed == generated,
-        "include/strata.h is stale: run `STRATA_BLESS=1 cargo test -p strata-capi --test header`"
+        "include/strata.h is stale: run `STRATA_BLESS=1 cargo test -p strata-capi --test api header`"
     );
 }

@@ -57,7 +57,7 @@ pub trait Kernel: Send + Sync + fmt::Debug + 'static {
     /// One offset `d`, drawn from `rng` (the chain's mutation stream): its
     /// law must be symmetric about zero (`d` and `-d` equally likely), or the
     /// chain leaves its target. Any finite value; the coordinate moved is
-    /// wrapped onto `[0, 1)`.
+    /// wrapped onto `[0, 1)`. A value that is not finite moves nothing.
     fn offset(&self, rng: &mut Pcg32) -> f64;
 
     /// `P(|d| <= x)` for `x >= 0`: the law [`offset`](Self::offset) draws
@@ -76,10 +76,17 @@ static REGISTERED: Registry<dyn Kernel> = Registry::new(|k| k.name());
 
 impl Custom {
     /// `kernel`, registered under its name (again for the same kernel: the
-    /// name is then known). Another kernel of a taken name, a built-in's
-    /// name, or more than 32 kernels is
-    /// [`Error::InvalidKernel`](crate::Error::InvalidKernel).
+    /// name is then known). An empty name, another kernel of a taken name,
+    /// a built-in's name, or more than 32 kernels is
+    /// [`Error::InvalidKernel`](crate::Error::InvalidKernel), and nothing is
+    /// kept of `kernel`.
     pub fn new(kernel: &'static dyn Kernel) -> Result<Custom, Error> {
+        if kernel.name().is_empty() {
+            return Err(Error::InvalidKernel {
+                name: kernel.name(),
+                reason: "its name is empty",
+            });
+        }
         let reason = match REGISTERED.register(kernel, &SmallStep::NAMES) {
             Ok(()) => return Ok(Custom(kernel)),
             Err(Refused::NameTaken) => "another kernel has this name",

@@ -585,7 +585,11 @@ impl Mutator {
             Mutator::Custom(c) => {
                 let kernel = c.kernel();
                 for v in values {
-                    *v = wrap_unit(*v as f64 + kernel.offset(rng));
+                    // A kernel's value that is not finite moves nothing.
+                    let offset = kernel.offset(rng);
+                    if offset.is_finite() {
+                        *v = wrap_unit(*v as f64 + offset);
+                    }
                 }
             }
         }

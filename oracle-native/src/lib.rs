@@ -11,6 +11,7 @@ pub mod bidirectional;
 pub mod builtin;
 pub mod bvh;
 pub mod geometry;
+pub mod input;
 pub mod material;
 pub mod obj;
 pub mod pbrt;

@@ -12,7 +12,7 @@ use crate::scene::{MAX_COORDINATE, Mesh, Scene};
 /// becomes a Lambertian material (its `Kd`), and `Ke > 0` makes an area light.
 pub fn add_obj(scene: &mut Scene, path: &Path) -> Result<(), SceneError> {
     // tobj accepts some malformed statements silently; check them first.
-    let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
+    let text = crate::input::read_text(path)?;
     if let Some(line) = first_bad_line(&text) {
         return Err(SceneError::at(path, line, "malformed OBJ statement".into()));
     }
@@ -21,8 +21,14 @@ pub fn add_obj(scene: &mut Scene, path: &Path) -> Result<(), SceneError> {
         single_index: true,
         ..Default::default()
     };
-    let (models, materials) =
-        tobj::load_obj(path, &options).map_err(|e| SceneError::at(path, 0, format!("OBJ: {e}")))?;
+    // The text read above, and its MTL files through the same reader.
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let (models, materials) = tobj::load_obj_buf(&mut text.as_bytes(), &options, |mtl| {
+        let bytes =
+            crate::input::read(&dir.join(mtl)).map_err(|_| tobj::LoadError::OpenFileFailed)?;
+        tobj::load_mtl_buf(&mut bytes.as_slice())
+    })
+    .map_err(|e| SceneError::at(path, 0, format!("OBJ: {e}")))?;
     let materials = materials.unwrap_or_default();
     let default = scene.add_material(Material::Diffuse {
         reflectance: Texture::Constant(Vec3::splat(0.5)),

@@ -110,7 +110,7 @@ impl Reader<'_> {
 
 /// Reads the PLY file at `path`.
 pub fn read(path: &Path) -> Result<Mesh, SceneError> {
-    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bytes = crate::input::read(path)?;
     parse(&bytes).map_err(|(line, message)| SceneError::at(path, line, message))
 }
 

@@ -15,7 +15,7 @@
 //! FUZZ_CASES=100000 cargo test --release --test bounds fuzz_loaders -- --nocapture
 //! ```
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
@@ -290,4 +290,121 @@ fn edits_change_the_files() {
     assert_eq!(doubled, b"Translate 1 2 3\nScale 4 5 6\nScale 4 5 6\n");
     assert_eq!(apply(text, &[Edit::Truncate(0.5)], true).len(), 14);
     assert_ne!(apply(text, &[Edit::Flip(0.0, 1)], true), text);
+}
+
+/// Inputs that are not files, or files that would decode into far more
+/// than they hold, are typed errors that name them, at once and without a
+/// large allocation: a FIFO as the scene, a PLY mesh or a texture (its open
+/// blocked for ever), `/dev/urandom` as the scene or a mesh (read until
+/// memory ran out), and a 100-byte PNG whose header declares 12000 x 12000
+/// texels (3.4 GB decoded).
+#[test]
+fn inputs_that_are_not_files_are_refused() {
+    let _alone = crate::allocations::alone();
+    let dir = std::env::temp_dir().join(format!("strata-not-files-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let fifo = dir.join("fifo");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+    // A PNG of a signature, a header chunk declaring 12000 x 12000 grey
+    // texels, an empty compressed stream for their data, and an end chunk.
+    let chunk = |kind: &[u8], data: &[u8]| {
+        let mut out = (data.len() as u32).to_be_bytes().to_vec();
+        out.extend_from_slice(kind);
+        out.extend_from_slice(data);
+        let crc = crc32fast::hash(&out[4..]);
+        out.extend_from_slice(&crc.to_be_bytes());
+        out
+    };
+    let mut header = 12000u32.to_be_bytes().repeat(2);
+    header.extend_from_slice(&[8, 0, 0, 0, 0]);
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    png.extend(chunk(b"IHDR", &header));
+    png.extend(chunk(
+        b"IDAT",
+        &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01],
+    ));
+    png.extend(chunk(b"IEND", &[]));
+    let huge = dir.join("huge.png");
+    std::fs::write(&huge, &png).unwrap();
+
+    let scene = |shape: &str, texture: Option<&Path>| {
+        let material = texture.map_or(String::new(), |t| {
+            format!(
+                "Texture \"t\" \"spectrum\" \"imagemap\" \"string filename\" \"{}\"\n\
+                 Material \"matte\" \"texture Kd\" \"t\"\n",
+                t.display()
+            )
+        });
+        format!(
+            "Camera \"perspective\" \"float fov\" [45]\n\
+             Film \"image\" \"integer xresolution\" [8] \"integer yresolution\" [8]\n\
+             WorldBegin\n{material}{shape}\nWorldEnd\n"
+        )
+    };
+    let triangle =
+        "Shape \"trianglemesh\" \"point P\" [0 0 0 1 0 0 0 1 0] \"integer indices\" [0 1 2]";
+    let urandom = Path::new("/dev/urandom");
+    let cases: Vec<(&str, Result<pbrt::Loaded, strata::native::SceneError>, &str)> = vec![
+        (
+            "a FIFO as the scene",
+            pbrt::load(&fifo),
+            "not a regular file",
+        ),
+        (
+            "/dev/urandom as the scene",
+            pbrt::load(urandom),
+            "not a regular file",
+        ),
+        (
+            "a FIFO as a PLY mesh",
+            pbrt::parse(
+                &scene(
+                    &format!(
+                        "Shape \"plymesh\" \"string filename\" \"{}\"",
+                        fifo.display()
+                    ),
+                    None,
+                ),
+                &dir.join("scene.pbrt"),
+            ),
+            "not a regular file",
+        ),
+        (
+            "/dev/urandom as a PLY mesh",
+            pbrt::parse(
+                &scene(
+                    "Shape \"plymesh\" \"string filename\" \"/dev/urandom\"",
+                    None,
+                ),
+                &dir.join("scene.pbrt"),
+            ),
+            "not a regular file",
+        ),
+        (
+            "a FIFO as a texture",
+            pbrt::parse(&scene(triangle, Some(&fifo)), &dir.join("scene.pbrt")),
+            "not a regular file",
+        ),
+        (
+            "a PNG declaring 12000 x 12000",
+            pbrt::parse(&scene(triangle, Some(&huge)), &dir.join("scene.pbrt")),
+            "12000 x 12000 texels",
+        ),
+    ];
+    for (what, loaded, says) in cases {
+        let message = match loaded {
+            Ok(_) => panic!("{what}: loaded"),
+            Err(e) => e.to_string(),
+        };
+        assert!(message.contains(says), "{what}: {message}");
+        let largest = ALLOCATOR.take();
+        assert!(
+            largest < 1 << 20,
+            "{what}: allocated {largest} bytes at once"
+        );
+        eprintln!("{what}: {message}");
+    }
+    assert!(ply::read(&fifo).is_err_and(|e| e.message.contains("not a regular file")));
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -51,7 +51,7 @@ pub struct Loaded {
 
 /// Loads a pbrt-v3 file; relative paths inside resolve from its directory.
 pub fn load(path: &Path) -> Result<Loaded, SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
+    let text = crate::input::read_text(path)?;
     parse(&text, path)
 }
 
@@ -513,7 +513,7 @@ impl Parser {
             "imagemap" => {
                 let file = p.string("filename").unwrap_or_default();
                 let path = self.dir.join(file);
-                let img = image::open(&path).map_err(|e| {
+                let img = crate::input::read_image(&path).map_err(|e| {
                     SceneError::at(
                         &self.path,
                         self.line(),

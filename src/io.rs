@@ -25,9 +25,25 @@ pub fn to_rgb32f(film: &Film) -> Rgb32FImage {
     })
 }
 
-/// Writes `film` as a linear OpenEXR file (f32 RGB).
-pub fn write_exr(film: &Film, path: impl AsRef<Path>) -> Result<(), ImageError> {
-    to_rgb32f(film).save_with_format(path, image::ImageFormat::OpenExr)
+/// Writes `film` as a linear OpenEXR file (f32 RGB). Values beyond f32's
+/// range (sums valid in f64) are written as its largest, and values that
+/// are not numbers as 0: returns how many, for the caller to say so (an EXR
+/// holds no infinite pixel).
+pub fn write_exr(film: &Film, path: impl AsRef<Path>) -> Result<usize, ImageError> {
+    let mut image = to_rgb32f(film);
+    let mut outside = 0;
+    for v in image.iter_mut() {
+        if !v.is_finite() {
+            outside += 1;
+            *v = if v.is_nan() {
+                0.0
+            } else {
+                f32::MAX.copysign(*v)
+            };
+        }
+    }
+    image.save_with_format(path, image::ImageFormat::OpenExr)?;
+    Ok(outside)
 }
 
 /// sRGB encoding of a linear value in [0, 1].
@@ -72,6 +88,22 @@ pub fn read_film(path: impl AsRef<Path>) -> Result<Film, ImageError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Values beyond f32's range and NaN are written finite, and counted.
+    #[test]
+    fn an_exr_holds_no_infinite_pixel() {
+        let mut film = Film::new(Resolution::new(2, 1), 3);
+        film.data_mut()
+            .copy_from_slice(&[1e39, -1e39, f64::NAN, 0.5, f64::INFINITY, 2.0]);
+        let dir = std::env::temp_dir().join(format!("strata-io-inf-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("f.exr");
+        assert_eq!(write_exr(&film, &path).unwrap(), 4);
+        let back = read_film(&path).unwrap();
+        let max = f64::from(f32::MAX);
+        assert_eq!(back.data(), &[max, -max, 0.0, 0.5, max, 2.0]);
+        std::fs::remove_dir_all(dir).unwrap();
+    }
 
     #[test]
     fn exr_round_trip_and_tone_map() {

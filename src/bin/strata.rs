@@ -72,9 +72,15 @@ enum Backend {
 macro_rules! say {
     ($($t:tt)*) => {{
         use std::io::Write as _;
-        let _ = writeln!(std::io::stdout(), $($t)*);
+        if writeln!(std::io::stdout(), $($t)*).is_err() {
+            STDOUT_FAILED.store(true, Ordering::Relaxed);
+        }
     }};
 }
+
+/// Set when a message to standard output could not be written (a full
+/// disk, a closed pipe): the command then says so and exits with 1.
+static STDOUT_FAILED: AtomicBool = AtomicBool::new(false);
 
 /// `eprintln!` that never panics.
 macro_rules! warn {
@@ -114,7 +120,7 @@ struct MergeArgs {
     #[arg(required = true)]
     parts: Vec<PathBuf>,
     /// Output path: writes OUT.png and OUT.exr.
-    #[arg(long, default_value = "out/render")]
+    #[arg(long, default_value = "out/render", value_parser = out_path)]
     out: PathBuf,
     /// Merge the parts given even if tasks are missing: the image of those
     /// tasks only (fewer paths), said so.
@@ -231,7 +237,7 @@ struct Args {
     exposure: f32,
     /// Output path: writes OUT.png and OUT.exr (a final .png, .exr or .ckpt
     /// is dropped first; other dots stay: `a.b` writes `a.b.png`).
-    #[arg(long, default_value = "out/render")]
+    #[arg(long, default_value = "out/render", value_parser = out_path)]
     out: PathBuf,
     /// Rewrite OUT.png and OUT.exr with the image so far every this many
     /// seconds (each file written whole, then renamed over the old one).
@@ -561,6 +567,18 @@ enum Saved {
 }
 
 fn main() -> ExitCode {
+    let code = command();
+    use std::io::Write as _;
+    let flushed = std::io::stdout().flush().is_ok();
+    if (STDOUT_FAILED.load(Ordering::Relaxed) || !flushed) && code == ExitCode::SUCCESS {
+        warn!("error: cannot write to standard output: its messages are lost");
+        return ExitCode::FAILURE;
+    }
+    code
+}
+
+/// The command line's command, run.
+fn command() -> ExitCode {
     let args = match Cli::parse().command {
         Command::Render(args) => *args,
         Command::Merge(merge) => {
@@ -680,6 +698,27 @@ fn own_file(path: &Path, task: Task) -> PathBuf {
 
 /// `out` with the extension `ext` appended (after dropping one of the
 /// command's own extensions, so `--out a.png` writes `a.png`, not `a.png.png`).
+/// `--out`: a path whose last part names the files, not a directory
+/// (`o/` wrote `o/.png`).
+fn out_path(text: &str) -> Result<PathBuf, String> {
+    let path = PathBuf::from(text);
+    let names_a_file = !text.ends_with(std::path::is_separator)
+        && path.file_name().is_some_and(|n| n != "." && n != "..")
+        && !path.is_dir();
+    if names_a_file {
+        Ok(path)
+    } else {
+        Err(format!(
+            "{text} is a directory: --out names the files (for example {}render)",
+            if text.ends_with(std::path::is_separator) {
+                text.to_string()
+            } else {
+                format!("{text}/")
+            }
+        ))
+    }
+}
+
 fn output(out: &Path, ext: &str) -> PathBuf {
     let own = ["png", "exr", "ckpt", "part"];
     let base = match out.extension().and_then(|e| e.to_str()) {
@@ -1220,7 +1259,16 @@ fn write(film: &Film, out: &Path, exposure: f32, preview: bool) -> AnyResult<()>
     let png = output(out, "png");
     let exr = output(out, "exr");
     replace(&png, |path| strata::io::write_png(film, exposure, path))?;
-    replace(&exr, |path| strata::io::write_exr(film, path))?;
+    let mut outside = 0;
+    replace(&exr, |path| {
+        strata::io::write_exr(film, path).map(|n| outside = n)
+    })?;
+    if outside > 0 && !preview {
+        warn!(
+            "warning: {outside} values of {} were beyond f32's range (written as its largest) or not numbers (written as 0)",
+            exr.display()
+        );
+    }
     if !preview {
         say!("wrote {} and {}", png.display(), exr.display());
     }

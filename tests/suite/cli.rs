@@ -184,19 +184,22 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
     let stderr = String::from_utf8_lossy(&folder.stderr);
     assert_eq!(folder.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("not a regular file"), "{stderr}");
-    // A full stdout loses the report, not the render (issue 36: it panicked).
+    // A full stdout loses the report, not the render (it panicked), and
+    // the command says so on stderr and exits with 1 (it exited with 0).
     let full = std::fs::File::create("/dev/full").unwrap();
     let args: Vec<&str> = tiny
         .iter()
         .copied()
         .chain(["--spp", "4", "--out", out_arg])
         .collect();
-    let status = Command::new(env!("CARGO_BIN_EXE_strata"))
+    let reported = Command::new(env!("CARGO_BIN_EXE_strata"))
         .args(&args)
         .stdout(full)
-        .status()
+        .output()
         .unwrap();
-    assert_eq!(status.code(), Some(0));
+    assert_eq!(reported.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&reported.stderr).contains("standard output"));
+    assert!(dir.join("name.with.dots.exr").is_file());
 
     let ok = run(&["--spp", "4", "--stack-size", "16", "--out", out_arg]);
     assert_eq!(ok.status.code(), Some(0));
@@ -548,6 +551,87 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
         assert_eq!(refused.status.code(), Some(1), "{extra:?}: {stderr}");
         assert!(stderr.contains(says), "{extra:?}: {stderr}");
         assert!(std::fs::read(part(0)).unwrap() == before, "{extra:?}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// What a user meets at the edges: messages to a full disk are an error
+/// (exit 1, said on stderr) rather than lost; `--out` naming a directory is
+/// refused (it wrote `o/.png`); a scene with a NUL byte in its world block
+/// is an error naming its line (it rendered black); an environment of 3e38
+/// gives an EXR of finite pixels (`strata::io::write_exr` writes values
+/// beyond f32's range as its largest, and the command says so).
+#[test]
+fn edges_a_user_meets_are_errors_or_warnings() {
+    let dir = std::env::temp_dir().join(format!("strata-cli-edges-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let full = Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(["settings", "pssmlt"])
+        .stdout(std::fs::File::create("/dev/full").unwrap())
+        .output()
+        .unwrap();
+    assert_eq!(full.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&full.stderr).contains("standard output"));
+
+    let directory = format!("{}/", dir.display());
+    let refused = strata(&["render", "procedural", "--spp", "1", "--out", &directory]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("is a directory"));
+
+    let scene = |world: &str| {
+        format!(
+            "LookAt 0 0 -1 0 0 0 0 1 0\nCamera \"perspective\" \"float fov\" [60]\n\
+             Film \"image\" \"integer xresolution\" [4] \"integer yresolution\" [4]\n\
+             WorldBegin\n{world}\nWorldEnd\n"
+        )
+    };
+    let damaged = dir.join("damaged.pbrt");
+    std::fs::write(
+        &damaged,
+        scene("LightSource \"infinite\" \"rgb L\" [1 1 1]\nSha\0pe \"sphere\""),
+    )
+    .unwrap();
+    let out = dir.join("o");
+    let nul = strata(&[
+        "render",
+        damaged.to_str().unwrap(),
+        "--spp",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&nul.stderr);
+    assert_eq!(nul.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(":6:") && stderr.contains("U+0000"),
+        "{stderr}"
+    );
+
+    let bright = dir.join("bright.pbrt");
+    std::fs::write(
+        &bright,
+        scene("LightSource \"infinite\" \"rgb L\" [3e38 3e38 3e38]"),
+    )
+    .unwrap();
+    for method in ["mc", "pssmlt", "stratified"] {
+        let written = strata(&[
+            "render",
+            bright.to_str().unwrap(),
+            "--method",
+            method,
+            "--spp",
+            "64",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&written.stderr);
+        assert_eq!(written.status.code(), Some(0), "{method}: {stderr}");
+        let film = strata::io::read_film(dir.join("o.exr")).unwrap();
+        let finite = film.data().iter().all(|v| v.is_finite());
+        assert!(
+            finite || stderr.contains("beyond f32's range"),
+            "{method}: {stderr}"
+        );
     }
     std::fs::remove_dir_all(&dir).ok();
 }

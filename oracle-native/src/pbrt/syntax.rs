@@ -16,6 +16,13 @@ pub(super) enum Token {
 }
 
 pub(super) fn tokenize(text: &str) -> Result<Vec<(Token, usize)>, (usize, String)> {
+    // A control character (a NUL from a damaged file) would end a word
+    // where none ends, and its directive be skipped as unknown.
+    if let Some(at) = text.find(|c: char| c.is_control() && !c.is_whitespace()) {
+        let line = 1 + text[..at].matches('\n').count();
+        let c = text[at..].chars().next().unwrap_or_default();
+        return Err((line, format!("a control character (U+{:04X})", c as u32)));
+    }
     let mut out = Vec::new();
     let mut chars = text.char_indices().peekable();
     let mut line = 1;

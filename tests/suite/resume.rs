@@ -290,6 +290,42 @@ fn damaged_checkpoints_and_checkpoints_of_another_render_are_typed_errors() {
     assert!(mismatch(&other_scene, &settings).starts_with("scene"));
 }
 
+/// ERPT's checkpoint with its normalization `b` (which its energy per step
+/// derives from) forged to 0, a denormal, a negative, NaN or infinity: each
+/// resume is a typed error. An energy of 0 started endless chains: the
+/// resume ran CPU-bound past a minute and did not hear Ctrl-C.
+#[test]
+fn a_forged_erpt_normalization_is_refused() {
+    let image = image();
+    let erpt = small_methods()
+        .into_iter()
+        .find(|m| m.name() == "erpt")
+        .unwrap();
+    let settings = settings(&erpt);
+    let stop = StopAt::new(2);
+    let out = render(&image, &MaxChannel, &settings, &stop).unwrap();
+    let b = out.stats.normalization.unwrap().to_le_bytes();
+    let original = stop.checkpoint().0.as_bytes().to_vec();
+    let at = original
+        .windows(8)
+        .position(|w| w == b)
+        .expect("b is saved");
+    for forged in [0.0, 5e-324, -1.0, f64::NAN, f64::INFINITY] {
+        let mut bytes = original.clone();
+        bytes[at..at + 8].copy_from_slice(&f64::to_le_bytes(forged));
+        let body = bytes.len() - 4;
+        let crc = crc32fast::hash(&bytes[..body]);
+        bytes[body..].copy_from_slice(&crc.to_le_bytes());
+        let checkpoint = Checkpoint::from_bytes(bytes).unwrap();
+        let resumed = resume(&image, &MaxChannel, &settings, &checkpoint, &Silent);
+        assert!(
+            matches!(resumed, Err(Error::CheckpointCorrupted { .. })),
+            "b = {forged}: {:?}",
+            resumed.map(|o| o.stats.samples)
+        );
+    }
+}
+
 /// Forged checkpoints (issue 36): values overwritten inside a real
 /// checkpoint of every method, with the checksum recomputed, as a hostile
 /// file would be. Each resume is a typed error or a render with a finite,
@@ -310,7 +346,7 @@ fn forged_checkpoints_resume_to_an_error_or_a_sound_film() {
             (settings, stop.checkpoint().0.as_bytes().to_vec())
         })
         .collect();
-    let hostile = [f64::NAN, f64::INFINITY, -1.0, -1e300, 1e308];
+    let hostile = [f64::NAN, f64::INFINITY, -1.0, -1e300, 1e308, 0.0, 5e-324];
     let edit = (0.0..1.0f64, 0..hostile.len());
     let case = (0..checkpoints.len(), prop::collection::vec(edit, 1..4));
     // A fixed stream of cases: CI sees the same ones every run.

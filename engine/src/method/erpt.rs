@@ -229,12 +229,12 @@ pub(crate) fn merge(
     let mut head = None;
     for part in parts.iter_mut() {
         // `Saved`'s fields in order.
-        let (_, bootstrap, b, normalization): (f64, Traced, f64, Normalization) = part.take()?;
+        let (bootstrap, b, normalization): (Traced, f64, Normalization) = part.take()?;
         films.push(part.skim_film(resolution, channels)?);
         type Rest = (Vec<u64>, Vec<Totals>, usize, u64, usize);
         let (v, t, starts, p, done): Rest = part.take()?;
         let blocks = starts.div_ceil(BLOCK);
-        if v.len() != visits.len() || starts < resolution.pixel_count() || done >= blocks {
+        if v.len() != visits.len() || starts != self::starts(resolution) || done >= blocks {
             return Err(part.damaged());
         }
         visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
@@ -259,7 +259,6 @@ pub(crate) fn merge(
 /// [`Passes`] that are not the job's, the bootstrap's counters and estimate).
 #[derive(Deserialize)]
 struct Saved {
-    energy: f64,
     bootstrap: Traced,
     /// The bootstrap's `b*`, and the samples behind it.
     b: f64,
@@ -427,11 +426,16 @@ where
         let resolution = job.resolution;
         let (saved, position) = match job.resumed::<Saved>()? {
             Some((position, saved)) => {
+                // What the state derives from (its energy from `b`, its
+                // starts from the film) checked, not trusted: a forged `b`
+                // of 0 or a denormal started endless chains.
                 let fits = saved.film.fits(resolution, O::Radiance::CHANNELS)
                     && saved.visits.len() == resolution.pixel_count()
                     && saved.totals.len() == TASKS
-                    && saved.starts >= resolution.pixel_count()
-                    && saved.done < saved.starts.div_ceil(BLOCK);
+                    && saved.starts == starts(resolution)
+                    && saved.done < saved.starts.div_ceil(BLOCK)
+                    && energy(settings, saved.b).is_normal()
+                    && saved.b > 0.0;
                 if !fits {
                     return Err(checkpoint::does_not_fit());
                 }
@@ -447,8 +451,6 @@ where
                     &job.bootstrap_halt(),
                 )?;
                 let saved = Saved {
-                    energy: bootstrap.normalization()
-                        / (settings.chain_length as f64 * settings.chains_per_path),
                     bootstrap: bootstrap.traced(),
                     b: bootstrap.normalization(),
                     normalization: bootstrap.estimate(0),
@@ -474,7 +476,7 @@ where
             settings,
             set_up: (saved.bootstrap, saved.b, saved.normalization),
             task: job.task,
-            energy: saved.energy,
+            energy: energy(settings, saved.b),
             work: saved
                 .totals
                 .iter()
@@ -498,7 +500,6 @@ where
         let (bootstrap, b, normalization) = self.set_up;
         checkpoint::append(
             &(
-                self.energy,
                 bootstrap,
                 b,
                 normalization,
@@ -667,6 +668,11 @@ where
             self.starts,
         ))
     }
+}
+
+/// The energy a chain step deposits, `e_d = b / (N r)`.
+fn energy(settings: &ErptSettings, b: f64) -> f64 {
+    b / (settings.chain_length as f64 * settings.chains_per_path)
 }
 
 /// The part of a pass of `starts` start paths its first `blocks` blocks

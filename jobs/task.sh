@@ -14,8 +14,9 @@
 # core), STRATA (the strata command; default: the one on PATH).
 #
 # A task that is run again finds its finished part and does nothing; one
-# that was stopped (preempted, requeued) continues from its checkpoint,
-# written every 10 minutes.
+# that was stopped (preempted, requeued; SIGTERM saves a checkpoint)
+# continues from its checkpoint, written every 10 minutes and removed once
+# the part is written.
 set -euo pipefail
 index=${1:?usage: jobs/task.sh INDEX COUNT}
 count=${2:?usage: jobs/task.sh INDEX COUNT}
@@ -29,6 +30,18 @@ mkdir -p "$dir"
 [ -f "$out.part" ] && exit 0
 resume=()
 [ -f "$out.ckpt" ] && resume=(--resume "$out.ckpt")
-exec "$strata" render "$scene" "${render_args[@]}" --threads "$threads" \
+"$strata" render "$scene" "${render_args[@]}" --threads "$threads" \
   --task-index "$index" --task-count "$count" --out "$out" \
-  --checkpoint-every 600 "${resume[@]}"
+  --checkpoint-every 600 "${resume[@]}" &
+# The render in the background so that a scheduler's SIGTERM reaches it
+# (and the checkpoint is saved) while this shell waits.
+render=$!
+trap 'kill -TERM "$render" 2>/dev/null' TERM INT
+status=0
+wait "$render" || status=$?
+# A stopped wait returns early: wait for the render to save and exit.
+while kill -0 "$render" 2>/dev/null; do wait "$render" || status=$?; done
+if [ "$status" = 0 ] && [ -f "$out.part" ]; then
+  rm -f "$out.ckpt"
+fi
+exit "$status"

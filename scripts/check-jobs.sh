@@ -22,7 +22,7 @@ else
 fi
 grep -q '^#SBATCH ' jobs/slurm-tasks.sbatch
 grep -q 'SLURM_ARRAY_TASK_ID' jobs/slurm-tasks.sbatch
-grep -q 'dependency=.afterok' jobs/slurm-submit.sh
+grep -q 'dependency=.afterany' jobs/slurm-submit.sh
 python3 - <<'PY'
 import re, sys, yaml
 

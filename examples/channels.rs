@@ -1,5 +1,5 @@
 //! Every channel and every region of every method against a long MC
-//! reference, over several seeds, at sample or time budgets (issue 35):
+//! reference, over several seeds, at sample or time budgets:
 //! what a user sees first in a preview, measured.
 //!
 //! For each method and budget it renders seeds `0..seeds` and reports:

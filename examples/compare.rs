@@ -286,7 +286,7 @@ fn reference_error(reference: &Film, check: &Film) -> ImageErrors {
 /// default, 0.8); replica exchange with 4 chains up to T = 100.
 fn compared(name: &str, args: &Args) -> AnyResult<Method> {
     let mutation = MutationParams {
-        small_step: SmallStep::Kelemen(Kelemen::SEED_001),
+        small_step: SmallStep::Kelemen(Kelemen::GRUSON_2020),
         large_step_probability: 0.3,
     };
     let mut method = Method::from_name(name).ok_or("unknown method")?;

@@ -1,4 +1,4 @@
-//! How the equi-energy sampler's finite-time bias falls (issue 18; Šik 2018
+//! How the equi-energy sampler's finite-time bias falls (Šik 2018
 //! sec. 5.3.6, Kou et al. 2006).
 //!
 //! Target: our own mixture, 4 separated Gaussians in [0,1]^2 with unequal

@@ -175,11 +175,11 @@ fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), 
             solver,
             ..Default::default()
         };
-        stratified.mutation.small_step = SmallStep::Kelemen(Kelemen::SEED_001);
+        stratified.mutation.small_step = SmallStep::Kelemen(Kelemen::GRUSON_2020);
         run(name, Method::Stratified(stratified))?;
     }
     let erpt = ErptSettings {
-        small_step: SmallStep::Kelemen(Kelemen::SEED_001),
+        small_step: SmallStep::Kelemen(Kelemen::GRUSON_2020),
         chain_length: 20,
         ..Default::default()
     };

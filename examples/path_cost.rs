@@ -1,5 +1,5 @@
-//! What a traced path costs with each method, against MC, on real scenes
-//! (issue 19), and where the difference goes.
+//! What a traced path costs with each method, against MC, on real scenes,
+//! and where the difference goes.
 //!
 //! For every method (MC, PSSMLT, stratified MCMC, ERPT, replica exchange
 //! with power tempering) on the pbrt Cornell box and on veach-ajar:

@@ -100,7 +100,7 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     // Seed 001 sec. 4's small steps (Kelemen 1/1024..1/32), as `compare`.
     let stratified = StratifiedSettings {
         mutation: MutationParams {
-            small_step: SmallStep::Kelemen(Kelemen::SEED_001),
+            small_step: SmallStep::Kelemen(Kelemen::GRUSON_2020),
             ..StratifiedSettings::default().mutation
         },
         ..Default::default()

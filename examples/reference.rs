@@ -109,11 +109,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     scene.camera.resolution = Resolution::new(args.size, args.size);
     let tracer = native_tracer(scene);
     let mut method = Method::from_name(&args.method).ok_or("unknown method")?;
-    let seed_001 = SmallStep::Kelemen(Kelemen::SEED_001);
+    let gruson_2020 = SmallStep::Kelemen(Kelemen::GRUSON_2020);
     match &mut method {
-        Method::Pssmlt(s) => s.mutation.small_step = seed_001,
-        Method::Stratified(s) => s.mutation.small_step = seed_001,
-        Method::Erpt(s) => s.small_step = seed_001,
+        Method::Pssmlt(s) => s.mutation.small_step = gruson_2020,
+        Method::Stratified(s) => s.mutation.small_step = gruson_2020,
+        Method::Erpt(s) => s.small_step = gruson_2020,
         _ => {}
     }
     let budgets: Vec<(String, Budget)> = match args.time {

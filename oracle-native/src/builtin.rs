@@ -475,7 +475,7 @@ pub fn caustic(resolution: Resolution) -> Scene {
 /// each reflects one channel only), a mirror sphere and a glass sphere under
 /// a large light: every channel lights a region of its own, and the glass
 /// adds caustics. A scene where an estimator that gets one channel's share
-/// wrong shows it (issue 35).
+/// wrong shows it.
 pub fn saturated(resolution: Resolution) -> Scene {
     let (mut s, [_, _, _, black]) = cornell_room(
         resolution,
@@ -511,8 +511,7 @@ pub fn saturated(resolution: Resolution) -> Scene {
 /// glossy (GGX α = 0.2, a rippled surface). Next-event estimation
 /// is blocked by the surface and camera paths reach the small light after
 /// two refractions only by chance: the scene where unidirectional sampling
-/// fails and bidirectional connections at the glossy surface do not
-/// (issue 37).
+/// fails and bidirectional connections at the glossy surface do not.
 pub fn pool(resolution: Resolution) -> Scene {
     let (mut s, [_, _, _, black]) = cornell_room(
         resolution,

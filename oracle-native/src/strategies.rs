@@ -46,7 +46,7 @@ pub(crate) fn joinable(s: usize, t: usize, longest: usize) -> bool {
 /// their inverse); they decide only where large steps propose. A uniform
 /// choice over `max_depth = 65` lengths (the real scenes') puts most large
 /// steps on long paths that carry nothing: `1/(n-1)²` measured best of
-/// uniform and `1/(n-1)^{1, 1.5, 2, 3}` (docs/RESULTS.md, issue 38).
+/// uniform and `1/(n-1)^{1, 1.5, 2, 3}` (docs/RESULTS.md).
 #[derive(Clone, Debug)]
 pub(crate) struct Lengths {
     /// `P(n <= k + 2)` at index `k`.
@@ -118,7 +118,7 @@ impl Lengths {
 /// a renderer can estimate it apart, `PathOracle::separates_emission`). The
 /// length is still chosen with its probability: those large steps are cheap
 /// (a camera ray), and proposing long paths more often instead made MMLT's
-/// heavy seeds heavier (docs/RESULTS.md, issue 38).
+/// heavy seeds heavier (docs/RESULTS.md).
 pub(crate) fn multiplexed_choice<S: Sampler + ?Sized>(
     sampler: &mut S,
     lengths: &Lengths,

@@ -1348,7 +1348,7 @@ mod tests {
     }
 
     /// Without flags the command renders each method with the engine's
-    /// defaults, those of `Method::from_name` and the C API (issue 36: the
+    /// defaults, those of `Method::from_name` and the C API (the
     /// tempering and the Kelemen step sizes differed).
     #[test]
     fn the_commands_defaults_are_the_engines() {
@@ -1359,7 +1359,7 @@ mod tests {
     }
 
     /// Random flags with hostile values parse to a method or an error,
-    /// never a panic, and an accepted method validates (issue 36: the CLI's
+    /// never a panic, and an accepted method validates (the CLI's
     /// own surface, fuzzed; a fixed stream of 300 cases).
     #[test]
     fn random_flags_give_a_valid_method_or_an_error() {

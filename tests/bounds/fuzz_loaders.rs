@@ -1,4 +1,4 @@
-//! Fuzzing the scene loaders on stable Rust (issue 20): proptest mutates the
+//! Fuzzing the scene loaders on stable Rust: proptest mutates the
 //! real scene files (byte flips, truncation, duplicated and deleted lines,
 //! numbers replaced by NaN, infinities, 0, -1, 1e30, fractions and huge
 //! counts), runs the loaders, and renders whatever loads at 8x6 with MC and

@@ -1,4 +1,4 @@
-//! Fuzzing the settings table (issue 36): proptest sets random settings of
+//! Fuzzing the settings table: proptest sets random settings of
 //! random methods by name, with values drawn from each row's range, its
 //! ends, just past them, and hostile numbers (NaN, infinities, fractions,
 //! 1e300), through the library ([`Method::set`]) and through the C API

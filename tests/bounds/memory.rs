@@ -1,4 +1,4 @@
-//! The memory bound (issue 36): every method's [`RenderMethod::memory_bound`],
+//! The memory bound: every method's [`RenderMethod::memory_bound`],
 //! the reservation a render makes before any work, within 1.5x of the peak
 //! of the bytes the render really holds (a tracking allocator, the
 //! reservation itself left out), on the Cornell box with unidirectional and

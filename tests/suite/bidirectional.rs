@@ -358,7 +358,7 @@ impl strata::engine::Sampler for Chosen {
 /// light; counted from the camera (joined at the slab, which no connection
 /// joins) it would carry none. MIS weights sum to one either way, so the
 /// unbiasedness checks cannot see this; it is what removed MMLT's heavy
-/// seeds on veach-ajar (docs/RESULTS.md, issue 38).
+/// seeds on veach-ajar (docs/RESULTS.md).
 #[test]
 fn multiplexed_strategies_join_past_the_glass_the_camera_looks_through() {
     let camera = Camera::look_at(

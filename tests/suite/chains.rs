@@ -19,7 +19,10 @@ use strata::engine::{
 fn kernels() -> Vec<(&'static str, SmallStep)> {
     vec![
         ("kelemen", SmallStep::Kelemen(Kelemen::DEFAULT)),
-        ("kelemen-seed001", SmallStep::Kelemen(Kelemen::SEED_001)),
+        (
+            "kelemen-gruson2020",
+            SmallStep::Kelemen(Kelemen::GRUSON_2020),
+        ),
         ("gaussian", SmallStep::Gaussian(Gaussian::DEFAULT)),
         ("adaptive", SmallStep::Adaptive(Adaptive::DEFAULT)),
         // A kernel of one's own, from outside the engine.

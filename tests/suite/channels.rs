@@ -2,7 +2,7 @@
 //! redistribute energy (stratified MCMC, ERPT, multi-stage MLT) agree with
 //! MC at preview budgets (16 and 64 paths per pixel, and 256 for stratified
 //! MCMC, whose reconstruction changes with the budget) on the saturated
-//! scene, where each wall reflects one channel only (issue 35): a bias in
+//! scene, where each wall reflects one channel only: a bias in
 //! one channel's share, which the image's mean luminance hides, fails here.
 //!
 //! Each method and MC render the scene with `SEEDS` seeds per budget; per

@@ -127,7 +127,7 @@ fn bidirectional_paths_render_from_the_command_line() {
 
 /// Budgets that hold no work, exposures that would write a black or white
 /// image and NaN are refused with exit code 1 or 2 and a message; an output
-/// name with dots keeps them (issue 36).
+/// name with dots keeps them.
 #[test]
 fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
     let dir = std::env::temp_dir().join(format!("strata-cli-dots-{}", std::process::id()));
@@ -156,7 +156,7 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
         assert!(stderr.contains(says), "{extra:?}: {stderr}");
     }
     // An output directory that cannot be made: an error naming it, before
-    // any work (issue 36: it came after the whole render).
+    // any work (it came after the whole render).
     let refused = run(&["--spp", "4", "--out", "/proc/strata-no-such-dir/r"]);
     let stderr = String::from_utf8_lossy(&refused.stderr);
     assert_eq!(refused.status.code(), Some(1), "{stderr}");
@@ -215,7 +215,7 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
 }
 
 /// `--resume` with flags that differ from the checkpoint's is an error
-/// naming them (issue 36: they were silently replaced).
+/// naming them (they were silently replaced).
 #[test]
 fn resume_with_other_flags_is_an_error_naming_them() {
     let dir = std::env::temp_dir().join(format!("strata-cli-flags-{}", std::process::id()));
@@ -244,7 +244,7 @@ fn resume_with_other_flags_is_an_error_naming_them() {
     let stderr = String::from_utf8_lossy(&other.stderr);
     assert_eq!(other.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("chains=256 (not 8)"), "{stderr}");
-    // A device is no checkpoint (issue 36: /dev/zero was read for 4 GB).
+    // A device is no checkpoint (/dev/zero was read for 4 GB).
     let zero = run(&["--spp", "8", "--resume", "/dev/zero", "--out", out_arg]);
     let stderr = String::from_utf8_lossy(&zero.stderr);
     assert_eq!(zero.status.code(), Some(1), "{stderr}");
@@ -384,7 +384,7 @@ fn ctrl_c_saves_a_checkpoint_and_resume_finishes_the_same_image() {
 
 /// A time budget shorter than one unit of the method's work cannot be kept
 /// (the unit runs whatever the budget): the command says so, and that the
-/// reconstruction was cut, instead of overrunning silently (issue 36).
+/// reconstruction was cut, instead of overrunning silently.
 #[test]
 fn a_time_budget_below_one_unit_of_work_is_reported() {
     let dir = std::env::temp_dir().join(format!("strata-cli-overrun-{}", std::process::id()));

@@ -104,7 +104,7 @@ fn nan_infinite_and_negative_radiance_is_excluded_and_counted() {
     assert!((right - 0.75).abs() < 0.2, "right half blue {right}");
 }
 
-/// Radiance near f32's range is radiance: every method keeps it (issue 36:
+/// Radiance near f32's range is radiance: every method keeps it (before,
 /// multi-stage MLT's squared deviation overflowed and dropped every path).
 #[test]
 fn huge_finite_radiance_is_kept_by_every_method() {
@@ -251,7 +251,7 @@ fn counting(traces: &AtomicU32) -> impl PathOracle<Radiance = f32> + '_ {
     )
 }
 
-/// A sample budget below one unit of a method's work (issue 36: it was
+/// A sample budget below one unit of a method's work (it was
 /// silently overrun) is refused before any path, naming the smallest
 /// budget; the smallest itself renders, at most one unit over.
 #[test]
@@ -382,7 +382,7 @@ fn invalid_settings_are_typed_errors_before_any_work() {
     let mut multistage = MultiStageSettings::default();
     multistage.pssmlt.chains = 0;
     refuse(Method::MultiStage(multistage), "chains");
-    // A budget without work (issue 36: it rendered one round), every method.
+    // A budget without work (it rendered one round), every method.
     for method in Method::all() {
         for budget in [Budget::Samples(0), Budget::Time(Duration::ZERO)] {
             let empty = Settings {
@@ -397,7 +397,7 @@ fn invalid_settings_are_typed_errors_before_any_work() {
     assert_eq!(traces.load(Ordering::Relaxed), 0, "work before validation");
     assert!(Kelemen::new(1.0 / 64.0, 1.0 / 1024.0).is_err());
     assert!(Kelemen::new(0.01, 0.01).is_err());
-    let _ = SmallStep::Kelemen(Kelemen::SEED_001);
+    let _ = SmallStep::Kelemen(Kelemen::GRUSON_2020);
 }
 
 fn black(resolution: Resolution) -> impl PathOracle<Radiance = Rgb> {
@@ -629,7 +629,7 @@ impl Observer for SetUpLog {
     }
 }
 
-/// Set-up work reports its progress before the first round (issue 36):
+/// Set-up work reports its progress before the first round:
 /// PSSMLT's bootstrap per block of 2^16 candidates up to all of them,
 /// replica exchange's ladder tuning per round of sweeps, stratified MCMC's
 /// bootstrap and initialization rounds, multi-stage MLT's stages'

@@ -31,7 +31,7 @@ fn pssmlt_and_mc_match_the_procedural_image() {
     let mutations = [
         MutationParams::default(),
         MutationParams {
-            small_step: SmallStep::Kelemen(Kelemen::SEED_001),
+            small_step: SmallStep::Kelemen(Kelemen::GRUSON_2020),
             large_step_probability: 0.1,
         },
     ];

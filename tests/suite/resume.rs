@@ -326,7 +326,7 @@ fn a_forged_erpt_normalization_is_refused() {
     }
 }
 
-/// Forged checkpoints (issue 36): values overwritten inside a real
+/// Forged checkpoints: values overwritten inside a real
 /// checkpoint of every method, with the checksum recomputed, as a hostile
 /// file would be. Each resume is a typed error or a render with a finite,
 /// non-negative film (the issue found 20 of 600 forgeries resuming to NaN,

@@ -684,7 +684,7 @@ fn smooth(x: f64, y: f64) -> f64 {
     0.6 + 0.3 * (x / 7.0).sin() * (y / 5.0).cos() + 0.1 * ((x + y) / 11.0).sin()
 }
 
-/// No straight seams (issue 35): along every row and every column the
+/// No straight seams: along every row and every column the
 /// error's mean changes from one row (column) to the next only within its
 /// noise. A defect that followed the work's structure (the solver's strips
 /// of rows, the exchange's alternating pairs, rows run in parallel) would

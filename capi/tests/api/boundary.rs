@@ -59,7 +59,7 @@ fn bad_arguments_are_status_codes_with_a_message() {
         strata_settings_set_samples_per_pixel(settings, 0),
         StrataStatus::InvalidArgument
     );
-    // NaN, beyond a duration's range (issue 36: 1e20 was accepted, then
+    // NaN, beyond a duration's range (1e20 was accepted, then
     // panicked in the render), and below a nanosecond.
     for seconds in [f64::NAN, 1e20, 1e-300, 0.0, -1.0] {
         assert_eq!(
@@ -482,7 +482,7 @@ fn methods_take_their_choices_by_name_and_refuse_unknown_ones() {
 }
 
 /// Counts, from inside `trace`, the answers of `strata_sampler_start_stream`:
-/// streams 0-6 are served, 7 and 255 refused (issue 36: they were ignored
+/// streams 0-6 are served, 7 and 255 refused (they were ignored
 /// without a word).
 static SERVED: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
 static REFUSED: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
@@ -548,7 +548,7 @@ extern "C" fn deep(_: *mut c_void, _: f32, _: f32, s: *mut StrataSampler, _: f32
 }
 
 /// 4000 frames of 1 KiB (~4 MB, twice a default Rust worker's stack) fit
-/// the API's default worker stack (issue 36: such tracers died with
+/// the API's default worker stack (such tracers died with
 /// SIGSEGV and no message).
 #[test]
 fn recursive_tracers_fit_the_default_stack() {

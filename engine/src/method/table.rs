@@ -4,7 +4,7 @@
 //! [`RenderMethod::validate`](super::RenderMethod::validate) checks every value against it, so a settings value
 //! built field by field is bounded like one set by name; the `strata`
 //! command and the C API (`strata_settings_set`, `_set_choice`, `_name`)
-//! take their settings, defaults and bounds from here (issue 36).
+//! take their settings, defaults and bounds from here.
 //!
 //! The ranges are what a render on this machine class can carry: a value
 //! inside them renders (memory is checked before any work, see
@@ -761,15 +761,18 @@ mod tests {
     }
 
     /// The gruson2020 preset gives the paper's step sizes (the constant
-    /// `Kelemen::SEED_001`) and leaves other methods alone.
+    /// `Kelemen::GRUSON_2020`) and leaves other methods alone.
     #[test]
-    fn the_seed_001_preset_is_the_papers() {
+    fn the_gruson2020_preset_is_the_papers() {
         let mut stratified = Method::from_name("stratified").unwrap();
         stratified.apply_preset("gruson2020").unwrap();
         let Method::Stratified(s) = &stratified else {
             unreachable!()
         };
-        assert_eq!(s.mutation.small_step, SmallStep::Kelemen(Kelemen::SEED_001));
+        assert_eq!(
+            s.mutation.small_step,
+            SmallStep::Kelemen(Kelemen::GRUSON_2020)
+        );
         assert_eq!(s.mutation.large_step_probability, 0.3);
         assert!(!s.cross_validate_alpha);
         assert_eq!(s.emission_rays, 0);

@@ -35,7 +35,7 @@ impl Kelemen {
         log_ratio: 4.0 * core::f64::consts::LN_2,
     };
     /// The sizes of Gruson et al. 2020 (sec. 4, "minimum 1/1024, maximum 1/32").
-    pub const SEED_001: Kelemen = Kelemen {
+    pub const GRUSON_2020: Kelemen = Kelemen {
         s1: 1.0 / 1024.0,
         s2: 1.0 / 32.0,
         log_ratio: 5.0 * core::f64::consts::LN_2,
@@ -785,7 +785,7 @@ mod tests {
         let mut rng = stream(12, Domain::User, 0);
         for k in [
             Kelemen::DEFAULT,
-            Kelemen::SEED_001,
+            Kelemen::GRUSON_2020,
             Kelemen::new(1e-7, 0.5).unwrap(),
         ] {
             for _ in 0..2000 {

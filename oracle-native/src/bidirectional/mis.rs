@@ -128,7 +128,7 @@ impl Subpaths {
     /// sample, it carries some on veach-ajar it samples a million times
     /// worse (one render's relMSE 81), and from 1/100 of the best density
     /// on, veach-ajar at 30 s has twice the relMSE (bright pixels).
-    /// `docs/RESULTS.md`, issue 38.
+    /// `docs/RESULTS.md`.
     fn specular_weight(&self, (s, t): (usize, usize), reverse: &Reverse) -> f32 {
         let camera = Ratios::walk(
             &self.camera[..t],

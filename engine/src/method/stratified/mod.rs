@@ -268,7 +268,7 @@ pub struct StratifiedSettings {
     pub anchor_total: bool,
     /// Plain MC paths per pixel and sweep traced for the regularizer alone,
     /// one tile at a time at its centre pixel (0 by default: Gruson et al.'s (2020) large
-    /// steps only). Ours, issue 18: the regularizer is the reconstruction's
+    /// steps only). Ours: the regularizer is the reconstruction's
     /// one absolute anchor, and its noise is what limits the image on
     /// veach-ajar (docs/RESULTS.md).
     pub regularizer_paths: u32,

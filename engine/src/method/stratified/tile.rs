@@ -582,7 +582,7 @@ mod tests {
     use crate::oracle::Rgb;
 
     /// A film holds a chain per pixel, so these sizes are most of
-    /// stratified MCMC's bytes a pixel (issue 40: at most 400 in all;
+    /// stratified MCMC's bytes a pixel (at most 400 in all;
     /// docs/BENCHMARKS.md).
     #[test]
     fn a_chain_at_rest_stays_small() {

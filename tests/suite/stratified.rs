@@ -837,3 +837,32 @@ fn local_exchanges_wait_for_exchange_after_sweeps() {
     let later = counters(2, 64);
     assert!(later.sweeps > 2 && later.exchange_attempts > 0);
 }
+
+/// Stratified MCMC keeps a short budget on a small film: at 8 to 32 paths a
+/// pixel on 16x16, the paths it traces (initialization included) are at
+/// most the budget and half a sweep (its sweeps are the whole number
+/// nearest the budget). The initialization's global chains ran rounds of
+/// 64 steps whatever its share: 7 097 paths for a budget of 2 048.
+#[test]
+fn a_short_budget_on_a_small_film_is_kept() {
+    let image = ProceduralImage::showcase(Resolution::new(16, 16));
+    for spp in [8, 16, 32] {
+        let budget = Budget::samples_per_pixel(spp, image.resolution);
+        let settings = Settings {
+            seed: 1,
+            budget,
+            method: Method::Stratified(StratifiedSettings::default()),
+        };
+        let out = render(&image, &MaxChannel, &settings, &Silent).unwrap();
+        let Budget::Samples(paths) = budget else {
+            unreachable!()
+        };
+        let counters = extras(&out).counters;
+        let half_a_sweep = counters.tile_samples / counters.sweeps.max(1) / 2;
+        assert!(
+            out.stats.samples <= paths + half_a_sweep,
+            "{spp} spp: {} paths for a budget of {paths}",
+            out.stats.samples
+        );
+    }
+}

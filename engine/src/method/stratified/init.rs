@@ -152,15 +152,24 @@ where
         .collect();
     let mut initialized = vec![false; n];
     let mut count = 0usize;
-    const STEPS_PER_ROUND: usize = 64;
-    while count < wanted
-        && target.traces.load(Ordering::Relaxed) < max_traces
-        && !clock.is_some_and(Clock::expired)
-        && !report(SetUpStage::Initialization, count as u64, wanted as u64)
-    {
+    const STEPS_PER_ROUND: u64 = 64;
+    // A step of every global chain traces its state in every tile pixel: a
+    // round holds only the steps the initialization's share still pays for
+    // (rounds of 64 traced 7 000 paths for a 2 048-path render at 16x16).
+    let step_cost = global.len() as u64 * offsets;
+    loop {
+        let left = max_traces.saturating_sub(target.traces.load(Ordering::Relaxed));
+        let steps = (left / step_cost.max(1)).min(STEPS_PER_ROUND);
+        if count >= wanted
+            || steps == 0
+            || clock.is_some_and(Clock::expired)
+            || report(SetUpStage::Initialization, count as u64, wanted as u64)
+        {
+            break;
+        }
         let run = |chain: &mut PathChain<f32>| -> Vec<Visit> {
             let mut visits: Vec<Visit> = Vec::new();
-            for _ in 0..STEPS_PER_ROUND {
+            for _ in 0..steps {
                 chain.step(&target, &MaxChannel, |_, _| {});
                 let state = chain.current();
                 let tile = ctx.tiles.resolution().pixel_index(state.film);

@@ -297,7 +297,7 @@ fn edits_change_the_files() {
 /// large allocation: a FIFO as the scene, a PLY mesh or a texture (its open
 /// blocked for ever), `/dev/urandom` as the scene or a mesh (read until
 /// memory ran out), and a 100-byte PNG whose header declares 12000 x 12000
-/// texels (3.4 GB decoded).
+/// texels (3.4 GB decoded): no allocation of 64 MiB or more.
 #[test]
 fn inputs_that_are_not_files_are_refused() {
     let _alone = crate::allocations::alone();
@@ -399,8 +399,10 @@ fn inputs_that_are_not_files_are_refused() {
         };
         assert!(message.contains(says), "{what}: {message}");
         let largest = ALLOCATOR.take();
+        // The process's largest (the harness's buffers among them): far
+        // below the gigabytes these inputs took.
         assert!(
-            largest < 1 << 20,
+            largest < 1 << 26,
             "{what}: allocated {largest} bytes at once"
         );
         eprintln!("{what}: {message}");

@@ -11,7 +11,7 @@ use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Film, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::native::builtin::{by_name, cuboid, quad, sphere};
 use strata::native::material::{Material, Texture};
-use strata::native::{Camera, Mesh, PathSampler, Scene, native_tracer};
+use strata::native::{BvhIntersector, Camera, Mesh, PathSampler, PathTracer, Scene, native_tracer};
 
 use crate::common;
 use crate::threads;
@@ -475,16 +475,16 @@ fn bidirectional_and_unidirectional_images_agree() {
     }
 }
 
-/// The furnace: inside a closed box whose walls all emit `Le` and reflect
-/// diffusely with albedo `a`, the radiance everywhere is `Le Σ a^k` over
-/// the path lengths the tracer allows (`k <= max_depth`; `Le / (1 - a)`
-/// without a limit). Every method renders it on bidirectional paths (with
-/// and without light tracing) and on multiplexed ones, whose light subpaths
-/// start on every wall and splat everywhere.
-#[test]
-fn every_method_renders_the_furnace_on_bidirectional_and_multiplexed_paths() {
-    let (le, albedo, max_depth) = (1.0f32, 0.5f32, 4);
-    let resolution = Resolution::new(8, 8);
+/// A closed box whose walls all emit `le` and reflect diffusely with albedo
+/// `albedo`, seen from its centre, with paths of at most `max_depth`
+/// bounces: its tracer and the exact radiance everywhere, `le Σ albedo^k`
+/// over `k <= max_depth`.
+fn furnace(
+    le: f32,
+    albedo: f32,
+    max_depth: u32,
+    resolution: Resolution,
+) -> (PathTracer<BvhIntersector>, f64) {
     let camera = Camera::look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 70.0, resolution);
     let mut scene = Scene::new(camera);
     let wall = scene.add_material(Material::Diffuse {
@@ -494,10 +494,22 @@ fn every_method_renders_the_furnace_on_bidirectional_and_multiplexed_paths() {
     room.indices.iter_mut().for_each(|t| t.swap(1, 2));
     scene.add_mesh(&room, wall, Some(Vec3::splat(le)));
     scene.max_depth = max_depth;
-    let mut tracer = native_tracer(scene);
     let exact = (0..=max_depth)
-        .map(|k| (le * albedo.powi(k as i32)) as f64)
-        .sum::<f64>();
+        .map(|k| f64::from(le) * f64::from(albedo).powi(k as i32))
+        .sum();
+    (native_tracer(scene), exact)
+}
+
+/// The furnace: inside a closed box whose walls all emit `Le` and reflect
+/// diffusely with albedo `a`, the radiance everywhere is `Le Σ a^k` over
+/// the path lengths the tracer allows (`k <= max_depth`; `Le / (1 - a)`
+/// without a limit). Every method renders it on bidirectional paths (with
+/// and without light tracing) and on multiplexed ones, whose light subpaths
+/// start on every wall and splat everywhere.
+#[test]
+fn every_method_renders_the_furnace_on_bidirectional_and_multiplexed_paths() {
+    let resolution = Resolution::new(8, 8);
+    let (mut tracer, exact) = furnace(1.0, 0.5, 4, resolution);
     let reference =
         Film::from_data(resolution, 3, vec![exact; resolution.pixel_count() * 3]).unwrap();
     for sampler in [
@@ -534,21 +546,7 @@ fn every_method_renders_the_furnace_on_bidirectional_and_multiplexed_paths() {
 /// to 2e-4 in oracle-native's `mis_weights_are_the_power_heuristic_of_the_path_itself`.
 #[test]
 fn a_bright_furnace_keeps_its_energy_on_every_path_sampler() {
-    let (le, albedo, max_depth) = (0.1f32, 0.95f32, 40);
-    let resolution = Resolution::new(4, 4);
-    let camera = Camera::look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 70.0, resolution);
-    let mut scene = Scene::new(camera);
-    let wall = scene.add_material(Material::Diffuse {
-        reflectance: Texture::Constant(Vec3::splat(albedo)),
-    });
-    let mut room = cuboid(Vec3::splat(-1.0), Vec3::splat(1.0));
-    room.indices.iter_mut().for_each(|t| t.swap(1, 2));
-    scene.add_mesh(&room, wall, Some(Vec3::splat(le)));
-    scene.max_depth = max_depth;
-    let mut tracer = native_tracer(scene);
-    let exact: f64 = (0..=max_depth)
-        .map(|k| f64::from(le) * f64::from(albedo).powi(k as i32))
-        .sum();
+    let (mut tracer, exact) = furnace(0.1, 0.95, 40, Resolution::new(4, 4));
     // Paths a pixel per seed: a bidirectional path here joins ~20 light
     // vertices to ~20 camera vertices.
     for (sampler, spp) in [

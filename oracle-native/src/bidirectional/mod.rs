@@ -67,151 +67,14 @@ use strata_engine::{FilmPoint, PathFlags, Rgb, Sampler, SplatSink};
 
 use crate::geometry::{Frame, Intersector, Ray, cosine_hemisphere, uniform_triangle};
 use crate::material::Bsdf;
-use crate::scene::{NO_LIGHT, Projection, Scene};
+use crate::scene::{NO_LIGHT, Projection};
 use crate::strategies::{Strategies, joinable, multiplexed_choice};
 use crate::tracer::{DIRECT_EMITTER, PathTracer, ROULETTE_DEPTH, SPECULAR_PATH, offset};
 
 mod mis;
+mod vertex;
 use mis::{Reverse, light_tracing_factor};
-
-/// What a subpath vertex is.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Kind {
-    /// The pinhole.
-    Camera,
-    /// The light subpath's point on light `index`.
-    Light(u32),
-    /// A scattering point.
-    Surface,
-}
-
-/// A subpath vertex (pbrt's `Vertex`).
-#[derive(Clone, Copy, Debug)]
-struct Vertex {
-    kind: Kind,
-    p: Vec3,
-    /// Geometric normal: a triangle's front, a light's emitting side.
-    ng: Vec3,
-    /// Shading frame (surfaces; its normal on `ng`'s side).
-    frame: Frame,
-    bsdf: Bsdf,
-    /// The light of the triangle (surfaces on an emitter), or `NO_LIGHT`.
-    emitter: u32,
-    /// The subpath's throughput up to this vertex.
-    beta: Vec3,
-    /// Area density of this vertex by its own subpath's sampling.
-    pdf_fwd: f32,
-    /// Area density of this vertex by the other subpath's sampling.
-    pdf_rev: f32,
-    /// Sampled by a specular lobe: cannot be joined.
-    delta: bool,
-    /// Unit direction to the subpath's previous vertex (zero at its start).
-    to_prev: Vec3,
-    /// What turns a solid-angle density at this vertex toward the previous
-    /// one into an area density there: its cosine over the squared distance
-    /// (the pinhole's cosine counts as 1).
-    prev_area: f32,
-}
-
-impl Vertex {
-    fn new(kind: Kind, p: Vec3, ng: Vec3, beta: Vec3, pdf_fwd: f32) -> Self {
-        Self {
-            kind,
-            p,
-            ng,
-            frame: Frame::new(ng),
-            bsdf: Bsdf::Diffuse(Vec3::ZERO),
-            emitter: NO_LIGHT,
-            beta,
-            pdf_fwd,
-            pdf_rev: 0.0,
-            delta: false,
-            to_prev: Vec3::ZERO,
-            prev_area: 0.0,
-        }
-    }
-
-    /// The light this vertex emits as (a light vertex, or a surface on an
-    /// emitter).
-    fn light(&self) -> u32 {
-        match self.kind {
-            Kind::Light(index) => index,
-            _ => self.emitter,
-        }
-    }
-
-    /// Links this vertex to `prev`, the vertex its subpath sampled it from:
-    /// its forward area density (pbrt's `ConvertDensity`), the direction
-    /// back and [`prev_area`](Self::prev_area). Returns the solid-angle
-    /// density with which `prev` samples the vertex before it when coming
-    /// from this one (its reverse density, before conversion).
-    ///
-    /// Every density comes from the vertices' positions, not from the
-    /// sampled direction: the ray left an offset point, and a density taken
-    /// from its direction gives each strategy of a path a slightly different
-    /// geometry. Their MIS weights then summed to less than one, about
-    /// 0.05 % a vertex (a closed furnace of albedo 0.9 came out 0.5 % dark
-    /// at a maximum depth of 30).
-    fn link(&mut self, prev: &Vertex, camera: &Projection) -> f32 {
-        let w = self.p - prev.p;
-        let d2 = w.length_squared();
-        if d2 == 0.0 {
-            return 0.0;
-        }
-        let w = w / d2.sqrt();
-        let (forward, reverse) = prev.densities(w, self.p, camera);
-        self.pdf_fwd = forward * self.ng.dot(w).abs() / d2;
-        self.to_prev = -w;
-        let cos_prev = if prev.kind == Kind::Camera {
-            1.0
-        } else {
-            prev.ng.dot(w).abs()
-        };
-        self.prev_area = cos_prev / d2;
-        reverse
-    }
-
-    /// The solid-angle densities with which this vertex samples the unit
-    /// direction `w` (toward `next`), coming from the vertex before it, and
-    /// the direction to the vertex before it, coming from `w`: the pinhole's
-    /// ray density, a light's cosine emission, a surface's BSDF (0 at a
-    /// specular vertex, whose densities do not count).
-    fn densities(&self, w: Vec3, next: Vec3, camera: &Projection) -> (f32, f32) {
-        match self.kind {
-            Kind::Camera => (camera.direction_pdf(next), 0.0),
-            Kind::Light(_) => (self.ng.dot(w).max(0.0) * FRAC_1_PI, 0.0),
-            Kind::Surface if self.delta => (0.0, 0.0),
-            Kind::Surface => {
-                let wo = self.frame.to_local(self.to_prev);
-                let wi = self.frame.to_local(w);
-                (self.bsdf.pdf(wo, wi), self.bsdf.pdf(wi, wo))
-            }
-        }
-    }
-
-    /// Area density of this emitter point as the start of a light subpath.
-    fn pdf_light_origin(&self, scene: &Scene) -> f32 {
-        let light = self.light();
-        scene.light_probability(light) / scene.lights[light as usize].area
-    }
-
-    /// Radiance emitted from this vertex along `w` (front side only).
-    fn emitted(&self, scene: &Scene, w: Vec3) -> Vec3 {
-        let light = self.light();
-        if light == NO_LIGHT || self.ng.dot(w) <= 0.0 {
-            return Vec3::ZERO;
-        }
-        scene.lights[light as usize].radiance
-    }
-
-    /// Whether a connection may join this vertex (at temperature's BSDF).
-    fn connectible(&self) -> bool {
-        match self.kind {
-            Kind::Surface => !self.bsdf.is_specular(),
-            _ => true,
-        }
-    }
-}
+use vertex::{Kind, Vertex};
 
 /// Which way a subpath carries light.
 #[derive(Clone, Copy, PartialEq)]
@@ -829,7 +692,7 @@ mod tests {
     use crate::builtin::cuboid;
     use crate::material::{Material, Texture};
     use crate::native_tracer;
-    use crate::scene::Camera;
+    use crate::scene::{Camera, Scene};
     use strata_engine::Resolution;
 
     /// Xorshift numbers in `[0, 1)`.

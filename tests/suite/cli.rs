@@ -627,9 +627,8 @@ fn edges_a_user_meets_are_errors_or_warnings() {
         let stderr = String::from_utf8_lossy(&written.stderr);
         assert_eq!(written.status.code(), Some(0), "{method}: {stderr}");
         let film = strata::io::read_film(dir.join("o.exr")).unwrap();
-        let finite = film.data().iter().all(|v| v.is_finite());
         assert!(
-            finite || stderr.contains("beyond f32's range"),
+            film.data().iter().all(|v| v.is_finite()),
             "{method}: {stderr}"
         );
     }

@@ -16,9 +16,9 @@ use crate::common;
 use crate::threads::small_methods;
 
 /// Stops a render once it has run `rounds` rounds.
-struct StopAfter {
-    rounds: u64,
-    done: AtomicU64,
+pub struct StopAfter {
+    pub rounds: u64,
+    pub done: AtomicU64,
 }
 
 impl Observer for StopAfter {

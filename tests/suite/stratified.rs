@@ -19,14 +19,13 @@ use strata::engine::reconstruct::LogSettings;
 use strata::engine::target::MaxChannel;
 use strata::engine::tiles::{TileShape, Tiles};
 use strata::engine::{
-    Budget, Film, FilmPoint, FnOracle, Method, Observer, Output, PathOracle, PathSample, Progress,
-    Resolution, Rgb, Sampler, Settings, Silent, SplatSink, Temperature, render,
+    Budget, Film, FilmPoint, FnOracle, Method, Output, PathOracle, PathSample, Resolution, Rgb,
+    Sampler, Settings, Silent, SplatSink, Temperature, render,
 };
 use strata::native::{builtin, native_tracer};
 
-use std::sync::atomic::{AtomicU32, Ordering};
-
 use crate::common;
+use crate::stopped::StopAfter;
 use crate::threads;
 use common::{RUNS, binned, check, renders, run};
 use threads::{bits, in_pool};
@@ -240,21 +239,6 @@ fn erpt_matches_the_procedural_image() {
     check("erpt", &runs, &image.reference());
 }
 
-/// Stops a render after `rounds` rounds.
-struct StopAfter {
-    rounds: u32,
-    seen: AtomicU32,
-}
-
-impl Observer for StopAfter {
-    fn progress(&self, _: &Progress) {
-        self.seen.fetch_add(1, Ordering::Relaxed);
-    }
-    fn should_stop(&self) -> bool {
-        self.seen.load(Ordering::Relaxed) >= self.rounds
-    }
-}
-
 /// An ERPT pass stopped after 2 of its 3 blocks (a time budget or a cancel
 /// inside a pass) is still an unbiased image: the blocks run in a random
 /// rotation, so each is in the 2 with probability 2/3, and the film is
@@ -279,7 +263,7 @@ fn erpt_passes_cut_short_stay_unbiased() {
             };
             let two_blocks = StopAfter {
                 rounds: 2,
-                seen: AtomicU32::new(0),
+                done: std::sync::atomic::AtomicU64::new(0),
             };
             let out = render(&image, &MaxChannel, &settings, &two_blocks).unwrap();
             assert!(out.cancelled);

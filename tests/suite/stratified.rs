@@ -756,37 +756,6 @@ fn a_sample_budget_is_spent() {
     }
 }
 
-/// A time budget is spent too: the sweeps stop where the reconstruction's
-/// timed estimate still fits, and the rest after the last whole sweep is
-/// traced as regularizer paths (at least one a tile whenever it is a fifth
-/// of a sweep or more: here a sweep traces 5 paths a tile). Of six renders
-/// at least one traces such a rest (each misses with probability ~0.2).
-/// Before, the rest was lost and this test failed (no render traced any).
-#[test]
-fn a_time_budget_is_spent_to_its_end() {
-    let image = ProceduralImage::showcase(Resolution::new(64, 48));
-    let budget = std::time::Duration::from_millis(250);
-    let mut rests = 0;
-    for seed in 0..6 {
-        let settings = Settings {
-            seed,
-            budget: Budget::Time(budget),
-            method: Method::Stratified(StratifiedSettings::default()),
-        };
-        let start = std::time::Instant::now();
-        let out = render(&image, &MaxChannel, &settings, &Silent).unwrap();
-        let elapsed = start.elapsed();
-        assert!(elapsed < crate::common::HANG);
-        let counters = extras(&out).counters;
-        eprintln!(
-            "{elapsed:?}: {} sweeps, {} rest paths",
-            counters.sweeps, counters.remainder_samples
-        );
-        rests += (counters.remainder_samples > 0) as u32;
-    }
-    assert!(rests > 0, "no render traced the rest of its time");
-}
-
 /// Local exchanges begin after `exchange_after` sweeps: none before, every
 /// sweep's after (`exchange_every` 1), each costing paths; and a sample
 /// budget buys its sweeps at that cost (more sweeps than if every sweep

@@ -310,11 +310,10 @@ pub(crate) fn drive<W: Rounds>(
             // As many units as still fit, up to a round's (a longer round
             // would end past the clock; a shorter one uses the time a whole
             // round would have wasted).
-            let left = clock.seconds_left();
             let after = |u: u64| finishing(done.saturating_add(u));
-            match units_fitting(left, unit_seconds, after) {
-                0 => {
-                    let rest = left - after(0);
+            match after_timed_round(clock.seconds_left(), unit_seconds, after) {
+                Next::Units(fit) => round = round.min(fit),
+                Next::End { rest } => {
                     if rest > 0.0 {
                         work.spend_rest(rest, unit_seconds);
                         saved = false;
@@ -330,7 +329,6 @@ pub(crate) fn drive<W: Rounds>(
                     }
                     break;
                 }
-                fit => round = round.min(fit),
             }
         }
     }
@@ -420,6 +418,29 @@ pub(crate) fn nothing_after(_units: u64) -> f64 {
     0.0
 }
 
+/// What a time budget does after a round ([`drive`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Next {
+    /// At most this many more units (at least one), then decide again.
+    Units(u64),
+    /// No whole unit fits: spend the `rest` seconds before the work after
+    /// the rounds ([`Rounds::spend_rest`]; 0 or less when none is left),
+    /// and end.
+    End { rest: f64 },
+}
+
+/// With `left` seconds of the budget, units of `unit` seconds and `after(u)`
+/// seconds of work after `u` more units ([`Loop::finishing`]): the units
+/// that still fit, or the rest of the time when none does.
+fn after_timed_round(left: f64, unit: f64, after: impl Fn(u64) -> f64) -> Next {
+    match units_fitting(left, unit, &after) {
+        0 => Next::End {
+            rest: left - after(0),
+        },
+        fit => Next::Units(fit),
+    }
+}
+
 /// The most units of `unit` seconds each that fit in `left` seconds with
 /// the work after them, `after(u)` seconds for `u` units (non-decreasing in
 /// `u`, so the time of `u` units and their work after is too: a binary
@@ -472,6 +493,32 @@ mod tests {
         assert_eq!(
             units_fitting(10.0, 1.0, |u| if u < 7 { 3.0 } else { 6.0 }),
             6
+        );
+    }
+
+    /// The time after the last whole unit is spent, not lost (stratified
+    /// MCMC traces it as regularizer paths); an overspent budget ends.
+    #[test]
+    fn the_rest_of_a_time_budget_is_spent_when_no_unit_fits() {
+        // 2.5 s left, 1 s units, 2 s of work after: no unit, 0.5 s rest.
+        assert_eq!(
+            after_timed_round(2.5, 1.0, |_| 2.0),
+            Next::End { rest: 0.5 }
+        );
+        assert_eq!(after_timed_round(3.5, 1.0, |_| 2.0), Next::Units(1));
+        assert_eq!(after_timed_round(9.5, 1.0, |_| 0.0), Next::Units(9));
+        assert_eq!(
+            after_timed_round(0.25, 1.0, |_| 0.0),
+            Next::End { rest: 0.25 }
+        );
+        // Overspent: nothing to spend.
+        assert_eq!(
+            after_timed_round(-0.5, 1.0, |_| 0.0),
+            Next::End { rest: -0.5 }
+        );
+        assert_eq!(
+            after_timed_round(1.0, 1.0, |_| 2.0),
+            Next::End { rest: -1.0 }
         );
     }
 

@@ -491,12 +491,9 @@ where
     fn spend_rest(&mut self, seconds: f64, unit_seconds: f64) {
         let sweeps = self.stats.sweeps;
         let sweep_paths = self.costs.of(sweeps.max(1)) - self.costs.of(sweeps.max(1) - 1);
-        let tiles = self.chains.len().max(1) as f64;
-        if unit_seconds > 0.0 {
-            let per_tile = libm::floor(seconds / unit_seconds * sweep_paths / tiles);
-            if per_tile >= 1.0 {
-                self.trace_remainder(per_tile.min(u32::MAX as f64) as u32);
-            }
+        let paths = rest_paths_per_tile(seconds, unit_seconds, sweep_paths, self.chains.len());
+        if paths > 0 {
+            self.trace_remainder(paths);
         }
     }
 
@@ -522,6 +519,19 @@ where
     }
 }
 
+/// The regularizer paths each of `tiles` traces in the `seconds` left after
+/// the last whole sweep, a sweep taking `sweep_seconds` for `sweep_paths`
+/// paths ([`Rounds::spend_rest`]): whole paths, none when the rest is less
+/// than one a tile.
+fn rest_paths_per_tile(seconds: f64, sweep_seconds: f64, sweep_paths: f64, tiles: usize) -> u32 {
+    if !(sweep_seconds > 0.0 && seconds > 0.0) {
+        return 0;
+    }
+    let per_tile = libm::floor(seconds / sweep_seconds * sweep_paths / tiles.max(1) as f64);
+    // `as` saturates: NaN gives 0, beyond u32 its largest.
+    per_tile as u32
+}
+
 /// What a row of tiles gave ([`Sweeps::each_row`]).
 pub(super) struct Swept<R, C> {
     stats: ChainStats,
@@ -543,5 +553,22 @@ impl core::ops::Add for SweepTraces {
             steps: self.steps + other.steps,
             regularizer: self.regularizer + other.regularizer,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::rest_paths_per_tile;
+
+    /// A time budget's rest buys the share of a sweep's paths it would have
+    /// traced: half a sweep of 5 paths a tile on 100 tiles is 2 a tile.
+    #[test]
+    fn the_rest_of_a_time_budget_buys_its_share_of_a_sweep() {
+        assert_eq!(rest_paths_per_tile(0.5, 1.0, 500.0, 100), 2);
+        assert_eq!(rest_paths_per_tile(0.19, 1.0, 500.0, 100), 0);
+        assert_eq!(rest_paths_per_tile(0.2, 1.0, 500.0, 100), 1);
+        assert_eq!(rest_paths_per_tile(-1.0, 1.0, 500.0, 100), 0);
+        assert_eq!(rest_paths_per_tile(1.0, 0.0, 500.0, 100), 0);
+        assert_eq!(rest_paths_per_tile(1e30, 1e-30, 500.0, 1), u32::MAX);
     }
 }

@@ -7,9 +7,10 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use strata::engine::oracle::DropSplats;
 use strata::engine::rng::{Domain, stream, uniform_f32};
 use strata::engine::sample::IndependentSampler;
-use strata::engine::{DropSplats, FilmPoint, PathOracle, Resolution, Temperature};
+use strata::engine::{FilmPoint, PathOracle, Resolution, Temperature};
 use strata::native::builtin;
 use strata::native::{BvhIntersector, Intersector, Ray, Scene, native_tracer};
 

@@ -11,9 +11,10 @@ use std::time::Instant;
 
 use clap::Parser;
 use strata::embree::EmbreeIntersector;
+use strata::engine::oracle::DropSplats;
 use strata::engine::rng::{Domain, stream, uniform_f32};
 use strata::engine::sample::IndependentSampler;
-use strata::engine::{DropSplats, FilmPoint, PathOracle, Resolution, Temperature};
+use strata::engine::{FilmPoint, PathOracle, Resolution, Temperature};
 use strata::native::builtin;
 use strata::native::{BvhIntersector, Intersector, PathTracer, Ray};
 

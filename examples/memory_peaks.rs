@@ -18,10 +18,10 @@ use strata::engine::{RenderMethod, RenderShape};
 
 use allocations::Tracking;
 use clap::Parser;
+use strata::engine::Task;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::native::{PathSampler, builtin, native_tracer};
-use strata::prelude::Task;
 
 #[global_allocator]
 static ALLOCATOR: Tracking = Tracking::new();

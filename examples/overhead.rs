@@ -25,12 +25,12 @@ use std::hint::black_box;
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::method::PssmltSettings;
 use strata::engine::mutate::{BATCH_LEN, Gaussian, Kelemen, MutationParams, SmallStep};
+use strata::engine::oracle::DropSplats;
 use strata::engine::rng::{self, Domain, uniform_f32};
 use strata::engine::sample::IndependentSampler;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
-    Budget, DropSplats, Method, PathOracle, Resolution, Sampler, Settings, Silent, Temperature,
-    render,
+    Budget, Method, PathOracle, Resolution, Sampler, Settings, Silent, Temperature, render,
 };
 use strata::native::{builtin, native_tracer};
 

@@ -41,10 +41,11 @@ use strata::engine::RenderMethod;
 use clap::Parser;
 use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Tempering};
 use strata::engine::method::{ErptSettings, ReplicaSettings, StratifiedSettings};
+use strata::engine::oracle::DropSplats;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
-    Budget, DropSplats, FilmPoint, Method, Output, PathOracle, PathSample, Resolution, Sampler,
-    Settings, Silent, SplatSink, Temperature, render,
+    Budget, FilmPoint, Method, Output, PathOracle, PathSample, Resolution, Sampler, Settings,
+    Silent, SplatSink, Temperature, render,
 };
 use strata::native::{native_tracer, pbrt};
 

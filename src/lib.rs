@@ -2,7 +2,6 @@
 
 pub use strata_embree as embree;
 pub use strata_engine as engine;
-pub use strata_engine::prelude;
 pub use strata_native as native;
 
 #[cfg(feature = "image-io")]

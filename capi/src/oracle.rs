@@ -2,8 +2,9 @@
 
 use std::ffi::c_void;
 
+use strata_engine::oracle::DropSplats;
 use strata_engine::{
-    DropSplats, FilmPoint, PathOracle, PathSample, Resolution, Rgb, Sampler, SplatSink, Temperature,
+    FilmPoint, PathOracle, PathSample, Resolution, Rgb, Sampler, SplatSink, Temperature,
 };
 
 use crate::*;

@@ -2,7 +2,7 @@
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
-use strata_engine::purity::check_purity;
+use strata_engine::check_purity;
 use strata_engine::target::MaxChannel;
 use strata_engine::{Budget, Error, Film, FilmPoint, Output, Settings, Temperature, render};
 

@@ -16,7 +16,7 @@ pub struct StrataSettings {
     pub(crate) threads: usize,
     pub(crate) stack_bytes: usize,
     /// The task [`strata_render_task`] renders (the whole render by default).
-    pub(crate) task: strata_engine::prelude::Task,
+    pub(crate) task: strata_engine::Task,
 }
 
 /// The worker threads' stack by default: 8 MiB, OpenMP's usual, room for a
@@ -57,7 +57,7 @@ pub extern "C" fn strata_settings_new(method: *const c_char) -> *mut StrataSetti
         budget: RequestedBudget::SamplesPerPixel(16),
         threads: 0,
         stack_bytes: DEFAULT_STACK_BYTES,
-        task: strata_engine::prelude::Task::WHOLE,
+        task: strata_engine::Task::WHOLE,
     }))
 }
 

@@ -8,9 +8,9 @@ use std::ffi::c_char;
 use std::path::PathBuf;
 use std::ptr::null_mut;
 
-use strata_engine::prelude::{PartFiles, Task, merge, render_task};
 use strata_engine::target::MaxChannel;
 use strata_engine::{Checkpoint, Error, Output};
+use strata_engine::{PartFiles, Task, merge, render_task};
 
 use crate::*;
 

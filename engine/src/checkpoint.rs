@@ -190,7 +190,7 @@ impl<S: Serialize> Checkpoints for Checkpointer<'_, S> {
         };
         let mut bytes = Vec::from(MAGIC);
         bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-        append(&header, &mut bytes);
+        append_state(&header, &mut bytes);
         write(&mut bytes);
         let crc = crc32fast::hash(&bytes);
         bytes.extend_from_slice(&crc.to_le_bytes());
@@ -286,7 +286,7 @@ fn read4(bytes: &[u8]) -> [u8; 4] {
 /// Appends `value`'s postcard bytes to `out` (plain data into a vector:
 /// cannot fail): how a method saves its state in a checkpoint, which
 /// [`Job::resumed`](crate::method::Job::resumed) reads back.
-pub fn append(value: &impl Serialize, out: &mut Vec<u8>) {
+pub fn append_state(value: &impl Serialize, out: &mut Vec<u8>) {
     let taken = core::mem::take(out);
     *out = postcard::to_extend(value, taken).unwrap_or_default();
 }

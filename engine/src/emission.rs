@@ -517,7 +517,7 @@ impl<O> Checkpoints for EmissionApart<'_, O> {
         write: &mut dyn FnMut(&mut Vec<u8>),
     ) -> Checkpoint {
         self.checkpoints.checkpoint(samples, finished, &mut |out| {
-            checkpoint::append(&*self.state.borrow(), out);
+            checkpoint::append_state(&*self.state.borrow(), out);
             write(out);
         })
     }

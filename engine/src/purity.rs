@@ -40,7 +40,7 @@ pub struct PurityViolation<R> {
 /// elsewhere, but one that fails is certainly wrong.
 ///
 /// ```
-/// use strata_engine::prelude::*;
+/// use strata_engine::*;
 /// use std::sync::atomic::{AtomicU32, Ordering};
 ///
 /// let film = FilmPoint { x: 0.5, y: 0.5 };

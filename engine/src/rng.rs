@@ -19,6 +19,13 @@ pub struct Pcg32 {
 }
 
 impl Pcg32 {
+    /// The caller's stream `index` under `seed`: well mixed, and independent
+    /// of every stream the engine draws for its chains (a method or kernel
+    /// of one's own seeds its numbers here).
+    pub fn seeded(seed: u64, index: u64) -> Self {
+        stream(seed, Domain::User, index)
+    }
+
     /// The stream `stream` (any value; made odd) started at `state`.
     pub fn new(state: u64, stream: u64) -> Self {
         let increment = (stream << 1) | 1;

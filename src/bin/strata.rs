@@ -54,8 +54,8 @@ use strata::engine::{
     Budget, Checkpoint, Error, Extras, Film, Method, Observer, Output, PathOracle, Progress,
     Resolution, SetUp, SetUpStage, Settings, render, resume,
 };
+use strata::engine::{PartFiles, Task, merge, part_of, render_task, resume_task};
 use strata::native::{PathSampler, PathTracer, builtin, native_tracer};
-use strata::prelude::{PartFiles, Task, merge, part_of, render_task, resume_task};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum Backend {

@@ -5,11 +5,11 @@
 //! bidirectional paths, at a preview budget and a longer one.
 
 use crate::ALLOCATOR;
+use strata::engine::Task;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::engine::{RenderMethod, RenderShape};
 use strata::native::{PathSampler, builtin, native_tracer};
-use strata::prelude::Task;
 
 /// How far the bound may be from the peak, either way.
 const WITHIN: f64 = 1.5;

@@ -390,7 +390,7 @@ fn multiplexed_strategies_join_past_the_glass_the_camera_looks_through() {
         centre,
         &mut numbers,
         strata::engine::Temperature::ONE,
-        &mut strata::engine::DropSplats,
+        &mut strata::engine::oracle::DropSplats,
     );
     assert!(
         path.radiance.0.iter().all(|&c| c > 0.0),

@@ -9,6 +9,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use strata::engine::SplatSink;
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::checkpoint;
 use strata::engine::drive::Rounds;
@@ -21,7 +22,6 @@ use strata::engine::{
     Budget, Error, Film, PathOracle, Radiance, RenderMethod, RenderStats, Resolution, Settings,
     Silent, Temperature, render, resume,
 };
-use strata::prelude::SplatSink;
 
 use crate::resume::StopAt;
 use crate::threads::bits;
@@ -77,7 +77,7 @@ impl RenderMethod for QuasiMc {
             invalid,
         };
         let cancelled = job.drive(&mut work, at, |w, out| {
-            checkpoint::append(&(&w.film, w.passes, w.invalid), out)
+            checkpoint::append_state(&(&w.film, w.passes, w.invalid), out)
         })?;
         Ok(Output {
             film: work.preview(),

@@ -14,7 +14,7 @@ use strata::engine::{
     Budget, Checkpoint, Error, Method, Observer, Output, Progress, Resolution, Settings, Silent,
     render,
 };
-use strata::prelude::{
+use strata::engine::{
     ErptSettings, MultiStageSettings, PartStore, PssmltSettings, ReplicaSettings,
     StratifiedSettings, Task, merge, render_task, resume_task,
 };

@@ -4,13 +4,14 @@
 //! Tolerances come from the spread of independent renders (fixed seeds).
 
 use glam::Vec3;
+use strata::engine::check_purity;
 use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Tempering};
 use strata::engine::method::{PssmltSettings, ReplicaSettings};
-use strata::engine::purity::check_purity;
+use strata::engine::oracle::DropSplats;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
-    Budget, DropSplats, Error, Film, FilmPoint, Method, PathOracle, Resolution, Settings, Silent,
-    Temperature, render,
+    Budget, Error, Film, FilmPoint, Method, PathOracle, Resolution, Settings, Silent, Temperature,
+    render,
 };
 use strata::native::builtin::{self, cuboid};
 use strata::native::material::{Material, Texture};

@@ -24,7 +24,7 @@ use core::cell::OnceCell;
 use serde::{Deserialize, Serialize};
 
 use crate::chain::ChainStats;
-use crate::checkpoint::{Checkpoint, Checkpoints, Position, append};
+use crate::checkpoint::{Checkpoint, Checkpoints, Position, append_state};
 use crate::error::Error;
 use crate::film::Film;
 use crate::oracle::Resolution;
@@ -264,7 +264,7 @@ pub(crate) fn drive<W: Rounds>(
     let checkpoint = |work: &W, done: u64, round: u64, complete: bool| {
         let position = Position { done, round };
         checkpoints.checkpoint(work.samples(), complete, &mut |out| {
-            append(&position, out);
+            append_state(&position, out);
             save(work, out);
         })
     };

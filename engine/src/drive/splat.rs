@@ -337,7 +337,7 @@ impl<W: Runs> Splatting<W> {
     /// Appends the films, the visits and the units done (read back as
     /// [`SplatSums`]).
     pub fn save_sums(&self, out: &mut Vec<u8>) {
-        checkpoint::append(&(&self.films, &self.visits, self.units), out);
+        checkpoint::append_state(&(&self.films, &self.visits, self.units), out);
     }
 
     /// Appends every worker's state (read back as `Vec<W::State>`).
@@ -346,7 +346,7 @@ impl<W: Runs> Splatting<W> {
         W: Saves,
     {
         let states: Vec<&W::State> = self.work.iter().map(Saves::state).collect();
-        checkpoint::append(&states, out);
+        checkpoint::append_state(&states, out);
     }
 
     /// The normalized image and the states per pixel.

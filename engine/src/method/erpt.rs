@@ -498,7 +498,7 @@ where
     /// Appends the state to a checkpoint (read back as [`Saved`]).
     fn save(&self, out: &mut Vec<u8>) {
         let (bootstrap, b, normalization) = self.set_up;
-        checkpoint::append(
+        checkpoint::append_state(
             &(
                 bootstrap,
                 b,

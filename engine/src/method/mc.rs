@@ -50,7 +50,7 @@ where
         invalid,
     };
     let cancelled = job.drive(&mut run, position, |run, out| {
-        checkpoint::append(&(&run.film, run.passes, run.invalid), out)
+        checkpoint::append_state(&(&run.film, run.passes, run.invalid), out)
     })?;
     let mut out = finish(run.film.rounded(), run.passes, run.invalid);
     out.cancelled = cancelled;

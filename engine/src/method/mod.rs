@@ -359,7 +359,7 @@ impl Extras {
 /// may take checkpoints: [`resume`] continues from one).
 ///
 /// ```
-/// use strata_engine::prelude::*;
+/// use strata_engine::*;
 ///
 /// let oracle = FnOracle::new(
 ///     Resolution::new(8, 8),
@@ -468,7 +468,7 @@ impl Checkpoint {
 ///
 /// ```
 /// use std::sync::Mutex;
-/// use strata_engine::prelude::*;
+/// use strata_engine::*;
 ///
 /// /// Saves the state after the first round and stops.
 /// struct StopAfterOneRound(Mutex<Option<Checkpoint>>);
@@ -694,7 +694,7 @@ fn check_memory(bytes: u64, what: &'static str) -> Result<(), Error> {
 mod tests {
     use super::*;
     use crate::analytic::ProceduralImage;
-    use crate::checkpoint::{Header, MAGIC, Position, append, take};
+    use crate::checkpoint::{Header, MAGIC, Position, append_state, take};
     use crate::drive::Observer;
     use crate::target::MaxChannel;
     use std::sync::Mutex;
@@ -733,9 +733,9 @@ mod tests {
         let forge = |done: u64| {
             let mut forged = bytes[..MAGIC.len() + 4].to_vec();
             let header: &Header<Settings> = &header;
-            append(header, &mut forged);
-            append(&emission, &mut forged);
-            append(&Position { done, ..position }, &mut forged);
+            append_state(header, &mut forged);
+            append_state(&emission, &mut forged);
+            append_state(&Position { done, ..position }, &mut forged);
             forged.extend_from_slice(state);
             let crc = crc32fast::hash(&forged);
             forged.extend_from_slice(&crc.to_le_bytes());

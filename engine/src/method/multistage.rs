@@ -679,7 +679,7 @@ impl Checkpoints for StageCheckpoints<'_> {
     ) -> Checkpoint {
         let total = self.done.stats.samples + samples;
         self.outer.checkpoint(total, finished, &mut |out| {
-            checkpoint::append(self.done, out);
+            checkpoint::append_state(self.done, out);
             write(out);
         })
     }

@@ -187,10 +187,10 @@ where
     ) -> impl Fn(&Splatting<ChainWork<'a, O, I>>, &mut Vec<u8>) + use<'a, O, I> {
         let (bootstrap, prior) = (self.bootstrap, self.prior);
         move |chains, out| {
-            checkpoint::append(&(bootstrap, prior), out);
+            checkpoint::append_state(&(bootstrap, prior), out);
             chains.save_sums(out);
             let summaries: Vec<Summary> = chains.work.iter().map(|w| summary(&w.chain)).collect();
-            checkpoint::append(&summaries, out);
+            checkpoint::append_state(&summaries, out);
             chains.save_states(out);
         }
     }

@@ -196,11 +196,11 @@ where
     fn saver(&self) -> impl Fn(&Splatting<EnsembleWork<'a, O, I>>, &mut Vec<u8>) + use<'a, O, I> {
         let (set_up, ladder, priors) = (self.set_up, self.ladder.clone(), self.priors.clone());
         move |ensembles, out| {
-            checkpoint::append(&(set_up, &ladder, &priors), out);
+            checkpoint::append_state(&(set_up, &ladder, &priors), out);
             ensembles.save_sums(out);
             let summaries: Vec<Summary> =
                 ensembles.work.iter().map(|w| summary(&w.state)).collect();
-            checkpoint::append(&summaries, out);
+            checkpoint::append_state(&summaries, out);
             ensembles.save_states(out);
         }
     }

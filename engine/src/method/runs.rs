@@ -298,10 +298,9 @@ where
     if let Some(last) = job.last {
         if !cancelled {
             // Every run finished: the task's partial result.
-            let _ = last.set(
-                job.checkpoints
-                    .checkpoint(samples, true, &mut |out| checkpoint::append(&finished, out)),
-            );
+            let _ = last.set(job.checkpoints.checkpoint(samples, true, &mut |out| {
+                checkpoint::append_state(&finished, out)
+            }));
         }
         // A task's result is that checkpoint, and its image the merge's:
         // its runs are not pooled here (for stratified MCMC, a
@@ -422,7 +421,7 @@ impl<T: Serialize> Checkpoints for RunCheckpoints<'_, T> {
     ) -> Checkpoint {
         self.outer
             .checkpoint(self.before + samples, finished, &mut |out| {
-                checkpoint::append(self.finished, out);
+                checkpoint::append_state(self.finished, out);
                 write(out);
             })
     }

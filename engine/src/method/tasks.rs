@@ -151,7 +151,7 @@ pub fn part_of<P: PartStore + ?Sized>(parts: &P, part: usize) -> Result<(Setting
 /// [`Error::TasksMissing`], naming the part.
 ///
 /// ```
-/// use strata_engine::prelude::*;
+/// use strata_engine::*;
 ///
 /// let oracle = FnOracle::new(
 ///     Resolution::new(8, 8),

@@ -6,10 +6,10 @@
 //! several estimates `b_s G_s(j)` that must agree, and a Monte Carlo estimate
 //! `Î(j)` from the large steps regularizes the whole (eq. 11).
 //!
-//! * [`weighted`]: the weighted iterative (Jacobi / IRLS) solver of eq. 13-16,
+//! * `weighted`: the weighted iterative (Jacobi / IRLS) solver of eq. 13-16,
 //!   the one Gruson et al. 2020 uses. Every iteration computes all `b^{n+1}` from `b^n`,
 //!   so it is deterministic whatever the thread count.
-//! * [`log_domain`]: the ratio-based solver of eq. 17-20: log pixel values
+//! * `log_domain`: the ratio-based solver of eq. 17-20: log pixel values
 //!   whose differences match `log G_c(i) / G_c(j)` inside every tile `c`, a
 //!   Poisson-like linear system solved by conjugate gradients. Seed 001 found
 //!   it less robust (energy loss around bright areas) and does not use it.
@@ -102,7 +102,7 @@ pub(super) fn tile_means(tiles: &Tiles, values: &[f64]) -> Vec<f64> {
     })
 }
 
-/// The starting point of [`weighted`]: each tile's mean MC estimate over its
+/// The starting point of `weighted`: each tile's mean MC estimate over its
 /// mean unscaled estimate, `Î_s / Ḡ_s` (0 where `Ḡ_s = 0`).
 pub fn initial_normalizations(tiles: &Tiles, g: &[f64], mc: &[f64]) -> Vec<f64> {
     let o = tiles.offsets().len();

@@ -189,7 +189,7 @@ where
             &self.light,
             self.emission.as_ref(),
         );
-        checkpoint::append(&saved, out);
+        checkpoint::append_state(&saved, out);
     }
 
     /// What the run leaves for the pool: the tiles' sums and the

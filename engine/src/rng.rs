@@ -26,6 +26,11 @@ impl Pcg32 {
         stream(seed, Domain::User, index)
     }
 
+    /// The next number, uniform in `[0, 1)` with 53 random bits.
+    pub fn uniform(&mut self) -> f64 {
+        uniform_f64(self)
+    }
+
     /// The stream `stream` (any value; made odd) started at `state`.
     pub fn new(state: u64, stream: u64) -> Self {
         let increment = (stream << 1) | 1;

@@ -71,4 +71,4 @@ pub fn native_tracer(scene: Scene) -> PathTracer<BvhIntersector> {
     PathTracer::new(scene, accel)
 }
 
-pub use strata_engine::oracle::{PathOracle, PathSample, Radiance, Rgb};
+pub use strata_engine::{PathOracle, PathSample, Radiance, Rgb};

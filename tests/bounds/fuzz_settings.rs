@@ -34,7 +34,7 @@ const MAX_ALLOCATION: usize = 1 << 30;
 const BUDGET: Duration = Duration::from_millis(100);
 /// A hang detector, far above any real run: a render whose settings made it
 /// ignore its budget for good. How closely budgets are kept is measured by
-/// `examples/time_budgets.rs`, not by tests (a busy machine overruns them).
+/// `studies/src/bin/time_budgets.rs`, not by tests (a busy machine overruns them).
 const HANG: Duration = Duration::from_secs(60);
 
 use crate::ALLOCATOR;

@@ -19,7 +19,7 @@ pub const RUNS: u64 = 32;
 
 /// The only time bound a test may set: a hang detector far above any real
 /// run, so that a busy machine passes. How closely time budgets are kept
-/// is measured by `examples/time_budgets.rs`, not by tests.
+/// is measured by `studies/src/bin/time_budgets.rs`, not by tests.
 pub const HANG: std::time::Duration = std::time::Duration::from_secs(60);
 const Z_PIXEL: f64 = 6.5;
 const Z_TOTAL: f64 = 4.5;

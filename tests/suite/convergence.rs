@@ -261,7 +261,7 @@ fn a_roughened_target_stays_unbiased_with_a_larger_variance_term() {
     // Seed 003 sec. 6: sample g ≠ f and splat h f / g. Here g = sqrt(f) + c
     // (flatter, like a roughened BSDF). The state estimator stays unbiased;
     // the variance term grows (whether correlation falls enough to pay for it
-    // is what the estimator decides, see examples/convergence.rs).
+    // is what the estimator decides, see studies/src/bin/convergence.rs).
     struct Rough;
     impl Importance<f32> for Rough {
         fn importance(&self, s: &PathSample<f32>, _: FilmPoint) -> f64 {

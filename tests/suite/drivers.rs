@@ -548,7 +548,7 @@ fn observers_see_progress_previews_and_can_cancel() {
 
 /// A time budget ends every method's render, set-up included, with work
 /// done and the render not cancelled (how closely each keeps its budget,
-/// which a busy machine changes, is measured by `examples/time_budgets.rs`:
+/// which a busy machine changes, is measured by `studies/src/bin/time_budgets.rs`:
 /// a round holds only the units expected to end within the budget, so a
 /// render ends within a unit of it; the unit tests of `drive` check that
 /// arithmetic).

@@ -70,7 +70,7 @@ fn runs_kept(runs: u32, task: Task) -> u128 {
 /// start paths and a wave of its chains' steps (ERPT, which merges a
 /// block's chains in waves of 2^17 steps), a pass's splats (MC). The
 /// sizes were measured with the native tracer, unidirectional and
-/// bidirectional, by `examples/memory_peaks` (docs/BENCHMARKS.md), and
+/// bidirectional, by `studies/src/bin/memory_peaks.rs` (docs/BENCHMARKS.md), and
 /// `tests/bounds/memory.rs` checks the bound within 1.5x of the measured peak.
 pub(super) fn bound(method: &Method, shape: &RenderShape) -> u64 {
     use sizes::*;

@@ -4,12 +4,12 @@
 //! a built-in scene at several film sizes and budgets. Writes a CSV.
 //!
 //! ```text
-//! cargo run --release --features studies --example memory_peaks -- --sizes 320x240,1280x720 --spp 1,32
+//! cargo run --release -p strata-studies --bin memory_peaks -- --sizes 320x240,1280x720 --spp 1,32
 //! ```
 
 // The tests' allocator; the lock and the largest request are theirs alone.
 #[allow(dead_code)]
-#[path = "../tests/bounds/allocations.rs"]
+#[path = "../../../tests/bounds/allocations.rs"]
 mod allocations;
 
 use std::fmt::Write as _;

@@ -6,10 +6,10 @@
 //! (its own error included), averaged over seeds, and the ratio.
 //!
 //! ```text
-//! cargo run --release --features studies --example emission_apart -- --scene cornell --path-sampler bidirectional --method pssmlt --time 4 --seeds 4 --rates 0.25,1,4
+//! cargo run --release -p strata-studies --bin emission_apart -- --scene cornell --path-sampler bidirectional --method pssmlt --time 4 --seeds 4 --rates 0.25,1,4
 //! ```
 
-mod common;
+use strata_studies::common;
 
 use std::path::PathBuf;
 use std::time::Duration;

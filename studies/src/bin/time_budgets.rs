@@ -4,7 +4,7 @@
 //! a CSV.
 //!
 //! ```text
-//! cargo run --release --features studies --example time_budgets -- --scene veach-ajar --width 160 --height 90 --seconds 2,10
+//! cargo run --release -p strata-studies --bin time_budgets -- --scene veach-ajar --width 160 --height 90 --seconds 2,10
 //! ```
 
 use std::fmt::Write as _;

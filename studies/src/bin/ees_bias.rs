@@ -20,7 +20,7 @@
 //! states) is smaller there; one that persists is not.
 //!
 //! ```text
-//! cargo run --release --features studies --example ees_bias -- --runs 40 --out out/ees_bias
+//! cargo run --release -p strata-studies --bin ees_bias -- --runs 40 --out out/ees_bias
 //! ```
 //! writes `runs.csv` (one line per configuration, run and checkpoint) and
 //! `table.md`.

@@ -7,7 +7,9 @@ use plotters::prelude::*;
 
 /// One panel: a metric of every series against time.
 pub struct Panel {
+    /// Above the panel.
     pub title: String,
+    /// The metric, on the vertical axis.
     pub y_desc: &'static str,
     /// Each series' label and points `(seconds, value)`, in time order.
     pub lines: Vec<(String, Vec<(f64, f64)>)>,

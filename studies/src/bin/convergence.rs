@@ -4,7 +4,7 @@
 //! error of independent runs (a CSV and a log-log plot, PNG).
 //!
 //! ```text
-//! cargo run --release --features studies --example convergence -- --out out/results/convergence.csv
+//! cargo run --release -p strata-studies --bin convergence -- --out out/results/convergence.csv
 //! ```
 //!
 //! The plot needs a TrueType font at run time (`--font`, default DejaVu Sans,

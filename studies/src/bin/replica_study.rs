@@ -20,7 +20,7 @@
 //! for Fig. 5.13), to show the part of modes diff that is sampling noise.
 //!
 //! ```text
-//! cargo run --release --features studies --example replica_study -- --runs 100 --out out/replica_study
+//! cargo run --release -p strata-studies --bin replica_study -- --runs 100 --out out/replica_study
 //! ```
 //! writes `runs.csv` (one line per scenario, move and run) and `tables.md`.
 
@@ -348,7 +348,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     writeln!(
         md,
-        "Command: `cargo run --release --features studies --example replica_study -- --runs {} --samples {} --burn-in {}` ({:.0} s on this machine).",
+        "Command: `cargo run --release -p strata-studies --bin replica_study -- --runs {} --samples {} --burn-in {}` ({:.0} s on this machine).",
         args.runs,
         args.samples,
         args.burn_in,

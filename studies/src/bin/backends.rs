@@ -3,7 +3,7 @@
 //! the ratios to a JSON file. Needs `--features embree`.
 //!
 //! ```text
-//! cargo run --release --features embree --example backends -- --out out/bench/backends.json
+//! cargo run --release -p strata-studies --features embree --bin backends -- --out out/bench/backends.json
 //! ```
 
 use std::path::PathBuf;

@@ -5,7 +5,7 @@
 //! cheapest stencil iteration there is). Writes `out/bench/solver.csv`.
 //!
 //! ```text
-//! cargo run --release --features studies --example solver_speed -- --sizes 256,512,1024
+//! cargo run --release -p strata-studies --bin solver_speed -- --sizes 256,512,1024
 //! ```
 
 use std::io::Write;

@@ -10,14 +10,14 @@
 //! reference's own error (estimated from the bidirectional MC runs).
 //!
 //! ```text
-//! cargo run --release --features studies --example path_samplers -- --scene caustic --time 4 --seeds 3
-//! cargo run --release --features studies --example path_samplers -- --scene veach-ajar --width 128 --height 72
+//! cargo run --release -p strata-studies --bin path_samplers -- --scene caustic --time 4 --seeds 3
+//! cargo run --release -p strata-studies --bin path_samplers -- --scene veach-ajar --width 128 --height 72
 //! ```
 //!
 //! Scenes: the built-ins (`cornell`, `caustic`, `pool`, ...) or a directory
 //! of `scenes/` (`cornell-box`, `veach-ajar`).
 
-mod common;
+use strata_studies::common;
 
 use std::io::Write;
 use std::path::PathBuf;

@@ -18,13 +18,13 @@
 //! (`blocks.csv`) and each method's first image.
 //!
 //! ```text
-//! cargo run --release --features studies --example channels -- --scene saturated --spp 16,64,256 --seeds 6
-//! cargo run --release --features studies --example channels -- --scene cornell --time 2,8 --seeds 3
-//! cargo run --release --features studies --example channels -- --scene caustic --path-sampler bidirectional
+//! cargo run --release -p strata-studies --bin channels -- --scene saturated --spp 16,64,256 --seeds 6
+//! cargo run --release -p strata-studies --bin channels -- --scene cornell --time 2,8 --seeds 3
+//! cargo run --release -p strata-studies --bin channels -- --scene caustic --path-sampler bidirectional
 //! ```
 //! Scenes: the built-ins or a scene of `scenes/` (or `$STRATA_SCENES`).
 
-mod common;
+use strata_studies::common;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

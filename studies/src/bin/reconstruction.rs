@@ -20,8 +20,8 @@
 //! per pixel and channel).
 //!
 //! ```text
-//! cargo run --release --features studies --example compare -- --scene veach-ajar --width 160 --height 90 --methods mc --time 1
-//! cargo run --release --features studies --example reconstruction -- --scene veach-ajar --width 160 --height 90 --time 30 \
+//! cargo run --release -p strata-studies --bin compare -- --scene veach-ajar --width 160 --height 90 --methods mc --time 1
+//! cargo run --release -p strata-studies --bin reconstruction -- --scene veach-ajar --width 160 --height 90 --time 30 \
 //!     --reference out/compare/veach-ajar/reference_160x90_16384.exr
 //! ```
 

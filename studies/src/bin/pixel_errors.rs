@@ -13,7 +13,7 @@
 //! docs/RESULTS.md came from:
 //!
 //! ```text
-//! cargo run --release --features studies --example pixel_errors -- \
+//! cargo run --release -p strata-studies --bin pixel_errors -- \
 //!     --reference out/g3/caustic/reference_96x96_16384.exr out/s15/{unidirectional,bidirectional}-[012].exr \
 //!     --pixel 51,49 --pixel 54,50 --region 57:66,21:32
 //! ```
@@ -22,7 +22,7 @@
 //! (and against strata's own, `--reference out/tg/ref.exr`):
 //!
 //! ```text
-//! cargo run --release --features studies --example pixel_errors -- \
+//! cargo run --release -p strata-studies --bin pixel_errors -- \
 //!     --reference scenes/cornell-box/TungstenRender.exr --reference-box 8 \
 //!     --light 5 out/tg/multiplexed-[0123].exr
 //! ```
@@ -34,9 +34,8 @@ use strata::engine::Film;
 use strata::engine::metrics::EPSILON;
 use strata::io::read_film;
 
-#[path = "common/filter.rs"]
-mod filter;
 use filter::downsample;
+use strata_studies::common::filter;
 
 type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 

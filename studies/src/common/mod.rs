@@ -1,5 +1,7 @@
-//! What several examples share: the scenes they load by name and the MC
+//! What several studies share: the scenes they load by name and the MC
 //! reference renders they cache.
+
+pub mod filter;
 
 use std::path::Path;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -11,6 +13,7 @@ use strata::engine::{
 };
 use strata::native::{Scene, builtin, pbrt};
 
+/// A study's result: any error, reported by `main`.
 pub type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
 /// The scene called `name`: a built-in at `width` x `height` (`side` each

@@ -14,16 +14,16 @@
 //! plot from an existing `metrics.csv` without rendering.
 //!
 //! ```text
-//! cargo run --release --features studies --example compare -- --scene veach-ajar --width 160 --height 90 --time 60
-//! cargo run --release --features studies --example compare -- --scene envplane --time 10
+//! cargo run --release -p strata-studies --bin compare -- --scene veach-ajar --width 160 --height 90 --time 60
+//! cargo run --release -p strata-studies --bin compare -- --scene envplane --time 10
 //! ```
 //!
 //! Scenes: the built-ins (`cornell`, `door`, `envplane`, `caustic`, `saturated`) or a
 //! directory of `$STRATA_SCENES` (default: the repository's `scenes/`): `cornell-box`,
 //! `veach-ajar`. The plot needs a TrueType font (`--font`, default DejaVu Sans).
 
-mod common;
-mod curves;
+use strata_studies::common;
+use strata_studies::curves;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -8,8 +8,8 @@
 //! at every budget).
 //!
 //! ```text
-//! cargo run --release --features studies --example reference -- --spp 1024 --size 256
-//! cargo run --release --features studies --example reference -- --method stratified --spp 8,16,32,64 --seeds 4
+//! cargo run --release -p strata-studies --bin reference -- --spp 1024 --size 256
+//! cargo run --release -p strata-studies --bin reference -- --method stratified --spp 8,16,32,64 --seeds 4
 //! ```
 //! Scenes are found in `$STRATA_SCENES` (default: the repository's `scenes/`).
 
@@ -25,9 +25,8 @@ use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Film, Method, Resolution, Settings, Silent, metrics, render};
 use strata::native::{native_tracer, pbrt};
 
-#[path = "common/filter.rs"]
-mod filter;
 use filter::downsample;
+use strata_studies::common::filter;
 
 /// Render cornell-box and compare with Tungsten's converged image.
 #[derive(Parser, Debug)]

@@ -11,15 +11,15 @@
 //! the mean over seeds against the budget).
 //!
 //! ```text
-//! cargo run --release --features studies --example exchange_curves -- --scene caustic --times 1,2,4,8,16 --seeds 3
-//! cargo run --release --features studies --example exchange_curves -- --path-sampler multiplexed
+//! cargo run --release -p strata-studies --bin exchange_curves -- --scene caustic --times 1,2,4,8,16 --seeds 3
+//! cargo run --release -p strata-studies --bin exchange_curves -- --path-sampler multiplexed
 //! ```
 //!
 //! Scenes: the built-ins or a scene of `scenes/` (or `$STRATA_SCENES`). The plot needs
 //! a TrueType font (`--font`, default DejaVu Sans).
 
-mod common;
-mod curves;
+use strata_studies::common;
+use strata_studies::curves;
 
 use std::io::Write;
 use std::path::PathBuf;

@@ -6,7 +6,7 @@
 //! image is known.
 //!
 //! ```text
-//! cargo run --release --features studies --example density -- --scene procedural --spp 64 --out out/density
+//! cargo run --release -p strata-studies --bin density -- --scene procedural --spp 64 --out out/density
 //! ```
 
 use std::path::PathBuf;

@@ -27,8 +27,8 @@
 //!   render's budget is scaled so the 2-thread render takes ~`--seconds`).
 //!
 //! ```text
-//! cargo run --release --features studies --example path_cost -- --out out/bench/path_cost.csv
-//! cargo run --release --features studies --example path_cost -- --speedup --seconds 5 --out out/bench/speedup.csv
+//! cargo run --release -p strata-studies --bin path_cost -- --out out/bench/path_cost.csv
+//! cargo run --release -p strata-studies --bin path_cost -- --speedup --seconds 5 --out out/bench/speedup.csv
 //! ```
 
 use std::cell::Cell;

@@ -13,7 +13,7 @@
 //! more.
 //!
 //! ```text
-//! cargo run --release --features studies --example overhead -- --out out/bench/overhead.json
+//! cargo run --release -p strata-studies --bin overhead -- --out out/bench/overhead.json
 //! ```
 
 use std::path::PathBuf;

@@ -11,10 +11,10 @@
 //! and prints the mean and spread per sampler and budget.
 //!
 //! ```text
-//! cargo run --release --features studies --example caustic_energy -- --seeds 4
+//! cargo run --release -p strata-studies --bin caustic_energy -- --seeds 4
 //! ```
 
-mod common;
+use strata_studies::common;
 
 use std::io::Write;
 use std::path::PathBuf;

@@ -172,7 +172,7 @@ pub struct Initialization {
     /// And at most this fraction of the render's budget (samples or time;
     /// table setting `init_budget`). The main cost of a short render: a
     /// smaller share leaves more tiles to start-up bias (docs/RESULTS.md,
-    /// "Every channel, and against MC").
+    /// "Every channel, against MC, at equal time").
     pub max_budget_fraction: f64,
     /// Bootstrap candidates of the global chains (capped at half of the
     /// initialization budget).
@@ -216,7 +216,7 @@ pub struct StratifiedSettings {
     /// a tile whose target is flat or nearly so (an emitter, a diffuse wall)
     /// gains nothing from small steps; 0.8 was chosen by a sweep on the
     /// saturated scene and the Cornell box (docs/RESULTS.md, "Every
-    /// channel, and against MC").
+    /// channel, against MC, at equal time").
     pub mutation: MutationParams,
     /// Local replica exchange after every `exchange_every` sweeps (0: never).
     pub exchange_every: u32,
@@ -227,7 +227,7 @@ pub struct StratifiedSettings {
     /// pixel, 96², 8 seeds, exchanging from the first sweep -> after 8:
     /// saturated scene 16 spp 2.32 -> 1.39, 64 spp 1.18 -> 1.06, 256 spp
     /// 1.09 -> 1.09; Cornell box 3.92 -> 2.46, 1.90 -> 1.93, 1.78 -> 1.79
-    /// (docs/RESULTS.md, "Every channel, and against MC").
+    /// (docs/RESULTS.md, "Every channel, against MC, at equal time").
     pub exchange_after: u32,
     /// Global-chain initialization.
     pub initialization: Initialization,

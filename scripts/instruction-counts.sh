@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Instructions per traced path of every method against MC (issue 19), counted
+# Instructions per traced path of every method against MC, counted
 # by valgrind's callgrind: unlike wall times on a shared 2-core machine, the
 # count does not move with the machine's load, so it shows what a change to
 # the engine costs or saves to the instruction, run after run.
@@ -10,7 +10,7 @@
 # bootstrap included, as `strata render` reports them. With --step, each
 # method renders at 16 and at 48 paths per pixel instead, and the count is
 # the difference divided by the 32 x 128² paths between them: a chain step
-# alone, without the fixed costs. Replica exchange runs as issue 19 measures
+# alone, without the fixed costs. Replica exchange runs as the cost table measures
 # it (power tempering, 4 chains to T = 100) unless REPLICA_ARGS gives other
 # `strata render` options (e.g. "--tempering power --replicas 8 --t-max 2500
 # --exchange none"). Writes out/bench/instructions.csv (or

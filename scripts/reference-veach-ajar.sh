@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The long reference of veach-ajar at its own 1280x720 (issue 40, item 4):
+# The long reference of veach-ajar at its own 1280x720:
 # independent bidirectional-MC chunks of 64 paths per pixel, seeds 5000,
 # 5001, ..., each written to out/reference/ as an EXR; the reference is
 # their mean (equal weights). Hours of work: run it in the background, niced,

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A render split into tasks, simulated on one machine (issue 39's
+# A render split into tasks, simulated on one machine (the
 # measurements, docs/BENCHMARKS.md "A render split into tasks"): for MC and
 # PSSMLT (METHODS="mc replica ..." for others), the unsplit render and then its N tasks one after another, each
 # timed with its peak resident memory (/usr/bin/time -v); the partial

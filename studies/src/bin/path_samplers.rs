@@ -1,5 +1,5 @@
 //! Equal time, every method on unidirectional, bidirectional and
-//! multiplexed paths (issues 37, 38): each (method, path sampler) renders the scene with the same
+//! multiplexed paths: each (method, path sampler) renders the scene with the same
 //! time budget, over several seeds, and is compared with a long
 //! bidirectional MC reference (cached as `reference_WxH_SPP.exr` in the
 //! output directory). Writes `path_samplers.csv` (one row per render:

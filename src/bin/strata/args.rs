@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use std::time::Duration;
 use strata::engine::RenderMethod;
 
-use clap::builder::PossibleValuesParser;
 use clap::ValueEnum;
+use clap::builder::PossibleValuesParser;
 use strata::engine::SmallStep;
 use strata::engine::Solver;
 use strata::engine::Task;

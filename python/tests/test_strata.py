@@ -1,0 +1,212 @@
+"""strata from Python: every method renders the exact answer within noise,
+bad input raises, Python oracles render and stop cleanly, Ctrl-C stops a
+render, and a render is the command's for the same seed, bit for bit."""
+
+import math
+import os
+import subprocess
+import threading
+import time
+import _thread
+
+import numpy as np
+import pytest
+
+import strata
+
+# A hang detector, not a timing: a render that should stop in well under a
+# second must stop within this.
+HANG = 60.0
+
+
+def test_every_method_renders_the_exact_image_mean_within_noise():
+    """Sixteen seeds of each method at 64 paths a pixel (multi-stage MLT's
+    smallest budget here) on the procedural image: the mean of their image
+    means is within 4.5 standard errors (the seeds' spread, a t statistic of
+    15 degrees of freedom: a false alarm in 2 500 per method) of the exact
+    one."""
+    exact = strata.reference("procedural", 48, 32).mean()
+    # ERPT's pass is 101 paths a pixel with its chains of 100 steps.
+    own = {"erpt": {"chain_length": 10}}
+    for method in strata.METHODS:
+        means = [
+            strata.render("procedural", method, spp=64, seed=seed, width=48, height=32,
+                          **own.get(method, {})).image.mean()
+            for seed in range(16)
+        ]
+        mean = np.mean(means)
+        error = np.std(means, ddof=1) / math.sqrt(len(means))
+        z = (mean - exact) / error
+        assert abs(z) < 4.5, f"{method}: mean {mean:.4f} against {exact:.4f} (z {z:+.1f})"
+
+
+def test_an_image_is_a_float32_array_and_is_saved():
+    r = strata.render("cornell", "mc", spp=2, width=24, height=16, seed=1)
+    assert r.image.shape == (16, 24, 3) and r.image.dtype == np.float32
+    assert np.isfinite(r.image).all() and r.image.mean() > 0
+    assert r.stats["paths"] == 2 * 24 * 16 and r.stats["invalid_paths"] == 0
+    assert r._repr_png_()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_same_seed_gives_the_same_image_whatever_the_threads():
+    one = strata.render("caustic", "pssmlt", spp=4, width=24, height=24, seed=5, threads=1)
+    two = strata.render("caustic", "pssmlt", spp=4, width=24, height=24, seed=5, threads=2)
+    assert np.array_equal(one.image, two.image)
+
+
+@pytest.mark.skipif("STRATA_CLI" not in os.environ, reason="STRATA_CLI names the strata command (CI sets it)")
+def test_a_render_is_the_commands_for_the_same_seed(tmp_path):
+    """The same film from Python and from `strata render`: the EXRs they
+    write are the same bytes."""
+    for method in ["mc", "stratified"]:
+        out = tmp_path / method
+        subprocess.run(
+            [os.environ["STRATA_CLI"], "render", "cornell", "--method", method, "--spp", "8",
+             "--width", "32", "--height", "24", "--seed", "3", "--threads", "2", "--out", str(out)],
+            check=True, capture_output=True,
+        )
+        r = strata.render("cornell", method, spp=8, width=32, height=24, seed=3, threads=2)
+        r.save(str(tmp_path / f"{method}-python.exr"))
+        assert (tmp_path / f"{method}-python.exr").read_bytes() == (tmp_path / f"{method}.exr").read_bytes()
+
+
+def test_bad_settings_raise_value_and_type_errors():
+    with pytest.raises(ValueError, match="unknown method"):
+        strata.render("procedural", "metropolis")
+    with pytest.raises(ValueError, match="chains"):
+        strata.render("procedural", "pssmlt", chains=0)
+    with pytest.raises(ValueError):
+        strata.render("procedural", "mc", no_such_setting=1)
+    with pytest.raises(ValueError):
+        strata.render("procedural", "pssmlt", small_step="no-such-kernel")
+    with pytest.raises(TypeError):
+        strata.render("procedural", "pssmlt", chains=[1])
+    with pytest.raises(ValueError):
+        strata.render("procedural", "mc", spp=0)
+    with pytest.raises(ValueError):
+        strata.render("procedural", "mc", time=float("nan"))
+    with pytest.raises(ValueError):
+        strata.render("procedural", "mc", spp=4, time=1.0)
+    with pytest.raises(ValueError):
+        strata.render("procedural", "mc", width=0, height=4)
+    with pytest.raises(ValueError):
+        strata.render("no-such-scene.pbrt")
+    with pytest.raises(TypeError):
+        strata.render(42)
+    with pytest.raises(ValueError, match="width and height"):
+        strata.render(lambda x, y, s: (0, 0, 0))
+
+
+def test_settings_are_the_engines():
+    rows = {row["name"]: row for row in strata.settings("pssmlt")}
+    assert rows["chains"]["default"] == 256 and rows["chains"]["range"] == (1, 65536)
+    assert "kelemen" in rows["small_step"]["choices"]
+    r = strata.render("procedural", "pssmlt", spp=4, width=16, height=16, chains=8, small_step="gaussian")
+    assert r.stats["paths"] > 0
+
+
+def light_through_a_gap(x, y, sampler):
+    """An oracle written in Python: a tenth of the paths reach a light,
+    brighter to the right. Its image mean is 0.25 in red."""
+    u, v = sampler.next_2d()
+    if u >= 0.1:
+        return (0.0, 0.0, 0.0)
+    b = x / 16 * 10 * v
+    return (b, 0.8 * b, 0.6 * b)
+
+
+def test_a_python_oracle_renders_its_exact_mean():
+    """MC over 8 seeds: red's mean within 5 standard errors of 0.25."""
+    means = [
+        strata.render(light_through_a_gap, "mc", spp=16, width=16, height=8, seed=s).image[..., 0].mean()
+        for s in range(8)
+    ]
+    z = (np.mean(means) - 0.25) / (np.std(means, ddof=1) / math.sqrt(8))
+    assert abs(z) < 5, f"z {z:+.1f}"
+    pssmlt = strata.render(light_through_a_gap, "pssmlt", spp=16, width=16, height=8, chains=16,
+                           bootstrap_candidates=4096)
+    assert np.isfinite(pssmlt.image).all() and pssmlt.stats["acceptance"] > 0
+
+
+def test_an_exception_in_the_oracle_reaches_the_caller_and_stops_the_render():
+    calls = []
+
+    def broken(x, y, sampler):
+        calls.append(1)
+        if len(calls) > 50:
+            raise ZeroDivisionError("the oracle's own error")
+        return (1.0, 1.0, 1.0)
+
+    start = time.monotonic()
+    with pytest.raises(ZeroDivisionError, match="the oracle's own error") as raised:
+        strata.render(broken, "mc", spp=10_000, width=64, height=64)
+    assert time.monotonic() - start < HANG
+    assert raised.traceback[-1].name == "broken"
+    # It stopped: far fewer calls than the budget's 40 million paths.
+    assert len(calls) < 1_000_000
+
+
+def test_a_sampler_kept_beyond_its_call_raises():
+    kept = []
+
+    def keeps(x, y, sampler):
+        kept.append(sampler)
+        return (sampler.next_1d(), 0.0, 0.0)
+
+    strata.render(keeps, "mc", spp=1, width=2, height=2)
+    with pytest.raises(RuntimeError, match="only during the call"):
+        kept[0].next_1d()
+
+
+def test_the_purity_check_finds_an_oracle_that_draws_outside_its_sampler():
+    strata.check_purity(light_through_a_gap, 16, 8)
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match="not pure"):
+        strata.check_purity(lambda x, y, s: (float(rng.random()), 0.0, 0.0), 16, 8)
+
+
+def test_progress_is_reported_up_to_the_end():
+    seen = []
+    strata.render("procedural", "stratified", spp=32, width=32, height=32, progress=lambda f, n: seen.append((f, n)))
+    assert seen and seen[-1][0] == 1.0
+    assert all(a[0] <= b[0] and a[1] <= b[1] for a, b in zip(seen, seen[1:]))
+
+
+def test_an_exception_in_the_progress_callback_stops_the_render():
+    def fails(fraction, paths):
+        raise RuntimeError("the callback's own error")
+
+    with pytest.raises(RuntimeError, match="callback's own error"):
+        strata.render("procedural", "mc", spp=64, width=32, height=32, progress=fails)
+
+
+def test_ctrl_c_stops_a_long_render_with_keyboard_interrupt():
+    """SIGINT half a second into a 20-second render: KeyboardInterrupt,
+    well before the budget ends (a render deaf to it would return an image
+    after 20 s instead)."""
+    timer = threading.Timer(0.5, _thread.interrupt_main)
+    timer.start()
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        strata.render("cornell", "pssmlt", time=20.0, width=32, height=32)
+    assert time.monotonic() - start < 15
+
+
+def test_diagnostics_on_known_series():
+    rng = np.random.default_rng(1)
+    iid = rng.standard_normal(4000)
+    assert 0.8 * 4000 < strata.ess(list(iid)) < 1.2 * 4000
+    # An AR(1) series with coefficient 0.9: IAT (1 + 0.9) / (1 - 0.9) = 19.
+    ar = np.zeros(20000)
+    for i in range(1, len(ar)):
+        ar[i] = 0.9 * ar[i - 1] + rng.standard_normal()
+    assert 14 < strata.iat(list(ar)) < 25
+    same = [list(rng.standard_normal(1000)) for _ in range(4)]
+    apart = [list(rng.standard_normal(1000) + k) for k in range(4)]
+    assert strata.rhat(same) < 1.01 and strata.rhat(apart) > 1.5
+    ref = strata.reference("procedural", 32, 24)
+    assert strata.compare(ref, ref)["rel_mse"] == 0.0
+    # MAPE is mean |I - R| / (R + 0.01) over luminance (Gruson et al. 2020).
+    lum = ref @ np.array([0.2126, 0.7152, 0.0722])
+    expected = np.mean(0.1 * lum / (lum + 0.01))
+    assert strata.compare(ref * np.float32(1.1), ref)["mape"] == pytest.approx(expected, rel=1e-5)

@@ -288,6 +288,9 @@ pub(crate) fn render(
         budget,
         method,
     };
+    // A Python oracle holds the GIL for each path: more threads only wait
+    // for it (2 threads trace half the paths a second of 1).
+    let threads = threads.or(matches!(oracle, Scene::Python(_)).then_some(1));
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(threads) = threads {
         if threads == 0 {

@@ -75,6 +75,8 @@ def render(
         ``stratified``, ``erpt``, ``multistage``).
     spp / time: the budget, paths per pixel or seconds (default 16 spp).
     seed: the same seed gives the same image, whatever ``threads``.
+    threads: the engine's threads (default: every core; 1 for an oracle
+        written in Python, whose paths wait for the GIL).
     path_sampler: ``unidirectional``, ``bidirectional``,
         ``bidirectional-no-splats`` or ``multiplexed`` (scenes only).
     progress: ``True`` for a progress bar (tqdm where installed), or a

@@ -113,7 +113,7 @@ pub(crate) fn check_purity_of(
 /// Every setting of `method`: name, kind, default, range or choices, help.
 #[pyfunction]
 pub(crate) fn settings<'py>(py: Python<'py>, method: &str) -> PyResult<Vec<Bound<'py, PyDict>>> {
-    let m = crate::render::method(method, None, None)?;
+    let m = crate::scene::method(method, None, None)?;
     let mut rows = Vec::new();
     for s in m.settings() {
         let d = PyDict::new(py);

@@ -7,6 +7,8 @@ mod diagnostics;
 mod errors;
 mod oracle;
 mod render;
+mod scene;
+mod watch;
 
 use pyo3::prelude::*;
 
@@ -17,6 +19,8 @@ fn _strata(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<render::Render>()?;
     m.add_class::<oracle::PySampler>()?;
     m.add_function(wrap_pyfunction!(render::render, m)?)?;
+    m.add_function(wrap_pyfunction!(render::render_task, m)?)?;
+    m.add_function(wrap_pyfunction!(render::merge, m)?)?;
     m.add_function(wrap_pyfunction!(diagnostics::ess, m)?)?;
     m.add_function(wrap_pyfunction!(diagnostics::iat, m)?)?;
     m.add_function(wrap_pyfunction!(diagnostics::rhat, m)?)?;

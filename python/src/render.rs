@@ -1,170 +1,22 @@
-//! `strata.render`: a scene (built-in, pbrt-v3 file, analytic target or a
-//! Python oracle) rendered by any method, the GIL released, Ctrl-C and a
-//! progress callback heard between rounds; and the `Render` it returns.
+//! `strata.render`, `strata.render_task` and `strata.merge`: renders run on
+//! their own threads with the GIL released while the calling thread hears
+//! Ctrl-C; the `Render` they return, its image a numpy array.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::path::PathBuf;
 use std::time::Duration;
 
 use numpy::ndarray::Array3;
 use numpy::{IntoPyArray, PyArray3};
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::{PyOSError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
-use strata::engine::analytic::{GaussianMixture, ProceduralImage};
 use strata::engine::{
-    Budget, Extras, Film, MaxChannel, Method, Observer, Output, PathOracle, Progress, Resolution,
-    Settings,
+    Checkpoint, Error, Extras, Film, MaxChannel, Output, PathOracle, Settings, Task,
 };
-use strata::native::{PathSampler, builtin, native_tracer, pbrt};
 
 use crate::errors::engine_error;
-use crate::oracle::PyOracle;
-
-/// The observer of a render from Python: a progress callback and the stop
-/// (Ctrl-C, heard by the calling thread while it waits, or an exception in
-/// the oracle or the callback), both between rounds.
-struct Watch<'a> {
-    callback: Option<&'a Py<PyAny>>,
-    oracle: Option<&'a PyOracle>,
-    stopped: AtomicBool,
-    error: std::sync::Mutex<Option<PyErr>>,
-}
-
-impl Watch<'_> {
-    fn fail(&self, error: PyErr) {
-        if let Ok(mut kept) = self.error.lock() {
-            kept.get_or_insert(error);
-        }
-        self.stopped.store(true, Ordering::Relaxed);
-    }
-}
-
-impl Observer for Watch<'_> {
-    fn progress(&self, progress: &Progress) {
-        let Some(callback) = self.callback else {
-            return;
-        };
-        Python::attach(|py| {
-            if let Err(error) = callback.call1(py, (progress.fraction, progress.samples)) {
-                self.fail(error);
-            }
-        });
-    }
-
-    fn should_stop(&self) -> bool {
-        self.stopped.load(Ordering::Relaxed) || self.oracle.is_some_and(PyOracle::failed)
-    }
-}
-
-/// The scene argument of `render`, made an oracle.
-enum Scene {
-    Tracer(Box<strata::native::PathTracer<strata::native::BvhIntersector>>),
-    Procedural(ProceduralImage),
-    Mixture(GaussianMixture),
-    Python(PyOracle),
-}
-
-fn scene(
-    scene: &Bound<'_, PyAny>,
-    size: (Option<u32>, Option<u32>),
-    path_sampler: &str,
-    seed: u64,
-) -> PyResult<Scene> {
-    let (width, height) = size;
-    if scene.is_callable() {
-        let (Some(width), Some(height)) = (width, height) else {
-            return Err(PyValueError::new_err(
-                "an oracle written in Python needs width and height",
-            ));
-        };
-        return Ok(Scene::Python(PyOracle::new(
-            scene.clone().unbind(),
-            resolution(width, height)?,
-        )));
-    }
-    let Ok(name) = scene.extract::<String>() else {
-        return Err(PyTypeError::new_err(
-            "scene: a built-in's name, a pbrt-v3 file, 'procedural', 'mixture' or a callable oracle",
-        ));
-    };
-    let size = resolution(width.unwrap_or(256), height.unwrap_or(256))?;
-    let sampler = PathSampler::from_name(path_sampler).ok_or_else(|| {
-        PyValueError::new_err(format!("path_sampler: unknown '{path_sampler}' (unidirectional, bidirectional, bidirectional-no-splats, multiplexed)"))
-    })?;
-    match name.as_str() {
-        "procedural" => return Ok(Scene::Procedural(ProceduralImage::showcase(size))),
-        "mixture" => {
-            return Ok(Scene::Mixture(GaussianMixture::random(
-                12,
-                4,
-                (0.02, 0.1),
-                size,
-                seed,
-            )));
-        }
-        _ => {}
-    }
-    let scene = match builtin::by_name(&name, size) {
-        Some(scene) => scene,
-        None => {
-            let loaded = pbrt::load(std::path::Path::new(&name))
-                .map_err(|e| PyValueError::new_err(e.to_string()))?;
-            let mut scene = loaded.scene;
-            if width.is_some() || height.is_some() {
-                scene.camera.resolution = size;
-            }
-            scene
-        }
-    };
-    let mut tracer = native_tracer(scene);
-    tracer.sampler = sampler;
-    Ok(Scene::Tracer(Box::new(tracer)))
-}
-
-fn resolution(width: u32, height: u32) -> PyResult<Resolution> {
-    if width == 0 || height == 0 {
-        return Err(PyValueError::new_err(format!(
-            "a film of {width}x{height} pixels has none"
-        )));
-    }
-    Ok(Resolution::new(width, height))
-}
-
-/// The method called `name`, with a preset and `settings` set through the
-/// engine's settings table (the names, defaults and ranges of
-/// `strata settings`, the command's `--set` and the C API).
-pub(crate) fn method(
-    name: &str,
-    preset: Option<&str>,
-    settings: Option<&Bound<'_, PyDict>>,
-) -> PyResult<Method> {
-    let mut method = Method::from_name(name).ok_or_else(|| {
-        PyValueError::new_err(format!(
-            "unknown method '{name}' (one of {})",
-            Method::NAMES.join(", ")
-        ))
-    })?;
-    if let Some(preset) = preset {
-        method.apply_preset(preset).map_err(engine_error)?;
-    }
-    for (key, value) in settings.into_iter().flat_map(|d| d.iter()) {
-        let key: String = key.extract()?;
-        let set = if let Ok(flag) = value.cast::<pyo3::types::PyBool>() {
-            method.set(&key, if flag.is_true() { 1.0 } else { 0.0 })
-        } else if let Ok(number) = value.extract::<f64>() {
-            method.set(&key, number)
-        } else if let Ok(text) = value.extract::<String>() {
-            method.set_text(&key, &text)
-        } else {
-            return Err(PyTypeError::new_err(format!(
-                "setting {key}: a number, a bool or a choice's name, not {}",
-                value.get_type().name()?
-            )));
-        };
-        set.map_err(engine_error)?;
-    }
-    Ok(method)
-}
+use crate::scene::{self, Scene, WithOracle};
+use crate::watch::{Every, Watch};
 
 /// A finished render: the image as a numpy array, the statistics, and the
 /// method's extras.
@@ -177,6 +29,16 @@ pub(crate) struct Render {
     /// Paths, bootstrap paths, invalid paths, acceptance, seconds, ...
     #[pyo3(get)]
     stats: Py<PyDict>,
+}
+
+impl Render {
+    fn new(py: Python<'_>, output: Output, seconds: f64) -> PyResult<Self> {
+        Ok(Render {
+            image: to_numpy(py, &output.film).unbind(),
+            stats: stats(py, &output, seconds)?.unbind(),
+            film: output.film,
+        })
+    }
 }
 
 #[pymethods]
@@ -242,10 +104,116 @@ fn stats<'py>(py: Python<'py>, output: &Output, seconds: f64) -> PyResult<Bound<
     Ok(d)
 }
 
+/// Runs `work` on `pool` while this thread, where Python hears its
+/// signals, checks them every 20 ms (a signal stops the render through
+/// `watch`); then raises the first error the render met.
+fn run<W: WithOracle<Out = Result<T, Error>>, T: Send>(
+    py: Python<'_>,
+    pool: &rayon::ThreadPool,
+    scene: &Scene,
+    watch: &Watch<'_>,
+    work: &W,
+) -> PyResult<T> {
+    let done = py.detach(|| {
+        std::thread::scope(|threads| {
+            let rendering = threads.spawn(|| pool.install(|| scene.with(work)));
+            while !rendering.is_finished() {
+                std::thread::sleep(Duration::from_millis(20));
+                Python::attach(|py| {
+                    if let Err(error) = py.check_signals() {
+                        watch.fail(error);
+                    }
+                });
+            }
+            rendering.join()
+        })
+    });
+    let done = done.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+    if let Some(error) = watch.take_error() {
+        return Err(error);
+    }
+    done.map_err(engine_error)
+}
+
+/// A whole render, or its resume from a checkpoint.
+struct Whole<'a> {
+    settings: &'a Settings,
+    watch: &'a Watch<'a>,
+    resume: Option<&'a Checkpoint>,
+}
+
+impl WithOracle for Whole<'_> {
+    type Out = Result<Output, Error>;
+    fn with<O: PathOracle>(&self, oracle: &O) -> Self::Out {
+        match self.resume {
+            Some(checkpoint) => {
+                strata::engine::resume(oracle, &MaxChannel, self.settings, checkpoint, self.watch)
+            }
+            None => strata::engine::render(oracle, &MaxChannel, self.settings, self.watch),
+        }
+    }
+}
+
+/// One task of a split render.
+struct Part<'a> {
+    settings: &'a Settings,
+    watch: &'a Watch<'a>,
+    task: Task,
+}
+
+impl WithOracle for Part<'_> {
+    type Out = Result<Checkpoint, Error>;
+    fn with<O: PathOracle>(&self, oracle: &O) -> Self::Out {
+        strata::engine::render_task(oracle, &MaxChannel, self.settings, self.task, self.watch)
+    }
+}
+
+/// What `render` and `render_task` are asked: the scene, its settings and
+/// the threads.
+struct Asked {
+    scene: Scene,
+    settings: Settings,
+    pool: rayon::ThreadPool,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn asked(
+    scene: &Bound<'_, PyAny>,
+    method: &str,
+    spp: Option<u64>,
+    time: Option<f64>,
+    seed: u64,
+    threads: Option<usize>,
+    path_sampler: &str,
+    size: (Option<u32>, Option<u32>),
+    preset: Option<&str>,
+    settings: Option<&Bound<'_, PyDict>>,
+) -> PyResult<Asked> {
+    let method = scene::method(method, preset, settings)?;
+    let scene = scene::scene(scene, size, path_sampler, seed)?;
+    let budget = scene::budget(spp, time, scene.resolution())?;
+    let pool = scene::pool(threads, &scene)?;
+    Ok(Asked {
+        scene,
+        settings: Settings {
+            seed,
+            budget,
+            method,
+        },
+        pool,
+    })
+}
+
+fn read(path: &PathBuf) -> PyResult<Vec<u8>> {
+    std::fs::read(path).map_err(|e| PyOSError::new_err(format!("{}: {e}", path.display())))
+}
+
 /// Renders `scene`; see `strata.render`'s docstring (python/strata/__init__.py).
 #[pyfunction]
 #[pyo3(signature = (scene, method="pssmlt", *, spp=None, time=None, seed=0, threads=None,
-    path_sampler="unidirectional", width=None, height=None, progress=None, preset=None, **settings))]
+    path_sampler="unidirectional", width=None, height=None, progress=None, preview=None,
+    preview_every=1.0, checkpoint=None, checkpoint_every=None, resume=None, preset=None,
+    **settings))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render(
     py: Python<'_>,
@@ -259,101 +227,138 @@ pub(crate) fn render(
     width: Option<u32>,
     height: Option<u32>,
     progress: Option<Py<PyAny>>,
+    preview: Option<Py<PyAny>>,
+    preview_every: f64,
+    checkpoint: Option<PathBuf>,
+    checkpoint_every: Option<f64>,
+    resume: Option<PathBuf>,
     preset: Option<&str>,
     settings: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Render> {
-    let method = self::method(method, preset, settings)?;
-    let oracle = self::scene(scene, (width, height), path_sampler, seed)?;
-    let resolution = match &oracle {
-        Scene::Tracer(t) => t.resolution(),
-        Scene::Procedural(p) => p.resolution(),
-        Scene::Mixture(m) => m.resolution(),
-        Scene::Python(o) => o.resolution(),
-    };
-    let budget = match (spp, time) {
-        (Some(spp), None) => Budget::samples_per_pixel(spp, resolution),
-        (None, Some(t)) => Budget::Time(
-            Duration::try_from_secs_f64(t)
-                .ok()
-                .filter(|_| t > 0.0)
-                .ok_or_else(|| {
-                    PyValueError::new_err(format!("time: {t} is not a number of seconds"))
-                })?,
-        ),
-        (None, None) => Budget::samples_per_pixel(16, resolution),
-        (Some(_), Some(_)) => return Err(PyValueError::new_err("give spp or time, not both")),
-    };
-    let settings = Settings {
-        seed,
-        budget,
+    let asked = asked(
+        scene,
         method,
-    };
-    // A Python oracle holds the GIL for each path: more threads only wait
-    // for it (2 threads trace half the paths a second of 1).
-    let threads = threads.or(matches!(oracle, Scene::Python(_)).then_some(1));
-    let mut pool = rayon::ThreadPoolBuilder::new();
-    if let Some(threads) = threads {
-        if threads == 0 {
-            return Err(PyValueError::new_err("threads: at least 1"));
-        }
-        pool = pool.num_threads(threads);
-    }
-    let pool = pool
-        .build()
-        .map_err(|e| PyValueError::new_err(e.to_string()))?;
-    let python_oracle = match &oracle {
-        Scene::Python(o) => Some(o),
-        _ => None,
-    };
-    let watch = Watch {
-        callback: progress.as_ref(),
-        oracle: python_oracle,
-        stopped: AtomicBool::new(false),
-        error: std::sync::Mutex::new(None),
-    };
-    let start = std::time::Instant::now();
-    // The render runs on the pool; this (the main) thread, where Python
-    // hears its signals, checks them while it waits.
-    let rendered = py.detach(|| {
-        std::thread::scope(|scope| {
-            let rendering = scope.spawn(|| {
-                pool.install(|| match &oracle {
-                    Scene::Tracer(t) => {
-                        strata::engine::render(t.as_ref(), &MaxChannel, &settings, &watch)
-                    }
-                    Scene::Procedural(p) => {
-                        strata::engine::render(p, &MaxChannel, &settings, &watch)
-                    }
-                    Scene::Mixture(m) => strata::engine::render(m, &MaxChannel, &settings, &watch),
-                    Scene::Python(o) => strata::engine::render(o, &MaxChannel, &settings, &watch),
-                })
-            });
-            while !rendering.is_finished() {
-                std::thread::sleep(Duration::from_millis(20));
-                Python::attach(|py| {
-                    if let Err(error) = py.check_signals() {
-                        watch.fail(error);
-                    }
-                });
-            }
-            rendering.join()
+        spp,
+        time,
+        seed,
+        threads,
+        path_sampler,
+        (width, height),
+        preset,
+        settings,
+    )?;
+    let every = |seconds: f64, what: &str| {
+        Every::new(seconds).ok_or_else(|| {
+            PyValueError::new_err(format!("{what}: {seconds} is not a number of seconds"))
         })
-    });
-    let rendered = match rendered {
-        Ok(rendered) => rendered,
-        Err(panic) => std::panic::resume_unwind(panic),
     };
+    let preview = match &preview {
+        Some(callback) => Some((callback, every(preview_every, "preview_every")?)),
+        None => None,
+    };
+    let checkpoint = match (checkpoint, checkpoint_every) {
+        (Some(path), every_seconds) => Some((
+            path,
+            every_seconds
+                .map(|s| every(s, "checkpoint_every"))
+                .transpose()?,
+        )),
+        (None, Some(_)) => {
+            return Err(PyValueError::new_err(
+                "checkpoint_every needs checkpoint, the file",
+            ));
+        }
+        (None, None) => None,
+    };
+    let resume = match &resume {
+        Some(path) => Some(Checkpoint::from_bytes(read(path)?).map_err(engine_error)?),
+        None => None,
+    };
+    let mut watch = Watch::new(asked.scene.python());
+    watch.progress = progress.as_ref();
+    watch.preview = preview;
+    watch.checkpoint = checkpoint;
+    let start = std::time::Instant::now();
+    let whole = Whole {
+        settings: &asked.settings,
+        watch: &watch,
+        resume: resume.as_ref(),
+    };
+    let output = run(py, &asked.pool, &asked.scene, &watch, &whole)?;
     let seconds = start.elapsed().as_secs_f64();
-    if let Some(error) = python_oracle.and_then(PyOracle::take_error) {
-        return Err(error);
+    Render::new(py, output, seconds)
+}
+
+/// Renders task `index` of `count` of a split render; returns its part (the
+/// bytes `merge` takes, or that `strata merge` reads from a file).
+#[pyfunction]
+#[pyo3(signature = (scene, method, index, count, *, spp=None, time=None, seed=0, threads=None,
+    path_sampler="unidirectional", width=None, height=None, preset=None, **settings))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn render_task<'py>(
+    py: Python<'py>,
+    scene: &Bound<'_, PyAny>,
+    method: &str,
+    index: u32,
+    count: u32,
+    spp: Option<u64>,
+    time: Option<f64>,
+    seed: u64,
+    threads: Option<usize>,
+    path_sampler: &str,
+    width: Option<u32>,
+    height: Option<u32>,
+    preset: Option<&str>,
+    settings: Option<&Bound<'_, PyDict>>,
+) -> PyResult<Bound<'py, PyBytes>> {
+    let asked = asked(
+        scene,
+        method,
+        spp,
+        time,
+        seed,
+        threads,
+        path_sampler,
+        (width, height),
+        preset,
+        settings,
+    )?;
+    let watch = Watch::new(asked.scene.python());
+    let part = Part {
+        settings: &asked.settings,
+        watch: &watch,
+        task: Task { index, count },
+    };
+    let part = run(py, &asked.pool, &asked.scene, &watch, &part)?;
+    Ok(PyBytes::new(py, part.as_bytes()))
+}
+
+/// Merges the parts of a split render (bytes from `render_task`, or paths
+/// of part files) into its image, the unsplit render's bit for bit.
+/// `partial`: merge the parts given even if tasks are missing.
+#[pyfunction]
+#[pyo3(signature = (parts, partial=false))]
+pub(crate) fn merge(
+    py: Python<'_>,
+    parts: Vec<Bound<'_, PyAny>>,
+    partial: bool,
+) -> PyResult<Render> {
+    let mut read = Vec::with_capacity(parts.len());
+    for part in &parts {
+        let bytes = if let Ok(bytes) = part.cast::<PyBytes>() {
+            bytes.as_bytes().to_vec()
+        } else if let Ok(path) = part.extract::<PathBuf>() {
+            self::read(&path)?
+        } else {
+            return Err(PyTypeError::new_err(
+                "a part: the bytes render_task returned, or a file's path",
+            ));
+        };
+        read.push(Checkpoint::from_bytes(bytes).map_err(engine_error)?);
     }
-    if let Some(error) = watch.error.lock().ok().and_then(|mut e| e.take()) {
-        return Err(error);
-    }
-    let output = rendered.map_err(engine_error)?;
-    Ok(Render {
-        image: to_numpy(py, &output.film).unbind(),
-        stats: stats(py, &output, seconds)?.unbind(),
-        film: output.film,
-    })
+    let start = std::time::Instant::now();
+    let output = py
+        .detach(|| strata::engine::merge(&read, partial))
+        .map_err(engine_error)?;
+    Render::new(py, output, start.elapsed().as_secs_f64())
 }

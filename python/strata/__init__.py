@@ -23,6 +23,8 @@ from __future__ import annotations
 import sys
 from typing import Any, Callable, Optional, Union
 
+import numpy as np
+
 from . import _strata
 from ._strata import METHODS, Error, Render, Sampler, compare, ess, iat, reference, rhat
 
@@ -35,8 +37,10 @@ __all__ = [
     "compare",
     "ess",
     "iat",
+    "merge",
     "reference",
     "render",
+    "render_task",
     "rhat",
     "settings",
 ]
@@ -56,6 +60,11 @@ def render(
     width: Optional[int] = None,
     height: Optional[int] = None,
     progress: Union[bool, Callable[[float, int], None], None] = None,
+    preview: Optional[Callable[[np.ndarray], None]] = None,
+    preview_every: float = 1.0,
+    checkpoint: Optional[str] = None,
+    checkpoint_every: Optional[float] = None,
+    resume: Optional[str] = None,
     preset: Optional[str] = None,
     **settings: Any,
 ) -> Render:
@@ -81,6 +90,13 @@ def render(
         ``bidirectional-no-splats`` or ``multiplexed`` (scenes only).
     progress: ``True`` for a progress bar (tqdm where installed), or a
         callable ``f(fraction, paths)`` called between rounds.
+    preview: a callable given the image so far (a numpy array) at most
+        every ``preview_every`` seconds.
+    checkpoint: a file the render's state is written to every
+        ``checkpoint_every`` seconds, when Ctrl-C stops it and when its
+        budget is spent; ``resume`` continues from such a file (the same
+        scene and settings; with the same budget the image is the
+        uninterrupted render's, bit for bit; with a larger one it goes on).
     preset: ``"gruson2020"`` for stratified MCMC's paper settings.
     settings: any of the method's settings by name (:func:`settings`).
     """
@@ -97,11 +113,32 @@ def render(
             width=width,
             height=height,
             progress=callback,
+            preview=preview,
+            preview_every=preview_every,
+            checkpoint=checkpoint,
+            checkpoint_every=checkpoint_every,
+            resume=resume,
             preset=preset,
             **settings,
         )
     finally:
         close()
+
+
+def render_task(scene: Union[str, Oracle], method: str, index: int, count: int, **kwargs: Any) -> bytes:
+    """Render task ``index`` of ``count`` of a split render (the arguments of
+    :func:`render` but the callbacks and checkpoints); returns its part, to
+    write to a file or give to :func:`merge`. Every method splits (stratified
+    MCMC and multi-stage MLT by their ``runs``)."""
+    return _strata.render_task(scene, method, index, count, **kwargs)
+
+
+def merge(parts: "list[Union[bytes, str]]", partial: bool = False) -> Render:
+    """Merge the parts of a split render (bytes from :func:`render_task` or
+    paths of part files, ``strata render --task-index`` writes them too)
+    into its image: the unsplit render's, bit for bit. ``partial`` merges
+    the parts given even if tasks are missing."""
+    return _strata.merge(list(parts), partial)
 
 
 def check_purity(oracle: Oracle, width: int, height: int, trials: int = 16, seed: int = 0) -> None:

@@ -210,3 +210,42 @@ def test_diagnostics_on_known_series():
     lum = ref @ np.array([0.2126, 0.7152, 0.0722])
     expected = np.mean(0.1 * lum / (lum + 0.01))
     assert strata.compare(ref * np.float32(1.1), ref)["mape"] == pytest.approx(expected, rel=1e-5)
+
+
+def test_previews_are_numpy_images():
+    seen = []
+    strata.render("procedural", "pssmlt", spp=256, width=32, height=24, preview=seen.append, preview_every=1e-9)
+    assert seen and all(p.shape == (24, 32, 3) and p.dtype == np.float32 for p in seen)
+
+
+def test_a_render_stopped_by_ctrl_c_resumes_to_the_uninterrupted_image(tmp_path):
+    """Ctrl-C with a checkpoint file: the state is saved, KeyboardInterrupt
+    raised; resumed with the same budget, the image is the uninterrupted
+    render's, bit for bit."""
+    checkpoint = tmp_path / "cornell.ckpt"
+    args = dict(spp=2048, width=32, height=32, seed=4, threads=2)
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    fractions = []
+    with pytest.raises(KeyboardInterrupt):
+        strata.render("cornell", "pssmlt", checkpoint=str(checkpoint),
+                      progress=lambda f, n: fractions.append(f), **args)
+    # Stopped inside its budget, and saved.
+    assert fractions and fractions[-1] < 1.0
+    assert checkpoint.is_file()
+    resumed = strata.render("cornell", "pssmlt", resume=str(checkpoint), **args)
+    whole = strata.render("cornell", "pssmlt", **args)
+    assert resumed.stats["paths"] == whole.stats["paths"]
+    assert np.array_equal(resumed.image, whole.image)
+
+
+def test_tasks_merge_to_the_unsplit_render(tmp_path):
+    args = dict(spp=8, width=32, height=24, seed=2)
+    parts = [strata.render_task("cornell", "pssmlt", i, 3, **args) for i in range(3)]
+    (tmp_path / "part-2.part").write_bytes(parts[2])
+    merged = strata.merge([parts[1], parts[0], str(tmp_path / "part-2.part")])
+    whole = strata.render("cornell", "pssmlt", **args)
+    assert np.array_equal(merged.image, whole.image)
+    with pytest.raises(strata.Error):
+        strata.merge(parts[:2])
+    assert strata.merge(parts[:2], partial=True).stats["paths"] < whole.stats["paths"]

@@ -16,9 +16,18 @@
 # --exchange none"). Writes out/bench/instructions.csv (or
 # instructions-step.csv); needs valgrind (apt-get install valgrind).
 #
+# METHOD_ARGS adds `strata render` options to every method but MC (e.g.
+# "--set emission_rays=0": the engine's cost alone, without the emission
+# seen directly estimated apart, which changes the paths the chains take).
+# With --check (after --step, if given), each method's count is compared
+# with scripts/instruction-baseline.csv (committed; its rows name the
+# options they were counted with): more than 2 % over fails, and the
+# change is named. `--record` rewrites that file instead.
+#
 #   scripts/instruction-counts.sh                 every method
 #   scripts/instruction-counts.sh pssmlt          MC and the methods named
 #   scripts/instruction-counts.sh --step replica  a chain step of each
+#   scripts/instruction-counts.sh --step --check  a step of each, against the baseline
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -29,6 +38,13 @@ if [ "${1:-}" = --step ]; then
   step=true
   shift
 fi
+mode=""
+if [ "${1:-}" = --check ] || [ "${1:-}" = --record ]; then
+  mode=$1
+  shift
+fi
+read -r -a method_args <<<"${METHOD_ARGS:-}"
+baseline=scripts/instruction-baseline.csv
 methods=("${@:-pssmlt stratified erpt replica}")
 read -r -a methods <<<"${methods[*]}"
 read -r -a replica_args <<<"${REPLICA_ARGS:---tempering power --replicas 4 --t-max 100}"
@@ -43,6 +59,7 @@ echo "method,instructions,paths,instructions_per_path,ratio" >"$csv"
 count() {
   local method=$1 spp=$2 extra=()
   [ "$method" = replica ] && extra=("${replica_args[@]}")
+  [ "$method" != mc ] && extra+=("${method_args[@]}")
   local log="$out/instructions/$method-$spp.log"
   valgrind --tool=callgrind --callgrind-out-file=/dev/null \
     target/release/strata render "$scene" --method "$method" "${extra[@]}" \
@@ -71,3 +88,29 @@ for method in mc "${methods[@]}"; do
   echo "$method,$instructions,$paths,$per_path,$ratio" >>"$csv"
 done
 echo "wrote $csv"
+
+# The baseline: method, options, step, instructions per path.
+key() { printf '%s,%s,%s' "$1" "${METHOD_ARGS:-}" "$step"; }
+if [ "$mode" = --record ]; then
+  tail -n +2 "$csv" | while IFS=, read -r method _ _ per_path _; do
+    grep -v "^$(key "$method")," "$baseline" 2>/dev/null >"$baseline.new" || true
+    echo "$(key "$method"),$per_path" >>"$baseline.new"
+    mv "$baseline.new" "$baseline"
+  done
+  echo "recorded in $baseline"
+elif [ "$mode" = --check ]; then
+  status=0
+  while IFS=, read -r method _ _ per_path _; do
+    was=$(grep "^$(key "$method")," "$baseline" | cut -d, -f4)
+    if [ -z "$was" ]; then
+      echo "$method: no baseline for these options"
+      status=1
+    elif awk -v now="$per_path" -v was="$was" 'BEGIN {exit !(now > 1.02 * was)}'; then
+      echo "$method: $per_path instructions per path, baseline $was (+$(awk -v n="$per_path" -v w="$was" 'BEGIN {printf "%.1f", 100 * (n / w - 1)}') %)"
+      status=1
+    else
+      echo "$method: $per_path instructions per path, baseline $was: kept"
+    fi
+  done < <(tail -n +2 "$csv")
+  exit $status
+fi

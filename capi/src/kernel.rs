@@ -3,7 +3,7 @@
 
 use std::ffi::{c_char, c_void};
 
-use strata_engine::mutate::{Custom, Kernel};
+use strata_engine::mutate::{Custom, Kernel, check_inverse_law};
 use strata_engine::rng::{Pcg32, uniform_f64};
 
 use crate::*;
@@ -119,30 +119,6 @@ impl CKernel {
     /// [`strata_register_kernel`]).
     fn check(&self) -> Result<(), String> {
         let user = self.user as *mut c_void;
-        let mut previous = (0.0, 0.0);
-        let mut sizes: Vec<f64> = Vec::with_capacity(256);
-        for i in 0..256 {
-            let u = (i as f64 + 0.5) / 256.0;
-            let (d, mirror) = ((self.offset)(user, u), (self.offset)(user, 1.0 - u));
-            if !(d.is_finite() && mirror.is_finite()) {
-                return Err(format!("offset({u}) or offset({}) is not finite", 1.0 - u));
-            }
-            if (d + mirror).abs() > 1e-6 * d.abs().max(1.0) {
-                return Err(format!(
-                    "offset is not symmetric: offset({u}) = {d}, offset({}) = {mirror}",
-                    1.0 - u
-                ));
-            }
-            sizes.push(d.abs());
-        }
-        sizes.sort_by(f64::total_cmp);
-        for x in sizes {
-            let p = (self.abs_cdf)(user, x);
-            if !(0.0..=1.0).contains(&p) || (x > previous.0 && p < previous.1) {
-                return Err(format!("abs_cdf({x}) = {p}: not a distribution function"));
-            }
-            previous = (x, p);
-        }
-        Ok(())
+        check_inverse_law(|u| (self.offset)(user, u), |x| (self.abs_cdf)(user, x))
     }
 }

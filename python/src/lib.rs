@@ -5,6 +5,7 @@
 
 mod diagnostics;
 mod errors;
+mod kernel;
 mod oracle;
 mod render;
 mod scene;
@@ -28,5 +29,6 @@ fn _strata(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(diagnostics::reference, m)?)?;
     m.add_function(wrap_pyfunction!(diagnostics::check_purity_of, m)?)?;
     m.add_function(wrap_pyfunction!(diagnostics::settings, m)?)?;
+    m.add_function(wrap_pyfunction!(kernel::register_kernel, m)?)?;
     Ok(())
 }

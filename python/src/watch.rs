@@ -78,6 +78,7 @@ impl<'a> Watch<'a> {
     pub(crate) fn take_error(&self) -> Option<PyErr> {
         self.oracle
             .and_then(PyOracle::take_error)
+            .or_else(crate::kernel::take_error)
             .or_else(|| self.error.lock().ok()?.take())
     }
 
@@ -116,7 +117,9 @@ impl Observer for Watch<'_> {
     }
 
     fn should_stop(&self) -> bool {
-        self.stopped.load(Ordering::Relaxed) || self.oracle.is_some_and(PyOracle::failed)
+        self.stopped.load(Ordering::Relaxed)
+            || self.oracle.is_some_and(PyOracle::failed)
+            || crate::kernel::failed()
     }
 
     fn wants_checkpoint(&self) -> bool {

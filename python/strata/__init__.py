@@ -26,7 +26,18 @@ from typing import Any, Callable, Optional, Union
 import numpy as np
 
 from . import _strata
-from ._strata import METHODS, Error, Render, Sampler, compare, ess, iat, reference, rhat
+from ._strata import (
+    METHODS,
+    Error,
+    Render,
+    Sampler,
+    compare,
+    ess,
+    iat,
+    reference,
+    register_kernel,
+    rhat,
+)
 
 __all__ = [
     "METHODS",
@@ -39,6 +50,7 @@ __all__ = [
     "iat",
     "merge",
     "reference",
+    "register_kernel",
     "render",
     "render_task",
     "rhat",

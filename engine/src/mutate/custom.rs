@@ -38,7 +38,9 @@
 //! assert_eq!(SmallStep::from_name("cauchy"), Some(step));
 //! ```
 
+use alloc::format;
 use alloc::string::String;
+use alloc::vec::Vec;
 use core::fmt;
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -134,4 +136,41 @@ impl<'de> Deserialize<'de> for Custom {
             serde::de::Error::custom("a small-step kernel that this process has not registered")
         })
     }
+}
+
+/// Checks a kernel given by its law's inverse distribution function
+/// (`offset(u)` for a uniform `u`, as kernels written in C and Python
+/// are), at 256 evenly spaced `u` in `(0, 1)`: `offset(u)` finite and
+/// symmetric (`offset(1 - u) = -offset(u)`, to a part in a million), and
+/// `abs_cdf` in `[0, 1]` and non-decreasing at those offsets' sizes. The
+/// error says what failed.
+pub fn check_inverse_law(
+    offset: impl Fn(f64) -> f64,
+    abs_cdf: impl Fn(f64) -> f64,
+) -> Result<(), String> {
+    let mut sizes: Vec<f64> = Vec::with_capacity(256);
+    for i in 0..256 {
+        let u = (i as f64 + 0.5) / 256.0;
+        let (d, mirror) = (offset(u), offset(1.0 - u));
+        if !(d.is_finite() && mirror.is_finite()) {
+            return Err(format!("offset({u}) or offset({}) is not finite", 1.0 - u));
+        }
+        if (d + mirror).abs() > 1e-6 * d.abs().max(1.0) {
+            return Err(format!(
+                "offset is not symmetric: offset({u}) = {d}, offset({}) = {mirror}",
+                1.0 - u
+            ));
+        }
+        sizes.push(d.abs());
+    }
+    sizes.sort_by(f64::total_cmp);
+    let mut previous = (0.0, 0.0);
+    for x in sizes {
+        let p = abs_cdf(x);
+        if !(0.0..=1.0).contains(&p) || (x > previous.0 && p < previous.1) {
+            return Err(format!("abs_cdf({x}) = {p}: not a distribution function"));
+        }
+        previous = (x, p);
+    }
+    Ok(())
 }

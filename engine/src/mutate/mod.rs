@@ -8,7 +8,7 @@
 
 mod custom;
 
-pub use custom::{Custom, Kernel};
+pub use custom::{Custom, Kernel, check_inverse_law};
 
 use serde::{Deserialize, Serialize};
 

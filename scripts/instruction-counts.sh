@@ -44,7 +44,7 @@ if [ "${1:-}" = --check ] || [ "${1:-}" = --record ]; then
   shift
 fi
 read -r -a method_args <<<"${METHOD_ARGS:-}"
-baseline=scripts/instruction-baseline.csv
+baseline=${BASELINE:-scripts/instruction-baseline.csv}
 methods=("${@:-pssmlt stratified erpt replica}")
 read -r -a methods <<<"${methods[*]}"
 read -r -a replica_args <<<"${REPLICA_ARGS:---tempering power --replicas 4 --t-max 100}"

@@ -327,13 +327,7 @@ impl Method {
             (Method::Erpt(s), "chains_per_path") => number(s.chains_per_path),
             (Method::Erpt(s), "bootstrap_candidates") => number(s.bootstrap_candidates as f64),
             (Method::Erpt(s), "emission_rays") => number(s.emission_rays),
-            (Method::Erpt(s), "small_step" | "small_step_min" | "small_step_max") => {
-                let mutation = MutationParams {
-                    small_step: s.small_step,
-                    large_step_probability: 0.0,
-                };
-                mutation_get(&mutation, name)
-            }
+            (Method::Erpt(s), _) => kernel_get(&s.small_step, name),
             (Method::MultiStage(s), "linear_stages") => number(s.linear_stages.into()),
             (Method::MultiStage(s), "noise_aware") => number(f64::from(u8::from(s.noise_aware))),
             (Method::MultiStage(s), "runs") => number(s.runs.into()),
@@ -400,14 +394,7 @@ impl Method {
             (Method::Erpt(s), "chains_per_path") => s.chains_per_path = value,
             (Method::Erpt(s), "bootstrap_candidates") => s.bootstrap_candidates = n,
             (Method::Erpt(s), "emission_rays") => s.emission_rays = value,
-            (Method::Erpt(s), _) => {
-                let mut mutation = MutationParams {
-                    small_step: s.small_step,
-                    large_step_probability: 0.0,
-                };
-                mutation_set(&mut mutation, name, value)?;
-                s.small_step = mutation.small_step;
-            }
+            (Method::Erpt(s), _) => kernel_set(&mut s.small_step, name, value)?,
             (Method::MultiStage(s), "linear_stages") => s.linear_stages = n as u32,
             (Method::MultiStage(s), "noise_aware") => s.noise_aware = on,
             (Method::MultiStage(s), "runs") => s.runs = n as u32,
@@ -560,8 +547,15 @@ fn check(row: &Setting, value: f64) -> Result<(), Error> {
 
 /// The mutation settings' values by name.
 fn mutation_get(mutation: &MutationParams, name: &str) -> Option<Value> {
-    match (name, mutation.small_step) {
-        ("large_step_probability", _) => Some(Value::Number(mutation.large_step_probability)),
+    match name {
+        "large_step_probability" => Some(Value::Number(mutation.large_step_probability)),
+        _ => kernel_get(&mutation.small_step, name),
+    }
+}
+
+/// A small-step kernel's setting by name: the kernel, Kelemen's sizes.
+fn kernel_get(kernel: &SmallStep, name: &str) -> Option<Value> {
+    match (name, kernel) {
         ("small_step", kernel) => Some(Value::Choice(kernel.name())),
         ("small_step_min", SmallStep::Kelemen(k)) => Some(Value::Number(k.s1())),
         ("small_step_max", SmallStep::Kelemen(k)) => Some(Value::Number(k.s2())),
@@ -575,13 +569,23 @@ fn mutation_set(
     name: &'static str,
     value: f64,
 ) -> Result<(), Error> {
-    match (name, mutation.small_step) {
-        ("large_step_probability", _) => mutation.large_step_probability = value,
+    match name {
+        "large_step_probability" => {
+            mutation.large_step_probability = value;
+            Ok(())
+        }
+        _ => kernel_set(&mut mutation.small_step, name, value),
+    }
+}
+
+/// Sets Kelemen's sizes by name (the kernel itself is a choice).
+fn kernel_set(kernel: &mut SmallStep, name: &'static str, value: f64) -> Result<(), Error> {
+    match (name, *kernel) {
         ("small_step_min", SmallStep::Kelemen(k)) => {
-            mutation.small_step = SmallStep::Kelemen(Kelemen::new(value, k.s2())?)
+            *kernel = SmallStep::Kelemen(Kelemen::new(value, k.s2())?)
         }
         ("small_step_max", SmallStep::Kelemen(k)) => {
-            mutation.small_step = SmallStep::Kelemen(Kelemen::new(k.s1(), value)?)
+            *kernel = SmallStep::Kelemen(Kelemen::new(k.s1(), value)?)
         }
         _ => return Err(Error::NotApplicable { name }),
     }

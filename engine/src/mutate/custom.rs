@@ -45,7 +45,6 @@ use core::fmt;
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use super::SmallStep;
 use crate::error::Error;
 use crate::registry::{Refused, Registry};
 use crate::rng::Pcg32;
@@ -73,6 +72,10 @@ pub trait Kernel: Send + Sync + fmt::Debug + 'static {
 #[derive(Clone, Copy)]
 pub struct Custom(&'static dyn Kernel);
 
+/// The built-in kernels' names ([`SmallStep::NAMES`](super::SmallStep::NAMES),
+/// a test checks), which no kernel of one's own may take.
+pub(super) const BUILT_IN: [&str; 3] = ["kelemen", "gaussian", "adaptive"];
+
 /// The kernels registered so far.
 static REGISTERED: Registry<dyn Kernel> = Registry::new(|k| k.name());
 
@@ -89,7 +92,7 @@ impl Custom {
                 reason: "its name is empty",
             });
         }
-        let reason = match REGISTERED.register(kernel, &SmallStep::NAMES) {
+        let reason = match REGISTERED.register(kernel, &BUILT_IN) {
             Ok(()) => return Ok(Custom(kernel)),
             Err(Refused::NameTaken) => "another kernel has this name",
             Err(Refused::Full) => "32 kernels are registered already",

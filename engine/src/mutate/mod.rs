@@ -772,6 +772,13 @@ fn wrap_far(v: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Registration refuses the built-ins' names: the list it checks is
+    /// theirs.
+    #[test]
+    fn registration_knows_the_built_in_names() {
+        assert_eq!(custom::BUILT_IN, SmallStep::NAMES);
+    }
     use crate::rng::{Domain, stream};
 
     /// The AVX2 builds of the offsets and of the shift give the baseline

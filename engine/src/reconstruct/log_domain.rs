@@ -4,7 +4,7 @@ use alloc::vec;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
-use super::check_shapes;
+use super::estimate::check_shapes;
 use crate::error::Error;
 use crate::parallel::map_indices;
 use crate::tiles::Tiles;
@@ -183,7 +183,7 @@ fn conjugate_gradients(
 mod tests {
     use super::*;
     use crate::oracle::Resolution;
-    use crate::reconstruct::tests::synthetic;
+    use crate::reconstruct::estimate::tests::synthetic;
     use crate::tiles::TileShape;
 
     #[test]

@@ -6,9 +6,9 @@ use alloc::vec;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
+use super::estimate::{check_shapes, informative, initial_normalizations, tile_means};
 use super::planes::{Planes, Stencil};
 use super::stencil::{Chunks, Linear};
-use super::{check_shapes, informative, initial_normalizations, tile_means};
 use crate::error::Error;
 use crate::parallel::{self, map_indices, threads};
 use crate::tiles::Tiles;
@@ -531,7 +531,7 @@ impl Problem {
 mod tests {
     use super::*;
     use crate::oracle::Resolution;
-    use crate::reconstruct::tests::synthetic;
+    use crate::reconstruct::estimate::tests::synthetic;
     use crate::rng::{Domain, stream, uniform_f64};
     use crate::tiles::TileShape;
 
@@ -676,7 +676,7 @@ mod tests {
             ..Default::default()
         };
         let b = weighted(&tiles, &g, &intensity, &settings, None, &|| false).unwrap();
-        let image = super::super::image(&tiles, &g, &b, 1);
+        let image = super::super::estimate::image(&tiles, &g, &b, 1);
         for (j, (got, want)) in image.iter().zip(&intensity).enumerate() {
             assert!(
                 (got / want - 1.0).abs() < 1e-4,

@@ -41,7 +41,8 @@ use core::fmt;
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use super::{Decisions, Exchange, ExchangeKind, Move, Tempered};
+use super::context::{Exchange, Move, Tempered};
+use super::decide::Decisions;
 use crate::error::Error;
 use crate::registry::{Refused, Registry};
 
@@ -111,7 +112,20 @@ pub trait SwapMove: Send + Sync + fmt::Debug + 'static {
     }
 }
 
-/// A registered [`SwapMove`], as [`ExchangeKind::Custom`] holds it:
+/// The built-in moves' names ([`ExchangeKind::NAMES`](super::ExchangeKind::NAMES),
+/// a test checks), which no move of one's own may take.
+pub(super) const BUILT_IN: [&str; 8] = [
+    "none",
+    "neighbor",
+    "is-permutation",
+    "is-swap",
+    "original-eem",
+    "frequent-eem",
+    "ees",
+    "non-reversible",
+];
+
+/// A registered [`SwapMove`], as [`ExchangeKind::Custom`](super::ExchangeKind::Custom) holds it:
 /// compared, saved and read back by its name.
 #[derive(Clone, Copy)]
 pub struct CustomMove(&'static dyn SwapMove);
@@ -124,7 +138,7 @@ impl CustomMove {
     /// name is then known). Another move of a taken name, a built-in's
     /// name, or more than 32 moves is [`Error::InvalidMove`].
     pub fn new(exchange: &'static dyn SwapMove) -> Result<CustomMove, Error> {
-        let reason = match REGISTERED.register(exchange, &ExchangeKind::NAMES) {
+        let reason = match REGISTERED.register(exchange, &BUILT_IN) {
             Ok(()) => return Ok(CustomMove(exchange)),
             Err(Refused::NameTaken) => "another move has this name",
             Err(Refused::Full) => "32 moves are registered already",

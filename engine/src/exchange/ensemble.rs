@@ -10,8 +10,10 @@ use serde::{Deserialize, Serialize};
 use crate::rng::Pcg32;
 use rand_core::Rng;
 
+use super::context::{Exchange, Move};
+use super::ladder::Ladder;
+use super::stats::{ExchangeStats, SweepRecorder};
 use super::tempered::{EnsembleWeights, Levels, Replica, TemperedPath, TemperedTarget, Tempering};
-use super::{Exchange, ExchangeStats, Ladder, Move, SweepRecorder};
 use crate::bootstrap::{Bootstrap, Halt};
 use crate::chain::{ChainStats, Normalization};
 use crate::error::{Error, check_probability};

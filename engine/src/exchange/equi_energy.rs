@@ -10,7 +10,7 @@ use alloc::boxed::Box;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
-use super::{Exchange, Jump, Move, Tempered};
+use super::context::{Exchange, Jump, Move, Tempered};
 use crate::error::Error;
 
 /// Ring boundaries `H_2 < ... < H_d`, evenly spaced on a log scale (Šik 2018

@@ -5,11 +5,11 @@ use alloc::vec::Vec;
 
 use serde::{Deserialize, Serialize};
 
+use super::context::{Exchange, Jump, Move, NoExchange};
+use super::custom::CustomMove;
+use super::equi_energy::{EnergyLevels, EquiEnergy, EquiEnergySampler};
+use super::moves::{IsPermutation, IsSwap, NeighborSwap, NonReversible};
 use super::tempered::Replica;
-use super::{
-    CustomMove, EnergyLevels, EquiEnergy, EquiEnergySampler, Exchange, IsPermutation, IsSwap, Jump,
-    Move, NeighborSwap, NoExchange, NonReversible,
-};
 use crate::bootstrap::Bootstrap;
 use crate::error::Error;
 use crate::oracle::Radiance;

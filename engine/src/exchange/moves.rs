@@ -6,8 +6,8 @@ use alloc::vec;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
+use super::context::{Exchange, Move, Tempered};
 use super::permutation::PermutationSampler;
-use super::{Exchange, Move, Tempered};
 use crate::error::Error;
 
 /// Neighbor swapping (Šik 2018, sec. 5.3.1, fig. 5.6, after Gruson et al.

@@ -28,7 +28,7 @@ use alloc::boxed::Box;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
-use super::Tempered;
+use super::context::Tempered;
 use crate::bootstrap::{Bootstrap, Halt};
 use crate::chain::{Chain, Target, Traced, Weights};
 use crate::error::Error;

@@ -36,7 +36,8 @@ use alloc::vec::Vec;
 use core::ops::Range;
 use serde::{Deserialize, Serialize};
 
-use super::{Extras, Job, Output};
+use super::job::Job;
+use super::output::{Extras, Output};
 use crate::bootstrap::Bootstrap;
 use crate::chain::{Chain, ChainStats, Normalization, PathTarget, Traced, Weights};
 use crate::checkpoint::{self, Position};

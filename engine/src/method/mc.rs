@@ -9,7 +9,8 @@
 
 use alloc::vec::Vec;
 
-use super::{Extras, Job, Output};
+use super::job::Job;
+use super::output::{Extras, Output};
 use crate::checkpoint;
 use crate::drive::Rounds;
 use crate::error::Error;

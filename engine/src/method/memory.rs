@@ -2,44 +2,11 @@
 //! ([`RenderMethod::memory_bound`]), the reservation a render makes before
 //! any work, and the sizes it counts with.
 
-use super::{Method, RenderMethod, erpt};
+use super::dispatch::{Method, RenderMethod, RenderShape};
+use super::erpt;
 use crate::drive::Budget;
-use crate::oracle::{PathOracle, Radiance, Resolution};
-use crate::parallel;
+
 use crate::task::Task;
-
-/// What a render's memory depends on besides its method
-/// ([`RenderMethod::memory_bound`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RenderShape {
-    /// The film's size.
-    pub resolution: Resolution,
-    /// The radiance's channels ([`Radiance::CHANNELS`]).
-    pub channels: usize,
-    /// The oracle's splats a path ([`PathOracle::splats_per_path`]).
-    pub splats_per_path: f64,
-    /// The threads that render.
-    pub workers: usize,
-    /// The render's budget.
-    pub budget: Budget,
-    /// The task of a split render ([`Task::WHOLE`] for a whole one).
-    pub task: Task,
-}
-
-impl RenderShape {
-    /// The shape of a render of `oracle` with `budget`, for `task`, on the
-    /// current thread pool.
-    pub fn of<O: PathOracle>(oracle: &O, budget: Budget, task: Task) -> Self {
-        Self {
-            resolution: oracle.resolution(),
-            channels: O::Radiance::CHANNELS,
-            splats_per_path: oracle.splats_per_path(),
-            workers: parallel::threads(),
-            budget,
-            task,
-        }
-    }
-}
 
 /// The finished runs' sums a render of `runs` independent runs keeps
 /// besides the running one: a whole render's pooled as each ends (one), a
@@ -72,134 +39,136 @@ fn runs_kept(runs: u32, task: Task) -> u128 {
 /// sizes were measured with the native tracer, unidirectional and
 /// bidirectional, by `studies/src/bin/memory_peaks.rs` (docs/BENCHMARKS.md), and
 /// `tests/bounds/memory.rs` checks the bound within 1.5x of the measured peak.
-pub(super) fn bound(method: &Method, shape: &RenderShape) -> u64 {
-    use sizes::*;
-    let RenderShape {
-        resolution,
-        channels,
-        splats_per_path,
-        workers,
-        budget,
-        task,
-    } = *shape;
-    // In u128: a film of u32::MAX x u32::MAX pixels is still a number.
-    let pixels = resolution.pixel_count() as u128;
-    let film = 8 * channels as u128 * pixels;
-    // The exact sums the films of MC, PSSMLT (two layers), replica
-    // exchange and ERPT are, beside the image they finish to.
-    let exact = crate::exact::ExactFilm::VALUE_BYTES as u128 * channels as u128 * pixels;
-    let counted = film + 8 * pixels;
-    // A queued contribution: pixel, weight and radiance.
-    let queued = (12 + 4 * channels as u128).next_multiple_of(8);
-    // Splats per path, in hundredths (a fraction of one counts).
-    let splats = if splats_per_path.is_finite() {
-        (splats_per_path.clamp(0.0, 1e6) * 100.0) as u128
-    } else {
-        0
-    };
-    // The contributions of `paths` paths, each with `per_path` states
-    // (proposal and current) and their splats.
-    let contributions =
-        |paths: u64, per_path: u128| paths as u128 * per_path * (100 + splats) * queued / 100;
-    let round = |unit: u64| {
-        let most = match budget {
-            Budget::Samples(n) => (n / 64).saturating_add(unit),
-            #[cfg(feature = "std")]
-            Budget::Time(_) => ROUND_PATHS,
+impl Method {
+    /// The bound itself ([`RenderMethod::memory_bound`](super::RenderMethod::memory_bound)).
+    pub(super) fn memory(&self, shape: &RenderShape) -> u64 {
+        let method = self;
+        use sizes::*;
+        let RenderShape {
+            resolution,
+            channels,
+            splats_per_path,
+            workers,
+            budget,
+            task,
+        } = *shape;
+        // In u128: a film of u32::MAX x u32::MAX pixels is still a number.
+        let pixels = resolution.pixel_count() as u128;
+        let film = 8 * channels as u128 * pixels;
+        // The exact sums the films of MC, PSSMLT (two layers), replica
+        // exchange and ERPT are, beside the image they finish to.
+        let exact = crate::exact::ExactFilm::VALUE_BYTES as u128 * channels as u128 * pixels;
+        let counted = film + 8 * pixels;
+        // A queued contribution: pixel, weight and radiance.
+        let queued = (12 + 4 * channels as u128).next_multiple_of(8);
+        // Splats per path, in hundredths (a fraction of one counts).
+        let splats = if splats_per_path.is_finite() {
+            (splats_per_path.clamp(0.0, 1e6) * 100.0) as u128
+        } else {
+            0
         };
-        contributions(most.min(ROUND_PATHS.max(unit)), 2)
-    };
-    let workers = workers as u128;
-    let bytes = match method {
-        Method::Mc => exact + film + pixels * splats * queued / 100,
-        // The bootstrap's candidates are let go before the first round.
-        Method::Pssmlt(s) => {
-            counted
-                + 2 * exact
-                + s.chains as u128 * CHAIN
-                + (s.bootstrap_candidates as u128 * CANDIDATE).max(round(s.chains as u64))
-        }
-        Method::Replica(s) => {
-            let levels = s.ensemble.ladder.len() as u128;
-            let sweep = s.traces_per_sweep().saturating_mul(s.ensembles as u64);
-            counted
-                + exact
-                + s.ensembles as u128 * levels * CHAIN
-                + (s.ensemble.bootstrap_candidates as u128 * levels * CANDIDATE).max(round(sweep))
-        }
-        Method::Stratified(s) => {
-            let tile = match s.shape {
-                crate::tiles::TileShape::Cross => 5,
-                crate::tiles::TileShape::Square { radius } => {
-                    (2 * radius as u128 + 1) * (2 * radius as u128 + 1)
-                }
+        // The contributions of `paths` paths, each with `per_path` states
+        // (proposal and current) and their splats.
+        let contributions =
+            |paths: u64, per_path: u128| paths as u128 * per_path * (100 + splats) * queued / 100;
+        let round = |unit: u64| {
+            let most = match budget {
+                Budget::Samples(n) => (n / 64).saturating_add(unit),
+                #[cfg(feature = "std")]
+                Budget::Time(_) => ROUND_PATHS,
             };
-            // Splats: a large step's centre trace keeps them, its other
-            // tile pixels do not (`stratified::light`).
-            let per_tile = tile * TILE_PIXEL + splats * queued / 100;
-            // Light tracing's two films, made at the first splat; the
-            // emission seen directly's (counted whether or not the
-            // oracle separates it).
-            let light = if splats > 0 { 2 * film } else { 0 };
-            let emission = if s.emission_rays > 0 {
-                film + 2 * pixels
-            } else {
-                0
-            };
-            // The sums of the runs finished before the last (each
-            // tile's `N G_s(k)` and draws, the uniform samples' sums,
-            // its light tracing and emission), kept to be pooled.
-            let run = pixels * (4 * tile * channels as u128 + 24 + 8 * (channels as u128 + 2))
-                + light
-                + emission;
-            counted
-                + light
-                + emission
-                + pixels * (TILE_CHAIN + per_tile)
-                + workers * CHAIN
-                + runs_kept(s.runs, task) * run
-        }
-        Method::Erpt(s) => {
-            // A block's start paths and a wave's proposals and states,
-            // in vectors that grew by doubling while it ran: half as
-            // much again.
-            let wave = contributions(erpt::BLOCK_PATHS + erpt::WAVE_STEPS, 3);
-            counted
-                + exact
-                + workers * CHAIN
-                + (s.bootstrap_candidates as u128 * CANDIDATE).max(wave)
-        }
-        Method::MultiStage(s) => {
-            // One PSSMLT stage, and beside it the estimate so far, the
-            // stages' sums and per pixel its luminance, deviation,
-            // importance and adaptation.
-            // (The emission apart counted once, below.)
-            let pssmlt = super::PssmltSettings {
-                emission_rays: 0.0,
-                ..s.pssmlt
-            };
-            let stage = bound(
-                &Method::Pssmlt(pssmlt),
-                &RenderShape {
+            contributions(most.min(ROUND_PATHS.max(unit)), 2)
+        };
+        let workers = workers as u128;
+        let bytes = match method {
+            Method::Mc => exact + film + pixels * splats * queued / 100,
+            // The bootstrap's candidates are let go before the first round.
+            Method::Pssmlt(s) => {
+                counted
+                    + 2 * exact
+                    + s.chains as u128 * CHAIN
+                    + (s.bootstrap_candidates as u128 * CANDIDATE).max(round(s.chains as u64))
+            }
+            Method::Replica(s) => {
+                let levels = s.ensemble.ladder.len() as u128;
+                let sweep = s.traces_per_sweep().saturating_mul(s.ensembles as u64);
+                counted
+                    + exact
+                    + s.ensembles as u128 * levels * CHAIN
+                    + (s.ensemble.bootstrap_candidates as u128 * levels * CANDIDATE)
+                        .max(round(sweep))
+            }
+            Method::Stratified(s) => {
+                let tile = match s.shape {
+                    crate::tiles::TileShape::Cross => 5,
+                    crate::tiles::TileShape::Square { radius } => {
+                        (2 * radius as u128 + 1) * (2 * radius as u128 + 1)
+                    }
+                };
+                // Splats: a large step's centre trace keeps them, its other
+                // tile pixels do not (`stratified::light`).
+                let per_tile = tile * TILE_PIXEL + splats * queued / 100;
+                // Light tracing's two films, made at the first splat; the
+                // emission seen directly's (counted whether or not the
+                // oracle separates it).
+                let light = if splats > 0 { 2 * film } else { 0 };
+                let emission = if s.emission_rays > 0 {
+                    film + 2 * pixels
+                } else {
+                    0
+                };
+                // The sums of the runs finished before the last (each
+                // tile's `N G_s(k)` and draws, the uniform samples' sums,
+                // its light tracing and emission), kept to be pooled.
+                let run = pixels * (4 * tile * channels as u128 + 24 + 8 * (channels as u128 + 2))
+                    + light
+                    + emission;
+                counted
+                    + light
+                    + emission
+                    + pixels * (TILE_CHAIN + per_tile)
+                    + workers * CHAIN
+                    + runs_kept(s.runs, task) * run
+            }
+            Method::Erpt(s) => {
+                // A block's start paths and a wave's proposals and states,
+                // in vectors that grew by doubling while it ran: half as
+                // much again.
+                let wave = contributions(erpt::BLOCK_PATHS + erpt::WAVE_STEPS, 3);
+                counted
+                    + exact
+                    + workers * CHAIN
+                    + (s.bootstrap_candidates as u128 * CANDIDATE).max(wave)
+            }
+            Method::MultiStage(s) => {
+                // One PSSMLT stage, and beside it the estimate so far, the
+                // stages' sums and per pixel its luminance, deviation,
+                // importance and adaptation.
+                // (The emission apart counted once, below.)
+                let pssmlt = super::pssmlt::PssmltSettings {
+                    emission_rays: 0.0,
+                    ..s.pssmlt
+                };
+                let stage = Method::Pssmlt(pssmlt).memory(&RenderShape {
                     task: Task::WHOLE,
                     ..*shape
-                },
-            );
-            // The sums of the runs finished before the last: film,
-            // deviations and visits.
-            let run = film + 16 * pixels;
-            stage as u128 + 2 * film + 4 * 8 * pixels + runs_kept(s.runs, task) * run
-        }
-    };
-    // The emission seen directly, estimated apart (`emission_rays`;
-    // counted whether or not the oracle separates it), and its pilot's
-    // two maps of the film, a byte a pixel each (`emission::sightings`).
-    let apart = if method.emission_rays() > 0.0 {
-        film + 2 * pixels
-    } else {
-        0
-    };
-    u64::try_from((bytes + apart).max(film)).unwrap_or(u64::MAX)
+                });
+                // The sums of the runs finished before the last: film,
+                // deviations and visits.
+                let run = film + 16 * pixels;
+                stage as u128 + 2 * film + 4 * 8 * pixels + runs_kept(s.runs, task) * run
+            }
+        };
+        // The emission seen directly, estimated apart (`emission_rays`;
+        // counted whether or not the oracle separates it), and its pilot's
+        // two maps of the film, a byte a pixel each (`emission::sightings`).
+        let apart = if method.emission_rays() > 0.0 {
+            film + 2 * pixels
+        } else {
+            0
+        };
+        u64::try_from((bytes + apart).max(film)).unwrap_or(u64::MAX)
+    }
 }
 
 /// The sizes [`bound`] counts with.

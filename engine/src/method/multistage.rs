@@ -36,10 +36,11 @@ use serde::{Deserialize, Serialize};
 
 use core::sync::atomic::{AtomicU64, Ordering};
 
+use super::job::Job;
 use super::noise_aware::noise_target;
+use super::output::{Extras, Output, Stage};
 use super::pssmlt::{Pssmlt, PssmltSettings};
 use super::runs::{self, Pooled};
-use super::{Extras, Job, Output};
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
 use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, SetUp};
 use crate::error::Error;
@@ -85,17 +86,6 @@ impl MultiStageSettings {
     pub fn validate(&self) -> Result<(), Error> {
         self.pssmlt.validate()
     }
-}
-
-/// One stage: its grid size and the paths it traced.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Stage {
-    /// Regions per side of the importance grid.
-    pub grid: u32,
-    /// Paths traced by the stage (bootstrap excluded).
-    pub samples: u64,
-    /// The stage's `b*`.
-    pub normalization: f64,
 }
 
 /// The grid sizes of Alg. 2 for an image whose larger side is `n`: `1, 2, 4,

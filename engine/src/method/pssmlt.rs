@@ -3,7 +3,8 @@
 //! step weights (see [`chain`](crate::chain)): `chains` chains run in
 //! parallel, each a unit of work one step.
 
-use super::{Extras, Job, Output};
+use super::job::Job;
+use super::output::{Extras, Output};
 use crate::bootstrap::Bootstrap;
 use alloc::vec::Vec;
 

@@ -11,7 +11,8 @@ use alloc::vec;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
-use super::{Extras, Job, Output};
+use super::job::Job;
+use super::output::{Extras, Output, ReplicaExtras};
 use crate::bootstrap::Bootstrap;
 use crate::chain::{ChainStats, Normalization};
 
@@ -96,19 +97,6 @@ impl ReplicaSettings {
         self.ensemble.validate()?;
         self.exchange.validate(self.ensemble.ladder.len())
     }
-}
-
-/// What replica exchange returns beyond the image ([`Extras::Replica`]).
-/// The render's `visits` count every chain's state after every sweep, and
-/// its `chains` counters sum every level's mutations.
-#[derive(Clone, Debug)]
-pub struct ReplicaExtras {
-    /// Exchange counters summed over ensembles.
-    pub exchange: ExchangeStats,
-    /// Mutation counters per temperature level, summed over ensembles.
-    pub levels: Vec<ChainStats>,
-    /// The ladder used (after tuning, if any).
-    pub ladder: Ladder,
 }
 
 /// Replica exchange under `job`.

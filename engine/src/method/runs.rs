@@ -25,7 +25,8 @@ use once_cell::race::OnceBox;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-use super::{Extras, Job, Output};
+use super::job::Job;
+use super::output::{Extras, Output};
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
 use crate::drive::{Beside, Budget, Clock, Observer, Progress, RenderStats, SetUp};
 use crate::error::Error;

@@ -16,7 +16,8 @@ use crate::exchange::{EnsembleSettings, ExchangeKind, Tempering};
 use crate::mutate::{Kelemen, MutationParams, SmallStep};
 use crate::tiles::TileShape;
 
-use super::{Method, RenderMethod, Solver};
+use super::dispatch::{Method, RenderMethod};
+use super::stratified::Solver;
 use crate::setting::{Kind, Setting, Value, choice, flag, real, whole};
 
 impl Method {
@@ -615,8 +616,8 @@ fn rebuild_ladder(
 
 #[cfg(test)]
 mod tests {
-    use super::RenderMethod;
     use super::*;
+    use crate::method::RenderMethod;
 
     /// Every method's defaults lie in the table, and every row can be read.
     #[test]

@@ -22,7 +22,10 @@ use alloc::string::ToString;
 use alloc::vec::Vec;
 use core::cell::OnceCell;
 
-use super::{Method, Output, Settings, erpt, mc, pssmlt, replica, run, run_resumed, runs};
+use super::dispatch::{Method, Settings};
+use super::output::Output;
+use super::render::{run, run_resumed};
+use super::{erpt, mc, pssmlt, replica, runs};
 use crate::checkpoint::{self, Checkpoint, Header, Position};
 use crate::drive::{Budget, Observer};
 use crate::emission::{self, SeenEmission};

@@ -98,14 +98,14 @@ use self::reconstruction::ReconstructionTime;
 use self::regularizer::Samples;
 use self::sweeps::{Saved, SweepCosts, Sweeps, SweptRun, finish_runs};
 use self::tile::{Context, TileChain};
+use super::job::Job;
+use super::output::{Output, StratifiedStats};
 use super::runs::{self, Pooled};
-use super::{Job, Output};
 use crate::chain::ChainStats;
 use crate::checkpoint;
 use crate::drive::Budget;
 use crate::emission::{SeenEmission, sightings};
 use crate::error::{Error, check_probability};
-use crate::film::Film;
 use crate::mutate::MutationParams;
 use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::reconstruct::{LogSettings, WeightedSettings};
@@ -348,50 +348,6 @@ impl StratifiedSettings {
     }
 }
 
-/// Counters of a stratified render.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct StratifiedStats {
-    /// Sweeps: steps made by every tile chain (all the same).
-    pub sweeps: u64,
-    /// Paths traced by the tile chains' steps.
-    pub tile_samples: u64,
-    /// Paths traced for the regularizer alone
-    /// ([`StratifiedSettings::regularizer_paths`]).
-    pub regularizer_samples: u64,
-    /// Paths a sample budget had left after its last sweep, traced as
-    /// regularizer paths at every tile's centre (`Sweeps::remainder`).
-    pub remainder_samples: u64,
-    /// Paths traced to evaluate exchanged and borrowed states.
-    pub exchange_samples: u64,
-    /// Paths traced by the initialization (bootstrap included, global
-    /// chains, replays of installed states).
-    pub initialization_samples: u64,
-    /// Tiles initialized by a global chain.
-    pub initialized_by_global_chains: u64,
-    /// Tiles initialized by borrowing a neighbour's state.
-    pub initialized_by_borrowing: u64,
-    /// Tiles initialized by one of their own uniform draws.
-    pub initialized_by_uniform_draws: u64,
-    /// Tiles that never found a state with `T_s > 0` (black tiles).
-    pub never_initialized: u64,
-    /// Local exchanges attempted (both tiles initialized).
-    pub exchange_attempts: u64,
-    /// Local exchanges accepted.
-    pub exchange_accepted: u64,
-    /// Pixels that took their regularizer's value
-    /// ([`StratifiedSettings::fallback_sigmas`]).
-    pub fallback_pixels: u64,
-    /// Pixels whose large steps all saw the same radiance (an emitter or a
-    /// constant environment seen directly) and took it.
-    pub known_pixels: u64,
-    /// The factor that gave the image the regularizer's total (1 without
-    /// [`StratifiedSettings::anchor_total`]).
-    pub total_scale: f64,
-    /// The weighted solver's `α` (cross-validated or the solver's own; 0
-    /// for the log-domain solver).
-    pub alpha: f64,
-}
-
 impl StratifiedStats {
     /// Every path traced, the bootstrap's included.
     fn traced(&self) -> u64 {
@@ -418,29 +374,6 @@ impl StratifiedStats {
         self.exchange_attempts += other.exchange_attempts;
         self.exchange_accepted += other.exchange_accepted;
     }
-}
-
-/// What stratified MCMC returns beyond the image ([`Extras::Stratified`](super::Extras::Stratified)).
-/// The render's `visits` count, per pixel, the tile-chain states evaluated
-/// in it (every tile containing the pixel, once per sweep).
-#[derive(Clone, Debug)]
-pub struct StratifiedExtras {
-    /// Counters specific to stratified MCMC.
-    pub counters: StratifiedStats,
-    /// The Monte Carlo estimate of the large steps (the regularizer `Î`).
-    pub regularizer: Film,
-    /// The reconstructed `b_s` per tile (empty for the log-domain solver).
-    pub normalizations: Vec<f64>,
-    /// The unscaled estimates `G_s(k)` of eq. 10, indexed `(tile · offsets +
-    /// offset) · channels + channel` (offsets in [`Tiles::offsets`] order; 0
-    /// where the tile is clipped). Within a tile their ratios estimate the
-    /// ratios of the pixel values. A tile whose chain never found a state
-    /// with `T_s > 0` holds the regularizer's values.
-    pub unscaled: Vec<f32>,
-    /// A time budget ran out during the weighted solver, which returned the
-    /// normalizations it had (fewer iterations than
-    /// [`WeightedSettings::iterations`]).
-    pub reconstruction_cut: bool,
 }
 
 /// One run of stratified MCMC under `job` (see the module docs): its sums

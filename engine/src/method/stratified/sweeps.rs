@@ -9,18 +9,19 @@ use alloc::vec::Vec;
 
 use serde::{Deserialize, Serialize};
 
+use super::StratifiedSettings;
 use super::light::LightTracing;
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
 use super::regularizer::{Draws, Samples};
 use super::tile::{Context, Row, Start, TileChain, Waking, accumulate};
-use super::{StratifiedExtras, StratifiedSettings, StratifiedStats};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;
 use crate::drive::{Budget, RenderStats, Rounds};
 use crate::emission::SeenEmission;
 use crate::error::Error;
 use crate::film::Film;
+use crate::method::output::{StratifiedExtras, StratifiedStats};
 use crate::method::{Extras, Output};
 use crate::oracle::{PathOracle, Splat};
 use crate::parallel;

@@ -4,7 +4,7 @@ use embree4_sys as rtc;
 use glam::{Vec2, Vec3};
 use strata_native::{Hit, Intersector, Ray};
 
-use crate::EmbreeError;
+use crate::error::EmbreeError;
 
 /// Embree's ray-hit record, padded. embree4-sys 0.0.12 was generated from
 /// Embree 4.2's headers, where `RTCRayHit` is 80 bytes; Embree 4.3 added

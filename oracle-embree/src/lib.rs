@@ -8,45 +8,15 @@
 //! [`EmbreeError::NotBuilt`], so a plain `cargo test --workspace` needs no
 //! system library.
 
-use std::fmt;
-
 #[cfg(not(feature = "embree"))]
 use glam::Vec3;
 
 #[cfg(feature = "embree")]
 mod backend;
+mod error;
 #[cfg(feature = "embree")]
 pub use backend::EmbreeIntersector;
-
-/// Why an Embree backend could not be made.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum EmbreeError {
-    /// The crate was built without the `embree` feature.
-    NotBuilt,
-    /// Embree reported an error (its code and where).
-    Embree {
-        /// What was being done.
-        during: &'static str,
-        /// Embree's error code.
-        code: i32,
-    },
-}
-
-impl fmt::Display for EmbreeError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            EmbreeError::NotBuilt => write!(
-                f,
-                "strata was built without Embree: run scripts/install-embree.sh, then build with `--features embree`"
-            ),
-            EmbreeError::Embree { during, code } => {
-                write!(f, "Embree error {code} during {during}")
-            }
-        }
-    }
-}
-
-impl std::error::Error for EmbreeError {}
+pub use error::EmbreeError;
 
 /// Stand-in when the `embree` feature is off: cannot be constructed.
 #[cfg(not(feature = "embree"))]

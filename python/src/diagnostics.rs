@@ -11,8 +11,8 @@ use strata::engine::diagnostics;
 use strata::engine::{Film, FilmPoint, Kind, Resolution, Temperature, Value, check_purity};
 
 use crate::errors::engine_error;
+use crate::image::to_numpy;
 use crate::oracle::PyOracle;
-use crate::render::to_numpy;
 
 /// The effective sample size of a series (Geyer 1992's initial positive
 /// sequence).

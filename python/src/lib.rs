@@ -5,6 +5,7 @@
 
 mod diagnostics;
 mod errors;
+mod image;
 mod kernel;
 mod oracle;
 mod render;

@@ -5,8 +5,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use numpy::ndarray::Array3;
-use numpy::{IntoPyArray, PyArray3};
+use numpy::PyArray3;
 use pyo3::exceptions::{PyOSError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
@@ -15,6 +14,7 @@ use strata::engine::{
 };
 
 use crate::errors::engine_error;
+use crate::image::to_numpy;
 use crate::scene::{self, Scene, WithOracle};
 use crate::watch::{Every, Watch};
 
@@ -71,21 +71,6 @@ impl Render {
         let r = self.film.resolution();
         format!("<strata.Render {}x{}>", r.width, r.height)
     }
-}
-
-/// The film as a height x width x 3 float32 array.
-pub(crate) fn to_numpy<'py>(py: Python<'py>, film: &Film) -> Bound<'py, PyArray3<f32>> {
-    let r = film.resolution();
-    let channels = film.channels();
-    let mut data = Vec::with_capacity(r.width as usize * r.height as usize * 3);
-    for pixel in film.data().chunks(channels) {
-        for c in 0..3 {
-            data.push(pixel.get(c).or(pixel.first()).copied().unwrap_or(0.0) as f32);
-        }
-    }
-    let array = Array3::from_shape_vec((r.height as usize, r.width as usize, 3), data)
-        .expect("a film holds width x height pixels");
-    array.into_pyarray(py)
 }
 
 fn stats<'py>(py: Python<'py>, output: &Output, seconds: f64) -> PyResult<Bound<'py, PyDict>> {

@@ -12,8 +12,8 @@ use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 use strata::engine::{Checkpoint, Film, Observer, Progress};
 
+use crate::image::to_numpy;
 use crate::oracle::PyOracle;
-use crate::render::to_numpy;
 
 /// Something to do at most every `every`.
 pub(crate) struct Every {

@@ -5,7 +5,8 @@
 //! rate below 1, paths through a specular vertex given whole to light
 //! tracing where it samples them well enough (O(n) a connection).
 
-use super::{Subpaths, Vertex};
+use super::subpaths::Subpaths;
+use super::vertex::Vertex;
 
 /// The factor on light tracing's squared density in the power heuristic,
 /// `n_lt²` for the caller's

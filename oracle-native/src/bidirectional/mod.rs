@@ -72,8 +72,10 @@ use crate::strategies::{Strategies, joinable, multiplexed_choice};
 use crate::tracer::{DIRECT_EMITTER, PathTracer, ROULETTE_DEPTH, SPECULAR_PATH, offset};
 
 mod mis;
+mod subpaths;
 mod vertex;
 use mis::{Reverse, light_tracing_factor};
+use subpaths::Subpaths;
 use vertex::{Kind, Vertex};
 
 /// Which way a subpath carries light.
@@ -113,32 +115,6 @@ fn adjoint_scale(bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> f32 {
         }
         _ => 1.0,
     }
-}
-
-/// The subpaths of one path and what the walks found on the way.
-#[derive(Default)]
-struct Subpaths {
-    camera: Vec<Vertex>,
-    light: Vec<Vertex>,
-    /// Radiance of the constant environment reached by the camera subpath.
-    environment: Vec3,
-    flags: PathFlags,
-    /// The camera subpath's first vertex in the MIS walk (1, or 2 without
-    /// light tracing), and each subpath's tail sums (`mis::tail_sums`).
-    camera_first: usize,
-    /// The light-tracing strategy's factor in the MIS weights of paths
-    /// without a specular vertex ([`light_tracing_factor`]; 1 without light
-    /// tracing), and the camera's tail sums with it.
-    light_tracing_factor: f32,
-    camera_tails: Vec<f32>,
-    /// The factor of the camera subpath alone (`s = 0`) in the MIS
-    /// weights (`Lengths::camera_alone_factor`; 1 but on multiplexed paths
-    /// the camera sees through specular vertices).
-    camera_alone_factor: f32,
-    light_tails: Vec<f32>,
-    /// Each subpath's first specular vertex (its length if none).
-    camera_first_delta: usize,
-    light_first_delta: usize,
 }
 
 std::thread_local! {

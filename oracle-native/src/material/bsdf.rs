@@ -5,11 +5,12 @@ use std::f32::consts::FRAC_1_PI;
 
 use glam::Vec3;
 
+use super::fresnel::{ConductorFresnel, MIN_TEMPERED_ROUGHNESS};
 use super::microfacet::{
     Ggx, conductor_fresnel, fr_dielectric, reflect, refract, rough_dielectric,
     rough_dielectric_pdf, smooth_dielectric,
 };
-use super::{ConductorFresnel, MIN_TEMPERED_ROUGHNESS};
+use super::sample::BsdfSample;
 
 /// pbrt-v3's plastic coat index.
 const PLASTIC_ETA: f32 = 1.5;
@@ -42,19 +43,6 @@ pub enum Bsdf {
         /// GGX α.
         alpha: f32,
     },
-}
-
-/// A sampled direction.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BsdfSample {
-    /// Incident direction (local frame).
-    pub wi: Vec3,
-    /// BSDF value (for a specular event, the weight of the delta).
-    pub f: Vec3,
-    /// Density in solid angle (for a specular event, the discrete probability).
-    pub pdf: f32,
-    /// Whether `wi` was chosen by a delta lobe.
-    pub specular: bool,
 }
 
 impl Bsdf {

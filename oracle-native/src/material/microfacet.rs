@@ -7,7 +7,8 @@ use std::f32::consts::PI;
 
 use glam::Vec3;
 
-use super::{BsdfSample, ConductorFresnel};
+use super::fresnel::ConductorFresnel;
+use super::sample::BsdfSample;
 
 /// The GGX distribution with roughness α.
 #[derive(Clone, Copy, Debug)]

@@ -13,33 +13,22 @@
 //! | `texture.rs` | [`Texture`]: constant, image, checkerboard |
 //! | `bsdf.rs` | [`Bsdf`] at a shading point: evaluation, density, sampling, tempering |
 //! | `microfacet.rs` | the GGX distribution, Fresnel terms, reflection and refraction |
+//! | `fresnel.rs` | what a conductor reflects, and the roughness tempering starts from |
+//! | `sample.rs` | [`BsdfSample`], a sampled direction |
 
 mod bsdf;
+mod fresnel;
 mod microfacet;
+mod sample;
 mod texture;
 
 use glam::{Vec2, Vec3};
 
-pub use bsdf::{Bsdf, BsdfSample};
+pub use bsdf::Bsdf;
+pub use fresnel::{ConductorFresnel, MIN_TEMPERED_ROUGHNESS};
 pub use microfacet::fr_dielectric;
+pub use sample::BsdfSample;
 pub use texture::Texture;
-
-/// Smallest roughness a tempered specular surface gets (Šik 2018, eq. 5.5).
-pub const MIN_TEMPERED_ROUGHNESS: f32 = 1e-4;
-
-/// What a conductor reflects.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum ConductorFresnel {
-    /// Complex index of refraction `eta + i k`, per RGB channel.
-    Complex {
-        /// Real part.
-        eta: Vec3,
-        /// Imaginary part (absorption).
-        k: Vec3,
-    },
-    /// A constant reflectance (an ideal mirror with color `Kr`).
-    Constant(Vec3),
-}
 
 /// A surface material.
 #[derive(Clone, Debug, PartialEq)]

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 use strata::engine::RenderMethod;
 
+use crate::out::AnyResult;
 use clap::ValueEnum;
 use clap::builder::PossibleValuesParser;
 use strata::engine::SmallStep;
@@ -13,8 +14,6 @@ use strata::engine::Task;
 use strata::engine::{ExchangeKind, Tempering};
 use strata::engine::{Method, Resolution};
 use strata::native::PathSampler;
-
-use crate::*;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub(crate) enum Backend {

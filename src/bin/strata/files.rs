@@ -2,13 +2,12 @@
 //! each written whole under a temporary name and renamed.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::Ordering;
 use strata::engine::{RenderMethod, RenderShape};
 
+use crate::args::Args;
+use crate::out::AnyResult;
 use strata::engine::{Film, PathOracle, Settings};
 use strata::engine::{PartFiles, Task, part_of};
-
-use crate::*;
 
 /// Writes `path` whole under a temporary name, then renames it over `path`
 /// (a viewer or a crash never sees half a file); an error names `path`. A

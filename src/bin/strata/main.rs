@@ -34,7 +34,7 @@
 //! error against the exact image.
 
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use strata::engine::RenderMethod;
 
 use clap::builder::PossibleValuesParser;
@@ -47,14 +47,10 @@ macro_rules! say {
     ($($t:tt)*) => {{
         use std::io::Write as _;
         if writeln!(std::io::stdout(), $($t)*).is_err() {
-            STDOUT_FAILED.store(true, Ordering::Relaxed);
+            $crate::out::STDOUT_FAILED.store(true, std::sync::atomic::Ordering::Relaxed);
         }
     }};
 }
-
-/// Set when a message to standard output could not be written (a full
-/// disk, a closed pipe): the command then says so and exits with 1.
-static STDOUT_FAILED: AtomicBool = AtomicBool::new(false);
 
 /// `eprintln!` that never panics.
 macro_rules! warn {
@@ -67,16 +63,17 @@ macro_rules! warn {
 mod args;
 mod files;
 mod merge;
+mod out;
 mod render;
 #[cfg(test)]
 mod tests;
 mod watch;
 
-use args::*;
-use files::*;
-use merge::*;
-use render::*;
-use watch::*;
+use args::Args;
+use merge::{MergeArgs, merge_parts};
+use out::STDOUT_FAILED;
+use render::run;
+use watch::{Ended, STOP, Saved};
 
 /// strata: Markov-chain Monte Carlo light transport (PSSMLT, replica
 /// exchange, stratified MCMC, ERPT, multi-stage MLT) and plain MC.
@@ -102,11 +99,6 @@ enum Command {
     /// unsplit gives.
     Merge(MergeArgs),
 }
-
-type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
-
-/// Set by Ctrl-C, SIGTERM or SIGHUP: the render stops after its current round.
-static STOP: AtomicBool = AtomicBool::new(false);
 
 fn main() -> ExitCode {
     let code = command();

@@ -1,14 +1,14 @@
 //! `strata merge`: the parts of a split render merged into its image.
 
 use std::path::PathBuf;
-use std::sync::atomic::Ordering;
 use std::time::Instant;
 use strata::engine::RenderMethod;
 
+use crate::args::{out_path, stops};
+use crate::files::write;
+use crate::out::AnyResult;
 use strata::engine::Error;
 use strata::engine::{PartFiles, merge, part_of};
-
-use crate::*;
 
 /// What `strata merge` takes.
 #[derive(clap::Args, Debug)]

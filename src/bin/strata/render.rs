@@ -1,12 +1,18 @@
 //! `strata render`: a scene rendered whole or as one task of a split
 //! render, and what it reports.
 
-use std::path::PathBuf;
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use strata::engine::RenderMethod;
 
+use crate::args::{Args, Backend, THREADS_PER_CORE, differences, keep_aspect, method};
+use crate::files::{
+    checkpoint_limit, checkpoint_path, output, part_path, prepare_outputs, read_checkpoint,
+    replace, write,
+};
+use crate::out::AnyResult;
+use crate::watch::{Ended, Every, Watch};
 use indicatif::{ProgressBar, ProgressStyle};
 use strata::embree::EmbreeIntersector;
 use strata::engine::MaxChannel;
@@ -19,24 +25,6 @@ use strata::engine::{
 use strata::engine::{Ladder, Tempering};
 use strata::engine::{Task, render_task, resume_task};
 use strata::native::{PathSampler, PathTracer, builtin, native_tracer};
-
-use crate::*;
-
-/// How a render ended.
-pub(crate) enum Ended {
-    Finished,
-    /// Ctrl-C or SIGTERM stopped it, with its checkpoint written or not.
-    Stopped(Saved),
-}
-
-/// Whether a stopped render's checkpoint was written, and where.
-pub(crate) enum Saved {
-    Yes(PathBuf),
-    /// Writing it failed (the warning says why).
-    Failed(PathBuf),
-    /// No round ended before the stop: nothing to save.
-    NothingYet,
-}
 
 pub(crate) fn run(args: &Args) -> AnyResult<Ended> {
     prepare_outputs(args)?;

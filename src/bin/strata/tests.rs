@@ -3,13 +3,14 @@
 
 use strata::engine::RenderMethod;
 
+use crate::args::{Args, keep_aspect, method};
+use crate::files::{own_file, part_path};
+use crate::{Cli, Command};
 use clap::Parser;
 use strata::engine::MaxChannel;
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::{Budget, Method, Resolution, Settings};
 use strata::engine::{Task, render_task};
-
-use crate::*;
 
 fn args(line: &[&str]) -> Args {
     let full: Vec<&str> = ["strata", "render"].iter().chain(line).copied().collect();

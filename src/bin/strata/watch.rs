@@ -6,10 +6,14 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use crate::args::Args;
+use crate::files::{own_file, replace, write};
+use crate::out::AnyResult;
 use indicatif::ProgressBar;
 use strata::engine::{Checkpoint, Film, Observer, Progress, SetUp, SetUpStage};
 
-use crate::*;
+/// Set by Ctrl-C, SIGTERM or SIGHUP: the render stops after its current round.
+pub(crate) static STOP: AtomicBool = AtomicBool::new(false);
 
 /// Something to do at most every `every`.
 pub(crate) struct Every {
@@ -160,4 +164,20 @@ impl Observer for Watch<'_> {
             }
         }
     }
+}
+
+/// How a render ended.
+pub(crate) enum Ended {
+    Finished,
+    /// Ctrl-C or SIGTERM stopped it, with its checkpoint written or not.
+    Stopped(Saved),
+}
+
+/// Whether a stopped render's checkpoint was written, and where.
+pub(crate) enum Saved {
+    Yes(PathBuf),
+    /// Writing it failed (the warning says why).
+    Failed(PathBuf),
+    /// No round ended before the stop: nothing to save.
+    NothingYet,
 }

@@ -43,8 +43,8 @@ pub enum Error {
     UnknownSetting {
         /// The method.
         method: &'static str,
-        /// Its settings.
-        settings: &'static [crate::setting::Setting],
+        /// Its settings' names.
+        settings: alloc::vec::Vec<&'static str>,
     },
     /// A choice's value that is not one of its options.
     UnknownChoice {
@@ -231,8 +231,8 @@ impl fmt::Display for Error {
             Error::NotANumber { name } => write!(f, "`{name}` takes a number"),
             Error::UnknownSetting { method, settings } => {
                 write!(f, "{method} has no such setting; it has:")?;
-                for s in settings.iter() {
-                    write!(f, " {}", s.name)?;
+                for name in settings {
+                    write!(f, " {name}")?;
                 }
                 Ok(())
             }

@@ -65,42 +65,110 @@ impl core::fmt::Display for Value {
     }
 }
 
-/// A row taking a whole number.
-pub(crate) const fn whole(name: &'static str, min: u64, max: u64, help: &'static str) -> Setting {
-    Setting {
-        name,
-        kind: Kind::Whole { min, max },
-        help,
+/// A setting of the settings type `S`, declared once: its row (name,
+/// range, help) and how its field is read and written. Each method's
+/// settings type lists its fields beside its definition ([`Fields`]); the
+/// settings table ([`Method::set`](crate::Method::set) and its kin) reads
+/// and writes by name through them.
+pub(crate) struct Field<S> {
+    pub(crate) row: Setting,
+    pub(crate) access: Access<S>,
+}
+
+/// How a field is read and written.
+pub(crate) enum Access<S> {
+    /// A whole number, a real or a flag. `get` is `None` where the setting
+    /// does not apply now (`alpha` with the log solver); `set` takes a value
+    /// already checked against the row's range.
+    Number {
+        get: fn(&S) -> Option<f64>,
+        set: fn(&mut S, f64) -> Result<(), crate::error::Error>,
+    },
+    /// One of the row's options, by name (`set` gives `None` for a name that
+    /// is not one).
+    Choice {
+        get: fn(&S) -> &'static str,
+        set: fn(&mut S, &str) -> Option<()>,
+    },
+}
+
+/// A settings type's fields, in the order of its help.
+pub(crate) trait Fields: Sized + 'static {
+    const FIELDS: &'static [Field<Self>];
+}
+
+impl<S> Field<S> {
+    /// A field taking a whole number from `min` to `max`.
+    pub(crate) const fn whole(
+        name: &'static str,
+        (min, max): (u64, u64),
+        help: &'static str,
+        get: fn(&S) -> Option<f64>,
+        set: fn(&mut S, f64) -> Result<(), crate::error::Error>,
+    ) -> Self {
+        let kind = Kind::Whole { min, max };
+        Self::number(Setting { name, kind, help }, get, set)
+    }
+
+    /// A field taking a real number from `min` to `max`.
+    pub(crate) const fn real(
+        name: &'static str,
+        (min, max): (f64, f64),
+        help: &'static str,
+        get: fn(&S) -> Option<f64>,
+        set: fn(&mut S, f64) -> Result<(), crate::error::Error>,
+    ) -> Self {
+        let kind = Kind::Real { min, max };
+        Self::number(Setting { name, kind, help }, get, set)
+    }
+
+    /// A field taking 0 (off) or 1 (on).
+    pub(crate) const fn flag(
+        name: &'static str,
+        help: &'static str,
+        get: fn(&S) -> Option<f64>,
+        set: fn(&mut S, f64) -> Result<(), crate::error::Error>,
+    ) -> Self {
+        let kind = Kind::Flag;
+        Self::number(Setting { name, kind, help }, get, set)
+    }
+
+    /// A field taking one of `names`.
+    pub(crate) const fn choice(
+        name: &'static str,
+        names: &'static [&'static str],
+        help: &'static str,
+        get: fn(&S) -> &'static str,
+        set: fn(&mut S, &str) -> Option<()>,
+    ) -> Self {
+        let kind = Kind::Choice(names);
+        let access = Access::Choice { get, set };
+        Self {
+            row: Setting { name, kind, help },
+            access,
+        }
+    }
+
+    /// A numeric field with `row` (its help shared with other methods').
+    pub(crate) const fn number(
+        row: Setting,
+        get: fn(&S) -> Option<f64>,
+        set: fn(&mut S, f64) -> Result<(), crate::error::Error>,
+    ) -> Self {
+        Self {
+            row,
+            access: Access::Number { get, set },
+        }
     }
 }
 
-/// A row taking a real number.
-pub(crate) const fn real(name: &'static str, min: f64, max: f64, help: &'static str) -> Setting {
-    Setting {
-        name,
-        kind: Kind::Real { min, max },
-        help,
-    }
+/// Writes `value` into `field`: the setter of a field that cannot refuse.
+pub(crate) fn put<T>(field: &mut T, value: T) -> Result<(), crate::error::Error> {
+    *field = value;
+    Ok(())
 }
 
-/// A row taking one of `names`.
-pub(crate) const fn choice(
-    name: &'static str,
-    names: &'static [&'static str],
-    help: &'static str,
-) -> Setting {
-    Setting {
-        name,
-        kind: Kind::Choice(names),
-        help,
-    }
-}
-
-/// A row taking 0 or 1.
-pub(crate) const fn flag(name: &'static str, help: &'static str) -> Setting {
-    Setting {
-        name,
-        kind: Kind::Flag,
-        help,
-    }
+/// A flag's value as a number.
+pub(crate) fn flag_value(on: bool) -> Option<f64> {
+    Some(f64::from(u8::from(on)))
 }

@@ -36,6 +36,7 @@ use alloc::vec::Vec;
 use core::ops::Range;
 use serde::{Deserialize, Serialize};
 
+use super::common_settings::{BOOTSTRAP, EMISSION_RAYS, Stepped, small_step, step_max, step_min};
 use super::job::Job;
 use super::output::{Extras, Output};
 use crate::bootstrap::Bootstrap;
@@ -52,6 +53,7 @@ use crate::parallel;
 use crate::parts::{self, PartReader};
 use crate::rng::{self, Domain, Permutation, uniform_f64};
 use crate::sample::MltSampler;
+use crate::setting::{Field, Fields, put};
 use crate::target::{Evaluated, Importance};
 use crate::task::Task;
 use rand_core::Rng;
@@ -89,6 +91,53 @@ impl Default for ErptSettings {
             bootstrap_candidates: 100_000,
             emission_rays: crate::emission::EMISSION_RAYS,
         }
+    }
+}
+
+impl Fields for ErptSettings {
+    const FIELDS: &'static [Field<Self>] = &[
+        Field::whole(
+            "chain_length",
+            (1, 1 << 16),
+            "steps per chain",
+            |s| Some(s.chain_length.into()),
+            |s, n| put(&mut s.chain_length, n as u32),
+        ),
+        Field::real(
+            "chains_per_path",
+            (1e-3, 1e3),
+            "chains started per path that reaches the film, on average",
+            |s| Some(s.chains_per_path),
+            |s, r| put(&mut s.chains_per_path, r),
+        ),
+        // ERPT deposits energy quanta of `b / (N r)`: a bootstrap of a
+        // handful of candidates can misjudge `b` by orders of magnitude, and
+        // one start path then spawns that many more chains (one candidate:
+        // 2.6 s past a 0.1 s budget on a 6x4 film), so ERPT takes at least 1024.
+        Field::whole(
+            BOOTSTRAP.name,
+            (1024, 1 << 24),
+            BOOTSTRAP.help,
+            |s| Some(s.bootstrap_candidates as f64),
+            |s, n| put(&mut s.bootstrap_candidates, n as u64),
+        ),
+        small_step(),
+        step_min(),
+        step_max(),
+        Field::number(
+            EMISSION_RAYS,
+            |s| Some(s.emission_rays),
+            |s, r| put(&mut s.emission_rays, r),
+        ),
+    ];
+}
+
+impl Stepped for ErptSettings {
+    fn kernel(&self) -> &SmallStep {
+        &self.small_step
+    }
+    fn kernel_mut(&mut self) -> &mut SmallStep {
+        &mut self.small_step
     }
 }
 

@@ -16,10 +16,13 @@
 //! rounds through the driver core ([`drive`](crate::drive)), and gives the
 //! same image for the same seed and sample budget whatever the thread count.
 //!
-//! A new method is a new module here: its settings type (with `Default` and
-//! `validate`), its state behind the driver's round interface, and a variant
-//! of [`Method`].
+//! A new method is a new module here: its settings type (with `Default`,
+//! `validate`, and its fields: each setting's name, range and help beside
+//! how it is read and written, which the settings table, the `strata`
+//! command's flags, the C API and Python take by name), its state behind
+//! the driver's round interface, and a variant of [`Method`].
 
+mod common_settings;
 mod dispatch;
 mod erpt;
 mod job;

@@ -36,6 +36,9 @@ use serde::{Deserialize, Serialize};
 
 use core::sync::atomic::{AtomicU64, Ordering};
 
+use super::common_settings::{
+    BOOTSTRAP, CHAINS, EMISSION_RAYS, Mutated, RUNS, large_step, small_step, step_max, step_min,
+};
 use super::job::Job;
 use super::noise_aware::noise_target;
 use super::output::{Extras, Output, Stage};
@@ -45,9 +48,11 @@ use crate::checkpoint::{self, Checkpoint, Checkpoints};
 use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, SetUp};
 use crate::error::Error;
 use crate::film::{AddFilm, AddValues, Film};
+use crate::mutate::MutationParams;
 use crate::oracle::{
     FilmPoint, PathOracle, PathSample, Radiance, Resolution, Sampler, SplatSink, Temperature,
 };
+use crate::setting::{Field, Fields, flag_value, put};
 use crate::target::{FnImportance, Importance};
 
 /// Settings of multi-stage MLT. The budget is split among the stages in
@@ -78,6 +83,60 @@ impl Default for MultiStageSettings {
             noise_aware: false,
             runs: 1,
         }
+    }
+}
+
+impl Fields for MultiStageSettings {
+    const FIELDS: &'static [Field<Self>] = &[
+        Field::whole(
+            "linear_stages",
+            (0, 1024),
+            "stages from half to full resolution (Hoberock and Hart 2010: 10)",
+            |s| Some(s.linear_stages.into()),
+            |s, n| put(&mut s.linear_stages, n as u32),
+        ),
+        Field::flag(
+            "noise_aware",
+            "noise-aware importance (Hoberock and Hart 2010, sec. 4.3)",
+            |s| flag_value(s.noise_aware),
+            |s, on| put(&mut s.noise_aware, on != 0.0),
+        ),
+        Field::number(
+            RUNS,
+            |s| Some(s.runs.into()),
+            |s, n| put(&mut s.runs, n as u32),
+        ),
+        // Fewer than PSSMLT's: the chains start again at every stage.
+        Field::whole(
+            CHAINS.name,
+            (1, 1 << 14),
+            "Markov chains run side by side (started again at every stage)",
+            |s| Some(s.pssmlt.chains.into()),
+            |s, n| put(&mut s.pssmlt.chains, n as u32),
+        ),
+        Field::number(
+            BOOTSTRAP,
+            |s| Some(s.pssmlt.bootstrap_candidates as f64),
+            |s, n| put(&mut s.pssmlt.bootstrap_candidates, n as u64),
+        ),
+        large_step(),
+        small_step(),
+        step_min(),
+        step_max(),
+        Field::number(
+            EMISSION_RAYS,
+            |s| Some(s.pssmlt.emission_rays),
+            |s, r| put(&mut s.pssmlt.emission_rays, r),
+        ),
+    ];
+}
+
+impl Mutated for MultiStageSettings {
+    fn mutation(&self) -> &MutationParams {
+        &self.pssmlt.mutation
+    }
+    fn mutation_mut(&mut self) -> &mut MutationParams {
+        &mut self.pssmlt.mutation
     }
 }
 

@@ -8,6 +8,9 @@ use super::output::{Extras, Output};
 use crate::bootstrap::Bootstrap;
 use alloc::vec::Vec;
 
+use super::common_settings::{
+    BOOTSTRAP, CHAINS, EMISSION_RAYS, Mutated, large_step, small_step, step_max, step_min,
+};
 use crate::chain::{ChainStats, Normalization, PathChain, Traced, splat_weights};
 use crate::checkpoint::{self, Position};
 use crate::drive::splat::{
@@ -21,6 +24,7 @@ use crate::mutate::MutationParams;
 use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::parallel;
 use crate::parts::{self, PartReader};
+use crate::setting::{Field, Fields, put};
 use crate::target::Importance;
 use crate::task::in_render_order;
 use serde::{Deserialize, Serialize};
@@ -54,6 +58,39 @@ impl Default for PssmltSettings {
             mutation: MutationParams::default(),
             emission_rays: crate::emission::EMISSION_RAYS,
         }
+    }
+}
+
+impl Fields for PssmltSettings {
+    const FIELDS: &'static [Field<Self>] = &[
+        Field::number(
+            CHAINS,
+            |s| Some(s.chains.into()),
+            |s, n| put(&mut s.chains, n as u32),
+        ),
+        Field::number(
+            BOOTSTRAP,
+            |s| Some(s.bootstrap_candidates as f64),
+            |s, n| put(&mut s.bootstrap_candidates, n as u64),
+        ),
+        large_step(),
+        small_step(),
+        step_min(),
+        step_max(),
+        Field::number(
+            EMISSION_RAYS,
+            |s| Some(s.emission_rays),
+            |s, r| put(&mut s.emission_rays, r),
+        ),
+    ];
+}
+
+impl Mutated for PssmltSettings {
+    fn mutation(&self) -> &MutationParams {
+        &self.mutation
+    }
+    fn mutation_mut(&mut self) -> &mut MutationParams {
+        &mut self.mutation
     }
 }
 

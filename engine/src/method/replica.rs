@@ -16,6 +16,9 @@ use super::output::{Extras, Output, ReplicaExtras};
 use crate::bootstrap::Bootstrap;
 use crate::chain::{ChainStats, Normalization};
 
+use super::common_settings::{
+    BOOTSTRAP, EMISSION_RAYS, Mutated, large_step, small_step, step_max, step_min,
+};
 use crate::checkpoint::{self, Position};
 use crate::drive::splat::{
     RoundBuffers, Runs, Saves, SplatBands, SplatSums, Splatting, Worker, skim_saved_sums,
@@ -26,9 +29,11 @@ use crate::exchange::{
     Ensemble, EnsembleSettings, ExchangeKind, ExchangeMove, ExchangeStats, Ladder, Tempering,
 };
 use crate::film::Film;
+use crate::mutate::MutationParams;
 use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::parallel;
 use crate::parts::{self, PartReader};
+use crate::setting::{Field, Fields, put};
 use crate::target::Importance;
 use crate::task::in_render_order;
 
@@ -71,10 +76,99 @@ impl Default for ReplicaSettings {
     }
 }
 
+impl Fields for ReplicaSettings {
+    const FIELDS: &'static [Field<Self>] = &[
+        Field::whole(
+            "ensembles",
+            (1, 4096),
+            "independent ensembles run in parallel",
+            |s| Some(s.ensembles.into()),
+            |s, n| put(&mut s.ensembles, n as u32),
+        ),
+        Field::whole(
+            "replicas",
+            (1, 64),
+            "chains per ensemble, temperatures 1 to t_max log-spaced",
+            |s| Some(s.ensemble.ladder.len() as f64),
+            |s, n| rebuild_ladder(s, Some(n as usize), None),
+        ),
+        Field::real(
+            "t_max",
+            (1.0, 1e12),
+            "the highest temperature",
+            |s| Some(s.t_max()),
+            |s, t| rebuild_ladder(s, None, Some(t)),
+        ),
+        Field::whole(
+            "ladder_tuning_sweeps",
+            (0, 1 << 20),
+            "sweeps per ensemble equalizing the ladder first (0: keep it)",
+            |s| Some(s.ladder_tuning_sweeps as f64),
+            |s, n| put(&mut s.ladder_tuning_sweeps, n as u64),
+        ),
+        Field::choice(
+            "exchange",
+            &ExchangeKind::NAMES,
+            "the exchange move (Šik 2018, sec. 5.3)",
+            |s| s.exchange.name(),
+            |s, name| ExchangeKind::from_name(name).map(|e| s.exchange = e),
+        ),
+        Field::choice(
+            "tempering",
+            &Tempering::NAMES,
+            "power: pi^(1/T), any oracle; oracle: the oracle roughens its paths",
+            |s| s.ensemble.tempering.name(),
+            |s, name| Tempering::from_name(name).map(|t| s.ensemble.tempering = t),
+        ),
+        Field::number(
+            BOOTSTRAP,
+            |s| Some(s.ensemble.bootstrap_candidates as f64),
+            |s, n| put(&mut s.ensemble.bootstrap_candidates, n as u64),
+        ),
+        large_step(),
+        small_step(),
+        step_min(),
+        step_max(),
+        Field::number(
+            EMISSION_RAYS,
+            |s| Some(s.emission_rays),
+            |s, r| put(&mut s.emission_rays, r),
+        ),
+    ];
+}
+
+impl Mutated for ReplicaSettings {
+    fn mutation(&self) -> &MutationParams {
+        &self.ensemble.mutation
+    }
+    fn mutation_mut(&mut self) -> &mut MutationParams {
+        &mut self.ensemble.mutation
+    }
+}
+
+/// A geometric ladder of `levels` temperatures up to `t_max` (each the
+/// current ladder's if `None`).
+fn rebuild_ladder(
+    s: &mut ReplicaSettings,
+    levels: Option<usize>,
+    t_max: Option<f64>,
+) -> Result<(), Error> {
+    let levels = levels.unwrap_or(s.ensemble.ladder.len());
+    let t_max = t_max.unwrap_or(s.t_max());
+    s.ensemble.ladder = Ladder::geometric(levels, t_max)?;
+    Ok(())
+}
+
 /// Candidates times levels the bootstrap may hold.
 const MAX_BOOTSTRAP_VALUES: u64 = 1 << 26;
 
 impl ReplicaSettings {
+    /// The ladder's highest temperature.
+    pub(crate) fn t_max(&self) -> f64 {
+        let temperatures = self.ensemble.ladder.temperatures();
+        temperatures.last().copied().unwrap_or(1.0)
+    }
+
     /// Paths one sweep of one ensemble traces (every level proposes once).
     pub(crate) fn traces_per_sweep(&self) -> u64 {
         self.ensemble.ladder.len() as u64 * self.ensemble.traces_per_proposal()

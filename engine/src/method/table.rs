@@ -1,6 +1,7 @@
-//! One table of every method's settings: for each, its name, what it takes
-//! (its range, or its choices) and a line of help, read and written by name
-//! through [`Method::get`], [`Method::set`] and [`Method::set_choice`].
+//! Every method's settings by name: each method's settings type declares
+//! its fields once, beside its definition (name, range or choices, help,
+//! and how the field is read and written), and [`Method::get`],
+//! [`Method::set`] and [`Method::set_choice`] find them by name.
 //! [`RenderMethod::validate`](super::RenderMethod::validate) checks every value against it, so a settings value
 //! built field by field is bounded like one set by name; the `strata`
 //! command and the C API (`strata_settings_set`, `_set_choice`, `_name`)
@@ -11,14 +12,11 @@
 //! [`RenderMethod::memory_bound`]), a value outside is
 //! [`Error::OutOfRange`](crate::Error::OutOfRange).
 
-use crate::error::Error;
-use crate::exchange::{EnsembleSettings, ExchangeKind, Tempering};
-use crate::mutate::{Kelemen, MutationParams, SmallStep};
-use crate::tiles::TileShape;
+use alloc::vec::Vec;
 
 use super::dispatch::{Method, RenderMethod};
-use super::stratified::Solver;
-use crate::setting::{Kind, Setting, Value, choice, flag, real, whole};
+use crate::error::Error;
+use crate::setting::{Access, Field, Fields, Kind, Setting, Value};
 
 impl Method {
     /// The table as text, a line per setting: name, current value, what it
@@ -48,299 +46,101 @@ impl Method {
     }
 }
 
-const CHAINS: Setting = whole("chains", 1, 1 << 16, "Markov chains run side by side");
-const BOOTSTRAP: Setting = whole(
-    "bootstrap_candidates",
-    1,
-    1 << 24,
-    "paths traced to estimate the normalization before the chains start (not in the budget)",
-);
-/// ERPT deposits energy quanta of `b / (N r)`: a bootstrap of a handful of
-/// candidates can misjudge `b` by orders of magnitude, and one start path
-/// then spawns that many more chains (one candidate: 2.6 s past a 0.1 s
-/// budget on a 6x4 film), so ERPT takes at least 1024.
-const ERPT_BOOTSTRAP: Setting = whole(
-    "bootstrap_candidates",
-    1024,
-    1 << 24,
-    "paths traced to estimate the normalization before the chains start (not in the budget)",
-);
-/// Multi-stage MLT restarts its chains at every stage.
-const STAGE_CHAINS: Setting = whole(
-    "chains",
-    1,
-    1 << 14,
-    "Markov chains run side by side (started again at every stage)",
-);
-const LARGE_STEP: Setting = real(
-    "large_step_probability",
-    0.0,
-    1.0,
-    "probability of a large step (an independent path)",
-);
-const SMALL_STEP: Setting = choice(
-    "small_step",
-    &SmallStep::NAMES,
-    "the small-step kernel (or a registered kernel of one's own, by its name)",
-);
-const STEP_MIN: Setting = real(
-    "small_step_min",
-    1e-9,
-    0.5,
-    "Kelemen's smallest step s1 (kelemen kernel; Gruson et al. 2020: 1/1024)",
-);
-const STEP_MAX: Setting = real(
-    "small_step_max",
-    1e-9,
-    0.5,
-    "Kelemen's largest step s2 (kelemen kernel; Gruson et al. 2020: 1/32)",
-);
+/// A method's fields, whatever its settings type (the table's dispatch).
+trait FieldList {
+    fn rows(&self) -> Vec<&'static Setting>;
+    fn get(&self, name: &str) -> Option<Value>;
+    fn set(&mut self, name: &str, value: Input<'_>) -> Result<(), SetError>;
+}
 
-const EMISSION_RAYS: Setting = real(
-    "emission_rays",
-    0.0,
-    256.0,
-    "camera rays per path for the emission seen directly (0: the chains keep it; a sixteenth where a pilot ray per pixel sees none nearby)",
-);
+/// A value to write: a number, or a choice's option by name.
+#[derive(Clone, Copy)]
+enum Input<'a> {
+    Number(f64),
+    Name(&'a str),
+}
 
-/// Independent runs: the units of work of the methods whose work is coupled
-/// while it runs, which a split render's tasks share (`runs.rs`).
-const RUNS: Setting = whole(
-    "runs",
-    1,
-    4096,
-    "independent runs, each with a share of the budget, pooled at the end (a task of a split render runs some of them)",
-);
+/// Why a write was refused.
+enum SetError {
+    /// The field does not take this kind of value (a name for a number).
+    WrongKind,
+    /// An option the choice does not have.
+    UnknownOption,
+    /// The setter's own error.
+    Refused(Error),
+}
 
-const PSSMLT: &[Setting] = &[
-    CHAINS,
-    BOOTSTRAP,
-    LARGE_STEP,
-    SMALL_STEP,
-    STEP_MIN,
-    STEP_MAX,
-    EMISSION_RAYS,
-];
-const REPLICA: &[Setting] = &[
-    whole(
-        "ensembles",
-        1,
-        4096,
-        "independent ensembles run in parallel",
-    ),
-    whole(
-        "replicas",
-        1,
-        64,
-        "chains per ensemble, temperatures 1 to t_max log-spaced",
-    ),
-    real("t_max", 1.0, 1e12, "the highest temperature"),
-    whole(
-        "ladder_tuning_sweeps",
-        0,
-        1 << 20,
-        "sweeps per ensemble equalizing the ladder first (0: keep it)",
-    ),
-    choice(
-        "exchange",
-        &ExchangeKind::NAMES,
-        "the exchange move (Šik 2018, sec. 5.3)",
-    ),
-    choice(
-        "tempering",
-        &Tempering::NAMES,
-        "power: pi^(1/T), any oracle; oracle: the oracle roughens its paths",
-    ),
-    BOOTSTRAP,
-    LARGE_STEP,
-    SMALL_STEP,
-    STEP_MIN,
-    STEP_MAX,
-    EMISSION_RAYS,
-];
-const STRATIFIED: &[Setting] = &[
-    whole(
-        "tile_radius",
-        0,
-        4,
-        "tile shape: 0 the cross of Gruson et al. 2020, r a (2r+1)^2 square (the reconstruction's cost grows with it)",
-    ),
-    whole(
-        "exchange_every",
-        0,
-        1 << 20,
-        "local replica exchange every this many sweeps (0: never)",
-    ),
-    whole(
-        "exchange_after",
-        0,
-        1 << 20,
-        "sweeps before the first local exchange (their paths go to tile steps)",
-    ),
-    choice(
-        "solver",
-        &Solver::NAMES,
-        "weighted: Gruson et al. 2020, eq. 13-16; log: eq. 17-20",
-    ),
-    real(
-        "alpha",
-        1e-6,
-        1e6,
-        "the weighted solver's regularizer weight (used when cross_validate_alpha is 0)",
-    ),
-    flag(
-        "cross_validate_alpha",
-        "choose alpha per render from 0.05, 0.2, 1 and 5 on half the large steps",
-    ),
-    real(
-        "fallback_sigmas",
-        0.0,
-        1e3,
-        "pixels this many standard errors below their MC estimate take it (0: never)",
-    ),
-    whole(
-        "regularizer_paths",
-        0,
-        4096,
-        "plain MC paths per pixel traced for the regularizer alone",
-    ),
-    real(
-        "init_coverage",
-        0.0,
-        1.0,
-        "global chains initialize tiles until this fraction is (Gruson et al. 2020: 0.3)",
-    ),
-    real(
-        "init_budget",
-        0.0,
-        1.0,
-        "at most this fraction of the budget (paths or time) for the initialization",
-    ),
-    whole(
-        "emission_rays",
-        0,
-        4096,
-        "camera rays per pixel and sweep for the emission seen directly (0: the tile chains keep it; a sixteenth where a pilot ray per pixel sees none nearby)",
-    ),
-    RUNS,
-    LARGE_STEP,
-    SMALL_STEP,
-    STEP_MIN,
-    STEP_MAX,
-];
-const ERPT: &[Setting] = &[
-    whole("chain_length", 1, 1 << 16, "steps per chain"),
-    real(
-        "chains_per_path",
-        1e-3,
-        1e3,
-        "chains started per path that reaches the film, on average",
-    ),
-    ERPT_BOOTSTRAP,
-    SMALL_STEP,
-    STEP_MIN,
-    STEP_MAX,
-    EMISSION_RAYS,
-];
-const MULTISTAGE: &[Setting] = &[
-    whole(
-        "linear_stages",
-        0,
-        1024,
-        "stages from half to full resolution (Hoberock and Hart 2010: 10)",
-    ),
-    flag(
-        "noise_aware",
-        "noise-aware importance (Hoberock and Hart 2010, sec. 4.3)",
-    ),
-    RUNS,
-    STAGE_CHAINS,
-    BOOTSTRAP,
-    LARGE_STEP,
-    SMALL_STEP,
-    STEP_MIN,
-    STEP_MAX,
-    EMISSION_RAYS,
-];
+impl<S: Fields> FieldList for S {
+    fn rows(&self) -> Vec<&'static Setting> {
+        S::FIELDS.iter().map(|f| &f.row).collect()
+    }
+
+    fn get(&self, name: &str) -> Option<Value> {
+        match field::<S>(name)?.access {
+            Access::Number { get, .. } => get(self).map(Value::Number),
+            Access::Choice { get, .. } => Some(Value::Choice(get(self))),
+        }
+    }
+
+    fn set(&mut self, name: &str, value: Input<'_>) -> Result<(), SetError> {
+        let access = &field::<S>(name).ok_or(SetError::WrongKind)?.access;
+        match (access, value) {
+            (Access::Number { set, .. }, Input::Number(v)) => {
+                set(self, v).map_err(SetError::Refused)
+            }
+            (Access::Choice { set, .. }, Input::Name(option)) => {
+                set(self, option).ok_or(SetError::UnknownOption)
+            }
+            _ => Err(SetError::WrongKind),
+        }
+    }
+}
+
+/// The field of `S` called `name`.
+fn field<S: Fields>(name: &str) -> Option<&'static Field<S>> {
+    S::FIELDS.iter().find(|f| f.row.name == name)
+}
 
 impl Method {
-    /// This method's settings, in the order of its `--help`.
-    pub fn settings(&self) -> &'static [Setting] {
+    /// The settings of this method's kind, whichever it is.
+    fn fields(&self) -> Option<&dyn FieldList> {
         match self {
-            Method::Mc => &[],
-            Method::Pssmlt(_) => PSSMLT,
-            Method::Replica(_) => REPLICA,
-            Method::Stratified(_) => STRATIFIED,
-            Method::Erpt(_) => ERPT,
-            Method::MultiStage(_) => MULTISTAGE,
+            Method::Mc => None,
+            Method::Pssmlt(s) => Some(s),
+            Method::Replica(s) => Some(s),
+            Method::Stratified(s) => Some(s),
+            Method::Erpt(s) => Some(s),
+            Method::MultiStage(s) => Some(s),
         }
+    }
+
+    /// [`fields`](Self::fields), to write.
+    fn fields_mut(&mut self) -> Option<&mut dyn FieldList> {
+        match self {
+            Method::Mc => None,
+            Method::Pssmlt(s) => Some(s),
+            Method::Replica(s) => Some(s),
+            Method::Stratified(s) => Some(s),
+            Method::Erpt(s) => Some(s),
+            Method::MultiStage(s) => Some(s),
+        }
+    }
+
+    /// This method's settings, in the order of its `--help`.
+    pub fn settings(&self) -> Vec<&'static Setting> {
+        self.fields().map_or_else(Vec::new, FieldList::rows)
     }
 
     /// The row of the setting called `name`.
     pub fn setting(&self, name: &str) -> Option<&'static Setting> {
-        self.settings().iter().find(|s| s.name == name)
+        self.settings().into_iter().find(|s| s.name == name)
     }
 
     /// The value of the setting called `name`; `None` for a name this method
     /// does not have, or one that does not apply now (`alpha` with the log
     /// solver, Kelemen's step sizes with another kernel).
     pub fn get(&self, name: &str) -> Option<Value> {
-        use Value::{Choice, Number};
-        let number = |v: f64| Some(Number(v));
-        match (self, name) {
-            (Method::Pssmlt(s), "chains") => number(s.chains.into()),
-            (Method::Pssmlt(s), "bootstrap_candidates") => number(s.bootstrap_candidates as f64),
-            (Method::Pssmlt(s), "emission_rays") => number(s.emission_rays),
-            (Method::Pssmlt(s), _) => mutation_get(&s.mutation, name),
-            (Method::Replica(s), "ensembles") => number(s.ensembles.into()),
-            (Method::Replica(s), "replicas") => number(s.ensemble.ladder.len() as f64),
-            (Method::Replica(s), "t_max") => number(t_max(&s.ensemble)),
-            (Method::Replica(s), "ladder_tuning_sweeps") => number(s.ladder_tuning_sweeps as f64),
-            (Method::Replica(s), "exchange") => Some(Choice(s.exchange.name())),
-            (Method::Replica(s), "tempering") => Some(Choice(s.ensemble.tempering.name())),
-            (Method::Replica(s), "bootstrap_candidates") => {
-                number(s.ensemble.bootstrap_candidates as f64)
-            }
-            (Method::Replica(s), "emission_rays") => number(s.emission_rays),
-            (Method::Replica(s), _) => mutation_get(&s.ensemble.mutation, name),
-            (Method::Stratified(s), "tile_radius") => number(match s.shape {
-                TileShape::Cross => 0.0,
-                TileShape::Square { radius } => radius.into(),
-            }),
-            (Method::Stratified(s), "exchange_every") => number(s.exchange_every.into()),
-            (Method::Stratified(s), "exchange_after") => number(s.exchange_after.into()),
-            (Method::Stratified(s), "solver") => Some(Choice(s.solver.name())),
-            (Method::Stratified(s), "alpha") => match s.solver {
-                Solver::Weighted(w) => number(w.alpha),
-                Solver::LogDomain(_) => None,
-            },
-            (Method::Stratified(s), "cross_validate_alpha") => {
-                number(f64::from(u8::from(s.cross_validate_alpha)))
-            }
-            (Method::Stratified(s), "fallback_sigmas") => number(s.fallback_sigmas.unwrap_or(0.0)),
-            (Method::Stratified(s), "regularizer_paths") => number(s.regularizer_paths.into()),
-            (Method::Stratified(s), "emission_rays") => number(s.emission_rays.into()),
-            (Method::Stratified(s), "init_coverage") => number(s.initialization.coverage),
-            (Method::Stratified(s), "init_budget") => number(s.initialization.max_budget_fraction),
-            (Method::Stratified(s), "runs") => number(s.runs.into()),
-            (Method::Stratified(s), _) => mutation_get(&s.mutation, name),
-            (Method::Erpt(s), "chain_length") => number(s.chain_length.into()),
-            (Method::Erpt(s), "chains_per_path") => number(s.chains_per_path),
-            (Method::Erpt(s), "bootstrap_candidates") => number(s.bootstrap_candidates as f64),
-            (Method::Erpt(s), "emission_rays") => number(s.emission_rays),
-            (Method::Erpt(s), _) => kernel_get(&s.small_step, name),
-            (Method::MultiStage(s), "linear_stages") => number(s.linear_stages.into()),
-            (Method::MultiStage(s), "noise_aware") => number(f64::from(u8::from(s.noise_aware))),
-            (Method::MultiStage(s), "runs") => number(s.runs.into()),
-            (Method::MultiStage(s), "chains") => number(s.pssmlt.chains.into()),
-            (Method::MultiStage(s), "bootstrap_candidates") => {
-                number(s.pssmlt.bootstrap_candidates as f64)
-            }
-            (Method::MultiStage(s), "emission_rays") => number(s.pssmlt.emission_rays),
-            (Method::MultiStage(s), _) => mutation_get(&s.pssmlt.mutation, name),
-            _ => None,
-        }
-        .filter(|_| self.setting(name).is_some())
+        self.fields()?.get(name)
     }
 
     /// Sets the numeric setting `name` (whole, real or flag) to `value`,
@@ -348,78 +148,19 @@ impl Method {
     /// error the settings are left as they were.
     pub fn set(&mut self, name: &str, value: f64) -> Result<(), Error> {
         let row = self.known(name)?;
-        let name = row.name;
         check(row, value)?;
-        let mut next = self.clone();
-        // Checked above: a whole value is a whole number within u32 or u64
-        // (every whole setting's maximum fits its field), a flag is 0 or 1.
-        let (n, on) = (value as u64, value != 0.0);
-        match (&mut next, name) {
-            (Method::Pssmlt(s), "chains") => s.chains = n as u32,
-            (Method::Pssmlt(s), "bootstrap_candidates") => s.bootstrap_candidates = n,
-            (Method::Pssmlt(s), "emission_rays") => s.emission_rays = value,
-            (Method::Pssmlt(s), _) => mutation_set(&mut s.mutation, name, value)?,
-            (Method::Replica(s), "ensembles") => s.ensembles = n as u32,
-            (Method::Replica(s), "replicas") => rebuild_ladder(&mut s.ensemble, n as usize, None)?,
-            (Method::Replica(s), "t_max") => {
-                let levels = s.ensemble.ladder.len();
-                rebuild_ladder(&mut s.ensemble, levels, Some(value))?
-            }
-            (Method::Replica(s), "ladder_tuning_sweeps") => s.ladder_tuning_sweeps = n,
-            (Method::Replica(s), "bootstrap_candidates") => s.ensemble.bootstrap_candidates = n,
-            (Method::Replica(s), "emission_rays") => s.emission_rays = value,
-            (Method::Replica(s), _) => mutation_set(&mut s.ensemble.mutation, name, value)?,
-            (Method::Stratified(s), "tile_radius") => {
-                s.shape = match n {
-                    0 => TileShape::Cross,
-                    radius => TileShape::Square {
-                        radius: radius as u32,
-                    },
-                }
-            }
-            (Method::Stratified(s), "exchange_every") => s.exchange_every = n as u32,
-            (Method::Stratified(s), "exchange_after") => s.exchange_after = n as u32,
-            (Method::Stratified(s), "alpha") => match &mut s.solver {
-                Solver::Weighted(w) => w.alpha = value,
-                Solver::LogDomain(_) => return Err(Error::NotApplicable { name: row.name }),
-            },
-            (Method::Stratified(s), "cross_validate_alpha") => s.cross_validate_alpha = on,
-            (Method::Stratified(s), "fallback_sigmas") => s.fallback_sigmas = on.then_some(value),
-            (Method::Stratified(s), "regularizer_paths") => s.regularizer_paths = n as u32,
-            (Method::Stratified(s), "emission_rays") => s.emission_rays = n as u32,
-            (Method::Stratified(s), "init_coverage") => s.initialization.coverage = value,
-            (Method::Stratified(s), "init_budget") => s.initialization.max_budget_fraction = value,
-            (Method::Stratified(s), "runs") => s.runs = n as u32,
-            (Method::Stratified(s), _) => mutation_set(&mut s.mutation, name, value)?,
-            (Method::Erpt(s), "chain_length") => s.chain_length = n as u32,
-            (Method::Erpt(s), "chains_per_path") => s.chains_per_path = value,
-            (Method::Erpt(s), "bootstrap_candidates") => s.bootstrap_candidates = n,
-            (Method::Erpt(s), "emission_rays") => s.emission_rays = value,
-            (Method::Erpt(s), _) => kernel_set(&mut s.small_step, name, value)?,
-            (Method::MultiStage(s), "linear_stages") => s.linear_stages = n as u32,
-            (Method::MultiStage(s), "noise_aware") => s.noise_aware = on,
-            (Method::MultiStage(s), "runs") => s.runs = n as u32,
-            (Method::MultiStage(s), "chains") => s.pssmlt.chains = n as u32,
-            (Method::MultiStage(s), "bootstrap_candidates") => s.pssmlt.bootstrap_candidates = n,
-            (Method::MultiStage(s), "emission_rays") => s.pssmlt.emission_rays = value,
-            (Method::MultiStage(s), _) => mutation_set(&mut s.pssmlt.mutation, name, value)?,
-            _ => return Err(Error::NotApplicable { name: row.name }),
-        }
-        next.validate()?;
-        *self = next;
-        Ok(())
+        self.write(row, Input::Number(value))
     }
 
     /// Sets the setting `name` from text, as `strata render --set NAME=VALUE`
     /// does: a choice by its option's name, any other setting by its number.
     pub fn set_text(&mut self, name: &str, value: &str) -> Result<(), Error> {
-        match self.known(name)?.kind {
+        let row = self.known(name)?;
+        match row.kind {
             Kind::Choice(_) => self.set_choice(name, value),
             _ => match value.trim().parse::<f64>() {
                 Ok(number) => self.set(name, number),
-                Err(_) => Err(Error::NotANumber {
-                    name: self.known(name)?.name,
-                }),
+                Err(_) => Err(Error::NotANumber { name: row.name }),
             },
         }
     }
@@ -428,32 +169,32 @@ impl Method {
     /// solver) to the option called `value`, with that option's defaults.
     pub fn set_choice(&mut self, name: &str, value: &str) -> Result<(), Error> {
         let row = self.known(name)?;
-        let name = row.name;
-        let Kind::Choice(names) = row.kind else {
+        self.write(row, Input::Name(value))
+    }
+
+    /// Writes `value` into a copy of the settings, which replaces them only
+    /// if the setting applies now and every setting is then valid.
+    fn write(&mut self, row: &'static Setting, value: Input<'_>) -> Result<(), Error> {
+        if self.get(row.name).is_none() {
             return Err(Error::NotApplicable { name: row.name });
-        };
-        let unknown = || Error::UnknownChoice {
-            name: row.name,
-            choices: names,
-        };
+        }
         let mut next = self.clone();
-        let kernel = || SmallStep::from_name(value).ok_or_else(unknown);
-        match (&mut next, name) {
-            (Method::Pssmlt(s), _) => s.mutation.small_step = kernel()?,
-            (Method::Replica(s), "small_step") => s.ensemble.mutation.small_step = kernel()?,
-            (Method::Replica(s), "exchange") => {
-                s.exchange = ExchangeKind::from_name(value).ok_or_else(unknown)?
+        let written = next.fields_mut().map(|f| f.set(row.name, value));
+        match written {
+            Some(Ok(())) => {}
+            Some(Err(SetError::Refused(e))) => return Err(e),
+            Some(Err(SetError::UnknownOption)) => {
+                let Kind::Choice(choices) = row.kind else {
+                    return Err(Error::NotApplicable { name: row.name });
+                };
+                return Err(Error::UnknownChoice {
+                    name: row.name,
+                    choices,
+                });
             }
-            (Method::Replica(s), _) => {
-                s.ensemble.tempering = Tempering::from_name(value).ok_or_else(unknown)?
+            Some(Err(SetError::WrongKind)) | None => {
+                return Err(Error::NotApplicable { name: row.name });
             }
-            (Method::Stratified(s), "small_step") => s.mutation.small_step = kernel()?,
-            (Method::Stratified(s), _) => {
-                s.solver = Solver::from_name(value).ok_or_else(unknown)?
-            }
-            (Method::Erpt(s), _) => s.small_step = kernel()?,
-            (Method::MultiStage(s), _) => s.pssmlt.mutation.small_step = kernel()?,
-            (Method::Mc, _) => return Err(Error::NotApplicable { name: row.name }),
         }
         next.validate()?;
         *self = next;
@@ -516,7 +257,7 @@ impl Method {
     fn known(&self, name: &str) -> Result<&'static Setting, Error> {
         self.setting(name).ok_or(Error::UnknownSetting {
             method: self.name(),
-            settings: self.settings(),
+            settings: self.settings().iter().map(|s| s.name).collect(),
         })
     }
 }
@@ -532,9 +273,7 @@ fn check(row: &Setting, value: f64) -> Result<(), Error> {
         Kind::Flag => return Err(Error::invalid(row.name, value, "0 or 1")),
         Kind::Choice(_) => return Err(Error::NotApplicable { name: row.name }),
     };
-    // Zero is "off" for the real settings whose help says so.
-    let off = value == 0.0 && row.name == "fallback_sigmas";
-    if (min..=max).contains(&value) || off {
+    if (min..=max).contains(&value) {
         Ok(())
     } else {
         Err(Error::OutOfRange {
@@ -546,78 +285,11 @@ fn check(row: &Setting, value: f64) -> Result<(), Error> {
     }
 }
 
-/// The mutation settings' values by name.
-fn mutation_get(mutation: &MutationParams, name: &str) -> Option<Value> {
-    match name {
-        "large_step_probability" => Some(Value::Number(mutation.large_step_probability)),
-        _ => kernel_get(&mutation.small_step, name),
-    }
-}
-
-/// A small-step kernel's setting by name: the kernel, Kelemen's sizes.
-fn kernel_get(kernel: &SmallStep, name: &str) -> Option<Value> {
-    match (name, kernel) {
-        ("small_step", kernel) => Some(Value::Choice(kernel.name())),
-        ("small_step_min", SmallStep::Kelemen(k)) => Some(Value::Number(k.s1())),
-        ("small_step_max", SmallStep::Kelemen(k)) => Some(Value::Number(k.s2())),
-        _ => None,
-    }
-}
-
-/// Sets a mutation setting by name.
-fn mutation_set(
-    mutation: &mut MutationParams,
-    name: &'static str,
-    value: f64,
-) -> Result<(), Error> {
-    match name {
-        "large_step_probability" => {
-            mutation.large_step_probability = value;
-            Ok(())
-        }
-        _ => kernel_set(&mut mutation.small_step, name, value),
-    }
-}
-
-/// Sets Kelemen's sizes by name (the kernel itself is a choice).
-fn kernel_set(kernel: &mut SmallStep, name: &'static str, value: f64) -> Result<(), Error> {
-    match (name, *kernel) {
-        ("small_step_min", SmallStep::Kelemen(k)) => {
-            *kernel = SmallStep::Kelemen(Kelemen::new(value, k.s2())?)
-        }
-        ("small_step_max", SmallStep::Kelemen(k)) => {
-            *kernel = SmallStep::Kelemen(Kelemen::new(k.s1(), value)?)
-        }
-        _ => return Err(Error::NotApplicable { name }),
-    }
-    Ok(())
-}
-
-/// The ladder's highest temperature.
-fn t_max(ensemble: &EnsembleSettings) -> f64 {
-    ensemble
-        .ladder
-        .temperatures()
-        .last()
-        .copied()
-        .unwrap_or(1.0)
-}
-
-/// A geometric ladder of `levels` up to `t_max` (the current one if `None`).
-fn rebuild_ladder(
-    ensemble: &mut EnsembleSettings,
-    levels: usize,
-    t_max_new: Option<f64>,
-) -> Result<(), Error> {
-    let top = t_max_new.unwrap_or_else(|| t_max(ensemble));
-    ensemble.ladder = crate::exchange::Ladder::geometric(levels, top)?;
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::method::RenderMethod;
+    use crate::mutate::{Kelemen, SmallStep};
 
     /// Every method's defaults lie in the table, and every row can be read.
     #[test]

@@ -98,6 +98,7 @@ use self::reconstruction::ReconstructionTime;
 use self::regularizer::Samples;
 use self::sweeps::{Saved, SweepCosts, Sweeps, SweptRun, finish_runs};
 use self::tile::{Context, TileChain};
+use super::common_settings::{Mutated, RUNS, large_step, small_step, step_max, step_min};
 use super::job::Job;
 use super::output::{Output, StratifiedStats};
 use super::runs::{self, Pooled};
@@ -109,6 +110,7 @@ use crate::error::{Error, check_probability};
 use crate::mutate::MutationParams;
 use crate::oracle::{PathOracle, Radiance, Resolution};
 use crate::reconstruct::{LogSettings, WeightedSettings};
+use crate::setting::{Field, Fields, flag_value, put};
 use crate::target::Importance;
 use crate::task::Task;
 use crate::tiles::{TileShape, Tiles};
@@ -307,6 +309,123 @@ impl Default for StratifiedSettings {
             emission_rays: EMISSION_RAYS,
             runs: 1,
         }
+    }
+}
+
+impl Fields for StratifiedSettings {
+    const FIELDS: &'static [Field<Self>] = &[
+        Field::whole(
+            "tile_radius",
+            (0, 4),
+            "tile shape: 0 the cross of Gruson et al. 2020, r a (2r+1)^2 square (the reconstruction's cost grows with it)",
+            |s| match s.shape {
+                TileShape::Cross => Some(0.0),
+                TileShape::Square { radius } => Some(radius.into()),
+            },
+            |s, r| {
+                let radius = r as u32;
+                put(
+                    &mut s.shape,
+                    match radius {
+                        0 => TileShape::Cross,
+                        radius => TileShape::Square { radius },
+                    },
+                )
+            },
+        ),
+        Field::whole(
+            "exchange_every",
+            (0, 1 << 20),
+            "local replica exchange every this many sweeps (0: never)",
+            |s| Some(s.exchange_every.into()),
+            |s, n| put(&mut s.exchange_every, n as u32),
+        ),
+        Field::whole(
+            "exchange_after",
+            (0, 1 << 20),
+            "sweeps before the first local exchange (their paths go to tile steps)",
+            |s| Some(s.exchange_after.into()),
+            |s, n| put(&mut s.exchange_after, n as u32),
+        ),
+        Field::choice(
+            "solver",
+            &Solver::NAMES,
+            "weighted: Gruson et al. 2020, eq. 13-16; log: eq. 17-20",
+            |s| s.solver.name(),
+            |s, name| Solver::from_name(name).map(|solver| s.solver = solver),
+        ),
+        Field::real(
+            "alpha",
+            (1e-6, 1e6),
+            "the weighted solver's regularizer weight (used when cross_validate_alpha is 0)",
+            |s| match s.solver {
+                Solver::Weighted(w) => Some(w.alpha),
+                Solver::LogDomain(_) => None,
+            },
+            |s, alpha| match &mut s.solver {
+                Solver::Weighted(w) => put(&mut w.alpha, alpha),
+                Solver::LogDomain(_) => Err(Error::NotApplicable { name: "alpha" }),
+            },
+        ),
+        Field::flag(
+            "cross_validate_alpha",
+            "choose alpha per render from 0.05, 0.2, 1 and 5 on half the large steps",
+            |s| flag_value(s.cross_validate_alpha),
+            |s, on| put(&mut s.cross_validate_alpha, on != 0.0),
+        ),
+        Field::real(
+            "fallback_sigmas",
+            (0.0, 1e3),
+            "pixels this many standard errors below their MC estimate take it (0: never)",
+            |s| Some(s.fallback_sigmas.unwrap_or(0.0)),
+            |s, sigmas| put(&mut s.fallback_sigmas, (sigmas != 0.0).then_some(sigmas)),
+        ),
+        Field::whole(
+            "regularizer_paths",
+            (0, 4096),
+            "plain MC paths per pixel traced for the regularizer alone",
+            |s| Some(s.regularizer_paths.into()),
+            |s, n| put(&mut s.regularizer_paths, n as u32),
+        ),
+        Field::real(
+            "init_coverage",
+            (0.0, 1.0),
+            "global chains initialize tiles until this fraction is (Gruson et al. 2020: 0.3)",
+            |s| Some(s.initialization.coverage),
+            |s, c| put(&mut s.initialization.coverage, c),
+        ),
+        Field::real(
+            "init_budget",
+            (0.0, 1.0),
+            "at most this fraction of the budget (paths or time) for the initialization",
+            |s| Some(s.initialization.max_budget_fraction),
+            |s, f| put(&mut s.initialization.max_budget_fraction, f),
+        ),
+        Field::whole(
+            "emission_rays",
+            (0, 4096),
+            "camera rays per pixel and sweep for the emission seen directly (0: the tile chains keep it; a sixteenth where a pilot ray per pixel sees none nearby)",
+            |s| Some(s.emission_rays.into()),
+            |s, n| put(&mut s.emission_rays, n as u32),
+        ),
+        Field::number(
+            RUNS,
+            |s| Some(s.runs.into()),
+            |s, n| put(&mut s.runs, n as u32),
+        ),
+        large_step(),
+        small_step(),
+        step_min(),
+        step_max(),
+    ];
+}
+
+impl Mutated for StratifiedSettings {
+    fn mutation(&self) -> &MutationParams {
+        &self.mutation
+    }
+    fn mutation_mut(&mut self) -> &mut MutationParams {
+        &mut self.mutation
     }
 }
 

@@ -17,7 +17,7 @@
 # instructions-step.csv); needs valgrind (apt-get install valgrind).
 #
 # METHOD_ARGS adds `strata render` options to every method but MC (e.g.
-# "--set emission_rays=0": the engine's cost alone, without the emission
+# "--emission-rays 0": the engine's cost alone, without the emission
 # seen directly estimated apart, which changes the paths the chains take).
 # With --check (after --step, if given), each method's count is compared
 # with scripts/instruction-baseline.csv (committed; its rows name the

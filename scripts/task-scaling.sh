@@ -29,7 +29,11 @@ csv=out/bench/tasks${TIME:+-time}.csv
 budget=(--spp "$spp")
 [ -n "${TIME:-}" ] && budget=(--time "$TIME")
 sets=()
-for setting in ${SET:-}; do sets+=(--set "$setting"); done
+# SET="runs=8 chains=64": each NAME=VALUE as its flag, --NAME VALUE.
+for setting in ${SET:-}; do
+  name=${setting%%=*}
+  sets+=("--${name//_/-}" "${setting#*=}")
+done
 mkdir -p "$dir"
 echo "method,what,index,seconds,peak_mb,file_mb" >"$csv"
 timed() { # label index command... -> a csv line

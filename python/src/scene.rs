@@ -96,7 +96,7 @@ fn resolution(width: u32, height: u32) -> PyResult<Resolution> {
 
 /// The method called `name`, with a preset and `settings` set through the
 /// engine's settings table (the names, defaults and ranges of
-/// `strata settings`, the command's `--set` and the C API).
+/// `strata settings`, the command's flags and the C API).
 pub(crate) fn method(
     name: &str,
     preset: Option<&str>,

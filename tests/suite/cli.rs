@@ -424,7 +424,7 @@ fn a_time_budget_below_one_unit_of_work_is_reported() {
 #[test]
 fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
     let dir = std::env::temp_dir().join(format!("strata-tasks-{}", std::process::id()));
-    let render_args = "--method pssmlt --spp 16 --seed 3 --width 40 --height 30 --set chains=24";
+    let render_args = "--method pssmlt --spp 16 --seed 3 --width 40 --height 30 --chains 24";
     let whole = dir.join("whole");
     let mut line: Vec<&str> = vec!["render", "cornell"];
     line.extend(render_args.split(' '));

@@ -8,11 +8,8 @@ use strata::engine::RenderMethod;
 use crate::out::AnyResult;
 use clap::ValueEnum;
 use clap::builder::PossibleValuesParser;
-use strata::engine::SmallStep;
-use strata::engine::Solver;
 use strata::engine::Task;
-use strata::engine::{ExchangeKind, Tempering};
-use strata::engine::{Method, Resolution};
+use strata::engine::{Kind, Method, Resolution, Setting};
 use strata::native::PathSampler;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -73,57 +70,6 @@ pub(crate) struct Args {
     /// stratified MCMC and ERPT); the flags below override it.
     #[arg(long, value_parser = PossibleValuesParser::new(Method::PRESETS))]
     pub(crate) preset: Option<String>,
-    /// Any setting of the method's table, NAME=VALUE (repeatable; `strata
-    /// settings METHOD` lists them with their ranges and defaults). The
-    /// flags below are shorthands for the common ones.
-    #[arg(long = "set", value_name = "NAME=VALUE")]
-    pub(crate) sets: Vec<String>,
-    /// PSSMLT and multi-stage MLT: chains (`chains`).
-    #[arg(long)]
-    pub(crate) chains: Option<u32>,
-    /// Small-step kernel (`small_step`).
-    #[arg(long, value_parser = PossibleValuesParser::new(SmallStep::NAMES))]
-    pub(crate) kernel: Option<String>,
-    /// Large-step probability (`large_step_probability`).
-    #[arg(long)]
-    pub(crate) large_step: Option<f64>,
-    /// Replica exchange: the exchange move (`exchange`; Šik 2018, sec. 5.3).
-    #[arg(long, value_parser = PossibleValuesParser::new(ExchangeKind::NAMES))]
-    pub(crate) exchange: Option<String>,
-    /// Replica exchange: tempering (`tempering`; power: pi^(1/T), any
-    /// oracle; oracle: the path tracer roughens its BSDFs).
-    #[arg(long, value_parser = PossibleValuesParser::new(Tempering::NAMES))]
-    pub(crate) tempering: Option<String>,
-    /// Replica exchange: chains per ensemble (`replicas`).
-    #[arg(long)]
-    pub(crate) replicas: Option<u32>,
-    /// Replica exchange: highest temperature (`t_max`).
-    #[arg(long)]
-    pub(crate) t_max: Option<f64>,
-    /// Replica exchange: ensembles run in parallel (`ensembles`).
-    #[arg(long)]
-    pub(crate) ensembles: Option<u32>,
-    /// Replica exchange: sweeps equalizing the ladder first (`ladder_tuning_sweeps`).
-    #[arg(long)]
-    pub(crate) tune_ladder: Option<u64>,
-    /// Stratified MCMC: tile radius (`tile_radius`; 0: the cross of Gruson et al. 2020).
-    #[arg(long)]
-    pub(crate) tile_radius: Option<u32>,
-    /// Stratified MCMC: local exchange every this many sweeps (`exchange_every`).
-    #[arg(long)]
-    pub(crate) exchange_every: Option<u32>,
-    /// Stratified MCMC: the reconstruction (`solver`).
-    #[arg(long, value_parser = PossibleValuesParser::new(Solver::NAMES))]
-    pub(crate) solver: Option<String>,
-    /// Stratified MCMC: the fallback's threshold (`fallback_sigmas`; 0: never).
-    #[arg(long)]
-    pub(crate) fallback_sigmas: Option<f64>,
-    /// ERPT: steps per chain (`chain_length`).
-    #[arg(long)]
-    pub(crate) chain_length: Option<u32>,
-    /// Multi-stage MLT: noise-aware importance (`noise_aware`; Hoberock and Hart 2010, sec. 4.3).
-    #[arg(long)]
-    pub(crate) noise_aware: bool,
     /// Exposure (stops) of the PNG, from -64 to 64.
     #[arg(long, default_value_t = 0.0, value_parser = stops)]
     pub(crate) exposure: f32,
@@ -158,6 +104,10 @@ pub(crate) struct Args {
     /// The number of tasks the render is split into.
     #[arg(long, value_name = "N", requires = "task_index", value_parser = clap::value_parser!(u32).range(1..))]
     pub(crate) task_count: Option<u32>,
+    /// The methods' settings given, by name, as their flags wrote them
+    /// (flags made from the engine's table by [`setting_flags`]).
+    #[arg(skip)]
+    pub(crate) settings: Vec<(&'static str, String)>,
 }
 
 impl Args {
@@ -233,72 +183,84 @@ pub(crate) fn stops(text: &str) -> Result<f32, String> {
     }
 }
 
+/// A flag for every setting of every method, made from the engine's table:
+/// `--NAME` (with dashes), its help and, for a choice, its options; a flag
+/// setting (0 or 1) alone means 1. `strata settings METHOD` lists their
+/// ranges and defaults.
+pub(crate) fn setting_flags() -> Vec<clap::Arg> {
+    // Each name once, with the methods that have it (and their own help
+    // where it differs: stratified MCMC's emission rays are per pixel).
+    let mut flags: Vec<(&'static Setting, Vec<&str>, String)> = Vec::new();
+    for method in Method::all() {
+        for row in method.settings() {
+            let name = method.name();
+            match flags.iter_mut().find(|(first, ..)| first.name == row.name) {
+                None => flags.push((row, vec![name], String::new())),
+                Some((first, methods, _)) if first.help == row.help => methods.push(name),
+                Some((_, _, own)) => own.push_str(&format!(" {name}: {}.", row.help)),
+            }
+        }
+    }
+    flags
+        .into_iter()
+        .map(|(row, methods, own)| {
+            let arg = clap::Arg::new(row.name)
+                .long(row.name.replace('_', "-"))
+                .help(format!("{} [{}].{own}", row.help, methods.join(", ")))
+                .help_heading("Method settings (`strata settings METHOD`: ranges and defaults)");
+            match row.kind {
+                Kind::Choice(options) => arg
+                    .value_name("NAME")
+                    .value_parser(PossibleValuesParser::new(options)),
+                Kind::Flag => arg
+                    .value_name("0|1")
+                    .num_args(0..=1)
+                    .default_missing_value("1"),
+                Kind::Whole { .. } => arg.value_name("N"),
+                Kind::Real { .. } => arg.value_name("X"),
+            }
+        })
+        .collect()
+}
+
+/// The settings given on the command line `matches` (of `strata render`,
+/// with [`setting_flags`]).
+pub(crate) fn given_settings(matches: &clap::ArgMatches) -> Vec<(&'static str, String)> {
+    let mut given = Vec::new();
+    for method in Method::all() {
+        for row in method.settings() {
+            if let Ok(Some(value)) = matches.try_get_one::<String>(row.name)
+                && !given.iter().any(|(name, _)| *name == row.name)
+            {
+                given.push((row.name, value.clone()));
+            }
+        }
+    }
+    given
+}
+
 /// The method named by `--method`: the engine's defaults, then `--preset`,
-/// then each flag given, set through the engine's settings table (a flag
-/// the method does not have is an error).
+/// then each setting given (the choices first: a kernel before its step
+/// sizes), through the engine's settings table (a setting the method does
+/// not have is an error).
 pub(crate) fn method(args: &Args) -> AnyResult<Method> {
     let mut method = Method::from_name(&args.method).ok_or("unknown method")?;
     if let Some(preset) = &args.preset {
         method.apply_preset(preset)?;
     }
-    let choices = [
-        ("--kernel", "small_step", &args.kernel),
-        ("--exchange", "exchange", &args.exchange),
-        ("--tempering", "tempering", &args.tempering),
-        ("--solver", "solver", &args.solver),
-    ];
-    for (flag, name, value) in choices {
-        if let Some(value) = value {
-            applies(&method, flag, name)?;
-            method.set_choice(name, value)?;
+    let choice_first = |(name, _): &&(&str, String)| {
+        !matches!(method.setting(name).map(|row| row.kind), Some(Kind::Choice(_)))
+    };
+    let mut given: Vec<_> = args.settings.iter().collect();
+    given.sort_by_key(choice_first);
+    for (name, value) in given {
+        let flag = format!("--{}", name.replace('_', "-"));
+        if method.setting(name).is_none() {
+            return Err(format!("{flag} does not apply to {}", method.name()).into());
         }
-    }
-    let numbers = [
-        ("--chains", "chains", args.chains.map(f64::from)),
-        ("--large-step", "large_step_probability", args.large_step),
-        ("--replicas", "replicas", args.replicas.map(f64::from)),
-        ("--t-max", "t_max", args.t_max),
-        ("--ensembles", "ensembles", args.ensembles.map(f64::from)),
-        (
-            "--tune-ladder",
-            "ladder_tuning_sweeps",
-            args.tune_ladder.map(|n| n as f64),
-        ),
-        (
-            "--tile-radius",
-            "tile_radius",
-            args.tile_radius.map(f64::from),
-        ),
-        (
-            "--exchange-every",
-            "exchange_every",
-            args.exchange_every.map(f64::from),
-        ),
-        ("--fallback-sigmas", "fallback_sigmas", args.fallback_sigmas),
-        (
-            "--chain-length",
-            "chain_length",
-            args.chain_length.map(f64::from),
-        ),
-        (
-            "--noise-aware",
-            "noise_aware",
-            args.noise_aware.then_some(1.0),
-        ),
-    ];
-    for (flag, name, value) in numbers {
-        if let Some(value) = value {
-            applies(&method, flag, name)?;
-            method.set(name, value)?;
-        }
-    }
-    for set in &args.sets {
-        let (name, value) = set
-            .split_once('=')
-            .ok_or_else(|| format!("--set {set}: expected NAME=VALUE"))?;
         method
             .set_text(name, value)
-            .map_err(|e| format!("--set {set}: {e}"))?;
+            .map_err(|e| format!("{flag} {value}: {e}"))?;
     }
     Ok(method)
 }
@@ -323,12 +285,4 @@ pub(crate) fn differences(saved: &Method, asked: &Method) -> Vec<String> {
 /// A setting's value as text (`-` where it does not apply).
 pub(crate) fn fmt(value: Option<strata::engine::Value>) -> String {
     value.map_or_else(|| "-".into(), |v| v.to_string())
-}
-
-/// An error unless `method` has the setting `name` that `flag` sets.
-pub(crate) fn applies(method: &Method, flag: &str, name: &str) -> AnyResult<()> {
-    match method.setting(name) {
-        Some(_) => Ok(()),
-        None => Err(format!("{flag} does not apply to {}", method.name()).into()),
-    }
 }

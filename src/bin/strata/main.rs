@@ -7,7 +7,7 @@
 //! strata render cornell --method pssmlt --spp 64 --out out/cornell
 //! strata render procedural --method pssmlt --spp 64 --out out/procedural
 //! strata render caustic --method replica --exchange is-permutation --spp 64
-//! strata render cornell --method stratified --preset gruson2020 --set tile_radius=1
+//! strata render cornell --method stratified --preset gruson2020 --tile-radius 1
 //! strata settings stratified      # every setting: default, range, help
 //! strata render scenes/veach-ajar/scene.pbrt --method stratified --time 30
 //! ```
@@ -21,7 +21,7 @@
 //! `--preview-every SECONDS` rewrites the PNG and EXR while rendering.
 //!
 //! On several machines (every method; stratified MCMC and multi-stage MLT with
-//! `--set runs=N`): `strata render ... --task-index I
+//! `--runs N`): `strata render ... --task-index I
 //! --task-count N --out part-I` renders task I of N and writes its partial
 //! result `part-I.part`; `strata merge part-*.part --out image` writes the
 //! image the render unsplit gives, byte for byte (README, "Rendering on a
@@ -38,7 +38,7 @@ use std::sync::atomic::Ordering;
 use strata::engine::RenderMethod;
 
 use clap::builder::PossibleValuesParser;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use strata::engine::Method;
 
 /// `println!` that never panics: a closed or full stdout (`> /dev/full`)
@@ -69,7 +69,7 @@ mod render;
 mod tests;
 mod watch;
 
-use args::Args;
+use args::{Args, given_settings, setting_flags};
 use merge::{MergeArgs, merge_parts};
 use out::STDOUT_FAILED;
 use render::run;
@@ -89,7 +89,8 @@ enum Command {
     /// Render a scene: a tone-mapped PNG and a linear EXR.
     Render(Box<Args>),
     /// List a method's settings (every method's without one): name,
-    /// default, range or choices, help. `render --set NAME=VALUE` takes them.
+    /// default, range or choices, help. `render --NAME VALUE` sets one
+    /// (dashes for underscores).
     Settings {
         #[arg(value_parser = PossibleValuesParser::new(Method::NAMES))]
         method: Option<String>,
@@ -111,9 +112,28 @@ fn main() -> ExitCode {
     code
 }
 
+/// The command line `line` parsed, with a flag for each of the methods'
+/// settings (made from the engine's table).
+fn parse<I, T>(line: I) -> Result<Cli, clap::Error>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let command = Cli::command().mut_subcommand("render", |render| render.args(setting_flags()));
+    let matches = command.try_get_matches_from(line)?;
+    let mut cli = Cli::from_arg_matches(&matches)?;
+    if let (Command::Render(args), Some(render)) =
+        (&mut cli.command, matches.subcommand_matches("render"))
+    {
+        args.settings = given_settings(render);
+    }
+    Ok(cli)
+}
+
 /// The command line's command, run.
 fn command() -> ExitCode {
-    let args = match Cli::parse().command {
+    let cli = parse(std::env::args_os()).unwrap_or_else(|e| e.exit());
+    let args = match cli.command {
         Command::Render(args) => *args,
         Command::Merge(merge) => {
             return match merge_parts(&merge) {

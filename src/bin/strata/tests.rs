@@ -5,8 +5,7 @@ use strata::engine::RenderMethod;
 
 use crate::args::{Args, keep_aspect, method};
 use crate::files::{own_file, part_path};
-use crate::{Cli, Command};
-use clap::Parser;
+use crate::{Command, parse};
 use strata::engine::MaxChannel;
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::{Budget, Method, Resolution, Settings};
@@ -14,7 +13,7 @@ use strata::engine::{Task, render_task};
 
 fn args(line: &[&str]) -> Args {
     let full: Vec<&str> = ["strata", "render"].iter().chain(line).copied().collect();
-    match Cli::try_parse_from(full).unwrap().command {
+    match parse(full).unwrap().command {
         Command::Render(args) => *args,
         _ => unreachable!(),
     }
@@ -100,11 +99,11 @@ fn random_flags_give_a_valid_method_or_an_error() {
     use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
     let flags = [
         "--chains",
-        "--large-step",
+        "--large-step-probability",
         "--replicas",
         "--t-max",
         "--ensembles",
-        "--tune-ladder",
+        "--ladder-tuning-sweeps",
         "--tile-radius",
         "--exchange-every",
         "--fallback-sigmas",
@@ -146,7 +145,7 @@ fn random_flags_give_a_valid_method_or_an_error() {
             }
             // Parsing may refuse (exit 2 in the command); a parsed line
             // gives a method or an error.
-            if let Ok(cli) = Cli::try_parse_from(&line) {
+            if let Ok(cli) = parse(&line) {
                 let Command::Render(args) = cli.command else {
                     unreachable!()
                 };
@@ -159,8 +158,8 @@ fn random_flags_give_a_valid_method_or_an_error() {
         .unwrap();
 }
 
-/// Flags go through the table: a flag of another method, a value out
-/// of range or an unknown `--set` name is an error naming it.
+/// Flags are made from the table and go through it: a flag of another
+/// method, a value out of range or not a number is an error naming it.
 #[test]
 fn flags_are_checked_against_the_table() {
     let err = |line: &[&str]| method(&args(line)).unwrap_err().to_string();
@@ -171,22 +170,29 @@ fn flags_are_checked_against_the_table() {
         err(&[
             "--method",
             "replica",
-            "--tune-ladder",
+            "--ladder-tuning-sweeps",
             "18446744073709551615"
         ])
         .contains("ladder_tuning_sweeps")
     );
-    assert!(err(&["--method", "erpt", "--set", "nope=1"]).contains("chain_length"));
-    assert!(err(&["--method", "erpt", "--set", "chain_length"]).contains("NAME=VALUE"));
+    assert!(err(&["--method", "erpt", "--chain-length", "x"]).contains("takes a number"));
+    assert!(err(&["--method", "mc", "--runs", "2"]).contains("--runs does not apply to mc"));
+    // A flag setting alone is on; a choice is checked by the parser.
+    let noise_aware = method(&args(&["--method", "multistage", "--noise-aware"])).unwrap();
+    assert_eq!(
+        noise_aware.get("noise_aware"),
+        Some(strata::engine::Value::Number(1.0))
+    );
+    assert!(parse(["strata", "render", "--solver", "nope"]).is_err());
     let set = method(&args(&[
         "--method",
         "stratified",
         "--preset",
         "gruson2020",
-        "--set",
-        "solver=log",
-        "--set",
-        "tile_radius=1",
+        "--solver",
+        "log",
+        "--tile-radius",
+        "1",
     ]))
     .unwrap();
     assert_eq!(

@@ -6,7 +6,7 @@
 # and say what the README says they do (an Indexed Job whose pods run
 # jobs/task.sh with their completion index and the task count, every pod on
 # the shared volume; the merge Job runs `strata merge` on it). Running the
-# tasks themselves is tests/suite/cli.rs's (through xargs -P).
+# tasks themselves is cli/tests/cli.rs's (through xargs -P).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 for f in jobs/*.sh jobs/*.sbatch; do

@@ -10,7 +10,6 @@ mod backends;
 mod bidirectional;
 mod chains;
 mod channels;
-mod cli;
 mod convergence;
 mod drivers;
 mod emission;

@@ -249,7 +249,10 @@ pub(crate) fn method(args: &Args) -> AnyResult<Method> {
         method.apply_preset(preset)?;
     }
     let choice_first = |(name, _): &&(&str, String)| {
-        !matches!(method.setting(name).map(|row| row.kind), Some(Kind::Choice(_)))
+        !matches!(
+            method.setting(name).map(|row| row.kind),
+            Some(Kind::Choice(_))
+        )
     };
     let mut given: Vec<_> = args.settings.iter().collect();
     given.sort_by_key(choice_first);

@@ -1,4 +1,3 @@
-#![cfg(feature = "cli")]
 //! The `strata` command as a user runs it: a render writes its PNG and EXR
 //! and exits with 0, an error exits with 1 and says what went wrong, bad
 //! arguments exit with 2.
@@ -438,7 +437,7 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
     );
     let tasks = Command::new("sh")
         .args(["-c", "seq 0 2 | xargs -P 2 -I{} jobs/task.sh {} 3"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
         .env("STRATA", env!("CARGO_BIN_EXE_strata"))
         .env("SCENE", "cornell")
         .env("DIR", &dir)
@@ -508,7 +507,7 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
     // A task run again finds its part and does nothing.
     let again = Command::new("jobs/task.sh")
         .args(["1", "3"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
         .env("STRATA", "/nonexistent")
         .env("DIR", &dir)
         .status()

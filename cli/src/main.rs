@@ -3,7 +3,7 @@
 //! it exits with 0 on success, 1 on an error (printed), 2 on bad arguments.
 //!
 //! ```text
-//! cargo install --path .          # or: cargo run --release -- render ...
+//! cargo install --path cli        # or: cargo run --release -p strata-cli -- render ...
 //! strata render cornell --method pssmlt --spp 64 --out out/cornell
 //! strata render procedural --method pssmlt --spp 64 --out out/procedural
 //! strata render caustic --method replica --exchange is-permutation --spp 64

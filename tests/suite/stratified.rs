@@ -495,7 +495,7 @@ fn tiles_that_start_dark_do_not_brighten_the_image() {
     assert!(z.abs() < 4.0, "z = {z:.2}");
 }
 
-/// Issue 18: the image mean is right from the first preview budget on, on
+/// The image mean is right from the first preview budget on, on
 /// the procedural image, a sparse light and a rare bright path: within 4
 /// standard errors (of 16 independent renders) of the exact mean at 8, 16,
 /// 32 and 64 spp. Without the total's anchor

@@ -327,7 +327,7 @@ fn methods_take_their_settings_by_name_and_refuse_bad_ones() {
         StrataStatus::InvalidArgument
     );
     assert!(last_error().contains("whole number"), "{}", last_error());
-    // Issue 36's values, accepted before and then aborting or hanging the
+    // Values once accepted and then aborting or hanging the
     // render: refused now, naming the range.
     for (method, name, value) in [
         (c"pssmlt", c"chains", 4e9),

@@ -14,8 +14,8 @@
 //!
 //! Long renders in steps: `--checkpoint-every SECONDS` saves the render's
 //! state to `--checkpoint FILE` (default `OUT.ckpt`); Ctrl-C (or SIGTERM, as a
-//! scheduler stops a job, or SIGHUP) stops after the
-//! current round, writes the checkpoint and the image so far and exits with
+//! scheduler stops a job, or SIGHUP; more of them within a second are the
+//! same stop) stops after the current round, writes the checkpoint and the image so far and exits with
 //! 130; the same command with `--resume FILE` continues (with the same
 //! `--spp`, the image is the one an uninterrupted render gives, bit for bit).
 //! `--preview-every SECONDS` rewrites the PNG and EXR while rendering.
@@ -34,7 +34,9 @@
 //! error against the exact image.
 
 use std::process::ExitCode;
+use std::sync::OnceLock;
 use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
 use strata::engine::RenderMethod;
 
 use clap::builder::PossibleValuesParser;
@@ -112,6 +114,15 @@ fn main() -> ExitCode {
     code
 }
 
+/// Signals within this long of the first are the same stop: a scheduler
+/// stopping a job signals each of its processes, and jobs/task.sh forwards
+/// the one it gets to the render too (two SIGTERMs a few milliseconds
+/// apart exited at once, without the checkpoint).
+const SAME_STOP: Duration = Duration::from_secs(1);
+
+/// When the first stop signal came.
+static FIRST_SIGNAL: OnceLock<Instant> = OnceLock::new();
+
 /// The command line `line` parsed, with a flag for each of the methods'
 /// settings (made from the engine's table).
 fn parse<I, T>(line: I) -> Result<Cli, clap::Error>
@@ -154,9 +165,11 @@ fn command() -> ExitCode {
         }
     };
     // The first Ctrl-C (SIGINT, SIGTERM or SIGHUP) stops after the current
-    // round; a second one at once.
+    // round; another one, a second or more later, at once.
     let handler = ctrlc::set_handler(|| {
-        if STOP.swap(true, Ordering::Relaxed) {
+        let first = *FIRST_SIGNAL.get_or_init(Instant::now);
+        STOP.store(true, Ordering::Relaxed);
+        if first.elapsed() >= SAME_STOP {
             std::process::exit(130);
         }
     });

@@ -8,6 +8,7 @@
 //!
 //! ```text
 //! cargo run --release -p strata-studies --bin mc_efficiency -- --scenes cornell,door,caustic
+//! cargo run --release -p strata-studies --bin mc_efficiency -- --path-sampler bidirectional --spp 16
 //! ```
 
 use std::path::PathBuf;
@@ -16,7 +17,7 @@ use std::time::Instant;
 use clap::Parser;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Method, PathOracle, Settings, Silent, metrics, render};
-use strata::native::native_tracer;
+use strata::native::{PathSampler, native_tracer};
 use strata_studies::common::{AnyResult, cached_mc, scene};
 
 /// MC's error and time per scene.
@@ -34,6 +35,9 @@ struct Args {
     /// Renders (seeds 0, 1, ...) per scene.
     #[arg(long, default_value_t = 32)]
     seeds: u64,
+    /// How the tracer samples paths (unidirectional, bidirectional, ...).
+    #[arg(long, default_value = "unidirectional")]
+    path_sampler: String,
     /// Where the references are cached.
     #[arg(long, default_value = "out/mc_efficiency")]
     out: PathBuf,
@@ -44,8 +48,11 @@ fn main() -> AnyResult<()> {
     std::fs::create_dir_all(&args.out)?;
     println!("scene,rel_mse,rel_mse_without_fireflies,l1,seconds,efficiency");
     for name in &args.scenes {
-        let tracer = native_tracer(scene(name, None, None, args.side)?);
-        let reference = cached_mc(&tracer, name, 4096, 1000, &args.out)?;
+        let mut tracer = native_tracer(scene(name, None, None, args.side)?);
+        tracer.sampler =
+            PathSampler::from_name(&args.path_sampler).ok_or("no such path sampler")?;
+        let cached = format!("{name}-{}", args.path_sampler);
+        let reference = cached_mc(&tracer, &cached, 4096, 1000, &args.out)?;
         let (mut mse, mut robust, mut l1, mut seconds) = (0.0, 0.0, 0.0, 0.0);
         for seed in 0..args.seeds {
             let settings = Settings {

@@ -98,7 +98,7 @@ pub(crate) struct Args {
     /// whole render's, a time budget each task's). Tasks share the render's
     /// units of work: MC's and ERPT's passes, PSSMLT's chains, replica
     /// exchange's ensembles, and the runs of stratified MCMC and multi-stage
-    /// MLT (1 unless `--set runs=N`).
+    /// MLT (1 unless `--runs N`).
     #[arg(long, value_name = "I", requires = "task_count")]
     pub(crate) task_index: Option<u32>,
     /// The number of tasks the render is split into.

@@ -152,7 +152,7 @@ impl Method {
         self.write(row, Input::Number(value))
     }
 
-    /// Sets the setting `name` from text, as `strata render --set NAME=VALUE`
+    /// Sets the setting `name` from text, as `strata render --NAME VALUE`
     /// does: a choice by its option's name, any other setting by its number.
     pub fn set_text(&mut self, name: &str, value: &str) -> Result<(), Error> {
         let row = self.known(name)?;

@@ -28,6 +28,10 @@
 //! observer sees one progress over all stages and previews of the combined
 //! image.
 
+mod settings;
+
+pub use settings::MultiStageSettings;
+
 use alloc::vec;
 use alloc::vec::Vec;
 use core::cell::OnceCell;
@@ -36,116 +40,19 @@ use serde::{Deserialize, Serialize};
 
 use core::sync::atomic::{AtomicU64, Ordering};
 
-use super::common_settings::{
-    BOOTSTRAP, CHAINS, EMISSION_RAYS, Mutated, RUNS, large_step, small_step, step_max, step_min,
-};
 use super::job::Job;
 use super::noise_aware::noise_target;
 use super::output::{Extras, Output, Stage};
-use super::pssmlt::{Pssmlt, PssmltSettings};
+use super::pssmlt::Pssmlt;
 use super::runs::{self, Pooled};
 use crate::checkpoint::{self, Checkpoint, Checkpoints};
 use crate::drive::{Budget, Clock, Observer, Progress, RenderStats, SetUp};
 use crate::error::Error;
 use crate::film::{AddFilm, AddValues, Film};
-use crate::mutate::MutationParams;
 use crate::oracle::{
     FilmPoint, PathOracle, PathSample, Radiance, Resolution, Sampler, SplatSink, Temperature,
 };
-use crate::setting::{Field, Fields, flag_value, put};
 use crate::target::{FnImportance, Importance};
-
-/// Settings of multi-stage MLT. The budget is split among the stages in
-/// proportion to their grid size; each stage counts it like PSSMLT.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct MultiStageSettings {
-    /// Chains, mutations and bootstrap candidates of every stage.
-    pub pssmlt: PssmltSettings,
-    /// Stages from half to full resolution (Hoberock and Hart 2010: 10).
-    pub linear_stages: u32,
-    /// Noise-aware MLT (Hoberock and Hart 2010, sec. 4.3.4-4.3.5): also target the
-    /// estimated visual noise of each pixel.
-    pub noise_aware: bool,
-    /// Independent runs, each of every stage with a share of the budget,
-    /// pooled at the end (1 by default): the units a task of a split render
-    /// owns (see `runs.rs`).
-    pub runs: u32,
-}
-
-impl Default for MultiStageSettings {
-    fn default() -> Self {
-        Self {
-            pssmlt: PssmltSettings {
-                bootstrap_candidates: 16_384,
-                ..PssmltSettings::default()
-            },
-            linear_stages: 10,
-            noise_aware: false,
-            runs: 1,
-        }
-    }
-}
-
-impl Fields for MultiStageSettings {
-    const FIELDS: &'static [Field<Self>] = &[
-        Field::whole(
-            "linear_stages",
-            (0, 1024),
-            "stages from half to full resolution (Hoberock and Hart 2010: 10)",
-            |s| Some(s.linear_stages.into()),
-            |s, n| put(&mut s.linear_stages, n as u32),
-        ),
-        Field::flag(
-            "noise_aware",
-            "noise-aware importance (Hoberock and Hart 2010, sec. 4.3)",
-            |s| flag_value(s.noise_aware),
-            |s, on| put(&mut s.noise_aware, on != 0.0),
-        ),
-        Field::number(
-            RUNS,
-            |s| Some(s.runs.into()),
-            |s, n| put(&mut s.runs, n as u32),
-        ),
-        // Fewer than PSSMLT's: the chains start again at every stage.
-        Field::whole(
-            CHAINS.name,
-            (1, 1 << 14),
-            "Markov chains run side by side (started again at every stage)",
-            |s| Some(s.pssmlt.chains.into()),
-            |s, n| put(&mut s.pssmlt.chains, n as u32),
-        ),
-        Field::number(
-            BOOTSTRAP,
-            |s| Some(s.pssmlt.bootstrap_candidates as f64),
-            |s, n| put(&mut s.pssmlt.bootstrap_candidates, n as u64),
-        ),
-        large_step(),
-        small_step(),
-        step_min(),
-        step_max(),
-        Field::number(
-            EMISSION_RAYS,
-            |s| Some(s.pssmlt.emission_rays),
-            |s, r| put(&mut s.pssmlt.emission_rays, r),
-        ),
-    ];
-}
-
-impl Mutated for MultiStageSettings {
-    fn mutation(&self) -> &MutationParams {
-        &self.pssmlt.mutation
-    }
-    fn mutation_mut(&mut self) -> &mut MutationParams {
-        &mut self.pssmlt.mutation
-    }
-}
-
-impl MultiStageSettings {
-    /// Checks every parameter.
-    pub fn validate(&self) -> Result<(), Error> {
-        self.pssmlt.validate()
-    }
-}
 
 /// The grid sizes of Alg. 2 for an image whose larger side is `n`: `1, 2, 4,
 /// ...` while `<= n/2`, then `linear` steps up to `n`.

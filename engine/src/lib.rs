@@ -18,6 +18,7 @@
 //! | bring a small-step kernel | [`Kernel`], [`Custom`], [`SmallStep`] |
 //! | bring a replica-exchange move | [`SwapMove`], [`CustomMove`], [`ExchangeKind`] |
 //! | bring a method | [`RenderMethod`], [`Job`], [`Rounds`], [`append_state`] |
+//! | batch an oracle's traces (a vectorized oracle) | [`TaskRunner`], [`run_tasks_with`] |
 //! | test a sampler on a known answer | [`analytic`] targets, [`diagnostics`] (ESS, R-hat, image errors) |
 //!
 //! The modules hidden from these docs are the workspace's lab: the engine's
@@ -94,6 +95,8 @@ pub use method::{
     StratifiedSettings, StratifiedStats, merge, part_of, render, render_task, resume, resume_task,
 };
 pub use mutate::{Adaptive, Custom, Gaussian, Kelemen, Kernel, MutationParams, SmallStep};
+#[cfg(feature = "std")]
+pub use parallel::{TaskRunner, run_tasks_with};
 pub use oracle::{
     FilmPoint, FnOracle, HELD_STREAM, ORACLE_STREAMS, PathFlags, PathOracle, PathSample, Radiance,
     Resolution, Rgb, Sampler, SplatSink, Temperature,

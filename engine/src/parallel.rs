@@ -1,22 +1,66 @@
 //! Data-parallel loops: on rayon's pool under the `parallel` feature, plain
-//! loops without it. Each item goes to exactly one task and results are
+//! loops without it, or on a [`TaskRunner`] the caller sets for a render
+//! ([`run_tasks_with`]). Each item goes to exactly one task and results are
 //! combined in a way that does not depend on the schedule (in index order, or
 //! by an addition that is exact, such as of integers), so nothing computed
-//! through these helpers depends on the number of threads.
+//! through these helpers depends on the number of threads, nor on how a
+//! runner interleaves the tasks.
 
 use alloc::vec::Vec;
 use core::ops::Add;
 
-/// The threads parallel loops may use (1 without `parallel`).
+#[cfg(feature = "std")]
+pub use runner::{TaskRunner, run_tasks_with};
+
+/// The threads parallel loops may use (1 without `parallel`), or the tasks
+/// a runner runs at once.
 pub(crate) fn threads() -> usize {
+    #[cfg(feature = "std")]
+    if let Some(width) = runner::width() {
+        return width;
+    }
     #[cfg(feature = "parallel")]
     return rayon::current_num_threads();
     #[cfg(not(feature = "parallel"))]
     1
 }
 
+/// `f(index, item)` for every item on the runner set for this thread (or in
+/// a plain loop inside one of its tasks), collected in item order; `None`
+/// when there is no runner, and the caller's own loop runs.
+fn on_runner<T: Send, U: Send>(
+    items: &mut [T],
+    f: &(dyn Fn(usize, &mut T) -> U + Sync),
+) -> Option<Vec<U>> {
+    #[cfg(feature = "std")]
+    return runner::run(items, f);
+    #[cfg(not(feature = "std"))]
+    {
+        let _ = (items, f);
+        None
+    }
+}
+
+/// [`on_runner`] over the consecutive `chunk`-long pieces of `values`.
+fn chunks_on_runner<T: Send, U: Send>(
+    values: &mut [T],
+    chunk: usize,
+    f: &(dyn Fn(usize, &mut [T]) -> U + Sync),
+) -> Option<Vec<U>> {
+    #[cfg(feature = "std")]
+    if runner::is_set() {
+        let mut chunks: Vec<&mut [T]> = values.chunks_mut(chunk).collect();
+        return on_runner(&mut chunks, &|i, c| f(i, c));
+    }
+    let _ = (values, chunk, f);
+    None
+}
+
 /// `f(item)` for every item.
 pub(crate) fn for_each<T: Send>(items: &mut [T], f: impl Fn(&mut T) + Sync + Send) {
+    if on_runner(items, &|_, item| f(item)).is_some() {
+        return;
+    }
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
@@ -33,6 +77,9 @@ pub(crate) fn for_each_chunk<T: Send>(
     chunk: usize,
     f: impl Fn(usize, &mut [T]) + Sync + Send,
 ) {
+    if chunks_on_runner(values, chunk, &f).is_some() {
+        return;
+    }
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
@@ -55,6 +102,9 @@ pub(crate) fn for_each_chunk_init<T: Send, S>(
     init: impl Fn() -> S + Sync + Send,
     f: impl Fn(&mut S, usize, &mut [T]) + Sync + Send,
 ) {
+    if chunks_on_runner(values, chunk, &|i, c| f(&mut init(), i, c)).is_some() {
+        return;
+    }
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
@@ -81,6 +131,9 @@ pub(crate) fn sum_chunks<T: Send, C: Default + Add<Output = C> + Send>(
     chunk: usize,
     f: impl Fn(usize, &mut [T]) -> C + Sync + Send,
 ) -> C {
+    if let Some(sums) = chunks_on_runner(values, chunk, &f) {
+        return sums.into_iter().fold(C::default(), |a, b| a + b);
+    }
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
@@ -104,6 +157,9 @@ pub(crate) fn sum_chunks_init<T: Send, S, C: Default + Add<Output = C> + Send>(
     init: impl Fn() -> S + Sync + Send,
     f: impl Fn(&mut S, usize, &mut [T]) -> C + Sync + Send,
 ) -> C {
+    if let Some(sums) = chunks_on_runner(values, chunk, &|i, c| f(&mut init(), i, c)) {
+        return sums.into_iter().fold(C::default(), |a, b| a + b);
+    }
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
@@ -128,6 +184,9 @@ pub(crate) fn map_each<T: Send, U: Send>(
     items: &mut [T],
     f: impl Fn(&mut T) -> U + Sync + Send,
 ) -> Vec<U> {
+    if let Some(out) = on_runner(items, &|_, item| f(item)) {
+        return out;
+    }
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
@@ -143,6 +202,9 @@ pub(crate) fn map_each_init<T: Send, S, U: Send>(
     init: impl Fn() -> S + Sync + Send,
     f: impl Fn(&mut S, &mut T) -> U + Sync + Send,
 ) -> Vec<U> {
+    if let Some(out) = on_runner(items, &|_, item| f(&mut init(), item)) {
+        return out;
+    }
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
@@ -157,6 +219,13 @@ pub(crate) fn map_each_init<T: Send, S, U: Send>(
 
 /// `[f(0), f(1), ..., f(n - 1)]`.
 pub(crate) fn map_indices<U: Send>(n: usize, f: impl Fn(usize) -> U + Sync + Send) -> Vec<U> {
+    #[cfg(feature = "std")]
+    if runner::is_set() {
+        let mut indices: Vec<usize> = (0..n).collect();
+        if let Some(out) = on_runner(&mut indices, &|i, _| f(i)) {
+            return out;
+        }
+    }
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
@@ -164,4 +233,115 @@ pub(crate) fn map_indices<U: Send>(n: usize, f: impl Fn(usize) -> U + Sync + Sen
     }
     #[cfg(not(feature = "parallel"))]
     (0..n).map(f).collect()
+}
+
+/// Renders whose loops run on a caller's [`TaskRunner`].
+#[cfg(feature = "std")]
+mod runner {
+    use alloc::sync::Arc;
+    use alloc::vec::Vec;
+    use core::cell::RefCell;
+    use std::sync::{Mutex, PoisonError};
+
+    /// What runs the tasks of the engine's parallel loops during a render, in
+    /// place of rayon's pool ([`run_tasks_with`]). A runner may interleave
+    /// the tasks as it likes: each as a coroutine on one thread, say, so
+    /// that an oracle can pause every task at its trace and evaluate all
+    /// their paths in one batch (a vectorized oracle, e.g. one numpy call).
+    /// The tasks of a loop are independent and their results are combined
+    /// in index order, so the image is the same bit for bit whatever the
+    /// runner does.
+    pub trait TaskRunner {
+        /// Calls `task(i)` exactly once for each `i` in `0..count`, in any
+        /// order or interleaving, and returns when every call has returned.
+        fn run(&self, count: usize, task: &(dyn Fn(usize) + Sync));
+
+        /// How many tasks it runs at once (a render's workers, for its
+        /// memory estimate).
+        fn width(&self) -> usize;
+    }
+
+    /// Where this thread's loops run.
+    enum Loops {
+        /// On rayon's pool, or in plain loops.
+        Pool,
+        /// On a runner.
+        Runner(Arc<dyn TaskRunner>),
+        /// Inside a runner's task: in plain loops (a task's nested loop
+        /// stays in its task).
+        Inside,
+    }
+
+    std::thread_local! {
+        static LOOPS: RefCell<Loops> = const { RefCell::new(Loops::Pool) };
+    }
+
+    /// Puts back the loops it replaced when dropped (also by a panic).
+    struct Restore(Option<Loops>);
+
+    impl Restore {
+        fn set(loops: Loops) -> Self {
+            Restore(Some(LOOPS.with(|l| l.replace(loops))))
+        }
+    }
+
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            if let Some(loops) = self.0.take() {
+                LOOPS.with(|l| *l.borrow_mut() = loops);
+            }
+        }
+    }
+
+    /// Runs `f` (a render) with the parallel loops it starts on this thread
+    /// run by `runner`: its tasks, and any loop nested in a task as a plain
+    /// loop inside that task.
+    pub fn run_tasks_with<R>(runner: Arc<dyn TaskRunner>, f: impl FnOnce() -> R) -> R {
+        let _restore = Restore::set(Loops::Runner(runner));
+        f()
+    }
+
+    /// Whether loops on this thread go to a runner (or run inside its task).
+    pub(super) fn is_set() -> bool {
+        LOOPS.with(|l| !matches!(*l.borrow(), Loops::Pool))
+    }
+
+    /// The runner's width; 1 inside one of its tasks; `None` without one.
+    pub(super) fn width() -> Option<usize> {
+        LOOPS.with(|l| match &*l.borrow() {
+            Loops::Pool => None,
+            Loops::Runner(runner) => Some(runner.width().max(1)),
+            Loops::Inside => Some(1),
+        })
+    }
+
+    /// See [`super::on_runner`].
+    pub(super) fn run<T: Send, U: Send>(
+        items: &mut [T],
+        f: &(dyn Fn(usize, &mut T) -> U + Sync),
+    ) -> Option<Vec<U>> {
+        let runner = LOOPS.with(|l| match &*l.borrow() {
+            Loops::Pool => None,
+            Loops::Runner(runner) => Some(Some(runner.clone())),
+            Loops::Inside => Some(None),
+        })?;
+        let Some(runner) = runner else {
+            return Some(items.iter_mut().enumerate().map(|(i, x)| f(i, x)).collect());
+        };
+        let cells: Vec<Mutex<(&mut T, Option<U>)>> =
+            items.iter_mut().map(|x| Mutex::new((x, None))).collect();
+        {
+            let _restore = Restore::set(Loops::Inside);
+            runner.run(cells.len(), &|i| {
+                let mut cell = cells[i].lock().unwrap_or_else(PoisonError::into_inner);
+                let (item, out) = &mut *cell;
+                *out = Some(f(i, item));
+            });
+        }
+        let out = cells.into_iter().map(|cell| {
+            let (_, out) = cell.into_inner().unwrap_or_else(PoisonError::into_inner);
+            out.expect("a TaskRunner returned before running every task")
+        });
+        Some(out.collect())
+    }
 }

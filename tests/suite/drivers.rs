@@ -19,7 +19,7 @@ use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Error, Film, FilmPoint, FnOracle, Method, Observer, Output, PathOracle, PathSample,
     Progress, Resolution, Rgb, Sampler, SetUp, SetUpStage, Settings, Silent, SplatSink,
-    Temperature, render,
+    TaskRunner, Temperature, render, run_tasks_with,
 };
 
 use crate::common;
@@ -51,6 +51,38 @@ fn same_seed_gives_a_bit_identical_image_on_one_and_two_threads() {
         assert_eq!(one.visits, two.visits, "{name}");
         // And a different seed gives a different image.
         assert_ne!(bits(&one.film), bits(&run(2, 6).film), "{name}");
+    }
+}
+
+/// Runs a loop's tasks last first, on this thread, counting them.
+#[derive(Default)]
+struct LastFirst(AtomicU32);
+
+impl TaskRunner for LastFirst {
+    fn run(&self, count: usize, task: &(dyn Fn(usize) + Sync)) {
+        self.0.fetch_add(count as u32, Ordering::Relaxed);
+        (0..count).rev().for_each(task);
+    }
+
+    fn width(&self) -> usize {
+        3
+    }
+}
+
+#[test]
+fn a_task_runner_that_reorders_the_tasks_gives_the_same_image() {
+    let image = ProceduralImage::showcase(Resolution::new(40, 30));
+    for method in methods() {
+        let name = method.name();
+        let s = settings(5, 100_000, &method);
+        let pool = in_pool(2, || render(&image, &MaxChannel, &s, &Silent).unwrap());
+        let runner = std::sync::Arc::new(LastFirst::default());
+        let ran = run_tasks_with(runner.clone(), || {
+            render(&image, &MaxChannel, &s, &Silent).unwrap()
+        });
+        assert!(runner.0.load(Ordering::Relaxed) > 0, "{name}: no task reached the runner");
+        assert_eq!(bits(&pool.film), bits(&ran.film), "{name}");
+        assert_eq!(pool.stats, ran.stats, "{name}");
     }
 }
 

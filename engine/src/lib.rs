@@ -95,12 +95,12 @@ pub use method::{
     StratifiedSettings, StratifiedStats, merge, part_of, render, render_task, resume, resume_task,
 };
 pub use mutate::{Adaptive, Custom, Gaussian, Kelemen, Kernel, MutationParams, SmallStep};
-#[cfg(feature = "std")]
-pub use parallel::{TaskRunner, run_tasks_with};
 pub use oracle::{
     FilmPoint, FnOracle, HELD_STREAM, ORACLE_STREAMS, PathFlags, PathOracle, PathSample, Radiance,
     Resolution, Rgb, Sampler, SplatSink, Temperature,
 };
+#[cfg(feature = "std")]
+pub use parallel::{TaskRunner, run_tasks_with};
 #[cfg(feature = "std")]
 pub use parts::PartFiles;
 pub use parts::PartStore;

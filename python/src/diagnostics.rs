@@ -13,6 +13,7 @@ use strata::engine::{Film, FilmPoint, Kind, Resolution, Temperature, Value, chec
 use crate::errors::engine_error;
 use crate::image::to_numpy;
 use crate::oracle::PyOracle;
+use crate::vectorized::{Vectorized, VectorizedOracle};
 
 /// The effective sample size of a series (Geyer 1992's initial positive
 /// sequence).
@@ -92,19 +93,27 @@ pub(crate) fn reference<'py>(
 #[pyfunction]
 #[pyo3(signature = (oracle, width, height, trials=16, seed=0))]
 pub(crate) fn check_purity_of(
-    oracle: Py<PyAny>,
+    oracle: &Bound<'_, PyAny>,
     width: u32,
     height: u32,
     trials: u32,
     seed: u64,
 ) -> PyResult<()> {
-    let oracle = PyOracle::new(oracle, Resolution::new(width.max(1), height.max(1)));
+    let resolution = Resolution::new(width.max(1), height.max(1));
     let centre = FilmPoint {
         x: width as f32 / 2.0,
         y: height as f32 / 2.0,
     };
-    let checked = check_purity(&oracle, centre, Temperature::ONE, seed, trials);
-    if let Some(error) = oracle.take_error() {
+    let (checked, raised) = if let Ok(vectorized) = oracle.cast::<Vectorized>() {
+        let oracle = VectorizedOracle::new(vectorized.get(), resolution);
+        let checked = check_purity(&oracle, centre, Temperature::ONE, seed, trials);
+        (checked, oracle.raised().take())
+    } else {
+        let oracle = PyOracle::new(oracle.clone().unbind(), resolution);
+        let checked = check_purity(&oracle, centre, Temperature::ONE, seed, trials);
+        (checked, oracle.raised.take())
+    };
+    if let Some(error) = raised {
         return Err(error);
     }
     checked.map_err(|v| PyValueError::new_err(format!("the oracle is not pure: {v:?}")))

@@ -10,6 +10,7 @@ mod kernel;
 mod oracle;
 mod render;
 mod scene;
+mod vectorized;
 mod watch;
 
 use pyo3::prelude::*;
@@ -20,6 +21,7 @@ fn _strata(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("METHODS", strata::engine::Method::NAMES.to_vec())?;
     m.add_class::<render::Render>()?;
     m.add_class::<oracle::PySampler>()?;
+    m.add_class::<vectorized::Vectorized>()?;
     m.add_function(wrap_pyfunction!(render::render, m)?)?;
     m.add_function(wrap_pyfunction!(render::render_task, m)?)?;
     m.add_function(wrap_pyfunction!(render::merge, m)?)?;

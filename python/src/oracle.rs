@@ -90,13 +90,37 @@ impl PySampler {
     }
 }
 
+/// The first exception an oracle written in Python raised, kept for the
+/// caller (it stops the render: [`Raised::failed`]).
+#[derive(Default)]
+pub(crate) struct Raised(Mutex<Option<PyErr>>);
+
+impl Raised {
+    /// Keeps `error` unless an earlier one is kept.
+    pub(crate) fn keep(&self, error: PyErr) {
+        if let Ok(mut kept) = self.0.lock() {
+            kept.get_or_insert(error);
+        }
+    }
+
+    /// Whether the oracle has raised.
+    pub(crate) fn failed(&self) -> bool {
+        self.0.lock().is_ok_and(|e| e.is_some())
+    }
+
+    /// The exception the oracle raised first, if any.
+    pub(crate) fn take(&self) -> Option<PyErr> {
+        self.0.lock().ok()?.take()
+    }
+}
+
 /// A Python callable as the engine's oracle. The first exception it raises
-/// is kept (and stops the render, [`PyOracle::failed`]); its paths are then
-/// invalid, so the image is never poisoned.
+/// is kept (and stops the render); its paths are then invalid, so the image
+/// is never poisoned.
 pub(crate) struct PyOracle {
     callable: Py<PyAny>,
     resolution: Resolution,
-    error: Mutex<Option<PyErr>>,
+    pub(crate) raised: Raised,
 }
 
 impl PyOracle {
@@ -104,18 +128,8 @@ impl PyOracle {
         PyOracle {
             callable,
             resolution,
-            error: Mutex::new(None),
+            raised: Raised::default(),
         }
-    }
-
-    /// Whether the oracle has raised.
-    pub(crate) fn failed(&self) -> bool {
-        self.error.lock().is_ok_and(|e| e.is_some())
-    }
-
-    /// The exception the oracle raised first, if any.
-    pub(crate) fn take_error(&self) -> Option<PyErr> {
-        self.error.lock().ok()?.take()
     }
 
     /// Calls the oracle at `film` with `sampler` lent to Python.
@@ -158,15 +172,13 @@ impl PathOracle for PyOracle {
         _: &mut dyn SplatSink<Rgb>,
     ) -> PathSample<Rgb> {
         let invalid = PathSample::new(Rgb([f32::NAN; 3]));
-        if self.failed() {
+        if self.raised.failed() {
             return invalid;
         }
         Python::attach(|py| match self.call(py, film, sampler) {
             Ok(rgb) => PathSample::new(rgb),
             Err(error) => {
-                if let Ok(mut kept) = self.error.lock() {
-                    kept.get_or_insert(error);
-                }
+                self.raised.keep(error);
                 invalid
             }
         })

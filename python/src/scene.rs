@@ -8,11 +8,12 @@ use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
-use strata::engine::{Budget, Method, PathOracle, Resolution};
+use strata::engine::{Budget, Method, PathOracle, Resolution, run_tasks_with};
 use strata::native::{BvhIntersector, PathSampler, PathTracer, builtin, native_tracer, pbrt};
 
 use crate::errors::engine_error;
-use crate::oracle::PyOracle;
+use crate::oracle::{PyOracle, Raised};
+use crate::vectorized::{Vectorized, VectorizedOracle};
 
 /// Work done with whichever oracle a [`Scene`] holds (a generic closure).
 pub(crate) trait WithOracle: Sync {
@@ -26,6 +27,7 @@ pub(crate) enum Scene {
     Procedural(ProceduralImage),
     Mixture(GaussianMixture),
     Python(PyOracle),
+    Vectorized(VectorizedOracle),
 }
 
 pub(crate) fn scene(
@@ -35,15 +37,22 @@ pub(crate) fn scene(
     seed: u64,
 ) -> PyResult<Scene> {
     let (width, height) = size;
+    let python_size = || match (width, height) {
+        (Some(width), Some(height)) => resolution(width, height),
+        _ => Err(PyValueError::new_err(
+            "an oracle written in Python needs width and height",
+        )),
+    };
+    if let Ok(vectorized) = scene.cast::<Vectorized>() {
+        return Ok(Scene::Vectorized(VectorizedOracle::new(
+            vectorized.get(),
+            python_size()?,
+        )));
+    }
     if scene.is_callable() {
-        let (Some(width), Some(height)) = (width, height) else {
-            return Err(PyValueError::new_err(
-                "an oracle written in Python needs width and height",
-            ));
-        };
         return Ok(Scene::Python(PyOracle::new(
             scene.clone().unbind(),
-            resolution(width, height)?,
+            python_size()?,
         )));
     }
     let Ok(name) = scene.extract::<String>() else {
@@ -138,6 +147,8 @@ impl Scene {
             Scene::Procedural(p) => work.with(p),
             Scene::Mixture(m) => work.with(m),
             Scene::Python(o) => work.with(o),
+            // Its paths are batched: the render's loops run on its runner.
+            Scene::Vectorized(o) => run_tasks_with(o.runner(), || work.with(o)),
         }
     }
 
@@ -147,13 +158,15 @@ impl Scene {
             Scene::Procedural(p) => p.resolution(),
             Scene::Mixture(m) => m.resolution(),
             Scene::Python(o) => o.resolution(),
+            Scene::Vectorized(o) => o.resolution(),
         }
     }
 
-    /// The Python oracle, if it is one.
-    pub(crate) fn python(&self) -> Option<&PyOracle> {
+    /// What the oracle written in Python raised, if it is one.
+    pub(crate) fn python(&self) -> Option<&Raised> {
         match self {
-            Scene::Python(o) => Some(o),
+            Scene::Python(o) => Some(&o.raised),
+            Scene::Vectorized(o) => Some(o.raised()),
             _ => None,
         }
     }

@@ -13,7 +13,7 @@ use pyo3::prelude::*;
 use strata::engine::{Checkpoint, Film, Observer, Progress};
 
 use crate::image::to_numpy;
-use crate::oracle::PyOracle;
+use crate::oracle::Raised;
 
 /// Something to do at most every `every`.
 pub(crate) struct Every {
@@ -51,15 +51,16 @@ pub(crate) struct Watch<'a> {
     /// Where checkpoints go and how often (none: only when stopped and at
     /// the budget's end).
     pub(crate) checkpoint: Option<(PathBuf, Option<Every>)>,
-    oracle: Option<&'a PyOracle>,
+    oracle: Option<&'a Raised>,
     stopped: AtomicBool,
     spent: AtomicBool,
     error: Mutex<Option<PyErr>>,
 }
 
 impl<'a> Watch<'a> {
-    /// An observer that stops when `oracle` (a Python oracle) raises.
-    pub(crate) fn new(oracle: Option<&'a PyOracle>) -> Self {
+    /// An observer that stops when an oracle written in Python raises
+    /// (`oracle`, what it raised).
+    pub(crate) fn new(oracle: Option<&'a Raised>) -> Self {
         Watch {
             oracle,
             ..Watch::default()
@@ -77,7 +78,7 @@ impl<'a> Watch<'a> {
     /// The first error that stopped the render (the oracle's first).
     pub(crate) fn take_error(&self) -> Option<PyErr> {
         self.oracle
-            .and_then(PyOracle::take_error)
+            .and_then(Raised::take)
             .or_else(crate::kernel::take_error)
             .or_else(|| self.error.lock().ok()?.take())
     }
@@ -118,7 +119,7 @@ impl Observer for Watch<'_> {
 
     fn should_stop(&self) -> bool {
         self.stopped.load(Ordering::Relaxed)
-            || self.oracle.is_some_and(PyOracle::failed)
+            || self.oracle.is_some_and(Raised::failed)
             || crate::kernel::failed()
     }
 

@@ -14,6 +14,11 @@ class Sampler:
     def next_2d(self) -> tuple[float, float]: ...
     def start_stream(self, stream: int) -> None: ...
 
+class Vectorized:
+    function: Callable[[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]], Any]
+    dimensions: int
+    def __init__(self, function: Callable[..., Any], dimensions: int) -> None: ...
+
 class Render:
     image: npt.NDArray[np.float32]
     stats: dict[str, Any]

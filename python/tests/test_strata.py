@@ -1,6 +1,7 @@
 """strata from Python: every method renders the exact answer within noise,
-bad input raises, Python oracles render and stop cleanly, Ctrl-C stops a
-render, and a render is the command's for the same seed, bit for bit."""
+bad input raises, Python oracles (a path a call, or numpy arrays of many)
+render and stop cleanly, Ctrl-C stops a render, and a render is the
+command's for the same seed, bit for bit."""
 
 import math
 import os
@@ -292,3 +293,70 @@ def test_an_exception_in_a_python_kernel_stops_the_render():
         strata.render("procedural", "pssmlt", spp=64, width=24, height=16, small_step="py-fails", chains=64)
     # The error is the render's: the next one starts clean.
     strata.render("procedural", "pssmlt", spp=4, width=24, height=16, chains=64)
+
+
+def gap_drawn_one_by_one(x, y, sampler):
+    """light_through_a_gap with its two numbers drawn by next_1d: the numbers
+    a vectorized oracle of two dimensions is handed."""
+    u = sampler.next_1d()
+    v = sampler.next_1d()
+    if u >= 0.1:
+        return (0.0, 0.0, 0.0)
+    b = x / 16 * 10 * v
+    return (b, 0.8 * b, 0.6 * b)
+
+
+def gap_vectorized(batches):
+    """The same arithmetic on arrays, noting each call's batch size."""
+
+    @strata.vectorized(dimensions=2)
+    def gap(x, y, u):
+        batches.append(len(x))
+        b = np.where(u[:, 0] < 0.1, x / 16 * 10 * u[:, 1], 0.0)
+        return np.stack([b, 0.8 * b, 0.6 * b], axis=1)
+
+    return gap
+
+
+def test_a_numpy_oracle_renders_the_per_path_oracles_image_bit_for_bit():
+    """Every method: the image and statistics of the oracle evaluated many
+    paths a call are those of the same arithmetic a path a call, and its
+    paths did come in batches."""
+    budgets = {"erpt": dict(spp=16, chain_length=10), "multistage": dict(spp=256)}
+    for method in strata.METHODS:
+        args = dict(width=16, height=8, seed=3, **budgets.get(method, dict(spp=16)))
+        one = strata.render(gap_drawn_one_by_one, method, **args)
+        batches = []
+        many = strata.render(gap_vectorized(batches), method, **args)
+        assert np.array_equal(one.image, many.image), method
+        del one.stats["seconds"], many.stats["seconds"]
+        assert one.stats == many.stats, method
+        assert max(batches) >= 8, f"{method}: batches of at most {max(batches)} paths"
+
+
+def test_a_numpy_oracle_that_raises_or_returns_a_wrong_shape_stops_the_render():
+    def broken(x, y, u):
+        raise ZeroDivisionError("the numpy oracle's own error")
+
+    with pytest.raises(ZeroDivisionError, match="numpy oracle's own error") as raised:
+        strata.render(strata.Vectorized(broken, 3), "pssmlt", spp=10_000, width=64, height=64)
+    assert raised.traceback[-1].name == "broken"
+    with pytest.raises(ValueError, match=r"shape \(\d+, 3\)"):
+        strata.render(strata.Vectorized(lambda x, y, u: u, 2), "mc", spp=1, width=8, height=8)
+    with pytest.raises(ValueError, match="dimensions"):
+        strata.Vectorized(lambda x, y, u: u, 0)
+    # Purity: checked on a batch of one path at a time.
+    strata.check_purity(gap_vectorized([]), 16, 8)
+    rng = np.random.default_rng(0)
+    noisy = strata.Vectorized(lambda x, y, u: rng.random((len(x), 3)), 1)
+    with pytest.raises(ValueError, match="not pure"):
+        strata.check_purity(noisy, 16, 8)
+
+
+def test_ctrl_c_stops_a_numpy_oracles_render():
+    timer = threading.Timer(0.5, _thread.interrupt_main)
+    timer.start()
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        strata.render(gap_vectorized([]), "pssmlt", time=20.0, width=16, height=8)
+    assert time.monotonic() - start < 15

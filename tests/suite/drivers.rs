@@ -18,8 +18,8 @@ use strata::engine::mutate::{Kelemen, MutationParams, SmallStep};
 use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Error, Film, FilmPoint, FnOracle, Method, Observer, Output, PathOracle, PathSample,
-    Progress, Resolution, Rgb, Sampler, SetUp, SetUpStage, Settings, Silent, SplatSink,
-    TaskRunner, Temperature, render, run_tasks_with,
+    Progress, Resolution, Rgb, Sampler, SetUp, SetUpStage, Settings, Silent, SplatSink, TaskRunner,
+    Temperature, render, run_tasks_with,
 };
 
 use crate::common;
@@ -80,7 +80,10 @@ fn a_task_runner_that_reorders_the_tasks_gives_the_same_image() {
         let ran = run_tasks_with(runner.clone(), || {
             render(&image, &MaxChannel, &s, &Silent).unwrap()
         });
-        assert!(runner.0.load(Ordering::Relaxed) > 0, "{name}: no task reached the runner");
+        assert!(
+            runner.0.load(Ordering::Relaxed) > 0,
+            "{name}: no task reached the runner"
+        );
         assert_eq!(bits(&pool.film), bits(&ran.film), "{name}");
         assert_eq!(pool.stats, ran.stats, "{name}");
     }

@@ -54,6 +54,7 @@ mod exact;
 #[doc(hidden)]
 pub mod exchange;
 mod film;
+mod invariance;
 #[doc(hidden)]
 pub mod method;
 #[doc(hidden)]

@@ -8,7 +8,9 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
 use strata::engine::diagnostics;
-use strata::engine::{Film, FilmPoint, Kind, Resolution, Temperature, Value, check_purity};
+use strata::engine::{
+    Film, FilmPoint, Kind, Resolution, SmallStep, Temperature, Value, check_purity,
+};
 
 use crate::errors::engine_error;
 use crate::image::to_numpy;
@@ -26,6 +28,35 @@ pub(crate) fn ess(series: Vec<f64>) -> f64 {
 #[pyfunction]
 pub(crate) fn iat(series: Vec<f64>) -> f64 {
     diagnostics::integrated_autocorrelation_time(&series)
+}
+
+/// The exact invariance check of the small-step kernel called `kernel` (a
+/// built-in or one registered with `register_kernel`) mixed with large
+/// steps of probability `large_step_probability`: `max |πP - π|` over the
+/// cells of `importance` (a discrete target on `[0, 1)`, 2 to 4096 cells);
+/// zero up to rounding for a correct kernel. Raises `ValueError` on bad
+/// input.
+#[pyfunction]
+#[pyo3(signature = (kernel, importance, large_step_probability=0.3))]
+pub(crate) fn invariance_error(
+    kernel: &str,
+    importance: Vec<f64>,
+    large_step_probability: f64,
+) -> PyResult<f64> {
+    let step = SmallStep::from_name(kernel).ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "unknown kernel '{kernel}' (one of {}, or one registered)",
+            SmallStep::NAMES.join(", ")
+        ))
+    })?;
+    let offsets = diagnostics::offset_cells(&step, importance.len());
+    // A kernel written in Python that raised while its law was read.
+    if let Some(raised) = crate::kernel::take_error() {
+        return Err(raised);
+    }
+    let offsets = offsets.map_err(engine_error)?;
+    diagnostics::invariance_error(&importance, &offsets, large_step_probability)
+        .map_err(engine_error)
 }
 
 /// The rank-normalized split R-hat of several chains (Vehtari et al. 2021).

@@ -28,6 +28,7 @@ fn _strata(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(diagnostics::ess, m)?)?;
     m.add_function(wrap_pyfunction!(diagnostics::iat, m)?)?;
     m.add_function(wrap_pyfunction!(diagnostics::rhat, m)?)?;
+    m.add_function(wrap_pyfunction!(diagnostics::invariance_error, m)?)?;
     m.add_function(wrap_pyfunction!(diagnostics::compare, m)?)?;
     m.add_function(wrap_pyfunction!(diagnostics::reference, m)?)?;
     m.add_function(wrap_pyfunction!(diagnostics::check_purity_of, m)?)?;

@@ -3,7 +3,8 @@
 //! its offset distribution integrated over cells (`SmallStep::offset_probability`,
 //! itself checked against the samplers by a KS test in the engine), the large
 //! step is uniform, and acceptance and splat weights are the engine's own
-//! functions. We check:
+//! functions (the first two checks are `diagnostics::invariance_error`,
+//! which Python reaches too). We check:
 //! 1. invariance, `π P = π`, for every kernel mixed with large steps;
 //! 2. that a deliberately broken variant (an asymmetric proposal without the
 //!    Hastings correction) fails the same check;
@@ -13,67 +14,27 @@
 //!    dropping the large-step term from Kelemen's weights breaks it.
 
 use strata::engine::chain::{acceptance, splat_weights};
+use strata::engine::diagnostics::{invariance_error, offset_cells};
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, SmallStep};
 
 const N: usize = 48;
 
-/// `q[k]`: probability that one small step moves `k` cells forward (mod N).
+/// The kernel's offsets over the cells; with `asymmetric`, every backward
+/// move folded forward: a drift the acceptance ignores.
 fn offset_pmf(step: &SmallStep, asymmetric: bool) -> Vec<f64> {
-    let h = 1.0 / N as f64;
-    let mut q = vec![0.0; N];
-    for (k, qk) in q.iter_mut().enumerate() {
-        // Offsets landing in cell k (mod 1): sum over windings, as many
-        // below as above (cell k's winding w mirrors cell N - k's -(w + 1)),
-        // so that a heavy-tailed law's truncation stays symmetric.
-        for wind in -4i32..4 {
-            let center = k as f64 * h + wind as f64;
-            *qk += step.offset_probability(center - h / 2.0, center + h / 2.0);
-        }
-    }
+    let mut q = offset_cells(step, N).unwrap();
     if asymmetric {
-        // Fold every backward move forward: a drift the acceptance ignores.
         for k in N / 2 + 1..N {
             q[N - k] += q[k];
             q[k] = 0.0;
         }
     }
-    let total: f64 = q.iter().sum();
-    q.iter().map(|v| v / total).collect()
-}
-
-/// Full transition matrix of one step: large step (uniform) with probability
-/// `p`, small step otherwise, each followed by Metropolis-Hastings acceptance.
-fn transition(importance: &[f64], q: &[f64], p: f64) -> Vec<Vec<f64>> {
-    let mut t = vec![vec![0.0; N]; N];
-    for x in 0..N {
-        for y in 0..N {
-            let proposal = p / N as f64 + (1.0 - p) * q[(y + N - x) % N];
-            if y != x {
-                let a = acceptance(importance[x], importance[y]);
-                t[x][y] += proposal * a;
-                t[x][x] += proposal * (1.0 - a);
-            } else {
-                t[x][x] += proposal;
-            }
-        }
-    }
-    t
+    q
 }
 
 fn stationary(importance: &[f64]) -> Vec<f64> {
     let total: f64 = importance.iter().sum();
     importance.iter().map(|i| i / total).collect()
-}
-
-/// max |π P - π|.
-fn invariance_error(importance: &[f64], t: &[Vec<f64>]) -> f64 {
-    let pi = stationary(importance);
-    (0..N)
-        .map(|y| {
-            let moved: f64 = (0..N).map(|x| pi[x] * t[x][y]).sum();
-            (moved - pi[y]).abs()
-        })
-        .fold(0.0, f64::max)
 }
 
 fn kernels() -> Vec<(&'static str, SmallStep)> {
@@ -114,11 +75,7 @@ fn every_kernel_leaves_the_target_invariant() {
     assert!(pi.contains(&0.0));
     for (name, step) in kernels() {
         for p in [0.0, 0.3, 1.0] {
-            let t = transition(&pi, &offset_pmf(&step, false), p);
-            for row in &t {
-                assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-12);
-            }
-            let e = invariance_error(&pi, &t);
+            let e = invariance_error(&pi, &offset_pmf(&step, false), p).unwrap();
             assert!(e < 1e-14, "{name}, p_large = {p}: |πP - π| = {e}");
         }
     }
@@ -128,7 +85,7 @@ fn every_kernel_leaves_the_target_invariant() {
 fn an_asymmetric_proposal_without_correction_breaks_invariance() {
     let pi = parabola();
     for (name, step) in kernels() {
-        let e = invariance_error(&pi, &transition(&pi, &offset_pmf(&step, true), 0.3));
+        let e = invariance_error(&pi, &offset_pmf(&step, true), 0.3).unwrap();
         // The symmetric kernels pass at 1e-14; a drift is off by orders of magnitude.
         assert!(
             e > 1e-4,

@@ -11,7 +11,8 @@
 # (shared storage for the parts; default out/tasks), RENDER_ARGS (the
 # render's flags, the same for every task: method, budget, seed, size;
 # default "--method pssmlt --spp 64 --seed 1"), THREADS (default: every
-# core), STRATA (the strata command; default: the one on PATH).
+# core), STRATA (the strata command; default: the one on PATH),
+# STRATA_CHECKPOINT_KEY (if set, checkpoints and parts are sealed with it).
 #
 # A task that is run again finds its finished part and does nothing; one
 # that was stopped (preempted, requeued; SIGTERM saves a checkpoint)

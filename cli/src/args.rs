@@ -82,7 +82,9 @@ pub(crate) struct Args {
     #[arg(long, value_name = "SECONDS")]
     pub(crate) preview_every: Option<f64>,
     /// Where checkpoints go (default: OUT.ckpt). One is always written when
-    /// Ctrl-C stops the render.
+    /// Ctrl-C stops the render. With STRATA_CHECKPOINT_KEY set (16 bytes or
+    /// more), checkpoints and parts are sealed with it (HMAC-SHA256) and
+    /// only files sealed with it are read.
     #[arg(long, value_name = "FILE")]
     pub(crate) checkpoint: Option<PathBuf>,
     /// Save a checkpoint every this many seconds, and at the end (a later

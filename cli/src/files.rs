@@ -1,13 +1,61 @@
 //! The files a render reads and writes: checkpoints, parts and images,
 //! each written whole under a temporary name and renamed.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use strata::engine::{RenderMethod, RenderShape};
 
 use crate::args::Args;
 use crate::out::AnyResult;
+use strata::engine::{Checkpoint, Error, PartFiles, Task, part_of};
 use strata::engine::{Film, PathOracle, Settings};
-use strata::engine::{PartFiles, Task, part_of};
+
+/// The environment variable that holds the key checkpoints and parts are
+/// sealed with.
+pub(crate) const KEY_VARIABLE: &str = "STRATA_CHECKPOINT_KEY";
+
+/// The key in [`KEY_VARIABLE`], if it is set: the command then seals every
+/// checkpoint and part it writes (an HMAC-SHA256 under the key,
+/// `Checkpoint::sealed`) and reads only those sealed with it, so that no
+/// one without the key can forge or alter one between machines.
+pub(crate) fn checkpoint_key() -> AnyResult<Option<Vec<u8>>> {
+    let Some(key) = std::env::var_os(KEY_VARIABLE) else {
+        return Ok(None);
+    };
+    let key = key.into_encoded_bytes();
+    if key.len() < 16 {
+        let why = format!(
+            "{KEY_VARIABLE}: a key of at least 16 bytes, not {}",
+            key.len()
+        );
+        return Err(why.into());
+    }
+    Ok(Some(key))
+}
+
+/// The bytes to write of `checkpoint`: sealed if there is a key.
+pub(crate) fn checkpoint_bytes(checkpoint: &Checkpoint) -> AnyResult<Cow<'_, [u8]>> {
+    Ok(match checkpoint_key()? {
+        Some(key) => Cow::Owned(checkpoint.sealed(&key)?),
+        None => Cow::Borrowed(checkpoint.as_bytes()),
+    })
+}
+
+/// The checkpoint in `bytes`: opened with the key if there is one.
+pub(crate) fn open_checkpoint(bytes: Vec<u8>, key: Option<&[u8]>) -> Result<Checkpoint, Error> {
+    match key {
+        Some(key) => Checkpoint::from_sealed_bytes(bytes, key),
+        None => Checkpoint::from_bytes(bytes),
+    }
+}
+
+/// The parts in the files `paths`: sealed with the key if there is one.
+pub(crate) fn part_files(paths: Vec<PathBuf>, key: Option<&[u8]>) -> PartFiles {
+    match key {
+        Some(key) => PartFiles::with_key(paths, key),
+        None => PartFiles::new(paths),
+    }
+}
 
 /// Writes `path` whole under a temporary name, then renames it over `path`
 /// (a viewer or a crash never sees half a file); an error names `path`. A
@@ -74,6 +122,7 @@ pub(crate) fn checkpoint_limit<O: PathOracle>(settings: &Settings, oracle: &O, t
 /// Makes the directories the outputs and checkpoints go to and checks that
 /// they take a file, before any work (an error names the directory).
 pub(crate) fn prepare_outputs(args: &Args) -> AnyResult<()> {
+    checkpoint_key()?;
     let files = [
         output(&args.out, "png"),
         output(&args.out, "exr"),
@@ -137,7 +186,8 @@ pub(crate) fn held_task(path: &Path) -> Option<Task> {
     if !path.is_file() {
         return None;
     }
-    part_of(&PartFiles::new(vec![path.to_path_buf()]), 0)
+    let key = checkpoint_key().ok().flatten();
+    part_of(&part_files(vec![path.to_path_buf()], key.as_deref()), 0)
         .ok()
         .map(|(_, task)| task)
 }

@@ -19,6 +19,10 @@
 //! 130; the same command with `--resume FILE` continues (with the same
 //! `--spp`, the image is the one an uninterrupted render gives, bit for bit).
 //! `--preview-every SECONDS` rewrites the PNG and EXR while rendering.
+//! With `STRATA_CHECKPOINT_KEY` set (a secret of 16 bytes or more), every
+//! checkpoint and part is sealed with it (HMAC-SHA256) and only files
+//! sealed with it are resumed or merged: no one without the key can forge
+//! or alter one between machines.
 //!
 //! On several machines (every method; stratified MCMC and multi-stage MLT with
 //! `--runs N`): `strata render ... --task-index I

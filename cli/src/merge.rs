@@ -5,10 +5,10 @@ use std::time::Instant;
 use strata::engine::RenderMethod;
 
 use crate::args::{out_path, stops};
-use crate::files::write;
+use crate::files::{checkpoint_key, part_files, write};
 use crate::out::AnyResult;
 use strata::engine::Error;
-use strata::engine::{PartFiles, merge, part_of};
+use strata::engine::{merge, part_of};
 
 /// What `strata merge` takes.
 #[derive(clap::Args, Debug)]
@@ -32,7 +32,7 @@ pub(crate) struct MergeArgs {
 /// OUT.exr.
 pub(crate) fn merge_parts(args: &MergeArgs) -> AnyResult<()> {
     let start = Instant::now();
-    let parts = PartFiles::new(args.parts.clone());
+    let parts = part_files(args.parts.clone(), checkpoint_key()?.as_deref());
     let path = |part: usize| args.parts[part].display().to_string();
     let merged = merge(&parts, args.partial).map_err(|e| match e {
         Error::PartMismatch { part, .. }

@@ -8,8 +8,8 @@ use strata::engine::RenderMethod;
 
 use crate::args::{Args, Backend, THREADS_PER_CORE, differences, keep_aspect, method};
 use crate::files::{
-    checkpoint_limit, checkpoint_path, output, part_path, prepare_outputs, read_checkpoint,
-    replace, write,
+    checkpoint_bytes, checkpoint_key, checkpoint_limit, checkpoint_path, open_checkpoint, output,
+    part_path, prepare_outputs, read_checkpoint, replace, write,
 };
 use crate::out::AnyResult;
 use crate::watch::{Ended, Every, Watch};
@@ -177,7 +177,7 @@ pub(crate) fn render_with<O: PathOracle>(
         Some(path) => {
             let most = checkpoint_limit(&settings, oracle, args.task().unwrap_or(Task::WHOLE));
             let bytes = read_checkpoint(path, most)?;
-            let checkpoint = Checkpoint::from_bytes(bytes)
+            let checkpoint = open_checkpoint(bytes, checkpoint_key()?.as_deref())
                 .map_err(|e| format!("in checkpoint {}: {e}", path.display()))?;
             // The method's settings must be the ones the render started
             // with: a flag that differs is an error naming it.
@@ -314,7 +314,8 @@ pub(crate) fn render_task_with<O: PathOracle>(
             part.display()
         );
     }
-    replace(&part, |path| std::fs::write(path, checkpoint.as_bytes()))?;
+    let bytes = checkpoint_bytes(&checkpoint)?;
+    replace(&part, |path| std::fs::write(path, &bytes))?;
     say!(
         "{} {}, task {} of {}: {} paths in {:.2} s; wrote {} ({:.1} MB)",
         args.scene,
@@ -324,7 +325,7 @@ pub(crate) fn render_task_with<O: PathOracle>(
         checkpoint.samples()?,
         start.elapsed().as_secs_f64(),
         part.display(),
-        checkpoint.as_bytes().len() as f64 / 1e6
+        bytes.len() as f64 / 1e6
     );
     Ok((None, Ended::Finished))
 }

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::args::Args;
-use crate::files::{own_file, replace, write};
+use crate::files::{checkpoint_bytes, own_file, replace, write};
 use crate::out::AnyResult;
 use indicatif::ProgressBar;
 use strata::engine::{Checkpoint, Film, Observer, Progress, SetUp, SetUpStage};
@@ -146,14 +146,17 @@ impl Observer for Watch<'_> {
                 *file = own;
             }
         }
-        match replace(&file, |path| std::fs::write(path, checkpoint.as_bytes())) {
-            Ok(()) => {
+        let written = checkpoint_bytes(&checkpoint).and_then(|bytes| {
+            replace(&file, |path| std::fs::write(path, &bytes)).map(|()| bytes.len())
+        });
+        match written {
+            Ok(length) => {
                 self.saved.store(true, Ordering::Relaxed);
                 self.bar.suspend(|| {
                     warn!(
                         "checkpoint: {} ({:.1} MB, written in {:.2} s)",
                         file.display(),
-                        checkpoint.as_bytes().len() as f64 / 1e6,
+                        length as f64 / 1e6,
                         start.elapsed().as_secs_f64()
                     )
                 });

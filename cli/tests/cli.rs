@@ -637,3 +637,96 @@ fn edges_a_user_meets_are_errors_or_warnings() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The command with `STRATA_CHECKPOINT_KEY` set to `key`, or unset.
+fn strata_keyed(args: &[&str], key: Option<&str>) -> std::process::Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_strata"));
+    match key {
+        Some(key) => command.env("STRATA_CHECKPOINT_KEY", key),
+        None => command.env_remove("STRATA_CHECKPOINT_KEY"),
+    };
+    command.args(args).output().expect("the strata binary runs")
+}
+
+#[test]
+fn sealed_checkpoints_and_parts_open_with_their_key_only() {
+    const KEY: &str = "the cluster's secret, 32 bytes..";
+    let dir = std::env::temp_dir().join(format!("strata-cli-sealed-{}", std::process::id()));
+    let path = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let tiny = ["render", "procedural", "--width", "16", "--height", "16"];
+    let run = |extra: &[&str], key| {
+        let args: Vec<&str> = tiny.iter().copied().chain(extra.iter().copied()).collect();
+        let out = strata_keyed(&args, key);
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let out = path("r");
+    let (code, stderr) = run(
+        &["--spp", "4", "--checkpoint-every", "0.001", "--out", &out],
+        Some(KEY),
+    );
+    assert_eq!(code, Some(0), "{stderr}");
+    let sealed = std::fs::read(dir.join("r.ckpt")).unwrap();
+    assert!(sealed.ends_with(b"STRATAsl"));
+    let resume = |file: &str, key| run(&["--spp", "8", "--resume", file, "--out", &out], key);
+    let ckpt = path("r.ckpt");
+    let refused = |(code, stderr): (Option<i32>, String), why: &str| {
+        assert_eq!(code, Some(1), "{stderr}");
+        assert!(stderr.contains(why), "{why}: {stderr}");
+    };
+    refused(resume(&ckpt, None), "it is sealed: open it with its key");
+    refused(
+        resume(&ckpt, Some("another secret of 32 bytes......")),
+        "another key",
+    );
+    refused(resume(&ckpt, Some("short")), "at least 16 bytes");
+    // The checkpoint alone (a valid checksum), and one byte of its state
+    // changed with its checksum recomputed: neither opens with the key.
+    let plain = &sealed[..sealed.len() - 40];
+    std::fs::write(dir.join("plain.ckpt"), plain).unwrap();
+    refused(resume(&path("plain.ckpt"), Some(KEY)), "not sealed");
+    let mut forged = plain.to_vec();
+    let crc_at = forged.len() - 4;
+    forged[crc_at - 100] ^= 0x10;
+    let crc = crc32fast::hash(&forged[..crc_at]);
+    forged[crc_at..].copy_from_slice(&crc.to_le_bytes());
+    forged.extend_from_slice(&sealed[sealed.len() - 40..]);
+    std::fs::write(dir.join("forged.ckpt"), &forged).unwrap();
+    refused(resume(&path("forged.ckpt"), Some(KEY)), "does not match");
+    let (code, stderr) = resume(&ckpt, Some(KEY));
+    assert_eq!(code, Some(0), "{stderr}");
+    // Tasks write sealed parts; only the key merges them.
+    for i in ["0", "1"] {
+        let part = path(&format!("part-{i}"));
+        let task = [
+            "--spp",
+            "4",
+            "--task-index",
+            i,
+            "--task-count",
+            "2",
+            "--out",
+            &part,
+        ];
+        let (code, stderr) = run(&task, Some(KEY));
+        assert_eq!(code, Some(0), "{stderr}");
+    }
+    let merge = |key| {
+        let (a, b, m) = (path("part-0.part"), path("part-1.part"), path("merged"));
+        let out = strata_keyed(&["merge", &a, &b, "--out", &m], key);
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    refused(merge(None), "it is sealed: open it with its key");
+    refused(
+        merge(Some("another secret of 32 bytes......")),
+        "another key",
+    );
+    let (code, stderr) = merge(Some(KEY));
+    assert_eq!(code, Some(0), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -27,6 +27,7 @@ use crate::error::Error;
 use crate::oracle::{FilmPoint, PathOracle, Radiance, Resolution, Sampler, Temperature};
 use crate::rng::{self, Domain, mix64};
 use crate::sample::IndependentSampler;
+use crate::seal;
 use crate::target::SplatList;
 use crate::task::Task;
 
@@ -208,6 +209,9 @@ impl Checkpoint {
     /// version and the checksum (not yet the oracle or the settings, which
     /// [`resume`](crate::method::resume) checks).
     pub fn from_bytes(bytes: Vec<u8>) -> Result<Self, Error> {
+        if seal::looks_sealed(&bytes) {
+            return Err(seal::sealed_without_key());
+        }
         if bytes.len() < PREFIX + 4 {
             return Err(not_a_checkpoint());
         }
@@ -220,6 +224,23 @@ impl Checkpoint {
         // The header's first field.
         check_engine(&take::<String>(this.body())?.0)?;
         Ok(this)
+    }
+
+    /// The checkpoint's bytes sealed with `key` (at least 16 bytes): followed
+    /// by their HMAC-SHA256 under the key (RFC 2104) and the magic
+    /// `STRATAsl`. Only [`from_sealed_bytes`](Self::from_sealed_bytes) with
+    /// the same key opens them, so a checkpoint or part passed between
+    /// machines cannot be forged or altered by anyone without the key.
+    pub fn sealed(&self, key: &[u8]) -> Result<Vec<u8>, Error> {
+        seal::seal(&self.bytes, key)
+    }
+
+    /// Opens bytes [`sealed`](Self::sealed) with `key`: the seal is checked
+    /// first, then the checkpoint as [`from_bytes`](Self::from_bytes) does.
+    /// Bytes not sealed, sealed with another key, or altered are
+    /// [`Error::CheckpointSeal`].
+    pub fn from_sealed_bytes(bytes: Vec<u8>, key: &[u8]) -> Result<Self, Error> {
+        Self::from_bytes(seal::open(bytes, key)?)
     }
 
     /// The header and the state after it (the header's settings are read

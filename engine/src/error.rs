@@ -126,6 +126,13 @@ pub enum Error {
         /// This engine's ([`FORMAT_VERSION`](crate::checkpoint::FORMAT_VERSION)).
         expected: u32,
     },
+    /// A checkpoint sealed with a key ([`Checkpoint::sealed`](crate::Checkpoint::sealed))
+    /// read without it, one read with a key but not sealed, or one whose
+    /// seal does not match its bytes under the key (forged or altered).
+    CheckpointSeal {
+        /// What is wrong.
+        reason: &'static str,
+    },
     /// A checkpoint of another render: another method (or method settings),
     /// seed, scene, film or engine version.
     CheckpointMismatch {
@@ -286,6 +293,7 @@ impl fmt::Display for Error {
                 "the checkpoint is of format version {found}, this engine reads version \
                  {expected}: finish it with the strata that wrote it, or start again"
             ),
+            Error::CheckpointSeal { reason } => write!(f, "the checkpoint's seal: {reason}"),
             Error::CheckpointMismatch { what } => write!(
                 f,
                 "the checkpoint is of another render: its {what} differs from this one's"

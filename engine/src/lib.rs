@@ -74,6 +74,7 @@ mod registry;
 pub mod rng;
 #[doc(hidden)]
 pub mod sample;
+mod seal;
 mod setting;
 #[doc(hidden)]
 pub mod target;

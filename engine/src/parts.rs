@@ -22,6 +22,8 @@ use crate::error::Error;
 use crate::exact::ExactSum;
 use crate::film::Film;
 use crate::oracle::Resolution;
+#[cfg(feature = "std")]
+use crate::seal;
 
 /// The parts a merge reads: each a checkpoint's bytes, read at any offset.
 pub trait PartStore {
@@ -102,20 +104,41 @@ impl<P: PartStore + ?Sized> PartStore for Borrowed<'_, P> {
 }
 
 /// Parts in files, opened as they are read (one at a time: a merge of
-/// thousands of parts needs no more open files than one).
+/// thousands of parts needs no more open files than one), sealed or not
+/// ([`with_key`](Self::with_key)).
 #[cfg(feature = "std")]
 pub struct PartFiles {
     paths: Vec<std::path::PathBuf>,
     open: core::cell::RefCell<Option<(usize, std::fs::File)>>,
+    /// The key the parts are sealed with, if they are.
+    key: Option<Vec<u8>>,
+    /// Each part's size without its seal, once its seal (or its absence)
+    /// has been checked.
+    sizes: core::cell::RefCell<Vec<Option<u64>>>,
 }
 
 #[cfg(feature = "std")]
 impl PartFiles {
-    /// The parts in the files `paths`, in that order.
+    /// The parts in the files `paths`, in that order (a sealed one is
+    /// refused: [`with_key`](Self::with_key) reads those).
     pub fn new(paths: Vec<std::path::PathBuf>) -> Self {
+        let sizes = core::cell::RefCell::new(alloc::vec![None; paths.len()]);
         Self {
             paths,
             open: core::cell::RefCell::new(None),
+            key: None,
+            sizes,
+        }
+    }
+
+    /// The parts in the files `paths`, each sealed with `key`
+    /// ([`Checkpoint::sealed`]): a part's seal is checked over the whole
+    /// file before anything of it is read, and a part not sealed, sealed
+    /// with another key, or altered is [`Error::PartUnreadable`].
+    pub fn with_key(paths: Vec<std::path::PathBuf>, key: &[u8]) -> Self {
+        Self {
+            key: Some(key.to_vec()),
+            ..Self::new(paths)
         }
     }
 
@@ -140,6 +163,52 @@ impl PartFiles {
         };
         f(file).map_err(failed)
     }
+
+    /// Part `part`'s size without its seal, its seal checked on first use:
+    /// with a key, the tag over the whole file; without, that there is no
+    /// seal.
+    fn checked_size(&self, part: usize) -> Result<u64, Error> {
+        if let Some(size) = self.sizes.borrow()[part] {
+            return Ok(size);
+        }
+        use std::io::{Read, Seek, SeekFrom};
+        let in_part = |e: Error| unreadable(part, &e.to_string());
+        let size = self.with_file(part, |file| Ok(file.metadata()?.len()))?;
+        let trailer = seal::TRAILER as u64;
+        let tail = self.with_file(part, |file| {
+            let mut tail = alloc::vec![0; size.min(trailer) as usize];
+            file.seek(SeekFrom::Start(size - tail.len() as u64))?;
+            file.read_exact(&mut tail)?;
+            Ok(tail)
+        })?;
+        let size = match &self.key {
+            None if seal::looks_sealed(&tail) => return Err(in_part(seal::sealed_without_key())),
+            None => size,
+            Some(key) => {
+                let mut sealer = seal::Sealer::new(key).map_err(in_part)?;
+                if !seal::looks_sealed(&tail) {
+                    return Err(in_part(seal::not_sealed()));
+                }
+                let body = size - trailer;
+                self.with_file(part, |file| {
+                    file.seek(SeekFrom::Start(0))?;
+                    let mut window = alloc::vec![0; WINDOW];
+                    let mut left = body;
+                    while left > 0 {
+                        let piece = &mut window[..left.min(WINDOW as u64) as usize];
+                        file.read_exact(piece)?;
+                        sealer.update(piece);
+                        left -= piece.len() as u64;
+                    }
+                    Ok(())
+                })?;
+                sealer.opens(&tail).map_err(in_part)?;
+                body
+            }
+        };
+        self.sizes.borrow_mut()[part] = Some(size);
+        Ok(size)
+    }
 }
 
 #[cfg(feature = "std")]
@@ -149,11 +218,15 @@ impl PartStore for PartFiles {
     }
 
     fn size(&self, part: usize) -> Result<u64, Error> {
-        self.with_file(part, |file| Ok(file.metadata()?.len()))
+        self.checked_size(part)
     }
 
     fn read_at(&self, part: usize, offset: u64, buf: &mut [u8]) -> Result<(), Error> {
         use std::io::{Read, Seek, SeekFrom};
+        let size = self.checked_size(part)?;
+        if offset.saturating_add(buf.len() as u64) > size {
+            return Err(unreadable(part, "it is shorter than its contents say"));
+        }
         self.with_file(part, |file| {
             file.seek(SeekFrom::Start(offset))?;
             file.read_exact(buf)

@@ -14,7 +14,8 @@ use strata::engine::checkpoint::FORMAT_VERSION;
 use strata::engine::target::MaxChannel;
 use strata::engine::{
     Budget, Checkpoint, Error, FilmPoint, FnOracle, Method, Observer, Output, PathSample, Progress,
-    Resolution, Rgb, Sampler, Settings, Silent, SplatSink, Temperature, render, resume,
+    Resolution, Rgb, Sampler, Settings, Silent, SplatSink, Task, Temperature, render, render_task,
+    resume,
 };
 
 use crate::emission::{Lamp, Lit};
@@ -391,5 +392,74 @@ fn forged_checkpoints_resume_to_an_error_or_a_sound_film() {
         "forged checkpoints: {} resumed soundly, {} refused",
         sound.into_inner(),
         refused.into_inner()
+    );
+}
+
+const KEY: &[u8] = b"a key of the cluster, 32 bytes..";
+
+fn seal_error(result: Result<Checkpoint, Error>) -> &'static str {
+    match result {
+        Err(Error::CheckpointSeal { reason }) => reason,
+        other => panic!("not a seal error: {other:?}"),
+    }
+}
+
+/// A finished MC render of the procedural image, as a checkpoint.
+fn small_checkpoint() -> Checkpoint {
+    let oracle = ProceduralImage::showcase(Resolution::new(8, 8));
+    let settings = Settings {
+        seed: 1,
+        budget: Budget::Samples(256),
+        method: Method::Mc,
+    };
+    render_task(&oracle, &MaxChannel, &settings, Task::WHOLE, &Silent).unwrap()
+}
+
+#[test]
+fn a_sealed_checkpoint_opens_with_its_key_only() {
+    let honest = small_checkpoint();
+    let sealed = honest.sealed(KEY).unwrap();
+    assert_eq!(sealed.len(), honest.as_bytes().len() + 40);
+    assert_eq!(
+        Checkpoint::from_sealed_bytes(sealed.clone(), KEY).unwrap(),
+        honest
+    );
+    let other = b"another key of 32 bytes.........";
+    let opened = |key: &[u8]| Checkpoint::from_sealed_bytes(sealed.clone(), key);
+    assert!(seal_error(opened(other)).contains("another key"));
+    assert!(seal_error(opened(b"short")).contains("16 bytes"));
+    assert!(seal_error(Checkpoint::from_bytes(sealed.clone())).contains("open it with its key"));
+    let plain = honest.as_bytes().to_vec();
+    assert!(seal_error(Checkpoint::from_sealed_bytes(plain, KEY)).contains("not sealed"));
+}
+
+#[test]
+fn a_forged_checkpoint_with_a_valid_checksum_does_not_open() {
+    let honest = small_checkpoint().as_bytes().to_vec();
+    let seal = Checkpoint::from_bytes(honest.clone())
+        .unwrap()
+        .sealed(KEY)
+        .unwrap()[honest.len()..]
+        .to_vec();
+    // Every byte changed in turn, the CRC recomputed so that the checkpoint
+    // alone reads as honest, the old seal kept.
+    let crc_at = honest.len() - 4;
+    let mut forged_but_readable = 0;
+    for i in 0..crc_at {
+        let mut forged = honest.clone();
+        forged[i] ^= 0x01;
+        let crc = crc32fast::hash(&forged[..crc_at]);
+        forged[crc_at..].copy_from_slice(&crc.to_le_bytes());
+        forged_but_readable += Checkpoint::from_bytes(forged.clone()).is_ok() as u32;
+        forged.extend_from_slice(&seal);
+        assert!(
+            Checkpoint::from_sealed_bytes(forged, KEY).is_err(),
+            "byte {i}"
+        );
+    }
+    // Without the seal, most of them would have been read.
+    assert!(
+        forged_but_readable > crc_at as u32 / 2,
+        "{forged_but_readable} of {crc_at}"
     );
 }

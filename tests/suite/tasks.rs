@@ -2,7 +2,8 @@
 //! for every method that splits, whatever the task count, the order of the
 //! parts and the threads each task ran on; a stopped task resumes to the
 //! same partial result; parts of other renders, missing, repeated or
-//! unfinished parts are typed errors.
+//! unfinished parts are typed errors; parts sealed with a key merge from
+//! their files with that key only.
 
 use std::sync::atomic::{AtomicU32, Ordering};
 use strata::engine::RenderMethod;
@@ -15,7 +16,7 @@ use strata::engine::{
     render,
 };
 use strata::engine::{
-    ErptSettings, MultiStageSettings, PartStore, PssmltSettings, ReplicaSettings,
+    ErptSettings, MultiStageSettings, PartFiles, PartStore, PssmltSettings, ReplicaSettings,
     StratifiedSettings, Task, merge, render_task, resume_task,
 };
 
@@ -149,8 +150,40 @@ fn tasks_merge_to_the_bytes_of_the_unsplit_render() {
                 &whole,
                 &format!("{}, {count} tasks", method.name()),
             );
+            if count == 3 {
+                merge_sealed_files(&parts, &whole, method.name());
+            }
         }
     }
+}
+
+/// `parts` sealed with a key, written to files and merged from them with
+/// the key: the unsplit render again; with another key, refused.
+fn merge_sealed_files(parts: &[Checkpoint], whole: &Output, name: &str) {
+    const KEY: &[u8] = b"the cluster's secret, 32 bytes..";
+    let dir = std::env::temp_dir().join(format!("strata-sealed-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let paths: Vec<_> = parts
+        .iter()
+        .enumerate()
+        .map(|(i, part)| {
+            let path = dir.join(format!("{i}.part"));
+            std::fs::write(&path, part.sealed(KEY).unwrap()).unwrap();
+            path
+        })
+        .collect();
+    let merged = merge(&PartFiles::with_key(paths.clone(), KEY), false).unwrap();
+    assert_same(&merged, whole, &format!("{name}, sealed parts"));
+    let other = PartFiles::with_key(paths.clone(), b"another secret of 32 bytes......");
+    assert!(matches!(
+        merge(&other, false),
+        Err(Error::PartUnreadable { part: 0, .. })
+    ));
+    assert!(matches!(
+        merge(&PartFiles::new(paths), false),
+        Err(Error::PartUnreadable { .. })
+    ));
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// Stops a render after its second round.

@@ -52,13 +52,14 @@ pub struct Hit {
     pub uv: Vec2,
 }
 
-/// Ray queries over a fixed triangle list. Backends (obvhs here, Embree in
-/// `strata-embree`) build from the triangles' vertices and must return the
-/// triangle's index in that list.
+/// Ray queries over a fixed triangle list. Backends (the eight-wide BVH
+/// here, Embree in `strata-embree`) build from the triangles' vertices and
+/// must return the triangle's index in that list.
 pub trait Intersector: Send + Sync {
-    /// The closest hit within the ray's `[t_min, t_max]`.
+    /// The closest hit strictly inside the ray's `(t_min, t_max)` (as
+    /// Embree counts: a ray that starts on a surface does not hit it at 0).
     fn closest_hit(&self, ray: &Ray) -> Option<Hit>;
-    /// Whether anything lies within the ray's `[t_min, t_max]`.
+    /// Whether anything lies strictly inside the ray's `(t_min, t_max)`.
     fn occluded(&self, ray: &Ray) -> bool;
 }
 

@@ -65,7 +65,7 @@ pub use geometry::{Hit, Intersector, Ray};
 pub use scene::{Camera, Mesh, Scene};
 pub use tracer::{PathSampler, PathTracer};
 
-/// A path tracer over the default (obvhs) backend.
+/// A path tracer over the default (eight-wide BVH) backend.
 pub fn native_tracer(scene: Scene) -> PathTracer<BvhIntersector> {
     let accel = BvhIntersector::new(&scene.triangles);
     PathTracer::new(scene, accel)

@@ -33,6 +33,9 @@ struct Args {
     /// JSON output.
     #[arg(long, default_value = "out/bench/backends.json")]
     out: PathBuf,
+    /// Only the scenes named (e.g. `mesh-1M`); every one without.
+    #[arg(long)]
+    only: Vec<String>,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -55,8 +58,13 @@ fn time(f: impl FnOnce() -> usize) -> f64 {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = Args::parse();
     let mut rows = Vec::new();
-    println!("| scene | closest hit, Embree / native | occlusion | paths |");
+    println!(
+        "| scene | closest hit, Embree / native | occlusion | paths | build, native / Embree |"
+    );
     for (name, scene) in builtin::benchmark_set(Resolution::new(128, 128)) {
+        if !args.only.is_empty() && !args.only.contains(&name) {
+            continue;
+        }
         let r = scene.camera.resolution;
         let mut rng = stream(5, Domain::User, 0);
         let rays: Vec<Ray> = (0..args.rays)
@@ -68,6 +76,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 Ray::new(o, d)
             })
             .collect();
+        // Build times, interleaved: the native tree against Embree's.
+        let (mut bn, mut be) = (vec![], vec![]);
+        for _ in 0..args.repeats.min(3) {
+            bn.push(time(|| {
+                BvhIntersector::new(&scene.triangles)
+                    .closest_hit(&rays[0])
+                    .is_some() as usize
+            }));
+            be.push(time(|| {
+                EmbreeIntersector::new(&scene.triangles)
+                    .map_or(0, |e| e.closest_hit(&rays[0]).is_some() as usize)
+            }));
+        }
+        let (build_n, build_e) = (median(bn), median(be));
         let native = PathTracer::new(scene.clone(), BvhIntersector::new(&scene.triangles));
         let embree = PathTracer::new(scene.clone(), EmbreeIntersector::new(&scene.triangles)?);
         let shadow: Vec<Ray> = rays
@@ -122,7 +144,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (ro_n, ro_e) = (rate(&on, args.rays), rate(&oe, args.rays));
         let (rp_n, rp_e) = (rate(&pn, args.paths), rate(&pe, args.paths));
         println!(
-            "| {name} | {:.2} ({:.2} / {:.2} M rays/s) | {:.2} ({:.2} / {:.2}) | {:.2} ({:.3} / {:.3} M paths/s) |",
+            "| {name} | {:.2} ({:.2} / {:.2} M rays/s) | {:.2} ({:.2} / {:.2}) | {:.2} ({:.3} / {:.3} M paths/s) | {:.2} ({:.0} / {:.0} ms) |",
             rc_e / rc_n,
             rc_e / 1e6,
             rc_n / 1e6,
@@ -131,10 +153,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             ro_n / 1e6,
             rp_e / rp_n,
             rp_e / 1e6,
-            rp_n / 1e6
+            rp_n / 1e6,
+            build_n / build_e,
+            build_n * 1e3,
+            build_e * 1e3
         );
         rows.push(format!(
-            "{{\"scene\": \"{name}\", \"triangles\": {}, \"closest_rays_per_s\": {{\"embree\": {rc_e:.0}, \"native\": {rc_n:.0}}}, \"occlusion_rays_per_s\": {{\"embree\": {ro_e:.0}, \"native\": {ro_n:.0}}}, \"paths_per_s\": {{\"embree\": {rp_e:.0}, \"native\": {rp_n:.0}}}, \"native_over_embree_paths\": {:.4}}}",
+            "{{\"scene\": \"{name}\", \"triangles\": {}, \"closest_rays_per_s\": {{\"embree\": {rc_e:.0}, \"native\": {rc_n:.0}}}, \"occlusion_rays_per_s\": {{\"embree\": {ro_e:.0}, \"native\": {ro_n:.0}}}, \"paths_per_s\": {{\"embree\": {rp_e:.0}, \"native\": {rp_n:.0}}}, \"native_over_embree_paths\": {:.4}, \"build_seconds\": {{\"embree\": {build_e:.4}, \"native\": {build_n:.4}}}}}",
             scene.triangles.len(),
             rp_n / rp_e
         ));

@@ -189,6 +189,15 @@ fn asked(
     })
 }
 
+/// The checkpoint in `bytes`, opened with `key` if it is sealed with one.
+fn open(bytes: Vec<u8>, key: Option<&[u8]>) -> PyResult<Checkpoint> {
+    match key {
+        Some(key) => Checkpoint::from_sealed_bytes(bytes, key),
+        None => Checkpoint::from_bytes(bytes),
+    }
+    .map_err(engine_error)
+}
+
 fn read(path: &PathBuf) -> PyResult<Vec<u8>> {
     std::fs::read(path).map_err(|e| PyOSError::new_err(format!("{}: {e}", path.display())))
 }
@@ -198,7 +207,7 @@ fn read(path: &PathBuf) -> PyResult<Vec<u8>> {
 #[pyo3(signature = (scene, method="pssmlt", *, spp=None, time=None, seed=0, threads=None,
     path_sampler="unidirectional", width=None, height=None, progress=None, preview=None,
     preview_every=1.0, checkpoint=None, checkpoint_every=None, resume=None, preset=None,
-    **settings))]
+    key=None, **settings))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render(
     py: Python<'_>,
@@ -218,6 +227,7 @@ pub(crate) fn render(
     checkpoint_every: Option<f64>,
     resume: Option<PathBuf>,
     preset: Option<&str>,
+    key: Option<Vec<u8>>,
     settings: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Render> {
     let asked = asked(
@@ -256,13 +266,14 @@ pub(crate) fn render(
         (None, None) => None,
     };
     let resume = match &resume {
-        Some(path) => Some(Checkpoint::from_bytes(read(path)?).map_err(engine_error)?),
+        Some(path) => Some(open(read(path)?, key.as_deref())?),
         None => None,
     };
     let mut watch = Watch::new(asked.scene.python());
     watch.progress = progress.as_ref();
     watch.preview = preview;
     watch.checkpoint = checkpoint;
+    watch.key = key;
     let start = std::time::Instant::now();
     let whole = Whole {
         settings: &asked.settings,
@@ -278,7 +289,7 @@ pub(crate) fn render(
 /// bytes `merge` takes, or that `strata merge` reads from a file).
 #[pyfunction]
 #[pyo3(signature = (scene, method, index, count, *, spp=None, time=None, seed=0, threads=None,
-    path_sampler="unidirectional", width=None, height=None, preset=None, **settings))]
+    path_sampler="unidirectional", width=None, height=None, preset=None, key=None, **settings))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render_task<'py>(
     py: Python<'py>,
@@ -294,6 +305,7 @@ pub(crate) fn render_task<'py>(
     width: Option<u32>,
     height: Option<u32>,
     preset: Option<&str>,
+    key: Option<Vec<u8>>,
     settings: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Bound<'py, PyBytes>> {
     let asked = asked(
@@ -315,18 +327,22 @@ pub(crate) fn render_task<'py>(
         task: Task { index, count },
     };
     let part = run(py, &asked.pool, &asked.scene, &watch, &part)?;
-    Ok(PyBytes::new(py, part.as_bytes()))
+    match key {
+        Some(key) => Ok(PyBytes::new(py, &part.sealed(&key).map_err(engine_error)?)),
+        None => Ok(PyBytes::new(py, part.as_bytes())),
+    }
 }
 
 /// Merges the parts of a split render (bytes from `render_task`, or paths
 /// of part files) into its image, the unsplit render's bit for bit.
 /// `partial`: merge the parts given even if tasks are missing.
 #[pyfunction]
-#[pyo3(signature = (parts, partial=false))]
+#[pyo3(signature = (parts, partial=false, key=None))]
 pub(crate) fn merge(
     py: Python<'_>,
     parts: Vec<Bound<'_, PyAny>>,
     partial: bool,
+    key: Option<Vec<u8>>,
 ) -> PyResult<Render> {
     let mut read = Vec::with_capacity(parts.len());
     for part in &parts {
@@ -339,7 +355,7 @@ pub(crate) fn merge(
                 "a part: the bytes render_task returned, or a file's path",
             ));
         };
-        read.push(Checkpoint::from_bytes(bytes).map_err(engine_error)?);
+        read.push(open(bytes, key.as_deref())?);
     }
     let start = std::time::Instant::now();
     let output = py

@@ -51,6 +51,8 @@ pub(crate) struct Watch<'a> {
     /// Where checkpoints go and how often (none: only when stopped and at
     /// the budget's end).
     pub(crate) checkpoint: Option<(PathBuf, Option<Every>)>,
+    /// The key checkpoints are sealed with, if any.
+    pub(crate) key: Option<Vec<u8>>,
     oracle: Option<&'a Raised>,
     stopped: AtomicBool,
     spent: AtomicBool,
@@ -138,8 +140,15 @@ impl Observer for Watch<'_> {
         // Whole under a temporary name, then renamed: never half a file.
         let mut temporary = path.clone().into_os_string();
         temporary.push(".writing");
-        let written = std::fs::write(&temporary, checkpoint.as_bytes())
-            .and_then(|()| std::fs::rename(&temporary, path));
+        let bytes = match &self.key {
+            Some(key) => match checkpoint.sealed(key) {
+                Ok(sealed) => std::borrow::Cow::Owned(sealed),
+                Err(e) => return self.fail(crate::errors::engine_error(e)),
+            },
+            None => std::borrow::Cow::Borrowed(checkpoint.as_bytes()),
+        };
+        let written =
+            std::fs::write(&temporary, &bytes).and_then(|()| std::fs::rename(&temporary, path));
         if let Err(e) = written {
             self.fail(PyOSError::new_err(format!(
                 "cannot write the checkpoint {}: {e}",

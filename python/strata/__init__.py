@@ -106,6 +106,7 @@ def render(
     checkpoint_every: Optional[float] = None,
     resume: Optional[str] = None,
     preset: Optional[str] = None,
+    key: Union[bytes, str, None] = None,
     **settings: Any,
 ) -> Render:
     """Render ``scene`` with ``method`` and return a :class:`Render`.
@@ -140,6 +141,9 @@ def render(
         scene and settings; with the same budget the image is the
         uninterrupted render's, bit for bit; with a larger one it goes on).
     preset: ``"gruson2020"`` for stratified MCMC's paper settings.
+    key: a secret (16 bytes or more) the checkpoints are sealed with
+        (HMAC-SHA256) and ``resume`` opens them with: no one without it can
+        forge or alter one (``strata render`` reads ``STRATA_CHECKPOINT_KEY``).
     settings: any of the method's settings by name (:func:`settings`).
     """
     callback, close = _progress(progress)
@@ -161,6 +165,7 @@ def render(
             checkpoint_every=checkpoint_every,
             resume=resume,
             preset=preset,
+            key=_key(key),
             **settings,
         )
     finally:
@@ -171,16 +176,20 @@ def render_task(scene: Union[str, Oracle], method: str, index: int, count: int, 
     """Render task ``index`` of ``count`` of a split render (the arguments of
     :func:`render` but the callbacks and checkpoints); returns its part, to
     write to a file or give to :func:`merge`. Every method splits (stratified
-    MCMC and multi-stage MLT by their ``runs``)."""
+    MCMC and multi-stage MLT by their ``runs``); ``key`` seals the part."""
+    if "key" in kwargs:
+        kwargs["key"] = _key(kwargs["key"])
     return _strata.render_task(scene, method, index, count, **kwargs)
 
 
-def merge(parts: "list[Union[bytes, str]]", partial: bool = False) -> Render:
+def merge(parts: "list[Union[bytes, str]]", partial: bool = False,
+          key: Union[bytes, str, None] = None) -> Render:
     """Merge the parts of a split render (bytes from :func:`render_task` or
     paths of part files, ``strata render --task-index`` writes them too)
     into its image: the unsplit render's, bit for bit. ``partial`` merges
-    the parts given even if tasks are missing."""
-    return _strata.merge(list(parts), partial)
+    the parts given even if tasks are missing; ``key`` opens parts sealed
+    with it (and refuses the others)."""
+    return _strata.merge(list(parts), partial, _key(key))
 
 
 def check_purity(oracle: Union[Oracle, Vectorized], width: int, height: int, trials: int = 16, seed: int = 0) -> None:
@@ -193,6 +202,16 @@ def check_purity(oracle: Union[Oracle, Vectorized], width: int, height: int, tri
 def settings(method: str) -> "list[dict[str, Any]]":
     """Every setting of ``method``: name, kind, default, range or choices, help."""
     return _strata.settings(method)
+
+
+def _key(key: Union[bytes, str, None]) -> Optional[bytes]:
+    """A checkpoint key as bytes: at least 16 of them."""
+    if key is None:
+        return None
+    key = key.encode() if isinstance(key, str) else bytes(key)
+    if len(key) < 16:
+        raise ValueError(f"key: at least 16 bytes, not {len(key)}")
+    return key
 
 
 def _progress(progress):

@@ -380,3 +380,25 @@ def test_the_exact_invariance_check_of_kernels():
         strata.invariance_error("kelemen", cells, 1.5)
     with pytest.raises(ValueError, match="cells"):
         strata.invariance_error("kelemen", [1.0])
+
+
+def test_sealed_checkpoints_and_parts_open_with_their_key_only(tmp_path):
+    """With a key, checkpoints and parts are sealed (HMAC-SHA256): resume and
+    merge open them with it, refuse them without it or with another."""
+    key = b"the cluster's secret, 32 bytes.."
+    ckpt = tmp_path / "r.ckpt"
+    args = dict(spp=8, width=24, height=16, seed=3)
+    whole = strata.render("procedural", "pssmlt", checkpoint=str(ckpt), key=key, **args)
+    assert ckpt.read_bytes().endswith(b"STRATAsl")
+    again = strata.render("procedural", "pssmlt", resume=str(ckpt), key=key, **args)
+    assert np.array_equal(again.image, whole.image)
+    with pytest.raises(strata.Error, match="sealed"):
+        strata.render("procedural", "pssmlt", resume=str(ckpt), **args)
+    with pytest.raises(strata.Error, match="another key"):
+        strata.render("procedural", "pssmlt", resume=str(ckpt), key=b"x" * 32, **args)
+    with pytest.raises(ValueError, match="16 bytes"):
+        strata.render("procedural", "pssmlt", key="short", **args)
+    parts = [strata.render_task("procedural", "pssmlt", i, 2, key=key, **args) for i in range(2)]
+    assert np.array_equal(strata.merge(parts, key=key).image, whole.image)
+    with pytest.raises(strata.Error, match="sealed"):
+        strata.merge(parts)

@@ -25,8 +25,9 @@ use wide::{Node, Query, Wide};
 
 /// An eight-wide BVH over a triangle list.
 pub struct BvhIntersector {
-    /// `None` for an empty scene (obvhs needs at least one primitive).
-    tree: Option<Wide>,
+    /// One tree for every [`wide::MAX_TRIANGLES`] triangles (none for an
+    /// empty scene), each over its own run of the order below.
+    trees: Vec<Wide>,
     /// Triangles in the tree's order, in obvhs' intersection layout.
     ordered: Vec<RtTriangle>,
     /// Triangles in the tree's order as given: for the closest hit's index
@@ -45,14 +46,11 @@ struct Given {
 impl BvhIntersector {
     /// Builds over `triangles` (an empty list gives an intersector that never hits).
     pub fn new(triangles: &[[Vec3; 3]]) -> Self {
-        let tris: Vec<Triangle> = triangles
-            .iter()
-            .map(|t| Triangle {
-                v0: t[0].into(),
-                v1: t[1].into(),
-                v2: t[2].into(),
-            })
-            .collect();
+        Self::in_trees_of(triangles, wide::MAX_TRIANGLES)
+    }
+
+    /// Builds a tree over every `size` triangles of `triangles`.
+    fn in_trees_of(triangles: &[[Vec3; 3]], size: usize) -> Self {
         let params = BvhBuildParams {
             max_prims_per_leaf: wide::LEAF_SIZE,
             // Leaves collapsed as SAH counts a node visit against a triangle
@@ -62,21 +60,29 @@ impl BvhIntersector {
             collapse_traversal_cost: 1.0,
             ..BvhBuildParams::medium_build()
         };
-        let bvh = (!tris.is_empty())
-            .then(|| build_bvh2_from_tris(&tris, params, &mut Duration::default()));
-        let order = bvh.iter().flat_map(|b| b.primitive_indices.iter().copied());
-        let ordered = order
-            .clone()
-            .map(|i| RtTriangle::from(&tris[i as usize]))
-            .collect();
-        let given = order
-            .map(|index| Given {
-                vertices: triangles[index as usize],
-                index,
-            })
-            .collect();
+        let (mut trees, mut ordered, mut given) = (Vec::new(), Vec::new(), Vec::new());
+        for (chunk, part) in triangles.chunks(size).enumerate() {
+            let tris: Vec<Triangle> = part
+                .iter()
+                .map(|t| Triangle {
+                    v0: t[0].into(),
+                    v1: t[1].into(),
+                    v2: t[2].into(),
+                })
+                .collect();
+            let bvh = build_bvh2_from_tris(&tris, params, &mut Duration::default());
+            trees.push(Wide::collapse(&bvh, ordered.len()));
+            for &i in &bvh.primitive_indices {
+                ordered.push(RtTriangle::from(&tris[i as usize]));
+                let index = chunk * size + i as usize;
+                given.push(Given {
+                    vertices: triangles[index],
+                    index: index as u32,
+                });
+            }
+        }
         Self {
-            tree: bvh.as_ref().map(Wide::collapse),
+            trees,
             ordered,
             given,
             #[cfg(target_arch = "x86_64")]
@@ -95,16 +101,19 @@ impl BvhIntersector {
         )
     }
 
-    /// The closest triangle `ray` hits (its index in the tree's order) and
-    /// the distance, children found by `enter`.
+    /// The closest triangle of `tree` that `ray` hits closer than `t_max`,
+    /// children found by `enter`: its distance (else `t_max`), and its
+    /// index in the intersector's order in `found`, which holds the closest
+    /// of the trees before (for ties).
     #[inline(always)]
     fn closest_with(
         &self,
         tree: &Wide,
         ray: &obvhs::ray::Ray,
+        t_max: f32,
+        found: &mut Option<usize>,
         enter: impl Fn(&Node, &Query, f32) -> (u32, [f32; 8]),
-    ) -> Option<(usize, f32)> {
-        let mut found: Option<usize> = None;
+    ) -> f32 {
         let hit = |first: usize, count: usize, t_max: f32| {
             let mut r = *ray;
             r.tmax = t_max;
@@ -121,16 +130,15 @@ impl BvhIntersector {
                 if better && t > r.tmin {
                     r.tmax = t;
                     closer = Some(t);
-                    found = Some(first + i);
+                    *found = Some(first + i);
                 }
             }
             closer
         };
-        let t = tree.closest(&Query::new(ray), ray.tmax, enter, hit);
-        found.map(|i| (i, t))
+        tree.closest(&Query::new(ray), t_max, enter, hit)
     }
 
-    /// Whether `ray` hits a triangle, children found by `enter`.
+    /// Whether `ray` hits a triangle of `tree`, children found by `enter`.
     #[inline(always)]
     fn any_with(
         &self,
@@ -150,27 +158,58 @@ impl BvhIntersector {
     /// [`closest_with`](Self::closest_with) compiled for AVX2 with its node test.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn closest_avx2(&self, tree: &Wide, ray: &obvhs::ray::Ray) -> Option<(usize, f32)> {
-        self.closest_with(tree, ray, |n, q, t| avx2::enter(n, q, t))
+    fn closest_avx2(
+        &self,
+        tree: &Wide,
+        ray: &obvhs::ray::Ray,
+        t_max: f32,
+        found: &mut Option<usize>,
+    ) -> f32 {
+        // SAFETY: this function is compiled for AVX2.
+        #[allow(unsafe_code)]
+        self.closest_with(tree, ray, t_max, found, |n, q, t| unsafe {
+            avx2::enter(n, q, t)
+        })
     }
 
     /// [`any_with`](Self::any_with) compiled for AVX2 with its node test.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn any_avx2(&self, tree: &Wide, ray: &obvhs::ray::Ray) -> bool {
-        self.any_with(tree, ray, |n, q, t| avx2::enter(n, q, t))
+        // SAFETY: this function is compiled for AVX2.
+        #[allow(unsafe_code)]
+        self.any_with(tree, ray, |n, q, t| unsafe { avx2::enter(n, q, t) })
     }
 
-    /// The closest hit: in the tree's order, and its distance.
+    /// The closest hit: in the intersector's order, and its distance.
     fn closest(&self, ray: &obvhs::ray::Ray) -> Option<(usize, f32)> {
-        let tree = self.tree.as_ref()?;
-        #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: the processor has AVX2 (detected in `new`).
-            #[allow(unsafe_code)]
-            return unsafe { self.closest_avx2(tree, ray) };
+        let (mut found, mut t) = (None, ray.tmax);
+        for tree in &self.trees {
+            #[cfg(target_arch = "x86_64")]
+            if self.avx2 {
+                // SAFETY: the processor has AVX2 (detected in `new`).
+                #[allow(unsafe_code)]
+                {
+                    t = unsafe { self.closest_avx2(tree, ray, t, &mut found) };
+                }
+                continue;
+            }
+            t = self.closest_with(tree, ray, t, &mut found, wide::enter);
         }
-        self.closest_with(tree, ray, wide::enter)
+        found.map(|i| (i, t))
+    }
+
+    /// Whether `ray` hits any triangle.
+    fn any(&self, ray: &obvhs::ray::Ray) -> bool {
+        self.trees.iter().any(|tree| {
+            #[cfg(target_arch = "x86_64")]
+            if self.avx2 {
+                // SAFETY: the processor has AVX2 (detected in `new`).
+                #[allow(unsafe_code)]
+                return unsafe { self.any_avx2(tree, ray) };
+            }
+            self.any_with(tree, ray, wide::enter)
+        })
     }
 }
 
@@ -199,17 +238,7 @@ impl Intersector for BvhIntersector {
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        let Some(tree) = &self.tree else {
-            return false;
-        };
-        let ray = Self::obvhs_ray(ray);
-        #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: the processor has AVX2 (detected in `new`).
-            #[allow(unsafe_code)]
-            return unsafe { self.any_avx2(tree, &ray) };
-        }
-        self.any_with(tree, &ray, wide::enter)
+        self.any(&Self::obvhs_ray(ray))
     }
 }
 
@@ -288,17 +317,21 @@ mod tests {
         }
         let (tris, rays) = sheet_and_rays();
         let bvh = BvhIntersector::new(&tris);
-        let tree = bvh.tree.as_ref().unwrap();
         let (mut hits, mut occluded) = (0, 0);
+        let tree = &bvh.trees[0];
         for (k, ray) in rays.iter().enumerate() {
             let query = BvhIntersector::obvhs_ray(ray);
+            let (mut a, mut b) = (None, None);
             // SAFETY: the processor has AVX2 (checked above).
             #[allow(unsafe_code)]
-            let (a, missed) =
-                unsafe { (bvh.closest_avx2(tree, &query), !bvh.any_avx2(tree, &query)) };
-            let b = bvh.closest_with(tree, &query, wide::enter);
-            let bits = |h: Option<(usize, f32)>| h.map(|(i, t)| (i, t.to_bits()));
-            assert_eq!(bits(a), bits(b), "ray {k}");
+            let (ta, missed) = unsafe {
+                (
+                    bvh.closest_avx2(tree, &query, query.tmax, &mut a),
+                    !bvh.any_avx2(tree, &query),
+                )
+            };
+            let tb = bvh.closest_with(tree, &query, query.tmax, &mut b, wide::enter);
+            assert_eq!((a, ta.to_bits()), (b, tb.to_bits()), "ray {k}");
             assert_eq!(missed, !bvh.any_with(tree, &query, wide::enter), "ray {k}");
             assert_eq!(missed, a.is_none(), "ray {k}");
             hits += a.is_some() as u32;
@@ -354,6 +387,28 @@ mod tests {
             hits > 500 && ties * 100 < hits,
             "{ties} ties of {hits} hits"
         );
+    }
+
+    /// A scene split into several trees (as one of more than
+    /// [`wide::MAX_TRIANGLES`] triangles is) finds the hits of one tree:
+    /// the same triangle at the same distance, ties included, ray by ray.
+    #[test]
+    fn several_trees_find_the_hits_of_one() {
+        let (tris, rays) = sheet_and_rays();
+        let one = BvhIntersector::new(&tris);
+        let several = BvhIntersector::in_trees_of(&tris, 1000);
+        assert_eq!((one.trees.len(), several.trees.len()), (1, 8));
+        let mut hits = 0;
+        for (k, ray) in rays.iter().enumerate() {
+            let bits = |h: Option<Hit>| {
+                h.map(|h| (h.triangle, h.t.to_bits(), h.uv.to_array().map(f32::to_bits)))
+            };
+            let hit = one.closest_hit(ray);
+            assert_eq!(bits(hit), bits(several.closest_hit(ray)), "ray {k}");
+            assert_eq!(one.occluded(ray), several.occluded(ray), "ray {k}");
+            hits += hit.is_some() as u32;
+        }
+        assert!(hits > 500, "{hits}");
     }
 
     #[test]

@@ -16,10 +16,14 @@ use obvhs::bvh2::Bvh2;
 /// A child slot that holds nothing.
 const EMPTY: u32 = u32::MAX;
 /// A child slot that holds a leaf: this bit, the triangle count less one in
-/// the next four bits, the first triangle in the rest.
+/// the next two bits, the first triangle (of the tree's own) in the rest.
 const LEAF: u32 = 1 << 31;
-const COUNT_SHIFT: u32 = 27;
+const COUNT_SHIFT: u32 = 29;
 const FIRST_MASK: u32 = (1 << COUNT_SHIFT) - 1;
+
+/// The most triangles one tree holds (2^29: what a leaf's first index
+/// encodes); larger scenes are split into several trees.
+pub(super) const MAX_TRIANGLES: usize = 1 << COUNT_SHIFT;
 
 /// The factor a child's exit distance is widened by before it is compared
 /// with the entry: `1 + 2^-20`, a few ulps, more than the rounding of the
@@ -29,7 +33,7 @@ const FIRST_MASK: u32 = (1 << COUNT_SHIFT) - 1;
 pub(super) const WIDEN: f32 = 1.0 + 1.0 / (1 << 20) as f32;
 
 /// The most triangles a leaf holds (the binary tree's leaves are collapsed
-/// to at most four; the encoding holds sixteen).
+/// to at most four, what the encoding holds).
 pub(super) const LEAF_SIZE: u32 = 4;
 
 /// Eight children: their bounds, axis by axis, and what each holds.
@@ -93,16 +97,18 @@ pub(super) fn enter(node: &Node, query: &Query, t_max: f32) -> (u32, [f32; 8]) {
 }
 
 /// The tree: its nodes, the root first, over triangles in the order of the
-/// binary tree's primitive indices.
+/// binary tree's primitive indices, from `base` on in the intersector's.
 pub(super) struct Wide {
     nodes: Vec<Node>,
+    /// Where the tree's triangles start in the intersector's order.
+    base: usize,
     /// The deepest path from the root, in nodes: the traversal's stack
     /// holds at most seven children a level.
     depth: usize,
 }
 
 /// A leaf's triangles: `first..first + count` of the tree's order.
-pub(super) fn leaf(child: u32) -> (usize, usize) {
+fn leaf(child: u32) -> (usize, usize) {
     let first = (child & FIRST_MASK) as usize;
     let count = ((child & !LEAF) >> COUNT_SHIFT) as usize + 1;
     (first, count)
@@ -110,10 +116,11 @@ pub(super) fn leaf(child: u32) -> (usize, usize) {
 
 impl Wide {
     /// The binary tree `bvh` (leaves of at most [`LEAF_SIZE`] primitives,
-    /// fewer than 2^27 of them) collapsed: each node takes its children's
+    /// at most [`MAX_TRIANGLES`] of them) collapsed: each node takes its children's
     /// children, the largest in surface area first, until it has eight
     /// or only leaves (Wald et al. 2008's collapse).
-    pub(super) fn collapse(bvh: &Bvh2) -> Self {
+    /// Its triangles start at `base` of the intersector's order.
+    pub(super) fn collapse(bvh: &Bvh2, base: usize) -> Self {
         let empty = Node {
             bounds: [
                 [f32::INFINITY; 8],
@@ -172,7 +179,7 @@ impl Wide {
                 };
             }
         }
-        Wide { nodes, depth }
+        Wide { nodes, base, depth }
     }
 
     /// Room for the traversal's stack.
@@ -219,7 +226,7 @@ impl Wide {
             };
             if current & LEAF != 0 {
                 let (first, count) = leaf(current);
-                if let Some(t) = hit(first, count, t_max) {
+                if let Some(t) = hit(self.base + first, count, t_max) {
                     t_max = t;
                 }
                 continue;
@@ -279,7 +286,7 @@ impl Wide {
             let current = stack[top];
             if current & LEAF != 0 {
                 let (first, count) = leaf(current);
-                if hit(first, count) {
+                if hit(self.base + first, count) {
                     return true;
                 }
                 continue;

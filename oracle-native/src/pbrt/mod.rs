@@ -428,7 +428,11 @@ impl Parser {
         ))
     }
 
-    fn roughness(&self, p: &Params, default: f64) -> Result<f32, SceneError> {
+    /// A microfacet alpha from `roughness` (or `uroughness`), remapped as
+    /// pbrt-v3 does unless `remaproughness` is false; 0 stays 0 (smooth)
+    /// where `zero_is_smooth`, as for pbrt-v3's glass (`GlassMaterial`'s
+    /// `isSpecular`, tested before the remapping, which takes 0 to 0.045).
+    fn roughness(&self, p: &Params, default: f64, zero_is_smooth: bool) -> Result<f32, SceneError> {
         let r = p
             .num("roughness")
             .or_else(|| p.num("uroughness"))
@@ -437,7 +441,7 @@ impl Parser {
             return self.err(format!("roughness must be finite and >= 0, got {r}"));
         }
         let remap = p.bool("remaproughness").unwrap_or(true);
-        let alpha = if remap {
+        let alpha = if remap && !(zero_is_smooth && r == 0.0) {
             roughness_to_alpha(r as f32)
         } else {
             r as f32
@@ -459,7 +463,7 @@ impl Parser {
                         eta: self.checked_color(eta, "eta")?,
                         k: self.checked_color(k, "k")?,
                     },
-                    alpha: self.roughness(p, 0.01)?,
+                    alpha: self.roughness(p, 0.01, false)?,
                 }
             }
             "glass" => {
@@ -469,7 +473,7 @@ impl Parser {
                 }
                 Material::Dielectric {
                     eta,
-                    alpha: self.roughness(p, 0.0)?,
+                    alpha: self.roughness(p, 0.0, true)?,
                 }
             }
             "mirror" => Material::Conductor {
@@ -481,7 +485,7 @@ impl Parser {
             "plastic" => Material::Plastic {
                 diffuse: self.color_or_texture(p, "Kd", Vec3::splat(0.25))?,
                 specular: self.checked_color(p.rgb("Ks").unwrap_or(Vec3::splat(0.25)), "Ks")?,
-                alpha: self.roughness(p, 0.1)?.max(1e-3),
+                alpha: self.roughness(p, 0.1, false)?.max(1e-3),
             },
             other => {
                 self.out

@@ -60,7 +60,9 @@ impl BvhIntersector {
             collapse_traversal_cost: 1.0,
             ..BvhBuildParams::medium_build()
         };
-        let (mut trees, mut ordered, mut given) = (Vec::new(), Vec::new(), Vec::new());
+        let mut trees = Vec::new();
+        let mut ordered = Vec::with_capacity(triangles.len());
+        let mut given = Vec::with_capacity(triangles.len());
         for (chunk, part) in triangles.chunks(size).enumerate() {
             let tris: Vec<Triangle> = part
                 .iter()

@@ -33,9 +33,18 @@ struct Args {
     /// JSON output.
     #[arg(long, default_value = "out/bench/backends.json")]
     out: PathBuf,
-    /// Only the scenes named (e.g. `mesh-1M`); every one without.
+    /// Only the scenes named (e.g. `mesh-1M`); every one without. `mesh-5M`
+    /// (a sphere of 5M triangles) is measured only when named.
     #[arg(long)]
     only: Vec<String>,
+}
+
+/// The process's resident memory, in bytes (Linux; 0 elsewhere).
+fn resident_bytes() -> usize {
+    std::fs::read_to_string("/proc/self/statm")
+        .ok()
+        .and_then(|s| s.split_whitespace().nth(1)?.parse::<usize>().ok())
+        .map_or(0, |pages| pages * 4096)
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -59,12 +68,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = Args::parse();
     let mut rows = Vec::new();
     println!(
-        "| scene | closest hit, Embree / native | occlusion | paths | build, native / Embree |"
+        "| scene | closest hit, Embree / native | occlusion | paths | build, native / Embree | bytes a triangle, native / Embree |"
     );
-    for (name, scene) in builtin::benchmark_set(Resolution::new(128, 128)) {
+    let size = Resolution::new(128, 128);
+    let mut scenes = builtin::benchmark_set(size);
+    if args.only.iter().any(|n| n == "mesh-5M") {
+        scenes.push(("mesh-5M".into(), builtin::dense_sphere(size, 1250, 2000)));
+    }
+    for (name, scene) in scenes {
         if !args.only.is_empty() && !args.only.contains(&name) {
             continue;
         }
+        // Memory first, each backend built once and kept: the growth of the
+        // resident set (a scene measured alone is not flattered by memory
+        // freed before it).
+        let before = resident_bytes();
+        let native_tree = BvhIntersector::new(&scene.triangles);
+        let native_bytes = resident_bytes().saturating_sub(before);
+        let embree_tree = EmbreeIntersector::new(&scene.triangles)?;
+        let embree_bytes = resident_bytes().saturating_sub(before + native_bytes);
+        let per_triangle = |b: usize| b as f64 / scene.triangles.len() as f64;
         let r = scene.camera.resolution;
         let mut rng = stream(5, Domain::User, 0);
         let rays: Vec<Ray> = (0..args.rays)
@@ -90,8 +113,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }));
         }
         let (build_n, build_e) = (median(bn), median(be));
-        let native = PathTracer::new(scene.clone(), BvhIntersector::new(&scene.triangles));
-        let embree = PathTracer::new(scene.clone(), EmbreeIntersector::new(&scene.triangles)?);
+        let native = PathTracer::new(scene.clone(), native_tree);
+        let embree = PathTracer::new(scene.clone(), embree_tree);
         let shadow: Vec<Ray> = rays
             .iter()
             .map(|ray| Ray {
@@ -144,7 +167,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (ro_n, ro_e) = (rate(&on, args.rays), rate(&oe, args.rays));
         let (rp_n, rp_e) = (rate(&pn, args.paths), rate(&pe, args.paths));
         println!(
-            "| {name} | {:.2} ({:.2} / {:.2} M rays/s) | {:.2} ({:.2} / {:.2}) | {:.2} ({:.3} / {:.3} M paths/s) | {:.2} ({:.0} / {:.0} ms) |",
+            "| {name} | {:.2} ({:.2} / {:.2} M rays/s) | {:.2} ({:.2} / {:.2}) | {:.2} ({:.3} / {:.3} M paths/s) | {:.2} ({:.0} / {:.0} ms) | {:.0} / {:.0} |",
             rc_e / rc_n,
             rc_e / 1e6,
             rc_n / 1e6,
@@ -156,10 +179,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             rp_n / 1e6,
             build_n / build_e,
             build_n * 1e3,
-            build_e * 1e3
+            build_e * 1e3,
+            per_triangle(native_bytes),
+            per_triangle(embree_bytes)
         );
         rows.push(format!(
-            "{{\"scene\": \"{name}\", \"triangles\": {}, \"closest_rays_per_s\": {{\"embree\": {rc_e:.0}, \"native\": {rc_n:.0}}}, \"occlusion_rays_per_s\": {{\"embree\": {ro_e:.0}, \"native\": {ro_n:.0}}}, \"paths_per_s\": {{\"embree\": {rp_e:.0}, \"native\": {rp_n:.0}}}, \"native_over_embree_paths\": {:.4}, \"build_seconds\": {{\"embree\": {build_e:.4}, \"native\": {build_n:.4}}}}}",
+            "{{\"scene\": \"{name}\", \"triangles\": {}, \"closest_rays_per_s\": {{\"embree\": {rc_e:.0}, \"native\": {rc_n:.0}}}, \"occlusion_rays_per_s\": {{\"embree\": {ro_e:.0}, \"native\": {ro_n:.0}}}, \"paths_per_s\": {{\"embree\": {rp_e:.0}, \"native\": {rp_n:.0}}}, \"native_over_embree_paths\": {:.4}, \"build_seconds\": {{\"embree\": {build_e:.4}, \"native\": {build_n:.4}}}, \"resident_bytes\": {{\"embree\": {embree_bytes}, \"native\": {native_bytes}}}}}",
             scene.triangles.len(),
             rp_n / rp_e
         ));

@@ -226,16 +226,18 @@ struct CoroutineRunner {
 }
 
 impl CoroutineRunner {
-    /// A coroutine running `task(index)`.
-    fn start(&self, index: usize, task: &(dyn Fn(usize) + Sync)) -> Task {
+    /// A coroutine running `task(index)`, or none when no stack can be
+    /// reserved for it (the address space exhausted).
+    fn start(&self, index: usize, task: &(dyn Fn(usize) + Sync)) -> Option<Task> {
         let stack = self
             .stacks
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .pop();
-        let stack = stack.unwrap_or_else(|| {
-            DefaultStack::new(STACK_BYTES).expect("cannot reserve a coroutine's stack")
-        });
+        let stack = match stack {
+            Some(stack) => stack,
+            None => DefaultStack::new(STACK_BYTES).ok()?,
+        };
         let body = move |yielder: &Yielder<Rgb, Request>, _: Rgb| {
             YIELDER.set(yielder);
             task(index);
@@ -244,13 +246,22 @@ impl CoroutineRunner {
         // `run` that made it; every coroutine is driven to completion or
         // dropped (unwinding its stack) before `run` returns, also when a
         // task panics (the `Vec` holding them is dropped while unwinding).
-        unsafe { Coroutine::with_stack_unchecked(stack, body) }
+        Some(unsafe { Coroutine::with_stack_unchecked(stack, body) })
     }
 }
 
 impl TaskRunner for CoroutineRunner {
     fn run(&self, count: usize, task: &(dyn Fn(usize) + Sync)) {
-        let mut tasks = (0..count).map(|i| (self.start(i, task), Rgb::default()));
+        // A task without a coroutine runs here at once, outside any task
+        // (no yielder is set between resumes), its paths evaluated a batch of
+        // one each: slower, the same image (results combine in index order).
+        let mut tasks = (0..count).filter_map(|i| match self.start(i, task) {
+            Some(coroutine) => Some((coroutine, Rgb::default())),
+            None => {
+                task(i);
+                None
+            }
+        });
         // Each live task, and the radiance it is to be resumed with.
         let mut live: Vec<(Task, Rgb)> = tasks.by_ref().take(WIDTH).collect();
         let mut waiting: Vec<Task> = Vec::with_capacity(live.len());

@@ -6,6 +6,7 @@ command's for the same seed, bit for bit."""
 import math
 import os
 import subprocess
+import sys
 import threading
 import time
 import _thread
@@ -332,6 +333,43 @@ def test_a_numpy_oracle_renders_the_per_path_oracles_image_bit_for_bit():
         del one.stats["seconds"], many.stats["seconds"]
         assert one.stats == many.stats, method
         assert max(batches) >= 8, f"{method}: batches of at most {max(batches)} paths"
+
+
+NO_ROOM_FOR_COROUTINES = r"""
+import resource, sys
+import numpy as np
+import strata
+sys.path.insert(0, sys.argv[1])
+from test_strata import gap_drawn_one_by_one, gap_vectorized
+
+args = dict(width=64, height=64, seed=3, spp=16)
+expected = strata.render(gap_drawn_one_by_one, "pssmlt", **args).image
+strata.render(gap_vectorized([]), "pssmlt", **args)  # threads and pools made
+with open("/proc/self/statm") as f:
+    size = int(f.read().split()[0]) * resource.getpagesize()
+# Room for a few dozen of the coroutines' 1 MB stacks, not for all.
+resource.setrlimit(resource.RLIMIT_AS, (size + (48 << 20), resource.RLIM_INFINITY))
+batches = []
+image = strata.render(gap_vectorized(batches), "pssmlt", **args).image
+print(np.array_equal(image, expected), min(batches), max(batches))
+"""
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/statm"), reason="Linux only")
+def test_a_numpy_oracle_without_room_for_its_coroutines_renders_the_same_image():
+    """When no stack can be reserved for a task's coroutine, the task runs at
+    once, its paths evaluated one by one: the same image, no crash."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    out = subprocess.run(
+        [sys.executable, "-c", NO_ROOM_FOR_COROUTINES, here],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert out.returncode == 0, out.stderr
+    same, smallest, largest = out.stdout.split()
+    assert same == "True"
+    assert int(smallest) == 1 and int(largest) >= 8, out.stdout
 
 
 def test_a_numpy_oracle_that_raises_or_returns_a_wrong_shape_stops_the_render():

@@ -348,12 +348,28 @@ enum StrataStatus strata_render_task(const struct StrataOracle *oracle,
                                      struct StrataPart **part);
 
 // The part's bytes (`*size` of them), to write to a file: valid until the
-// part is freed.
+// part is freed or sealed. Sealed ([`strata_part_seal`]), they carry the
+// seal.
 const uint8_t *strata_part_bytes(const struct StrataPart *part, uintptr_t *size);
+
+// Seals the part with the `key_size` bytes at `key` (16 or more): from
+// then on [`strata_part_bytes`] gives its bytes followed by their
+// HMAC-SHA256 under the key, which only [`strata_part_read`] and
+// [`strata_merge_files`] given the same key open, so that a part passed
+// between machines cannot be forged or altered by anyone without the key.
+// A null or short key is `STRATA_STATUS_INVALID_ARGUMENT`.
+enum StrataStatus strata_part_seal(struct StrataPart *part, const uint8_t *key, uintptr_t key_size);
 
 // A part read back from `size` bytes at `bytes` into `*part`: damaged
 // bytes or another format version are `STRATA_STATUS_INVALID_ARGUMENT`.
-enum StrataStatus strata_part_read(const uint8_t *bytes, uintptr_t size, struct StrataPart **part);
+// With a key (`key_size` bytes at `key`; null for none), only bytes
+// sealed with it are read ([`strata_part_seal`]): bytes not sealed,
+// sealed with another key, or altered are refused.
+enum StrataStatus strata_part_read(const uint8_t *bytes,
+                                   uintptr_t size,
+                                   const uint8_t *key,
+                                   uintptr_t key_size,
+                                   struct StrataPart **part);
 
 // Frees a part (null is ignored).
 void strata_part_free(struct StrataPart *part);
@@ -374,8 +390,13 @@ enum StrataStatus strata_merge(const struct StrataPart *const *parts,
 // `*film`, as [`strata_merge`] does, reading them piece by piece: the
 // merge holds the image, not the parts. A file that cannot be read, or is
 // no part, is `STRATA_STATUS_INVALID_ARGUMENT` with a message naming it.
+// With a key (`key_size` bytes at `key`; null for none), every file must
+// be a part sealed with it ([`strata_part_seal`]), its seal checked over
+// the whole file before anything of it is read.
 enum StrataStatus strata_merge_files(const char *const *paths,
                                      uintptr_t count,
+                                     const uint8_t *key,
+                                     uintptr_t key_size,
                                      int32_t subset,
                                      struct StrataFilm **film);
 

@@ -18,6 +18,18 @@ use crate::*;
 /// task the progress callback stopped.
 pub struct StrataPart {
     checkpoint: Checkpoint,
+    /// Its bytes sealed with a key ([`strata_part_seal`]), what
+    /// [`strata_part_bytes`] gives once set.
+    sealed: Option<Vec<u8>>,
+}
+
+/// The `size` bytes of a key at `key`; none for a null key.
+///
+/// # Safety
+/// `key` is null or points to `size` readable bytes.
+unsafe fn key<'a>(key: *const u8, size: usize) -> Option<&'a [u8]> {
+    // SAFETY: the caller's buffer of `size` bytes, when not null.
+    (!key.is_null()).then(|| unsafe { std::slice::from_raw_parts(key, size) })
 }
 
 /// Makes `settings` render task `index` (from 0) of `count`: each task
@@ -74,7 +86,12 @@ pub extern "C" fn strata_render_task(
         Ok(checkpoint) => {
             let finished = checkpoint.finished().unwrap_or(false);
             // SAFETY: checked non-null above.
-            unsafe { *part = Box::into_raw(Box::new(StrataPart { checkpoint })) };
+            unsafe {
+                *part = Box::into_raw(Box::new(StrataPart {
+                    checkpoint,
+                    sealed: None,
+                }))
+            };
             if finished {
                 StrataStatus::Ok
             } else {
@@ -89,7 +106,8 @@ pub extern "C" fn strata_render_task(
 }
 
 /// The part's bytes (`*size` of them), to write to a file: valid until the
-/// part is freed.
+/// part is freed or sealed. Sealed ([`strata_part_seal`]), they carry the
+/// seal.
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_part_bytes(part: *const StrataPart, size: *mut usize) -> *const u8 {
     if part.is_null() || size.is_null() {
@@ -97,17 +115,54 @@ pub extern "C" fn strata_part_bytes(part: *const StrataPart, size: *mut usize) -
         return std::ptr::null();
     }
     // SAFETY: a live part made by this API; `size` checked non-null.
-    let bytes = unsafe { &*part }.checkpoint.as_bytes();
+    let part = unsafe { &*part };
+    let bytes = part
+        .sealed
+        .as_deref()
+        .unwrap_or_else(|| part.checkpoint.as_bytes());
     unsafe { *size = bytes.len() };
     bytes.as_ptr()
 }
 
+/// Seals the part with the `key_size` bytes at `key` (16 or more): from
+/// then on [`strata_part_bytes`] gives its bytes followed by their
+/// HMAC-SHA256 under the key, which only [`strata_part_read`] and
+/// [`strata_merge_files`] given the same key open, so that a part passed
+/// between machines cannot be forged or altered by anyone without the key.
+/// A null or short key is `STRATA_STATUS_INVALID_ARGUMENT`.
+#[unsafe(no_mangle)]
+pub extern "C" fn strata_part_seal(
+    part: *mut StrataPart,
+    key: *const u8,
+    key_size: usize,
+) -> StrataStatus {
+    // SAFETY: the caller's key of `key_size` bytes, when not null.
+    let key = unsafe { self::key(key, key_size) };
+    let (false, Some(key)) = (part.is_null(), key) else {
+        return fail(StrataStatus::InvalidArgument, "null part or key pointer");
+    };
+    // SAFETY: a live part made by this API, checked non-null.
+    let part = unsafe { &mut *part };
+    match part.checkpoint.sealed(key) {
+        Ok(sealed) => {
+            part.sealed = Some(sealed);
+            StrataStatus::Ok
+        }
+        Err(e) => fail(StrataStatus::InvalidArgument, e.to_string()),
+    }
+}
+
 /// A part read back from `size` bytes at `bytes` into `*part`: damaged
 /// bytes or another format version are `STRATA_STATUS_INVALID_ARGUMENT`.
+/// With a key (`key_size` bytes at `key`; null for none), only bytes
+/// sealed with it are read ([`strata_part_seal`]): bytes not sealed,
+/// sealed with another key, or altered are refused.
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_part_read(
     bytes: *const u8,
     size: usize,
+    key: *const u8,
+    key_size: usize,
     part: *mut *mut StrataPart,
 ) -> StrataStatus {
     if bytes.is_null() || part.is_null() {
@@ -117,10 +172,20 @@ pub extern "C" fn strata_part_read(
     unsafe { *part = null_mut() };
     // SAFETY: the caller's buffer of `size` bytes.
     let bytes = unsafe { std::slice::from_raw_parts(bytes, size) }.to_vec();
-    match Checkpoint::from_bytes(bytes) {
+    // SAFETY: the caller's key of `key_size` bytes, when not null.
+    let read = match unsafe { self::key(key, key_size) } {
+        Some(key) => Checkpoint::from_sealed_bytes(bytes, key),
+        None => Checkpoint::from_bytes(bytes),
+    };
+    match read {
         Ok(checkpoint) => {
             // SAFETY: checked non-null above.
-            unsafe { *part = Box::into_raw(Box::new(StrataPart { checkpoint })) };
+            unsafe {
+                *part = Box::into_raw(Box::new(StrataPart {
+                    checkpoint,
+                    sealed: None,
+                }))
+            };
             StrataStatus::Ok
         }
         Err(e) => fail(StrataStatus::InvalidArgument, e.to_string()),
@@ -173,10 +238,15 @@ pub extern "C" fn strata_merge(
 /// `*film`, as [`strata_merge`] does, reading them piece by piece: the
 /// merge holds the image, not the parts. A file that cannot be read, or is
 /// no part, is `STRATA_STATUS_INVALID_ARGUMENT` with a message naming it.
+/// With a key (`key_size` bytes at `key`; null for none), every file must
+/// be a part sealed with it ([`strata_part_seal`]), its seal checked over
+/// the whole file before anything of it is read.
 #[unsafe(no_mangle)]
 pub extern "C" fn strata_merge_files(
     paths: *const *const c_char,
     count: usize,
+    key: *const u8,
+    key_size: usize,
     subset: i32,
     film: *mut *mut StrataFilm,
 ) -> StrataStatus {
@@ -200,7 +270,12 @@ pub extern "C" fn strata_merge_files(
         | Error::PartUnreadable { part, .. } => format!("{}: {e}", files[*part].display()),
         _ => e.to_string(),
     };
-    let result = merge(&PartFiles::new(files.clone()), subset != 0).map_err(named);
+    // SAFETY: the caller's key of `key_size` bytes, when not null.
+    let parts = match unsafe { self::key(key, key_size) } {
+        Some(key) => PartFiles::with_key(files.clone(), key),
+        None => PartFiles::new(files.clone()),
+    };
+    let result = merge(&parts, subset != 0).map_err(named);
     // SAFETY: checked non-null above.
     unsafe { merged(result, film) }
 }

@@ -656,7 +656,10 @@ fn tasks_merge_to_the_film_of_the_unsplit_render() {
         let mut size = 0;
         let bytes = strata_part_bytes(part, &mut size);
         let mut read = null_mut();
-        assert_eq!(strata_part_read(bytes, size, &mut read), StrataStatus::Ok);
+        assert_eq!(
+            strata_part_read(bytes, size, null(), 0, &mut read),
+            StrataStatus::Ok
+        );
         strata_part_free(part);
         parts.push(read as *const StrataPart);
     }
@@ -683,7 +686,7 @@ fn tasks_merge_to_the_film_of_the_unsplit_render() {
     let pointers: Vec<*const c_char> = paths.iter().map(|p| p.as_ptr()).collect();
     let mut from_files = null_mut();
     assert_eq!(
-        strata_merge_files(pointers.as_ptr(), 3, 0, &mut from_files),
+        strata_merge_files(pointers.as_ptr(), 3, null(), 0, 0, &mut from_files),
         StrataStatus::Ok
     );
     assert_eq!(film_bits(from_files), film_bits(whole));
@@ -691,7 +694,7 @@ fn tasks_merge_to_the_film_of_the_unsplit_render() {
     std::fs::remove_file(dir.join("part-1.part")).unwrap();
     let mut film = null_mut();
     assert_eq!(
-        strata_merge_files(pointers.as_ptr(), 3, 0, &mut film),
+        strata_merge_files(pointers.as_ptr(), 3, null(), 0, 0, &mut film),
         StrataStatus::InvalidArgument
     );
     assert!(film.is_null());
@@ -735,7 +738,7 @@ fn tasks_merge_to_the_film_of_the_unsplit_render() {
     strata_part_free(part);
     let mut part = null_mut();
     assert_eq!(
-        strata_part_read([1u8, 2].as_ptr(), 2, &mut part),
+        strata_part_read([1u8, 2].as_ptr(), 2, null(), 0, &mut part),
         StrataStatus::InvalidArgument
     );
     for p in parts {
@@ -745,6 +748,89 @@ fn tasks_merge_to_the_film_of_the_unsplit_render() {
     strata_film_free(whole);
     strata_settings_free(settings);
     strata_settings_free(stratified);
+}
+
+/// Parts sealed with a key: read back and merged from files with that key
+/// to the unsplit render's film; refused without it, with another, after a
+/// byte changed; a short key refused when sealing.
+#[test]
+fn sealed_parts_open_only_with_their_key() {
+    let settings = strata_settings_new(c"mc".as_ptr());
+    strata_settings_set_samples_per_pixel(settings, 8);
+    let mut whole = null_mut();
+    assert_eq!(
+        strata_render(&oracle(uniform), settings, null(), &mut whole),
+        StrataStatus::Ok
+    );
+    let (key, other) = (b"a key of 24 bytes, at 16+", b"another key, 24 bytes ..");
+    let dir = std::env::temp_dir().join(format!("strata-capi-sealed-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut paths = Vec::new();
+    for index in 0..2 {
+        strata_settings_set_task(settings, index, 2);
+        let mut part = null_mut();
+        assert_eq!(
+            strata_render_task(&oracle(uniform), settings, null(), &mut part),
+            StrataStatus::Ok
+        );
+        assert_eq!(
+            strata_part_seal(part, key.as_ptr(), 15),
+            StrataStatus::InvalidArgument
+        );
+        assert!(last_error().contains("16 bytes"), "{}", last_error());
+        assert_eq!(
+            strata_part_seal(part, key.as_ptr(), key.len()),
+            StrataStatus::Ok
+        );
+        let mut size = 0;
+        let bytes = strata_part_bytes(part, &mut size);
+        let mut read = null_mut();
+        for (k, k_size) in [(null(), 0), (other.as_ptr(), other.len())] {
+            assert_eq!(
+                strata_part_read(bytes, size, k, k_size, &mut read),
+                StrataStatus::InvalidArgument
+            );
+        }
+        assert_eq!(
+            strata_part_read(bytes, size, key.as_ptr(), key.len(), &mut read),
+            StrataStatus::Ok
+        );
+        strata_part_free(read);
+        // SAFETY: the part's bytes, alive while the part is.
+        let mut bytes = unsafe { std::slice::from_raw_parts(bytes, size) }.to_vec();
+        let path = dir.join(format!("part-{index}.part"));
+        std::fs::write(&path, &bytes).unwrap();
+        paths.push(std::ffi::CString::new(path.to_str().unwrap()).unwrap());
+        bytes[size / 2] ^= 1;
+        assert_eq!(
+            strata_part_read(bytes.as_ptr(), size, key.as_ptr(), key.len(), &mut read),
+            StrataStatus::InvalidArgument
+        );
+        strata_part_free(part);
+    }
+    let pointers: Vec<*const c_char> = paths.iter().map(|p| p.as_ptr()).collect();
+    let mut film = null_mut();
+    assert_eq!(
+        strata_merge_files(pointers.as_ptr(), 2, key.as_ptr(), key.len(), 0, &mut film),
+        StrataStatus::Ok
+    );
+    assert_eq!(film_bits(film), film_bits(whole));
+    strata_film_free(film);
+    for (k, k_size) in [(null(), 0), (other.as_ptr(), other.len())] {
+        let mut film = null_mut();
+        assert_eq!(
+            strata_merge_files(pointers.as_ptr(), 2, k, k_size, 0, &mut film),
+            StrataStatus::InvalidArgument
+        );
+        assert!(
+            film.is_null() && last_error().contains("part-"),
+            "{}",
+            last_error()
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+    strata_film_free(whole);
+    strata_settings_free(settings);
 }
 
 /// A lamp of 4 left of x = 3.5 over `u` in every channel.

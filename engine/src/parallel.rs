@@ -25,6 +25,15 @@ pub(crate) fn threads() -> usize {
     1
 }
 
+/// Whether this thread is running a task of a runner, whose nested loops
+/// run in order in the task.
+fn inside_a_task() -> bool {
+    #[cfg(feature = "std")]
+    return runner::inside();
+    #[cfg(not(feature = "std"))]
+    false
+}
+
 /// `f(index, item)` for every item on the runner set for this thread (or in
 /// a plain loop inside one of its tasks), collected in item order; `None`
 /// when there is no runner, and the caller's own loop runs.
@@ -95,32 +104,31 @@ pub(crate) fn for_each_chunk<T: Send>(
         .for_each(|(i, c)| f(i, c));
 }
 
-/// Like [`for_each_chunk`], with scratch made by `init` once per task.
+/// Like [`for_each_chunk`], with scratch made by `init` once per task (once
+/// for the whole loop inside a runner's task, where it runs in order).
 pub(crate) fn for_each_chunk_init<T: Send, S>(
     values: &mut [T],
     chunk: usize,
     init: impl Fn() -> S + Sync + Send,
     f: impl Fn(&mut S, usize, &mut [T]) + Sync + Send,
 ) {
-    if chunks_on_runner(values, chunk, &|i, c| f(&mut init(), i, c)).is_some() {
+    if !inside_a_task() && chunks_on_runner(values, chunk, &|i, c| f(&mut init(), i, c)).is_some() {
         return;
     }
     #[cfg(feature = "parallel")]
-    {
+    if !inside_a_task() {
         use rayon::prelude::*;
         values
             .par_chunks_mut(chunk)
             .enumerate()
             .for_each_init(init, |s, (i, c)| f(s, i, c));
+        return;
     }
-    #[cfg(not(feature = "parallel"))]
-    {
-        let mut scratch = init();
-        values
-            .chunks_mut(chunk)
-            .enumerate()
-            .for_each(|(i, c)| f(&mut scratch, i, c));
-    }
+    let mut scratch = init();
+    values
+        .chunks_mut(chunk)
+        .enumerate()
+        .for_each(|(i, c)| f(&mut scratch, i, c));
 }
 
 /// The sum of `f(index, chunk)` over the consecutive `chunk`-long pieces of
@@ -150,33 +158,33 @@ pub(crate) fn sum_chunks<T: Send, C: Default + Add<Output = C> + Send>(
         .fold(C::default(), |a, (i, c)| a + f(i, c))
 }
 
-/// Like [`sum_chunks`], with scratch made by `init` once per task.
+/// Like [`sum_chunks`], with scratch made by `init` once per task (once for
+/// the whole loop inside a runner's task, where it runs in order).
 pub(crate) fn sum_chunks_init<T: Send, S, C: Default + Add<Output = C> + Send>(
     values: &mut [T],
     chunk: usize,
     init: impl Fn() -> S + Sync + Send,
     f: impl Fn(&mut S, usize, &mut [T]) -> C + Sync + Send,
 ) -> C {
-    if let Some(sums) = chunks_on_runner(values, chunk, &|i, c| f(&mut init(), i, c)) {
+    if !inside_a_task()
+        && let Some(sums) = chunks_on_runner(values, chunk, &|i, c| f(&mut init(), i, c))
+    {
         return sums.into_iter().fold(C::default(), |a, b| a + b);
     }
     #[cfg(feature = "parallel")]
-    {
+    if !inside_a_task() {
         use rayon::prelude::*;
-        values
+        return values
             .par_chunks_mut(chunk)
             .enumerate()
             .map_init(init, |s, (i, c)| f(s, i, c))
-            .reduce(C::default, |a, b| a + b)
+            .reduce(C::default, |a, b| a + b);
     }
-    #[cfg(not(feature = "parallel"))]
-    {
-        let mut scratch = init();
-        values
-            .chunks_mut(chunk)
-            .enumerate()
-            .fold(C::default(), |a, (i, c)| a + f(&mut scratch, i, c))
-    }
+    let mut scratch = init();
+    values
+        .chunks_mut(chunk)
+        .enumerate()
+        .fold(C::default(), |a, (i, c)| a + f(&mut scratch, i, c))
 }
 
 /// `f(item)` for every item, collected in item order.
@@ -196,25 +204,25 @@ pub(crate) fn map_each<T: Send, U: Send>(
     items.iter_mut().map(f).collect()
 }
 
-/// Like [`map_each`], with scratch made by `init` once per task.
+/// Like [`map_each`], with scratch made by `init` once per task (once for
+/// the whole loop inside a runner's task, where it runs in order).
 pub(crate) fn map_each_init<T: Send, S, U: Send>(
     items: &mut [T],
     init: impl Fn() -> S + Sync + Send,
     f: impl Fn(&mut S, &mut T) -> U + Sync + Send,
 ) -> Vec<U> {
-    if let Some(out) = on_runner(items, &|_, item| f(&mut init(), item)) {
+    if !inside_a_task()
+        && let Some(out) = on_runner(items, &|_, item| f(&mut init(), item))
+    {
         return out;
     }
     #[cfg(feature = "parallel")]
-    {
+    if !inside_a_task() {
         use rayon::prelude::*;
-        items.par_iter_mut().map_init(init, f).collect()
+        return items.par_iter_mut().map_init(init, f).collect();
     }
-    #[cfg(not(feature = "parallel"))]
-    {
-        let mut scratch = init();
-        items.iter_mut().map(|item| f(&mut scratch, item)).collect()
-    }
+    let mut scratch = init();
+    items.iter_mut().map(|item| f(&mut scratch, item)).collect()
 }
 
 /// `[f(0), f(1), ..., f(n - 1)]`.
@@ -306,6 +314,11 @@ mod runner {
         LOOPS.with(|l| !matches!(*l.borrow(), Loops::Pool))
     }
 
+    /// Whether this thread is inside a runner's task.
+    pub(super) fn inside() -> bool {
+        LOOPS.with(|l| matches!(*l.borrow(), Loops::Inside))
+    }
+
     /// The runner's width; 1 inside one of its tasks; `None` without one.
     pub(super) fn width() -> Option<usize> {
         LOOPS.with(|l| match &*l.borrow() {
@@ -343,5 +356,55 @@ mod runner {
             out.expect("a TaskRunner returned before running every task")
         });
         Some(out.collect())
+    }
+}
+
+#[cfg(all(test, feature = "std"))]
+mod tests {
+    use super::*;
+    use alloc::sync::Arc;
+    use core::sync::atomic::{AtomicUsize, Ordering};
+
+    /// Runs tasks in order on the calling thread.
+    struct InOrder;
+
+    impl TaskRunner for InOrder {
+        fn run(&self, count: usize, task: &(dyn Fn(usize) + Sync)) {
+            (0..count).for_each(task);
+        }
+
+        fn width(&self) -> usize {
+            2
+        }
+    }
+
+    /// A runner's tasks get their own scratch; a loop nested in a task makes
+    /// one for all its items, and every loop's results are those of a plain
+    /// loop.
+    #[test]
+    fn scratch_is_made_once_per_task_and_once_for_a_nested_loop() {
+        let inits = AtomicUsize::new(0);
+        let init = || inits.fetch_add(1, Ordering::Relaxed);
+        let mut outer = [0u32; 3];
+        let nested = run_tasks_with(Arc::new(InOrder), || {
+            map_each_init(&mut outer, init, |_, _| {
+                let mut values = [1u32; 10];
+                let made = inits.load(Ordering::Relaxed);
+                let sum = sum_chunks_init(&mut values, 3, init, |_, i, c| {
+                    c.iter().sum::<u32>() + i as u32
+                });
+                let mut items = [0u32; 4];
+                for_each_chunk_init(&mut items, 1, init, |_, i, c| c[0] = i as u32);
+                let mapped = map_each_init(&mut items, init, |_, x| *x * 2);
+                (sum, mapped, inits.load(Ordering::Relaxed) - made)
+            })
+        });
+        for (sum, mapped, made) in nested {
+            // Ten ones, and the chunk indices 1, 2 and 3 (the first is 0).
+            assert_eq!(sum, 10 + 6);
+            assert_eq!(mapped, [0, 2, 4, 6]);
+            assert_eq!(made, 3, "one scratch for each nested loop");
+        }
+        assert_eq!(inits.load(Ordering::Relaxed), 3 + 3 * 3);
     }
 }

@@ -1,6 +1,7 @@
-//! Embree vs native (the eight-wide BVH) throughput and build time on the same
-//! scenes and the same rays, measured in one run, interleaved, medians of several
-//! repetitions; writes the ratios to a JSON file. Needs `--features embree`.
+//! Embree vs native (the eight-wide BVH) throughput, build time and memory on
+//! the same scenes and the same rays, measured in one run, interleaved,
+//! medians of several repetitions, on `--threads` threads (1 by default);
+//! writes the ratios to a JSON file. Needs `--features embree`.
 //!
 //! ```text
 //! cargo run --release -p strata-studies --features embree --bin backends -- --out out/bench/backends.json
@@ -30,6 +31,9 @@ struct Args {
     /// Interleaved repetitions.
     #[arg(long, default_value_t = 5)]
     repeats: usize,
+    /// Threads each measurement runs on, the rays and paths split among them.
+    #[arg(long, default_value_t = 1)]
+    threads: usize,
     /// JSON output.
     #[arg(long, default_value = "out/bench/backends.json")]
     out: PathBuf,
@@ -56,6 +60,22 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// interleaved by the caller.
 fn rate(seconds: &[f64], count: usize) -> f64 {
     count as f64 / median(seconds.to_vec())
+}
+
+/// The sum of `work(k, items)` over `threads` threads, thread `k` given
+/// its share `items` of `0..n`.
+fn on_threads(
+    threads: usize,
+    n: usize,
+    work: &(dyn Fn(usize, std::ops::Range<usize>) -> usize + Sync),
+) -> usize {
+    let threads = threads.max(1);
+    std::thread::scope(|scope| {
+        let parts: Vec<_> = (0..threads)
+            .map(|k| scope.spawn(move || work(k, k * n / threads..(k + 1) * n / threads)))
+            .collect();
+        parts.into_iter().map(|p| p.join().unwrap_or(0)).sum()
+    })
 }
 
 fn time(f: impl FnOnce() -> usize) -> f64 {
@@ -125,14 +145,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 ..*ray
             })
             .collect();
-        let closest =
-            |b: &dyn Intersector| rays.iter().filter(|r| b.closest_hit(r).is_some()).count();
-        let occluded = |b: &dyn Intersector| shadow.iter().filter(|r| b.occluded(r)).count();
-        let paths = |t: &dyn Fn(FilmPoint, &mut IndependentSampler) -> f32| {
-            let mut s = IndependentSampler::new(stream(6, Domain::User, 0));
-            let mut rng = stream(7, Domain::User, 0);
-            (0..args.paths)
-                .map(|_| {
+        let closest = |b: &(dyn Intersector + Sync)| {
+            on_threads(args.threads, rays.len(), &|_, part| {
+                rays[part]
+                    .iter()
+                    .filter(|r| b.closest_hit(r).is_some())
+                    .count()
+            })
+        };
+        let occluded = |b: &(dyn Intersector + Sync)| {
+            on_threads(args.threads, shadow.len(), &|_, part| {
+                shadow[part].iter().filter(|r| b.occluded(r)).count()
+            })
+        };
+        let paths = |t: &(dyn Fn(FilmPoint, &mut IndependentSampler) -> f32 + Sync)| {
+            on_threads(args.threads, args.paths, &|k, part| {
+                let mut s = IndependentSampler::new(stream(6, Domain::User, k as u64));
+                let mut rng = stream(7, Domain::User, k as u64);
+                part.map(|_| {
                     let p = FilmPoint {
                         x: uniform_f32(&mut rng) * r.width as f32,
                         y: uniform_f32(&mut rng) * r.height as f32,
@@ -140,6 +170,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     t(p, &mut s) as usize
                 })
                 .sum::<usize>()
+            })
         };
         let trace_native = |p, s: &mut IndependentSampler| {
             native
@@ -194,7 +225,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     std::fs::write(
         &args.out,
-        format!("{{\"threads\": 1, \"results\": [{}]}}\n", rows.join(", ")),
+        format!(
+            "{{\"threads\": {}, \"results\": [{}]}}\n",
+            args.threads,
+            rows.join(", ")
+        ),
     )?;
     println!("wrote {}", args.out.display());
     Ok(())

@@ -262,6 +262,8 @@ mod runner {
     pub trait TaskRunner {
         /// Calls `task(i)` exactly once for each `i` in `0..count`, in any
         /// order or interleaving, and returns when every call has returned.
+        /// (A runner that does not is harmless: a task called again or out
+        /// of range does nothing, and one not called runs after `run`.)
         fn run(&self, count: usize, task: &(dyn Fn(usize) + Sync));
 
         /// How many tasks it runs at once (a render's workers, for its
@@ -343,17 +345,21 @@ mod runner {
         };
         let cells: Vec<Mutex<(&mut T, Option<U>)>> =
             items.iter_mut().map(|x| Mutex::new((x, None))).collect();
-        {
-            let _restore = Restore::set(Loops::Inside);
-            runner.run(cells.len(), &|i| {
-                let mut cell = cells[i].lock().unwrap_or_else(PoisonError::into_inner);
-                let (item, out) = &mut *cell;
+        let _restore = Restore::set(Loops::Inside);
+        runner.run(cells.len(), &|i| {
+            // A runner that breaks its contract changes nothing: an index
+            // out of range, or a task run again, is ignored.
+            let Some(cell) = cells.get(i) else { return };
+            let mut cell = cell.lock().unwrap_or_else(PoisonError::into_inner);
+            let (item, out) = &mut *cell;
+            if out.is_none() {
                 *out = Some(f(i, item));
-            });
-        }
-        let out = cells.into_iter().map(|cell| {
-            let (_, out) = cell.into_inner().unwrap_or_else(PoisonError::into_inner);
-            out.expect("a TaskRunner returned before running every task")
+            }
+        });
+        // And the tasks it did not run are run here.
+        let out = cells.into_iter().enumerate().map(|(i, cell)| {
+            let (item, out) = cell.into_inner().unwrap_or_else(PoisonError::into_inner);
+            out.unwrap_or_else(|| f(i, item))
         });
         Some(out.collect())
     }

@@ -89,6 +89,39 @@ fn a_task_runner_that_reorders_the_tasks_gives_the_same_image() {
     }
 }
 
+/// A runner that breaks its contract: it skips every third task, runs the
+/// first twice and calls an index out of range.
+struct Careless;
+
+impl TaskRunner for Careless {
+    fn run(&self, count: usize, task: &(dyn Fn(usize) + Sync)) {
+        (0..count).filter(|i| i % 3 != 1).for_each(task);
+        if count > 0 {
+            task(0);
+        }
+        task(count);
+    }
+
+    fn width(&self) -> usize {
+        2
+    }
+}
+
+#[test]
+fn a_task_runner_that_skips_repeats_or_oversteps_tasks_gives_the_same_image() {
+    let image = ProceduralImage::showcase(Resolution::new(40, 30));
+    for method in methods() {
+        let name = method.name();
+        let s = settings(5, 100_000, &method);
+        let pool = in_pool(2, || render(&image, &MaxChannel, &s, &Silent).unwrap());
+        let ran = run_tasks_with(std::sync::Arc::new(Careless), || {
+            render(&image, &MaxChannel, &s, &Silent).unwrap()
+        });
+        assert_eq!(bits(&pool.film), bits(&ran.film), "{name}");
+        assert_eq!(pool.stats, ran.stats, "{name}");
+    }
+}
+
 /// Bright and valid on the left half; on the right half NaN, infinite or
 /// negative radiance for one path in four.
 fn poisoned() -> impl PathOracle<Radiance = Rgb> {

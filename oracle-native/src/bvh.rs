@@ -64,14 +64,7 @@ impl BvhIntersector {
         let mut ordered = Vec::with_capacity(triangles.len());
         let mut given = Vec::with_capacity(triangles.len());
         for (chunk, part) in triangles.chunks(size).enumerate() {
-            let tris: Vec<Triangle> = part
-                .iter()
-                .map(|t| Triangle {
-                    v0: t[0].into(),
-                    v1: t[1].into(),
-                    v2: t[2].into(),
-                })
-                .collect();
+            let tris: Vec<Triangle> = part.iter().map(obvhs_triangle).collect();
             let bvh = build_bvh2_from_tris(&tris, params, &mut Duration::default());
             trees.push(Wide::collapse(&bvh, ordered.len()));
             for &i in &bvh.primitive_indices {
@@ -244,6 +237,15 @@ impl Intersector for BvhIntersector {
     }
 }
 
+/// A triangle as obvhs builds over it.
+fn obvhs_triangle(t: &[Vec3; 3]) -> Triangle {
+    Triangle {
+        v0: t[0].into(),
+        v1: t[1].into(),
+        v2: t[2].into(),
+    }
+}
+
 /// Barycentric weights `(u, v)` of vertices 1 and 2 for the point of
 /// triangle `t` closest to `p` (Ericson, Real-Time Collision Detection 5.1.5).
 fn closest_barycentrics(p: Vec3, t: &[Vec3; 3]) -> glam::Vec2 {
@@ -355,14 +357,7 @@ mod tests {
         use obvhs::ray::RayHit;
         let (tris, rays) = sheet_and_rays();
         let bvh = BvhIntersector::new(&tris);
-        let obvhs_tris: Vec<Triangle> = tris
-            .iter()
-            .map(|t| Triangle {
-                v0: t[0].into(),
-                v1: t[1].into(),
-                v2: t[2].into(),
-            })
-            .collect();
+        let obvhs_tris: Vec<Triangle> = tris.iter().map(obvhs_triangle).collect();
         let cw = build_cwbvh_from_tris(
             &obvhs_tris,
             BvhBuildParams::medium_build(),

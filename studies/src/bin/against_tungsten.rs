@@ -41,7 +41,7 @@ struct Args {
     /// Scenes: `cornell`, `caustic`.
     #[arg(long, value_delimiter = ',', default_value = "cornell,caustic")]
     scenes: Vec<String>,
-    /// Renders of each renderer per scene (seeds 1, 2, ...).
+    /// Renders of each renderer per scene (seeds 1, 2, ...; at least 4).
     #[arg(long, default_value_t = 16)]
     runs: u64,
     /// Where the images and the summary go.
@@ -62,6 +62,11 @@ struct Runs {
 
 fn main() -> AnyResult<()> {
     let args = Args::parse();
+    if args.runs < 4 {
+        // With two runs both deviate equally from their mean: the standard
+        // errors below would read 0.
+        return Err("--runs must be at least 4".into());
+    }
     std::fs::create_dir_all(&args.out)?;
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let mut csv = String::from(
@@ -112,30 +117,19 @@ fn main() -> AnyResult<()> {
         for (renderer, runs, m) in [("strata", &ours, &m_ours), ("Tungsten", &theirs, &m_theirs)] {
             let (v, se, rel) = variance(&runs.films, m, &pooled);
             let seconds = runs.seconds.iter().sum::<f64>() / runs.seconds.len() as f64;
-            let per_path = SPP as f64;
-            let means = [0, 1, 2].map(|c| m.channel_mean(c));
+            // Per path: a pixel's variance times the paths it averaged.
+            let [v_path, se_path, rel_path] = [v, se, rel].map(|x| x * SPP as f64);
+            let [r, g, b] = [0, 1, 2].map(|c| m.channel_mean(c));
             println!(
-                "  {renderer:<9} {seconds:6.2}  {:.4e} ({:.1e})  {:.4e}          {:.4} {:.4} {:.4}",
-                v * per_path,
-                se * per_path,
-                rel * per_path,
-                means[0],
-                means[1],
-                means[2]
+                "  {renderer:<9} {seconds:6.2}  {v_path:.4e} ({se_path:.1e})  {rel_path:.4e}          {r:.4} {g:.4} {b:.4}"
             );
             csv += &format!(
-                "{name},{renderer},{seconds:.4},{:.6e},{:.3e},{:.6e},{:.6},{:.6},{:.6}\n",
-                v * per_path,
-                se * per_path,
-                rel * per_path,
-                means[0],
-                means[1],
-                means[2]
+                "{name},{renderer},{seconds:.4},{v_path:.6e},{se_path:.3e},{rel_path:.6e},{r:.6},{g:.6},{b:.6}\n"
             );
             let mean_file = args.out.join(format!("{name}-{renderer}-mean.exr"));
             strata::io::write_exr(m, &mean_file)?;
             strata::io::write_png(m, 0.0, mean_file.with_extension("png"))?;
-            rows.push((v, se, seconds, means, runs));
+            rows.push((v, se, seconds, [r, g, b], runs));
         }
         let [
             (v_s, se_s, t_s, mean_s, ours),

@@ -1,37 +1,41 @@
 //! The default ray backend: an eight-wide BVH of our own (`bvh/wide.rs`)
 //! over obvhs's binary tree, its node test in AVX2 where the processor has
-//! it (`bvh/avx2.rs`: the same hits as the portable test, bit for bit).
+//! it (`bvh/avx2.rs`: the same hits as the portable test, bit for bit), its
+//! leaves' triangles tested four at a time (`bvh/leaf.rs`).
 //!
 //! obvhs reorders primitives while building; the triangles are stored in the
-//! tree's order once at build time, in obvhs' intersection layout for the
-//! inner loop and as their original vertices and index for the closest hit's
-//! barycentrics, so neither needs an indirection (through obvhs' index they
-//! cost 5-8 % of the closest-hit rate on a 1M-triangle mesh).
+//! tree's order once at build time, in blocks of four for the inner loop and
+//! as their original vertices and index for the closest hit's barycentrics,
+//! so neither needs an indirection (through obvhs' index they cost 5-8 % of
+//! the closest-hit rate on a 1M-triangle mesh).
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+mod leaf;
 mod wide;
 
 use std::time::Duration;
 
-use glam::{Vec3, Vec3A};
+use glam::{Vec3, Vec3A, Vec4};
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
-use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
 
 use crate::geometry::{Hit, Intersector, Ray, intersect_triangle};
+use leaf::{Block, LANES, Ray4};
 use wide::{Node, Query, Wide};
 
 /// An eight-wide BVH over a triangle list.
 pub struct BvhIntersector {
     /// One tree for every [`wide::MAX_TRIANGLES`] triangles (none for an
-    /// empty scene), each over its own run of the order below.
+    /// empty scene), each over its own run of the blocks below.
     trees: Vec<Wide>,
-    /// Triangles in the tree's order, in obvhs' intersection layout.
-    ordered: Vec<RtTriangle>,
-    /// Triangles in the tree's order as given: for the closest hit's index
-    /// and barycentrics.
+    /// The triangles in the trees' order, four to a block (the last of a
+    /// leaf's blocks may have empty lanes).
+    blocks: Vec<Block>,
+    /// The same triangles as given, a slot per lane of the blocks (an empty
+    /// lane's is [`Given::EMPTY`]): for the closest hit's index and
+    /// barycentrics.
     given: Vec<Given>,
     /// Whether the processor has AVX2, for the node test of `bvh/avx2.rs`.
     avx2: bool,
@@ -43,6 +47,14 @@ struct Given {
     index: u32,
 }
 
+impl Given {
+    /// The slot of an empty lane, which no ray hits.
+    const EMPTY: Given = Given {
+        vertices: [Vec3::NAN; 3],
+        index: u32::MAX,
+    };
+}
+
 impl BvhIntersector {
     /// Builds over `triangles` (an empty list gives an intersector that never hits).
     pub fn new(triangles: &[[Vec3; 3]]) -> Self {
@@ -52,33 +64,40 @@ impl BvhIntersector {
     /// Builds a tree over every `size` triangles of `triangles`.
     fn in_trees_of(triangles: &[[Vec3; 3]], size: usize) -> Self {
         let params = BvhBuildParams {
-            max_prims_per_leaf: wide::LEAF_SIZE,
-            // Leaves collapsed as SAH counts a node visit against a triangle
-            // test (1, not obvhs's 3): smaller leaves; paths a second 4-10 %
-            // higher on the built-in scenes and veach-ajar than with 3
-            // (docs/BENCHMARKS.md, "Against Embree").
-            collapse_traversal_cost: 1.0,
+            // Leaves of one triangle: the wide tree (`Wide::collapse`)
+            // chooses its own leaves, of up to four blocks.
+            max_prims_per_leaf: 1,
+            // No second pass of reinsertion: with no collapse between, it
+            // costs as much as the first (the 1M-triangle mesh built in
+            // 1.3x the time) and paths a second gained nothing measurable.
+            post_collapse_reinsertion_batch_ratio_multiplier: 0.0,
             ..BvhBuildParams::medium_build()
         };
-        let mut trees = Vec::new();
-        let mut ordered = Vec::with_capacity(triangles.len());
-        let mut given = Vec::with_capacity(triangles.len());
+        let (mut trees, mut blocks, mut given) = (Vec::new(), Vec::new(), Vec::new());
         for (chunk, part) in triangles.chunks(size).enumerate() {
             let tris: Vec<Triangle> = part.iter().map(obvhs_triangle).collect();
             let bvh = build_bvh2_from_tris(&tris, params, &mut Duration::default());
-            trees.push(Wide::collapse(&bvh, ordered.len()));
-            for &i in &bvh.primitive_indices {
-                ordered.push(RtTriangle::from(&tris[i as usize]));
-                let index = chunk * size + i as usize;
-                given.push(Given {
-                    vertices: triangles[index],
-                    index: index as u32,
+            let (tree, lanes) = Wide::collapse(&bvh, blocks.len());
+            trees.push(tree);
+            blocks.reserve(lanes.len());
+            given.reserve(lanes.len() * LANES);
+            for lanes in lanes {
+                // Each lane's triangle, as given (its index) and in obvhs's form.
+                let lanes = lanes.map(|i| {
+                    (i != wide::NO_TRIANGLE).then(|| (chunk * size + i as usize, i as usize))
                 });
+                blocks.push(Block::new(lanes.map(|t| t.map(|(_, i)| (&tris[i]).into()))));
+                given.extend(lanes.map(|t| {
+                    t.map_or(Given::EMPTY, |(index, _)| Given {
+                        vertices: triangles[index],
+                        index: index as u32,
+                    })
+                }));
             }
         }
         Self {
             trees,
-            ordered,
+            blocks,
             given,
             #[cfg(target_arch = "x86_64")]
             avx2: std::is_x86_feature_detected!("avx2"),
@@ -109,23 +128,26 @@ impl BvhIntersector {
         found: &mut Option<usize>,
         enter: impl Fn(&Node, &Query, f32) -> (u32, [f32; 8]),
     ) -> f32 {
-        let hit = |first: usize, count: usize, t_max: f32| {
-            let mut r = *ray;
-            r.tmax = t_max;
+        let ray4 = Ray4::new(ray);
+        let hit = |first: usize, count: usize, mut t_max: f32| {
             let mut closer = None;
-            for (i, triangle) in self.ordered[first..first + count].iter().enumerate() {
-                let t = triangle.intersect(&r);
-                // Of triangles hit at the very same distance (a shared
-                // edge), the first given: the same whatever the order the
-                // traversal met them in.
-                let better = t < r.tmax
-                    || (t == r.tmax
-                        && found
-                            .is_some_and(|f| self.given[first + i].index < self.given[f].index));
-                if better && t > r.tmin {
-                    r.tmax = t;
-                    closer = Some(t);
-                    *found = Some(first + i);
+            for b in first..first + count {
+                let (mut lanes, t) = self.blocks[b].intersect(&ray4, t_max);
+                while lanes != 0 {
+                    let lane = lanes.trailing_zeros() as usize;
+                    lanes &= lanes - 1;
+                    let (t, slot) = (t[lane], b * LANES + lane);
+                    // Of triangles hit at the very same distance (a shared
+                    // edge), the first given: the same whatever the order the
+                    // traversal met them in.
+                    let better = t < t_max
+                        || (t == t_max
+                            && found.is_some_and(|f| self.given[slot].index < self.given[f].index));
+                    if better && t > ray.tmin {
+                        t_max = t;
+                        closer = Some(t);
+                        *found = Some(slot);
+                    }
                 }
             }
             closer
@@ -141,10 +163,12 @@ impl BvhIntersector {
         ray: &obvhs::ray::Ray,
         enter: impl Fn(&Node, &Query, f32) -> (u32, [f32; 8]),
     ) -> bool {
+        let ray4 = Ray4::new(ray);
+        let (t_min, t_max) = (Vec4::splat(ray.tmin), Vec4::splat(ray.tmax));
         let hit = |first: usize, count: usize| {
-            self.ordered[first..first + count].iter().any(|triangle| {
-                let t = triangle.intersect(ray);
-                t < ray.tmax && t > ray.tmin
+            self.blocks[first..first + count].iter().any(|block| {
+                let (lanes, t) = block.intersect(&ray4, ray.tmax);
+                lanes & (t.cmpgt(t_min) & t.cmplt(t_max)).bitmask() != 0
             })
         };
         tree.any(&Query::new(ray), ray.tmax, enter, hit)
@@ -176,7 +200,7 @@ impl BvhIntersector {
         self.any_with(tree, ray, |n, q, t| unsafe { avx2::enter(n, q, t) })
     }
 
-    /// The closest hit: in the intersector's order, and its distance.
+    /// The closest hit: its slot in [`Self::given`], and its distance.
     fn closest(&self, ray: &obvhs::ray::Ray) -> Option<(usize, f32)> {
         let (mut found, mut t) = (None, ray.tmax);
         for tree in &self.trees {
@@ -285,6 +309,7 @@ fn closest_barycentrics(p: Vec3, t: &[Vec3; 3]) -> glam::Vec2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use obvhs::rt_triangle::RtTriangle;
 
     /// A bumpy sheet of small triangles, and rays from all around it (each
     /// with its own `t_max`).
@@ -469,6 +494,7 @@ mod tests {
 #[cfg(test)]
 mod scene_rays {
     use super::*;
+    use obvhs::rt_triangle::RtTriangle;
     use strata_engine::Resolution;
 
     /// Rays leaving the surfaces of three built-in scenes (1e-4 off a

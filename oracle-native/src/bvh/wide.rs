@@ -1,9 +1,13 @@
-//! An eight-wide BVH of our own: obvhs's binary tree (PLOC with
-//! reinsertion, leaves of at most four triangles) collapsed into nodes of
-//! eight children whose float bounds lie in SIMD lanes, as Wald, Benthin
-//! and Boulos (2008) and Embree's BVH8 lay them out; the children a ray
-//! enters are visited nearest first, farther ones kept on a stack with
-//! their entry distance so that those beyond a closer hit are dropped.
+//! An eight-wide BVH of our own, over obvhs's binary tree (PLOC with
+//! reinsertion, a triangle a leaf): the wide tree of least cost by the
+//! surface area heuristic that the binary one holds, found by dynamic
+//! programming as Ylitie, Karras and Laine (2017) find their compressed
+//! wide trees ([`Plan`]), with leaves of up to four blocks of four
+//! triangles (`leaf.rs`). A node's eight children have their float bounds
+//! in SIMD lanes, as Wald, Benthin and Boulos (2008) and Embree's BVH8 lay
+//! them out; the children a ray enters are visited nearest first, farther
+//! ones kept on a stack with their entry distance so that those beyond a
+//! closer hit are dropped.
 //!
 //! The node test is written once over eight lanes ([`enter`]) and once in
 //! AVX2 (`avx2.rs`), with the same operations in the same order (a
@@ -15,16 +19,20 @@ use core::mem::MaybeUninit;
 use glam::Vec3A;
 use obvhs::bvh2::Bvh2;
 
+use super::leaf::LANES;
+
 /// A child slot that holds nothing.
 const EMPTY: u32 = u32::MAX;
-/// A child slot that holds a leaf: this bit, the triangle count less one in
-/// the next two bits, the first triangle (of the tree's own) in the rest.
+/// A child slot that holds a leaf: this bit, its count of blocks of
+/// [`LANES`] triangles less one in the next two bits, its first block (of
+/// the tree's own) in the rest.
 const LEAF: u32 = 1 << 31;
 const COUNT_SHIFT: u32 = 29;
 const FIRST_MASK: u32 = (1 << COUNT_SHIFT) - 1;
 
-/// The most triangles one tree holds (2^29: what a leaf's first index
-/// encodes); larger scenes are split into several trees.
+/// The most triangles one tree holds (2^29: the most blocks a leaf's first
+/// index encodes, each of at least one triangle); larger scenes are split
+/// into several trees.
 pub(super) const MAX_TRIANGLES: usize = 1 << COUNT_SHIFT;
 
 /// The factor a child's exit distance is widened by before it is compared
@@ -41,9 +49,11 @@ pub(super) const WIDEN: f32 = 1.0 + 1.0 / (1 << 20) as f32;
 /// 1M triangles or more, 18 levels and deeper).
 const INLINE_STACK: usize = 256;
 
-/// The most triangles a leaf holds (the binary tree's leaves are collapsed
-/// to at most four, what the encoding holds).
-pub(super) const LEAF_SIZE: u32 = 4;
+/// The most blocks a leaf holds (what its two bits of count encode).
+const LEAF_BLOCKS: usize = 4;
+
+/// The most triangles a leaf holds.
+const LEAF_SIZE: u32 = (LEAF_BLOCKS * LANES) as u32;
 
 /// Eight children: their bounds, axis by axis, and what each holds.
 #[derive(Clone, Copy, Debug)]
@@ -105,31 +115,185 @@ pub(super) fn enter(node: &Node, query: &Query, t_max: f32) -> (u32, [f32; 8]) {
     (mask, entry)
 }
 
-/// The tree: its nodes, the root first, over triangles in the order of the
-/// binary tree's primitive indices, from `base` on in the intersector's.
+/// The tree: its nodes, the root first, over blocks of triangles from
+/// `base` on in the intersector's list.
 pub(super) struct Wide {
     nodes: Vec<Node>,
-    /// Where the tree's triangles start in the intersector's order.
+    /// Where the tree's blocks start in the intersector's list.
     base: usize,
     /// The deepest path from the root, in nodes: the traversal's stack
     /// holds at most seven children a level.
     depth: usize,
 }
 
-/// A leaf's triangles: `first..first + count` of the tree's order.
+/// A leaf's blocks: `first..first + count` of the tree's.
 fn leaf(child: u32) -> (usize, usize) {
     let first = (child & FIRST_MASK) as usize;
     let count = ((child & !LEAF) >> COUNT_SHIFT) as usize + 1;
     (first, count)
 }
 
+/// The costs the surface area heuristic weighs a wide tree's shape by: an
+/// eight-wide node test, and a test of a block of [`LANES`] triangles (as
+/// much: paths a second changed by under 3 % on every scene from 0.75 to 3).
+const NODE_COST: f32 = 1.0;
+const BLOCK_COST: f32 = 1.0;
+
+/// What the best way to hold a binary node's subtree in `i + 1` slots of a
+/// wide node is (its entry `i` of [`Plan::choice`]).
+const AS_LEAF: u8 = 0;
+const AS_NODE: u8 = 1;
+/// In `i` slots (`i + 1 > 1`): as it is held in one slot fewer.
+const IN_FEWER: u8 = 2;
+/// In `i + 1 > 1` slots: its left child's subtree in `k` of them, its
+/// right's in the rest, for `SPLIT + k`.
+const SPLIT: u8 = 16;
+
+/// The cheapest wide tree over a binary one, by dynamic programming over
+/// the binary tree (Ylitie, Karras and Laine 2017, Section 4.1: the cost of
+/// each subtree held in one to eight slots of a wide node).
+struct Plan {
+    /// For each binary node and `i` in `0..8`: the least cost of its subtree
+    /// held in at most `i + 1` slots, and how.
+    cost: Vec<[f32; 8]>,
+    choice: Vec<[u8; 8]>,
+    /// For each binary node held as a wide node of its own: how many of the
+    /// eight slots its left child's subtree takes.
+    left_slots: Vec<u8>,
+}
+
+impl Plan {
+    fn new(bvh: &Bvh2) -> Self {
+        let n = bvh.nodes.len();
+        let mut plan = Plan {
+            cost: vec![[0.0; 8]; n],
+            choice: vec![[AS_LEAF; 8]; n],
+            left_slots: vec![0; n],
+        };
+        let mut count = vec![0u32; n];
+        let leaf_cost = |area: f32, count: u32| {
+            if count <= LEAF_SIZE {
+                area * BLOCK_COST * count.div_ceil(LANES as u32) as f32
+            } else {
+                f32::INFINITY
+            }
+        };
+        // Children before their parents: the reverse of a pre-order.
+        let mut order = Vec::with_capacity(n);
+        let mut todo = vec![0u32];
+        while let Some(i) = todo.pop() {
+            order.push(i);
+            let node = &bvh.nodes[i as usize];
+            if !node.is_leaf() {
+                todo.extend([node.first_index, node.first_index + 1]);
+            }
+        }
+        for &i in order.iter().rev() {
+            let i = i as usize;
+            let node = &bvh.nodes[i];
+            let area = node.aabb.half_area();
+            if node.is_leaf() {
+                count[i] = node.prim_count;
+                plan.cost[i] = [leaf_cost(area, count[i]); 8];
+                continue;
+            }
+            let (l, r) = (node.first_index as usize, node.first_index as usize + 1);
+            count[i] = count[l] + count[r];
+            // The two subtrees spread over 2 to 8 slots, the left one's
+            // share of the cheapest.
+            let (left, right) = (plan.cost[l], plan.cost[r]);
+            let mut spread = [(f32::INFINITY, 0u8); 9];
+            for (slots, best) in spread.iter_mut().enumerate().skip(2) {
+                for k in 1..slots {
+                    let cost = left[k - 1] + right[slots - k - 1];
+                    if cost < best.0 {
+                        *best = (cost, k as u8);
+                    }
+                }
+            }
+            plan.left_slots[i] = spread[8].1;
+            let as_leaf = leaf_cost(area, count[i]);
+            let as_node = area * NODE_COST + spread[8].0;
+            let (cost, choice) = (&mut plan.cost[i], &mut plan.choice[i]);
+            (cost[0], choice[0]) = if as_leaf <= as_node {
+                (as_leaf, AS_LEAF)
+            } else {
+                (as_node, AS_NODE)
+            };
+            for slots in 2..=8 {
+                let (spread, k) = spread[slots];
+                (cost[slots - 1], choice[slots - 1]) = if spread < cost[slots - 2] {
+                    (spread, SPLIT + k)
+                } else {
+                    (cost[slots - 2], IN_FEWER)
+                };
+            }
+        }
+        plan
+    }
+
+    /// The binary nodes that take the slots a wide node made of binary
+    /// node `i` has.
+    fn children(&self, bvh: &Bvh2, i: usize) -> Vec<usize> {
+        let mut children = Vec::with_capacity(8);
+        let node = &bvh.nodes[i];
+        if node.is_leaf() || self.choice[i][0] == AS_LEAF {
+            children.push(i);
+        } else {
+            let k = self.left_slots[i] as usize;
+            self.held_in(bvh, node.first_index as usize, k, &mut children);
+            self.held_in(bvh, node.first_index as usize + 1, 8 - k, &mut children);
+        }
+        children
+    }
+
+    /// Adds the binary nodes that hold `i`'s subtree in `slots` slots.
+    fn held_in(&self, bvh: &Bvh2, i: usize, slots: usize, out: &mut Vec<usize>) {
+        match self.choice[i][slots - 1] {
+            IN_FEWER => self.held_in(bvh, i, slots - 1, out),
+            c if c >= SPLIT && slots > 1 && !bvh.nodes[i].is_leaf() => {
+                let (k, first) = ((c - SPLIT) as usize, bvh.nodes[i].first_index as usize);
+                self.held_in(bvh, first, k, out);
+                self.held_in(bvh, first + 1, slots - k, out);
+            }
+            _ => out.push(i),
+        }
+    }
+
+    /// Whether binary node `i`, in a slot of its own, is a leaf.
+    fn is_leaf(&self, bvh: &Bvh2, i: usize) -> bool {
+        bvh.nodes[i].is_leaf() || self.choice[i][0] == AS_LEAF
+    }
+}
+
+/// The primitives of binary node `i`'s subtree, into `out` (`todo`: room
+/// for the walk).
+fn primitives(bvh: &Bvh2, i: usize, todo: &mut Vec<usize>, out: &mut Vec<u32>) {
+    todo.push(i);
+    while let Some(i) = todo.pop() {
+        let node = &bvh.nodes[i];
+        if node.is_leaf() {
+            let first = node.first_index as usize;
+            out.extend_from_slice(&bvh.primitive_indices[first..first + node.prim_count as usize]);
+        } else {
+            todo.extend([node.first_index as usize + 1, node.first_index as usize]);
+        }
+    }
+}
+
+/// A lane of a block without a triangle.
+pub(super) const NO_TRIANGLE: u32 = u32::MAX;
+
 impl Wide {
-    /// The binary tree `bvh` (leaves of at most [`LEAF_SIZE`] primitives,
-    /// at most [`MAX_TRIANGLES`] of them) collapsed: each node takes its children's
-    /// children, the largest in surface area first, until it has eight
-    /// or only leaves (Wald et al. 2008's collapse).
-    /// Its triangles start at `base` of the intersector's order.
-    pub(super) fn collapse(bvh: &Bvh2, base: usize) -> Self {
+    /// The wide tree of least cost by the surface area heuristic over the
+    /// binary tree `bvh` (of at most [`MAX_TRIANGLES`] primitives), chosen
+    /// by [`Plan`]: each wide node's children are binary nodes below it,
+    /// a leaf holding every primitive of its binary subtree (at most
+    /// [`LEAF_SIZE`]).
+    /// Its blocks start at `base` of the intersector's list; it returns
+    /// them, each as the primitives of `bvh` in its lanes (or
+    /// [`NO_TRIANGLE`]).
+    pub(super) fn collapse(bvh: &Bvh2, base: usize) -> (Self, Vec<[u32; LANES]>) {
         let empty = Node {
             bounds: [
                 [f32::INFINITY; 8],
@@ -141,35 +305,15 @@ impl Wide {
             ],
             child: [EMPTY; 8],
         };
+        let plan = Plan::new(bvh);
         let mut nodes = vec![empty];
+        let (mut blocks, mut primitives_of, mut walk) = (Vec::new(), Vec::new(), Vec::new());
         let mut depth = 1;
         // (the binary node a wide node is made from, the wide node, its depth)
         let mut todo = vec![(0usize, 0usize, 1usize)];
         while let Some((binary, wide, level)) = todo.pop() {
             depth = depth.max(level);
-            let root = &bvh.nodes[binary];
-            let mut children = if root.is_leaf() {
-                vec![binary]
-            } else {
-                let first = root.first_index as usize;
-                vec![first, first + 1]
-            };
-            while children.len() < 8 {
-                let widest = children
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, c)| !bvh.nodes[**c].is_leaf())
-                    .max_by(|a, b| {
-                        let area = |i: &usize| bvh.nodes[*i].aabb.half_area();
-                        area(a.1).total_cmp(&area(b.1))
-                    })
-                    .map(|(slot, _)| slot);
-                let Some(slot) = widest else { break };
-                let first = bvh.nodes[children[slot]].first_index as usize;
-                children[slot] = first;
-                children.push(first + 1);
-            }
-            for (lane, &c) in children.iter().enumerate() {
+            for (lane, c) in plan.children(bvh, binary).into_iter().enumerate() {
                 let node = &bvh.nodes[c];
                 let (lo, hi) = (node.aabb.min, node.aabb.max);
                 let bounds = &mut nodes[wide].bounds;
@@ -177,9 +321,19 @@ impl Wide {
                     bounds[2 * axis][lane] = lo[axis];
                     bounds[2 * axis + 1][lane] = hi[axis];
                 }
-                nodes[wide].child[lane] = if node.is_leaf() {
-                    debug_assert!(node.prim_count <= LEAF_SIZE && node.first_index <= FIRST_MASK);
-                    LEAF | ((node.prim_count - 1) << COUNT_SHIFT) | node.first_index
+                nodes[wide].child[lane] = if plan.is_leaf(bvh, c) {
+                    primitives_of.clear();
+                    primitives(bvh, c, &mut walk, &mut primitives_of);
+                    debug_assert!(primitives_of.len() <= LEAF_SIZE as usize);
+                    let first = blocks.len() as u32;
+                    debug_assert!(first <= FIRST_MASK);
+                    for lanes in primitives_of.chunks(LANES) {
+                        blocks.push(core::array::from_fn(|l| {
+                            lanes.get(l).copied().unwrap_or(NO_TRIANGLE)
+                        }));
+                    }
+                    let size = blocks.len() as u32 - first;
+                    LEAF | ((size - 1) << COUNT_SHIFT) | first
                 } else {
                     nodes.push(empty);
                     let index = nodes.len() - 1;
@@ -188,7 +342,7 @@ impl Wide {
                 };
             }
         }
-        Wide { nodes, base, depth }
+        (Wide { nodes, base, depth }, blocks)
     }
 
     /// Room for the traversal's stack.
@@ -196,9 +350,10 @@ impl Wide {
         7 * self.depth + 1
     }
 
-    /// The closest of the triangles `hit(first, count, t_max)` finds
-    /// along the ray (which returns the nearest it hits closer than
-    /// `t_max`), children found by `enter`.
+    /// The closest of the triangles `hit(first, count, t_max)` finds in
+    /// the blocks `first..first + count` of the intersector's list (it
+    /// returns the nearest it hits closer than `t_max`), children found
+    /// by `enter`.
     #[inline(always)]
     pub(super) fn closest(
         &self,
@@ -271,8 +426,9 @@ impl Wide {
         }
     }
 
-    /// Whether `hit(first, count, t_max)` finds any triangle along the ray
-    /// (it returns whether one of its triangles is hit).
+    /// Whether `hit(first, count)` finds any triangle along the ray (it
+    /// returns whether one of the blocks `first..first + count` of the
+    /// intersector's list is hit).
     #[inline(always)]
     pub(super) fn any(
         &self,
@@ -313,5 +469,92 @@ impl Wide {
             }
         }
         false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use obvhs::BvhBuildParams;
+    use obvhs::bvh2::builder::build_bvh2_from_tris;
+    use obvhs::triangle::Triangle;
+
+    /// Small triangles scattered in a box, with a few long slivers across
+    /// it (so that some subtrees are cheaper as leaves and some as nodes).
+    fn binary_tree() -> Bvh2 {
+        let mut state = 7u64;
+        let mut rnd = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let triangles: Vec<Triangle> = (0..3000)
+            .map(|k| {
+                let size = if k % 100 == 0 { 3.0 } else { 0.05 };
+                let p = Vec3A::new(rnd(), rnd(), rnd()) * 4.0;
+                let mut corner = || p + Vec3A::new(rnd(), rnd(), rnd()) * size;
+                Triangle {
+                    v0: p,
+                    v1: corner(),
+                    v2: corner(),
+                }
+            })
+            .collect();
+        let params = BvhBuildParams {
+            max_prims_per_leaf: 1,
+            ..BvhBuildParams::medium_build()
+        };
+        build_bvh2_from_tris(&triangles, params, &mut core::time::Duration::default())
+    }
+
+    /// The tree built holds every triangle once, in leaves of at most
+    /// [`LEAF_SIZE`], and costs what [`Plan`] found least: its nodes'
+    /// and leaves' areas, weighed by the heuristic's costs, add up to the
+    /// plan's cost of the root (rounding aside).
+    #[test]
+    fn the_tree_holds_every_triangle_once_at_the_plans_cost() {
+        let bvh = binary_tree();
+        let plan = Plan::new(&bvh);
+        let (tree, blocks) = Wide::collapse(&bvh, 0);
+        let mut held: Vec<u32> = blocks
+            .iter()
+            .flatten()
+            .copied()
+            .filter(|&t| t != NO_TRIANGLE)
+            .collect();
+        held.sort_unstable();
+        assert_eq!(held, (0..3000).collect::<Vec<u32>>());
+        let half_area = |node: &Node, lane: usize| {
+            let d = [0, 1, 2].map(|a| node.bounds[2 * a + 1][lane] - node.bounds[2 * a][lane]);
+            ((d[0] + d[1]) * d[2] + d[0] * d[1]) as f64
+        };
+        let mut cost = bvh.nodes[0].aabb.half_area() as f64 * NODE_COST as f64;
+        let (mut leaves, mut inner) = (0, 0);
+        for node in &tree.nodes {
+            for (lane, &child) in node.child.iter().enumerate() {
+                if child == EMPTY {
+                    continue;
+                }
+                let weight = if child & LEAF != 0 {
+                    let (_, count) = leaf(child);
+                    leaves += 1;
+                    count as f32 * BLOCK_COST
+                } else {
+                    inner += 1;
+                    NODE_COST
+                };
+                cost += half_area(node, lane) * weight as f64;
+            }
+        }
+        let planned = plan.cost[0][0] as f64;
+        assert!(
+            (cost - planned).abs() < 1e-4 * planned,
+            "{cost} against {planned}"
+        );
+        // Both kinds of children are common, and nodes are nearly full.
+        assert_eq!(inner + 1, tree.nodes.len());
+        assert!(leaves > 200 && inner > 20, "{leaves} leaves, {inner} nodes");
+        assert!(leaves + inner > 6 * tree.nodes.len(), "{leaves} {inner}");
     }
 }

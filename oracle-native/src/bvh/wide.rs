@@ -44,9 +44,8 @@ pub(super) const WIDEN: f32 = 1.0 + 1.0 / (1 << 20) as f32;
 
 /// Slots of a traversal's stack kept on the thread's stack, uninitialized
 /// (filling them cost 3 % of a path's instructions): enough for trees 36
-/// levels deep (a 5M-triangle mesh's is 22); a deeper tree's stack is on
-/// the heap, allocated per ray (which a 96-slot stack did for every mesh of
-/// 1M triangles or more, 18 levels and deeper).
+/// levels deep (a 1M-triangle mesh's is 15, veach-ajar's 15); a deeper
+/// tree's stack is on the heap, allocated per ray.
 const INLINE_STACK: usize = 256;
 
 /// The most blocks a leaf holds (what its two bits of count encode).
@@ -150,8 +149,10 @@ const IN_FEWER: u8 = 2;
 const SPLIT: u8 = 16;
 
 /// The cheapest wide tree over a binary one, by dynamic programming over
-/// the binary tree (Ylitie, Karras and Laine 2017, Section 4.1: the cost of
-/// each subtree held in one to eight slots of a wide node).
+/// the binary tree (Ylitie, Karras and Laine 2017, their conversion of a
+/// binary BVH to a wide one: the least SAH cost of each subtree held in one
+/// to eight slots of a wide node, children before parents). Its tables
+/// take ~40 bytes a binary node (~80 a triangle) while the tree is built.
 struct Plan {
     /// For each binary node and `i` in `0..8`: the least cost of its subtree
     /// held in at most `i + 1` slots, and how.

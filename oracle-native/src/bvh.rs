@@ -17,6 +17,7 @@ mod wide;
 use std::time::Duration;
 
 use glam::{Vec3, Vec3A, Vec4};
+use rayon::prelude::*;
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::triangle::Triangle;
@@ -36,7 +37,7 @@ pub struct BvhIntersector {
     /// The same triangles as given, a slot per lane of the blocks (an empty
     /// lane's is [`Given::EMPTY`]): for the closest hit's index and
     /// barycentrics.
-    given: Vec<Given>,
+    given: Vec<[Given; LANES]>,
     /// Whether the processor has AVX2, for the node test of `bvh/avx2.rs`.
     avx2: bool,
 }
@@ -78,23 +79,24 @@ impl BvhIntersector {
         for (chunk, part) in triangles.chunks(size).enumerate() {
             let tris: Vec<Triangle> = part.iter().map(obvhs_triangle).collect();
             let bvh = build_bvh2_from_tris(&tris, params, &mut Duration::default());
-            let (tree, lanes) = Wide::collapse(&bvh, blocks.len());
+            let (tree, wide_blocks) = Wide::collapse(&bvh, blocks.len());
             trees.push(tree);
-            blocks.reserve(lanes.len());
-            given.reserve(lanes.len() * LANES);
-            for lanes in lanes {
-                // Each lane's triangle, as given (its index) and in obvhs's form.
-                let lanes = lanes.map(|i| {
-                    (i != wide::NO_TRIANGLE).then(|| (chunk * size + i as usize, i as usize))
-                });
-                blocks.push(Block::new(lanes.map(|t| t.map(|(_, i)| (&tris[i]).into()))));
-                given.extend(lanes.map(|t| {
-                    t.map_or(Given::EMPTY, |(index, _)| Given {
-                        vertices: triangles[index],
-                        index: index as u32,
+            // Each block's triangles in obvhs's form, and as given (on
+            // rayon's threads; the order is the blocks').
+            let lanes = |block: &[u32; LANES]| {
+                block.map(|i| (i != wide::NO_TRIANGLE).then_some(i as usize))
+            };
+            blocks.par_extend(wide_blocks.par_iter().map(|block| {
+                Block::new(lanes(block).map(|i| i.map(|i| (&tris[i]).into())))
+            }));
+            given.par_extend(wide_blocks.par_iter().map(|block| {
+                lanes(block).map(|i| {
+                    i.map_or(Given::EMPTY, |i| Given {
+                        vertices: triangles[chunk * size + i],
+                        index: (chunk * size + i) as u32,
                     })
-                }));
-            }
+                })
+            }));
         }
         Self {
             trees,
@@ -105,6 +107,11 @@ impl BvhIntersector {
             #[cfg(not(target_arch = "x86_64"))]
             avx2: false,
         }
+    }
+
+    /// The triangle in lane `slot % LANES` of block `slot / LANES`.
+    fn given(&self, slot: usize) -> &Given {
+        &self.given[slot / LANES][slot % LANES]
     }
 
     fn obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
@@ -146,7 +153,7 @@ impl BvhIntersector {
                     // traversal met them in.
                     let better = t < t_max
                         || (t == t_max
-                            && found.is_some_and(|f| self.given[slot].index < self.given[f].index));
+                            && found.is_some_and(|f| self.given(slot).index < self.given(f).index));
                     if better && t > ray.tmin {
                         t_max = t;
                         closer = Some(t);
@@ -239,7 +246,7 @@ impl BvhIntersector {
 impl Intersector for BvhIntersector {
     fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
         let (primitive, t) = self.closest(&Self::obvhs_ray(ray))?;
-        let given = &self.given[primitive];
+        let given = self.given(primitive);
         // Barycentrics from the original vertices (one triangle per query);
         // when rounding puts the hit just outside an edge, those of the
         // closest point of the triangle.

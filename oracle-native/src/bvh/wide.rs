@@ -179,13 +179,16 @@ impl Plan {
                 f32::INFINITY
             }
         };
-        // Children before their parents: the reverse of a pre-order.
-        let mut order = Vec::with_capacity(n);
+        // The inner nodes, children before their parents: the reverse of a
+        // pre-order. (A binary leaf's row is its cost as a leaf in every
+        // entry, found when its parent needs it: half the nodes never
+        // written.)
+        let mut order = Vec::with_capacity(n / 2);
         let mut todo = vec![0u32];
         while let Some(i) = todo.pop() {
-            order.push(i);
             let node = &bvh.nodes[i as usize];
             if !node.is_leaf() {
+                order.push(i);
                 todo.extend([node.first_index, node.first_index + 1]);
             }
         }
@@ -193,16 +196,19 @@ impl Plan {
             let i = i as usize;
             let node = &bvh.nodes[i];
             let area = node.aabb.half_area();
-            if node.is_leaf() {
-                count[i] = node.prim_count;
-                plan.cost[i] = [leaf_cost(area, count[i]); 8];
-                continue;
-            }
             let (l, r) = (node.first_index as usize, node.first_index as usize + 1);
-            count[i] = count[l] + count[r];
+            // A child's costs and triangles.
+            let row = |plan: &Plan, c: usize| match &bvh.nodes[c] {
+                leaf if leaf.is_leaf() => (
+                    [leaf_cost(leaf.aabb.half_area(), leaf.prim_count); 8],
+                    leaf.prim_count,
+                ),
+                _ => (plan.cost[c], count[c]),
+            };
+            let ((left, left_count), (right, right_count)) = (row(&plan, l), row(&plan, r));
+            count[i] = left_count + right_count;
             // The two subtrees spread over 2 to 8 slots, the left one's
             // share of the cheapest.
-            let (left, right) = (plan.cost[l], plan.cost[r]);
             let mut spread = [(f32::INFINITY, 0u8); 9];
             for (slots, best) in spread.iter_mut().enumerate().skip(2) {
                 for k in 1..slots {

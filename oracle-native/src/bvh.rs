@@ -17,10 +17,10 @@ mod wide;
 use std::time::Duration;
 
 use glam::{Vec3, Vec3A, Vec4};
-use rayon::prelude::*;
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::triangle::Triangle;
+use rayon::prelude::*;
 
 use crate::geometry::{Hit, Intersector, Ray, intersect_triangle};
 use leaf::{Block, LANES, Ray4};
@@ -86,9 +86,11 @@ impl BvhIntersector {
             let lanes = |block: &[u32; LANES]| {
                 block.map(|i| (i != wide::NO_TRIANGLE).then_some(i as usize))
             };
-            blocks.par_extend(wide_blocks.par_iter().map(|block| {
-                Block::new(lanes(block).map(|i| i.map(|i| (&tris[i]).into())))
-            }));
+            blocks.par_extend(
+                wide_blocks
+                    .par_iter()
+                    .map(|block| Block::new(lanes(block).map(|i| i.map(|i| (&tris[i]).into())))),
+            );
             given.par_extend(wide_blocks.par_iter().map(|block| {
                 lanes(block).map(|i| {
                     i.map_or(Given::EMPTY, |i| Given {

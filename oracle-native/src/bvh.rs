@@ -446,6 +446,36 @@ mod tests {
         assert!(hits > 500, "{hits}");
     }
 
+    /// Triangles with NaN or infinite coordinates (which `Scene` drops,
+    /// but anyone may give `BvhIntersector::new`) do not panic the build,
+    /// and the others' hits are what a tree of them alone finds, ray by
+    /// ray.
+    #[test]
+    fn non_finite_triangles_change_no_other_hit() {
+        let (tris, rays) = sheet_and_rays();
+        let mut with_bad = tris.clone();
+        for k in 0..300 {
+            let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][k % 3];
+            let p = Vec3::new(k as f32 * 0.01, 1.0, 0.05);
+            let q = [
+                Vec3::new(bad, 0.0, 0.0),
+                Vec3::new(0.0, bad, 0.0),
+                Vec3::splat(bad),
+            ][k / 3 % 3];
+            with_bad.push([p, p + q, p + Vec3::Y * 0.1]);
+        }
+        let (clean, dirty) = (BvhIntersector::new(&tris), BvhIntersector::new(&with_bad));
+        let mut hits = 0;
+        for (k, ray) in rays.iter().enumerate() {
+            let bits = |h: Option<Hit>| h.map(|h| (h.triangle, h.t.to_bits()));
+            let hit = clean.closest_hit(ray);
+            assert_eq!(bits(hit), bits(dirty.closest_hit(ray)), "ray {k}");
+            assert_eq!(clean.occluded(ray), dirty.occluded(ray), "ray {k}");
+            hits += hit.is_some() as u32;
+        }
+        assert!(hits > 500, "{hits}");
+    }
+
     #[test]
     fn bvh_agrees_with_brute_force() {
         // A grid of small triangles at varying depths.

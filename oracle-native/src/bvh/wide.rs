@@ -209,7 +209,9 @@ impl Plan {
             count[i] = left_count + right_count;
             // The two subtrees spread over 2 to 8 slots, the left one's
             // share of the cheapest.
-            let mut spread = [(f32::INFINITY, 0u8); 9];
+            // (A split of one slot to the left stands where no cost
+            // compares, as NaN ones from NaN coordinates do not.)
+            let mut spread = [(f32::INFINITY, 1u8); 9];
             for (slots, best) in spread.iter_mut().enumerate().skip(2) {
                 for k in 1..slots {
                     let cost = left[k - 1] + right[slots - k - 1];
@@ -222,7 +224,7 @@ impl Plan {
             let as_leaf = leaf_cost(area, count[i]);
             let as_node = area * NODE_COST + spread[8].0;
             let (cost, choice) = (&mut plan.cost[i], &mut plan.choice[i]);
-            (cost[0], choice[0]) = if as_leaf <= as_node {
+            (cost[0], choice[0]) = if count[i] <= LEAF_SIZE && as_leaf <= as_node {
                 (as_leaf, AS_LEAF)
             } else {
                 (as_node, AS_NODE)

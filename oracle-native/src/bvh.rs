@@ -319,6 +319,19 @@ fn closest_barycentrics(p: Vec3, t: &[Vec3; 3]) -> glam::Vec2 {
     glam::Vec2::new(vb * denom, vc * denom)
 }
 
+/// Uniform numbers in `[0, 1)` for the tests, the same stream for a seed
+/// (a 64-bit linear congruential generator's top 24 bits).
+#[cfg(test)]
+fn test_uniforms(seed: u64) -> impl FnMut() -> f32 {
+    let mut state = seed;
+    move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -555,13 +568,7 @@ mod scene_rays {
                 .iter()
                 .map(|t| RtTriangle::new(t[0].into(), t[1].into(), t[2].into()))
                 .collect();
-            let mut state = 12345u64;
-            let mut rnd = || {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (state >> 40) as f32 / (1u64 << 24) as f32
-            };
+            let mut rnd = super::test_uniforms(12345);
             let mut hits = 0;
             for k in 0..50_000 {
                 let t = &tris[(rnd() * tris.len() as f32) as usize % tris.len()];

@@ -69,24 +69,34 @@ impl TaskRunner for LastFirst {
     }
 }
 
-#[test]
-fn a_task_runner_that_reorders_the_tasks_gives_the_same_image() {
+/// Every method renders through `runner` the image and statistics it
+/// renders on a pool of two threads; `check` runs after each method.
+fn same_images_through<T: TaskRunner + 'static>(
+    runner: std::sync::Arc<T>,
+    check: impl Fn(&str, &T),
+) {
     let image = ProceduralImage::showcase(Resolution::new(40, 30));
     for method in methods() {
         let name = method.name();
         let s = settings(5, 100_000, &method);
         let pool = in_pool(2, || render(&image, &MaxChannel, &s, &Silent).unwrap());
-        let runner = std::sync::Arc::new(LastFirst::default());
         let ran = run_tasks_with(runner.clone(), || {
             render(&image, &MaxChannel, &s, &Silent).unwrap()
         });
+        check(name, &runner);
+        assert_eq!(bits(&pool.film), bits(&ran.film), "{name}");
+        assert_eq!(pool.stats, ran.stats, "{name}");
+    }
+}
+
+#[test]
+fn a_task_runner_that_reorders_the_tasks_gives_the_same_image() {
+    same_images_through(std::sync::Arc::new(LastFirst::default()), |name, runner| {
         assert!(
             runner.0.load(Ordering::Relaxed) > 0,
             "{name}: no task reached the runner"
         );
-        assert_eq!(bits(&pool.film), bits(&ran.film), "{name}");
-        assert_eq!(pool.stats, ran.stats, "{name}");
-    }
+    });
 }
 
 /// A runner that breaks its contract: it skips every third task, runs the
@@ -109,17 +119,7 @@ impl TaskRunner for Careless {
 
 #[test]
 fn a_task_runner_that_skips_repeats_or_oversteps_tasks_gives_the_same_image() {
-    let image = ProceduralImage::showcase(Resolution::new(40, 30));
-    for method in methods() {
-        let name = method.name();
-        let s = settings(5, 100_000, &method);
-        let pool = in_pool(2, || render(&image, &MaxChannel, &s, &Silent).unwrap());
-        let ran = run_tasks_with(std::sync::Arc::new(Careless), || {
-            render(&image, &MaxChannel, &s, &Silent).unwrap()
-        });
-        assert_eq!(bits(&pool.film), bits(&ran.film), "{name}");
-        assert_eq!(pool.stats, ran.stats, "{name}");
-    }
+    same_images_through(std::sync::Arc::new(Careless), |_, _| {});
 }
 
 /// Bright and valid on the left half; on the right half NaN, infinite or

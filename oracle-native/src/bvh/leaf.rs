@@ -96,13 +96,8 @@ mod tests {
     /// fill of a block.
     #[test]
     fn a_block_finds_each_triangles_own_hits() {
-        let mut state = 99u64;
-        let mut rnd = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-        };
+        let mut uniform = crate::bvh::test_uniforms(99);
+        let mut rnd = || uniform() - 0.5;
         let (mut hits, mut misses) = (0, 0);
         for k in 0..20_000 {
             let mut point = || Vec3A::new(rnd(), rnd(), rnd());

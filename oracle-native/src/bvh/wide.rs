@@ -491,13 +491,7 @@ mod tests {
     /// Small triangles scattered in a box, with a few long slivers across
     /// it (so that some subtrees are cheaper as leaves and some as nodes).
     fn binary_tree() -> Bvh2 {
-        let mut state = 7u64;
-        let mut rnd = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rnd = crate::bvh::test_uniforms(7);
         let triangles: Vec<Triangle> = (0..3000)
             .map(|k| {
                 let size = if k % 100 == 0 { 3.0 } else { 0.05 };

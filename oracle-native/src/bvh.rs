@@ -116,6 +116,14 @@ impl BvhIntersector {
         &self.given[slot / LANES][slot % LANES]
     }
 
+    /// Asks the processor to bring block `b` into its cache.
+    #[inline(always)]
+    fn prefetch_block(&self, b: usize) {
+        if let Some(block) = self.blocks.get(b) {
+            wide::prefetch(block);
+        }
+    }
+
     fn obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
         obvhs::ray::Ray::new(
             Vec3A::from(ray.origin),
@@ -165,7 +173,9 @@ impl BvhIntersector {
             }
             closer
         };
-        tree.closest(&Query::new(ray), t_max, enter, hit)
+        tree.closest(&Query::new(ray), t_max, enter, hit, |b| {
+            self.prefetch_block(b)
+        })
     }
 
     /// Whether `ray` hits a triangle of `tree`, children found by `enter`.
@@ -184,7 +194,9 @@ impl BvhIntersector {
                 lanes & (t.cmpgt(t_min) & t.cmplt(t_max)).bitmask() != 0
             })
         };
-        tree.any(&Query::new(ray), ray.tmax, enter, hit)
+        tree.any(&Query::new(ray), ray.tmax, enter, hit, |b| {
+            self.prefetch_block(b)
+        })
     }
 
     /// [`closest_with`](Self::closest_with) compiled for AVX2 with its node test.

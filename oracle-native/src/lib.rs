@@ -2,10 +2,10 @@
 //! contract — the default ray backend and the reference for how an oracle
 //! draws every random decision from the engine's sampler.
 
-// Two reviewed exceptions, `#[allow(unsafe_code)]` with a SAFETY comment at
-// each use: the BVH traversal's AVX2 node test, called once the processor
-// is known to have AVX2 (`bvh`), and its stack's uninitialized slots, read
-// only below the top (`bvh/wide.rs`).
+// Three reviewed exceptions, `#[allow(unsafe_code)]` with a SAFETY comment
+// at each use: the BVH traversal's AVX2 node test, called once the
+// processor is known to have AVX2 (`bvh`), its stack's uninitialized slots,
+// read only below the top, and its prefetch hints (`bvh/wide.rs`).
 #![deny(unsafe_code)]
 
 pub mod bidirectional;

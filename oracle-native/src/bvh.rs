@@ -11,6 +11,7 @@
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+mod huge_pages;
 mod leaf;
 mod wide;
 
@@ -86,6 +87,8 @@ impl BvhIntersector {
             let lanes = |block: &[u32; LANES]| {
                 block.map(|i| (i != wide::NO_TRIANGLE).then_some(i as usize))
             };
+            huge_pages::reserve(&mut blocks, wide_blocks.len());
+            huge_pages::reserve(&mut given, wide_blocks.len());
             blocks.par_extend(
                 wide_blocks
                     .par_iter()

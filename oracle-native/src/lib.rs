@@ -2,10 +2,11 @@
 //! contract — the default ray backend and the reference for how an oracle
 //! draws every random decision from the engine's sampler.
 
-// Three reviewed exceptions, `#[allow(unsafe_code)]` with a SAFETY comment
-// at each use: the BVH traversal's AVX2 node test, called once the
-// processor is known to have AVX2 (`bvh`), its stack's uninitialized slots,
-// read only below the top, and its prefetch hints (`bvh/wide.rs`).
+// Reviewed exceptions, `#[allow(unsafe_code)]` with a SAFETY comment at
+// each use: the BVH traversal's AVX2 node test, called once the processor
+// is known to have AVX2 (`bvh`), its stack's uninitialized slots, read only
+// below the top, and its prefetch hints (`bvh/wide.rs`); the advice that
+// the tree's memory be backed by huge pages (`bvh/huge_pages.rs`).
 #![deny(unsafe_code)]
 
 pub mod bidirectional;

@@ -377,6 +377,12 @@ impl Wide {
                 };
             }
         }
+        // The nodes moved to memory in huge pages (the vector grew by
+        // pushes, the count unknown until now).
+        let mut tree = Vec::new();
+        super::huge_pages::reserve(&mut tree, nodes.len());
+        tree.extend_from_slice(&nodes);
+        let nodes = tree;
         (Wide { nodes, base, depth }, blocks)
     }
 

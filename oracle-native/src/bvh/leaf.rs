@@ -17,8 +17,10 @@ pub(super) const LANES: usize = 4;
 /// on the 1M-triangle mesh 1.06x as fast, paths a second no faster, and on
 /// AArch64 glam's fused cross product would give obvhs's normal other
 /// bits.) A lane without a triangle has NaN coordinates: every ray misses
-/// it.
+/// it. Aligned to cache lines, a block is three of them, not four (closest
+/// hits on the 1M-triangle mesh 1.07x as fast).
 #[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
 pub(super) struct Block {
     v0: [Vec4; 3],
     e1: [Vec4; 3],

@@ -4,10 +4,13 @@
 //! leaves' triangles tested four at a time (`bvh/leaf.rs`).
 //!
 //! obvhs reorders primitives while building; the triangles are stored in the
-//! tree's order once at build time, in blocks of four for the inner loop and
-//! as their original vertices and index for the closest hit's barycentrics,
-//! so neither needs an indirection (through obvhs' index they cost 5-8 % of
-//! the closest-hit rate on a 1M-triangle mesh).
+//! tree's order once at build time, in blocks of four for the inner loop,
+//! with their indices in the list given beside them, so neither needs an
+//! indirection (through obvhs' index they cost 5-8 % of the closest-hit rate
+//! on a 1M-triangle mesh). A closest hit's barycentrics are the block test's
+//! own: testing its triangle again for them (as this backend did until
+//! 2026-12-02) cost a fifth of a closest hit's instructions on small scenes,
+//! and the original vertices kept for it 40 bytes a triangle.
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
@@ -17,13 +20,13 @@ mod wide;
 
 use std::time::Duration;
 
-use glam::{Vec3, Vec3A, Vec4};
+use glam::{Vec2, Vec3, Vec3A, Vec4};
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::triangle::Triangle;
 use rayon::prelude::*;
 
-use crate::geometry::{Hit, Intersector, Ray, intersect_triangle};
+use crate::geometry::{Hit, Intersector, Ray};
 use leaf::{Block, LANES, Ray4};
 use wide::{Node, Query, Wide};
 
@@ -35,26 +38,22 @@ pub struct BvhIntersector {
     /// The triangles in the trees' order, four to a block (the last of a
     /// leaf's blocks may have empty lanes).
     blocks: Vec<Block>,
-    /// The same triangles as given, a slot per lane of the blocks (an empty
-    /// lane's is [`Given::EMPTY`]): for the closest hit's index and
-    /// barycentrics.
-    given: Vec<[Given; LANES]>,
+    /// The index in the list given of the triangle in each lane of the
+    /// blocks ([`NO_INDEX`] for an empty lane).
+    indices: Vec<[u32; LANES]>,
     /// Whether the processor has AVX2, for the node test of `bvh/avx2.rs`.
     avx2: bool,
 }
 
-/// A triangle as given to [`BvhIntersector::new`]: its vertices and index.
-struct Given {
-    vertices: [Vec3; 3],
-    index: u32,
-}
+/// The index of an empty lane.
+const NO_INDEX: u32 = u32::MAX;
 
-impl Given {
-    /// The slot of an empty lane, which no ray hits.
-    const EMPTY: Given = Given {
-        vertices: [Vec3::NAN; 3],
-        index: u32::MAX,
-    };
+/// The closest hit found so far: its lane of the blocks (`block * LANES +
+/// lane`) and its barycentrics.
+#[derive(Clone, Copy)]
+struct Found {
+    slot: usize,
+    uv: Vec2,
 }
 
 impl BvhIntersector {
@@ -76,37 +75,32 @@ impl BvhIntersector {
             post_collapse_reinsertion_batch_ratio_multiplier: 0.0,
             ..BvhBuildParams::medium_build()
         };
-        let (mut trees, mut blocks, mut given) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut trees, mut blocks, mut indices) = (Vec::new(), Vec::new(), Vec::new());
         for (chunk, part) in triangles.chunks(size).enumerate() {
             let tris: Vec<Triangle> = part.iter().map(obvhs_triangle).collect();
             let bvh = build_bvh2_from_tris(&tris, params, &mut Duration::default());
             let (tree, wide_blocks) = Wide::collapse(&bvh, blocks.len());
             trees.push(tree);
-            // Each block's triangles in obvhs's form, and as given (on
-            // rayon's threads; the order is the blocks').
+            // Each block's triangles in obvhs's form, and their indices
+            // (on rayon's threads; the order is the blocks').
             let lanes = |block: &[u32; LANES]| {
                 block.map(|i| (i != wide::NO_TRIANGLE).then_some(i as usize))
             };
             huge_pages::reserve(&mut blocks, wide_blocks.len());
-            huge_pages::reserve(&mut given, wide_blocks.len());
+            huge_pages::reserve(&mut indices, wide_blocks.len());
             blocks.par_extend(
                 wide_blocks
                     .par_iter()
                     .map(|block| Block::new(lanes(block).map(|i| i.map(|i| (&tris[i]).into())))),
             );
-            given.par_extend(wide_blocks.par_iter().map(|block| {
-                lanes(block).map(|i| {
-                    i.map_or(Given::EMPTY, |i| Given {
-                        vertices: triangles[chunk * size + i],
-                        index: (chunk * size + i) as u32,
-                    })
-                })
+            indices.par_extend(wide_blocks.par_iter().map(|block| {
+                lanes(block).map(|i| i.map_or(NO_INDEX, |i| (chunk * size + i) as u32))
             }));
         }
         Self {
             trees,
             blocks,
-            given,
+            indices,
             #[cfg(target_arch = "x86_64")]
             avx2: std::is_x86_feature_detected!("avx2"),
             #[cfg(not(target_arch = "x86_64"))]
@@ -114,9 +108,9 @@ impl BvhIntersector {
         }
     }
 
-    /// The triangle in lane `slot % LANES` of block `slot / LANES`.
-    fn given(&self, slot: usize) -> &Given {
-        &self.given[slot / LANES][slot % LANES]
+    /// The index of the triangle in lane `slot % LANES` of block `slot / LANES`.
+    fn index(&self, slot: usize) -> u32 {
+        self.indices[slot / LANES][slot % LANES]
     }
 
     /// Asks the processor to bring block `b` into its cache.
@@ -137,40 +131,42 @@ impl BvhIntersector {
     }
 
     /// The closest triangle of `tree` that `ray` hits closer than `t_max`,
-    /// children found by `enter`: its distance (else `t_max`), and its
-    /// index in the intersector's order in `found`, which holds the closest
-    /// of the trees before (for ties).
+    /// children found by `enter`: its distance (else `t_max`), and its lane
+    /// and barycentrics in `found`, which holds the closest of the trees
+    /// before (for ties).
     #[inline(always)]
     fn closest_with(
         &self,
         tree: &Wide,
         ray: &obvhs::ray::Ray,
         t_max: f32,
-        found: &mut Option<usize>,
+        found: &mut Option<Found>,
         enter: impl Fn(&Node, &Query, f32) -> (u32, [f32; 8]),
     ) -> f32 {
         let ray4 = Ray4::new(ray);
         let hit = |first: usize, count: usize, mut t_max: f32| {
             let mut closer = None;
             for b in first..first + count {
-                let (mut lanes, t) = self.blocks[b].intersect(&ray4, t_max);
+                let hits = self.blocks[b].intersect(&ray4, t_max);
+                let mut lanes = hits.lanes;
                 while lanes != 0 {
                     let lane = lanes.trailing_zeros() as usize;
                     lanes &= lanes - 1;
                     // (Through an array: `Vec4`'s own index is a jump
                     // table, which cost 12 % of the Cornell box's closest
                     // hits.)
-                    let (t, slot) = (t.to_array()[lane], b * LANES + lane);
+                    let (t, slot) = (hits.t.to_array()[lane], b * LANES + lane);
                     // Of triangles hit at the very same distance (a shared
                     // edge), the first given: the same whatever the order the
                     // traversal met them in.
                     let better = t < t_max
                         || (t == t_max
-                            && found.is_some_and(|f| self.given(slot).index < self.given(f).index));
+                            && found.is_some_and(|f| self.index(slot) < self.index(f.slot)));
                     if better && t > ray.tmin {
                         t_max = t;
                         closer = Some(t);
-                        *found = Some(slot);
+                        let uv = Vec2::new(hits.u.to_array()[lane], hits.v.to_array()[lane]);
+                        *found = Some(Found { slot, uv });
                     }
                 }
             }
@@ -193,8 +189,8 @@ impl BvhIntersector {
         let (t_min, t_max) = (Vec4::splat(ray.tmin), Vec4::splat(ray.tmax));
         let hit = |first: usize, count: usize| {
             self.blocks[first..first + count].iter().any(|block| {
-                let (lanes, t) = block.intersect(&ray4, ray.tmax);
-                lanes & (t.cmpgt(t_min) & t.cmplt(t_max)).bitmask() != 0
+                let hits = block.intersect(&ray4, ray.tmax);
+                hits.lanes & (hits.t.cmpgt(t_min) & hits.t.cmplt(t_max)).bitmask() != 0
             })
         };
         tree.any(&Query::new(ray), ray.tmax, enter, hit, |b| {
@@ -210,7 +206,7 @@ impl BvhIntersector {
         tree: &Wide,
         ray: &obvhs::ray::Ray,
         t_max: f32,
-        found: &mut Option<usize>,
+        found: &mut Option<Found>,
     ) -> f32 {
         // SAFETY: this function is compiled for AVX2.
         #[allow(unsafe_code)]
@@ -228,8 +224,8 @@ impl BvhIntersector {
         self.any_with(tree, ray, |n, q, t| unsafe { avx2::enter(n, q, t) })
     }
 
-    /// The closest hit: its slot in [`Self::given`], and its distance.
-    fn closest(&self, ray: &obvhs::ray::Ray) -> Option<(usize, f32)> {
+    /// The closest hit and its distance.
+    fn closest(&self, ray: &obvhs::ray::Ray) -> Option<(Found, f32)> {
         let (mut found, mut t) = (None, ray.tmax);
         for tree in &self.trees {
             #[cfg(target_arch = "x86_64")]
@@ -262,25 +258,11 @@ impl BvhIntersector {
 
 impl Intersector for BvhIntersector {
     fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
-        let (primitive, t) = self.closest(&Self::obvhs_ray(ray))?;
-        let given = self.given(primitive);
-        // Barycentrics from the original vertices (one triangle per query);
-        // when rounding puts the hit just outside an edge, those of the
-        // closest point of the triangle.
-        let tri = &given.vertices;
-        let exact = Ray {
-            t_min: 0.0,
-            t_max: f32::INFINITY,
-            ..*ray
-        };
-        let uv = intersect_triangle(&exact, tri).map_or_else(
-            || closest_barycentrics(ray.origin + t * ray.direction, tri),
-            |(_, uv)| uv,
-        );
+        let (found, t) = self.closest(&Self::obvhs_ray(ray))?;
         Some(Hit {
-            triangle: given.index,
+            triangle: self.index(found.slot),
             t,
-            uv,
+            uv: found.uv,
         })
     }
 
@@ -296,42 +278,6 @@ fn obvhs_triangle(t: &[Vec3; 3]) -> Triangle {
         v1: t[1].into(),
         v2: t[2].into(),
     }
-}
-
-/// Barycentric weights `(u, v)` of vertices 1 and 2 for the point of
-/// triangle `t` closest to `p` (Ericson, Real-Time Collision Detection 5.1.5).
-fn closest_barycentrics(p: Vec3, t: &[Vec3; 3]) -> glam::Vec2 {
-    let [a, b, c] = *t;
-    let (ab, ac, ap) = (b - a, c - a, p - a);
-    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return glam::Vec2::ZERO;
-    }
-    let bp = p - b;
-    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
-    if d3 >= 0.0 && d4 <= d3 {
-        return glam::Vec2::X;
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return glam::Vec2::new(d1 / (d1 - d3), 0.0);
-    }
-    let cp = p - c;
-    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
-    if d6 >= 0.0 && d5 <= d6 {
-        return glam::Vec2::Y;
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return glam::Vec2::new(0.0, d2 / (d2 - d6));
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
-        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return glam::Vec2::new(1.0 - w, w);
-    }
-    let denom = 1.0 / (va + vb + vc);
-    glam::Vec2::new(vb * denom, vc * denom)
 }
 
 /// Uniform numbers in `[0, 1)` for the tests, the same stream for a seed
@@ -350,6 +296,7 @@ fn test_uniforms(seed: u64) -> impl FnMut() -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::intersect_triangle;
     use obvhs::rt_triangle::RtTriangle;
 
     /// A bumpy sheet of small triangles, and rays from all around it (each
@@ -401,7 +348,8 @@ mod tests {
                 )
             };
             let tb = bvh.closest_with(tree, &query, query.tmax, &mut b, wide::enter);
-            assert_eq!((a, ta.to_bits()), (b, tb.to_bits()), "ray {k}");
+            let bits = |f: Option<Found>| f.map(|f| (f.slot, f.uv.to_array().map(f32::to_bits)));
+            assert_eq!((bits(a), ta.to_bits()), (bits(b), tb.to_bits()), "ray {k}");
             assert_eq!(missed, !bvh.any_with(tree, &query, wide::enter), "ray {k}");
             assert_eq!(missed, a.is_none(), "ray {k}");
             hits += a.is_some() as u32;

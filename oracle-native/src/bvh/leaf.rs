@@ -63,10 +63,10 @@ impl Block {
     }
 
     /// The lanes whose triangle `ray` hits at a distance in
-    /// `[t_min, t_max]`, a bit each, and the distances (lane by lane what
-    /// `RtTriangle::intersect` returns where it hits).
+    /// `[t_min, t_max]`, with their distances (lane by lane what
+    /// `RtTriangle::intersect` returns where it hits) and barycentrics.
     #[inline(always)]
-    pub(super) fn intersect(&self, ray: &Ray4, t_max: f32) -> (u32, Vec4) {
+    pub(super) fn intersect(&self, ray: &Ray4, t_max: f32) -> Hits {
         let [ox, oy, oz] = ray.origin;
         let [dx, dy, dz] = ray.direction;
         let [e1x, e1y, e1z] = self.e1;
@@ -85,8 +85,25 @@ impl Block {
         // Outside where u, v or w has its sign bit set (-0 included).
         let outside = u.is_negative_bitmask() | v.is_negative_bitmask() | w.is_negative_bitmask();
         let hit = inv_det.cmpne(Vec4::ZERO) & t.cmpge(ray.t_min) & t.cmple(Vec4::splat(t_max));
-        (hit.bitmask() & !outside, t)
+        Hits {
+            lanes: hit.bitmask() & !outside,
+            t,
+            u,
+            v,
+        }
     }
+}
+
+/// What a block's test found: the lanes hit, a bit each, and in every lane
+/// the distance and the barycentric weights of the triangle's second and
+/// third vertices (`u` of `v0 - e1`, `v` of `v0 + e2`: the hit point is
+/// `(1 - u - v) v0 + u v1 + v v2`, as in Embree's Möller–Trumbore test).
+/// A lane hit has `u`, `v` and `1 - u - v` all at least `+0`.
+pub(super) struct Hits {
+    pub(super) lanes: u32,
+    pub(super) t: Vec4,
+    pub(super) u: Vec4,
+    pub(super) v: Vec4,
 }
 
 #[cfg(test)]
@@ -108,27 +125,45 @@ mod tests {
             let shared = point();
             // Triangles that share a vertex with the ray's target, in the
             // first 1 to 4 lanes.
-            let triangles: [Option<RtTriangle>; LANES] = core::array::from_fn(|lane| {
-                (lane <= k % LANES).then(|| RtTriangle::new(shared, point(), point()))
+            let vertices: [Option<[Vec3A; 3]>; LANES] = core::array::from_fn(|lane| {
+                (lane <= k % LANES).then(|| [shared, point(), point()])
             });
+            let triangles = vertices.map(|v| v.map(|[a, b, c]| RtTriangle::new(a, b, c)));
             let origin = point() * 8.0;
             // Half of the rays aimed at the shared vertex exactly.
             let target = if k % 2 == 0 { shared } else { point() };
             let ray = obvhs::ray::Ray::new(origin, (target - origin).normalize(), 0.01, 20.0);
             let t_max = [20.0, 8.0, 0.5][k % 3];
-            let (mask, t) = Block::new(triangles).intersect(&Ray4::new(&ray), t_max);
+            let found = Block::new(triangles).intersect(&Ray4::new(&ray), t_max);
             for lane in 0..LANES {
                 let own = triangles[lane].map_or(f32::INFINITY, |tri| {
                     tri.intersect(&obvhs::ray::Ray { tmax: t_max, ..ray })
                 });
-                let found = if mask >> lane & 1 == 1 {
+                let t = if found.lanes >> lane & 1 == 1 {
                     hits += 1;
-                    t[lane]
+                    // The barycentrics name the point hit, to rounding
+                    // (which a grazing ray magnifies by 1 / cos).
+                    let (u, v) = (found.u[lane], found.v[lane]);
+                    assert!(u >= 0.0 && v >= 0.0 && u + v <= 1.0 + 1e-6, "{u} {v}");
+                    let [v0, v1, v2] = vertices[lane].unwrap();
+                    let point = v0 * (1.0 - u - v) + v1 * u + v2 * v;
+                    let along = ray.origin + ray.direction * found.t[lane];
+                    let cos = (v1 - v0)
+                        .cross(v2 - v0)
+                        .normalize()
+                        .dot(ray.direction)
+                        .abs();
+                    let tolerance = 1e-6 * (1.0 + found.t[lane]) / cos;
+                    assert!(
+                        (point - along).length() < tolerance,
+                        "case {k}: {point} {along}"
+                    );
+                    found.t[lane]
                 } else {
                     misses += 1;
                     f32::INFINITY
                 };
-                assert_eq!(found.to_bits(), own.to_bits(), "case {k}, lane {lane}");
+                assert_eq!(t.to_bits(), own.to_bits(), "case {k}, lane {lane}");
             }
         }
         assert!(hits > 3_000 && misses > 3_000, "{hits} {misses}");

@@ -470,38 +470,45 @@ mod tests {
                 ]);
             }
         }
-        let bvh = BvhIntersector::new(&tris);
-        let mut misses = 0;
-        for k in 0..2000 {
-            // Origins off the grid lines: an exact edge hit is a tie either way.
-            let o = Vec3::new(
-                (k % 41) as f32 * 0.05 + 0.0123,
-                (k % 37) as f32 * 0.055 + 0.0071,
-                5.0,
-            );
-            let ray = Ray::new(
-                o,
-                Vec3::new(
-                    0.01 * ((k % 7) as f32 - 3.0),
-                    0.01 * ((k % 5) as f32 - 2.0),
-                    -1.0,
-                ),
-            );
-            let brute = tris
-                .iter()
-                .enumerate()
-                .filter_map(|(i, t)| intersect_triangle(&ray, t).map(|(t, _)| (i as u32, t)))
-                .min_by(|a, b| a.1.total_cmp(&b.1));
-            let hit = bvh.closest_hit(&ray);
-            assert_eq!(hit.map(|h| h.triangle), brute.map(|b| b.0), "ray {k}");
-            if let (Some(h), Some(b)) = (hit, brute) {
-                assert!((h.t - b.1).abs() < 1e-4);
-            } else {
-                misses += 1;
+        // The whole grid, and the first few of it: a tree of one block
+        // of triangles is one leaf, with no node (one node costs more).
+        for n in [400, 16, 5, 2] {
+            let tris = &tris[..n];
+            let bvh = BvhIntersector::new(tris);
+            assert_eq!(bvh.trees[0].nodes() == 0, n <= 2, "{n} triangles");
+            let mut misses = 0;
+            for k in 0..2000 {
+                // Origins off the grid lines: an exact edge hit is a tie either way.
+                let o = Vec3::new(
+                    (k % 41) as f32 * 0.05 + 0.0123,
+                    (k % 37) as f32 * 0.055 + 0.0071,
+                    5.0,
+                );
+                let ray = Ray::new(
+                    o,
+                    Vec3::new(
+                        0.01 * ((k % 7) as f32 - 3.0),
+                        0.01 * ((k % 5) as f32 - 2.0),
+                        -1.0,
+                    ),
+                );
+                let brute = tris
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, t)| intersect_triangle(&ray, t).map(|(t, _)| (i as u32, t)))
+                    .min_by(|a, b| a.1.total_cmp(&b.1));
+                let hit = bvh.closest_hit(&ray);
+                assert_eq!(hit.map(|h| h.triangle), brute.map(|b| b.0), "ray {k}");
+                if let (Some(h), Some(b)) = (hit, brute) {
+                    assert!((h.t - b.1).abs() < 1e-4);
+                } else {
+                    misses += 1;
+                }
+                assert_eq!(bvh.occluded(&ray), brute.is_some());
             }
-            assert_eq!(bvh.occluded(&ray), brute.is_some());
+            assert!(misses < 2000, "{n} triangles: no hit");
+            assert!(n < 400 || misses > 0);
         }
-        assert!(misses > 0 && misses < 2000);
         assert!(
             BvhIntersector::new(&[])
                 .closest_hit(&Ray::new(Vec3::ZERO, Vec3::X))

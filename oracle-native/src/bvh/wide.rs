@@ -117,10 +117,14 @@ pub(super) fn enter(node: &Node, query: &Query, t_max: f32) -> (u32, [f32; 8]) {
     (mask, entry)
 }
 
-/// The tree: its nodes, the root first, over blocks of triangles from
-/// `base` on in the intersector's list.
+/// The tree: its nodes, over blocks of triangles from `base` on in the
+/// intersector's list.
 pub(super) struct Wide {
     nodes: Vec<Node>,
+    /// The root: node 0, or a leaf where all the triangles are cheaper
+    /// tested together (a scene of a few, as Embree's tree of a ground
+    /// plane is one leaf), with no node at all.
+    root: u32,
     /// Where the tree's blocks start in the intersector's list.
     base: usize,
     /// The deepest path from the root, in nodes: the traversal's stack
@@ -341,8 +345,36 @@ impl Wide {
             child: [EMPTY; 8],
         };
         let plan = Plan::new(bvh);
-        let mut nodes = vec![empty];
         let (mut blocks, mut primitives_of, mut walk) = (Vec::new(), Vec::new(), Vec::new());
+        // A leaf of binary node `c`'s primitives, its blocks added.
+        let mut leaf_of = |c: usize, blocks: &mut Vec<[u32; LANES]>| {
+            primitives_of.clear();
+            primitives(bvh, c, &mut walk, &mut primitives_of);
+            debug_assert!(primitives_of.len() <= LEAF_SIZE as usize);
+            let first = blocks.len() as u32;
+            debug_assert!(first <= FIRST_MASK);
+            for lanes in primitives_of.chunks(LANES) {
+                blocks.push(core::array::from_fn(|l| {
+                    lanes.get(l).copied().unwrap_or(NO_TRIANGLE)
+                }));
+            }
+            let size = blocks.len() as u32 - first;
+            LEAF | ((size - 1) << COUNT_SHIFT) | first
+        };
+        if plan.is_leaf(bvh, 0) {
+            let root = leaf_of(0, &mut blocks);
+            let (nodes, depth) = (Vec::new(), 0);
+            return (
+                Wide {
+                    nodes,
+                    root,
+                    base,
+                    depth,
+                },
+                blocks,
+            );
+        }
+        let mut nodes = vec![empty];
         let mut depth = 1;
         // (the binary node a wide node is made from, the wide node, its depth)
         let mut todo = vec![(0usize, 0usize, 1usize)];
@@ -357,18 +389,7 @@ impl Wide {
                     bounds[2 * axis + 1][lane] = hi[axis];
                 }
                 nodes[wide].child[lane] = if plan.is_leaf(bvh, c) {
-                    primitives_of.clear();
-                    primitives(bvh, c, &mut walk, &mut primitives_of);
-                    debug_assert!(primitives_of.len() <= LEAF_SIZE as usize);
-                    let first = blocks.len() as u32;
-                    debug_assert!(first <= FIRST_MASK);
-                    for lanes in primitives_of.chunks(LANES) {
-                        blocks.push(core::array::from_fn(|l| {
-                            lanes.get(l).copied().unwrap_or(NO_TRIANGLE)
-                        }));
-                    }
-                    let size = blocks.len() as u32 - first;
-                    LEAF | ((size - 1) << COUNT_SHIFT) | first
+                    leaf_of(c, &mut blocks)
                 } else {
                     nodes.push(empty);
                     let index = nodes.len() - 1;
@@ -383,7 +404,15 @@ impl Wide {
         super::huge_pages::reserve(&mut tree, nodes.len());
         tree.extend_from_slice(&nodes);
         let nodes = tree;
-        (Wide { nodes, base, depth }, blocks)
+        (
+            Wide {
+                nodes,
+                root: 0,
+                base,
+                depth,
+            },
+            blocks,
+        )
     }
 
     /// Asks the processor to fetch child `child` into its cache while the
@@ -397,6 +426,12 @@ impl Wide {
         } else if let Some(node) = self.nodes.get(child as usize) {
             prefetch(node);
         }
+    }
+
+    /// How many nodes the tree has.
+    #[cfg(test)]
+    pub(super) fn nodes(&self) -> usize {
+        self.nodes.len()
     }
 
     /// Room for the traversal's stack.
@@ -427,7 +462,7 @@ impl Wide {
         };
         let mut top = 0;
         let mut t_max = t_max;
-        let mut current = 0u32;
+        let mut current = self.root;
         loop {
             if current & LEAF != 0 {
                 let (first, count) = leaf(current);
@@ -514,7 +549,7 @@ impl Wide {
                 &mut heap
             }
         };
-        stack[0] = MaybeUninit::new(0);
+        stack[0] = MaybeUninit::new(self.root);
         let mut top = 1;
         while top > 0 {
             top -= 1;

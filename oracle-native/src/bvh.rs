@@ -8,9 +8,9 @@
 //! with their indices in the list given beside them, so neither needs an
 //! indirection (through obvhs' index they cost 5-8 % of the closest-hit rate
 //! on a 1M-triangle mesh). A closest hit's barycentrics are the block test's
-//! own: testing its triangle again for them (as this backend did until
-//! 2026-12-02) cost a fifth of a closest hit's instructions on small scenes,
-//! and the original vertices kept for it 40 bytes a triangle.
+//! own: a second test of its triangle for them would cost a fifth of a
+//! closest hit's instructions on small scenes, and the vertices kept for it
+//! 40 bytes a triangle.
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;

@@ -122,8 +122,8 @@ pub(super) fn enter(node: &Node, query: &Query, t_max: f32) -> (u32, [f32; 8]) {
 pub(super) struct Wide {
     nodes: Vec<Node>,
     /// The root: node 0, or a leaf where all the triangles are cheaper
-    /// tested together (a scene of a few, as Embree's tree of a ground
-    /// plane is one leaf), with no node at all.
+    /// tested together (a scene of a few, as a ground plane's two), with
+    /// no node at all.
     root: u32,
     /// Where the tree's blocks start in the intersector's list.
     base: usize,

@@ -549,31 +549,41 @@ impl Wide {
                 &mut heap
             }
         };
-        stack[0] = MaybeUninit::new(self.root);
-        let mut top = 1;
-        while top > 0 {
-            top -= 1;
-            // SAFETY: the slots below `top` were written by pushes.
-            #[allow(unsafe_code)]
-            let current = unsafe { stack[top].assume_init() };
+        let (mut top, mut current) = (0, self.root);
+        loop {
             if current & LEAF != 0 {
                 let (first, count) = leaf(current);
                 if hit(self.base + first, count) {
                     return true;
                 }
-                continue;
+            } else {
+                let node = &self.nodes[current as usize];
+                let (mut mask, _) = enter(node, query, t_max);
+                if mask != 0 {
+                    // The first child entered next, without the stack; the
+                    // others pushed (and prefetched).
+                    current = node.child[mask.trailing_zeros() as usize];
+                    mask &= mask - 1;
+                    while mask != 0 {
+                        let lane = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        self.prefetch(node.child[lane], &fetch_block);
+                        stack[top] = MaybeUninit::new(node.child[lane]);
+                        top += 1;
+                    }
+                    continue;
+                }
             }
-            let node = &self.nodes[current as usize];
-            let (mut mask, _) = enter(node, query, t_max);
-            while mask != 0 {
-                let lane = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                self.prefetch(node.child[lane], &fetch_block);
-                stack[top] = MaybeUninit::new(node.child[lane]);
-                top += 1;
+            if top == 0 {
+                return false;
+            }
+            top -= 1;
+            // SAFETY: the slots below `top` were written by pushes.
+            #[allow(unsafe_code)]
+            {
+                current = unsafe { stack[top].assume_init() };
             }
         }
-        false
     }
 }
 

@@ -1,12 +1,14 @@
 //! The default ray backend: an eight-wide BVH of our own (`bvh/wide.rs`)
-//! over obvhs's binary tree, its node test in AVX2 where the processor has
-//! it (`bvh/avx2.rs`: the same hits as the portable test, bit for bit), its
-//! leaves' triangles tested four at a time (`bvh/leaf.rs`).
+//! collapsed from a binary one built top down by the surface area heuristic
+//! (`bvh/build.rs`) and refined by obvhs's reinsertion, its node test in
+//! AVX2 where the processor has it (`bvh/avx2.rs`: the same hits as the
+//! portable test, bit for bit), its leaves' triangles tested four at a
+//! time (`bvh/leaf.rs`).
 //!
-//! obvhs reorders primitives while building; the triangles are stored in the
+//! The build reorders primitives; the triangles are stored in the
 //! tree's order once at build time, in blocks of four for the inner loop,
 //! with their indices in the list given beside them, so neither needs an
-//! indirection (through obvhs' index they cost 5-8 % of the closest-hit rate
+//! indirection (through the tree's index they cost 5-8 % of the closest-hit rate
 //! on a 1M-triangle mesh). A closest hit's barycentrics are the block test's
 //! own: a second test of its triangle for them would cost a fifth of a
 //! closest hit's instructions on small scenes, and the vertices kept for it
@@ -14,15 +16,13 @@
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+mod build;
 mod huge_pages;
 mod leaf;
 mod wide;
 
-use std::time::Duration;
-
 use glam::{Vec2, Vec3, Vec3A, Vec4};
-use obvhs::BvhBuildParams;
-use obvhs::bvh2::builder::build_bvh2_from_tris;
+use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::triangle::Triangle;
 use rayon::prelude::*;
 
@@ -45,6 +45,14 @@ pub struct BvhIntersector {
     avx2: bool,
 }
 
+/// The share of the binary tree's nodes obvhs's reinsertion (Meister and
+/// Bittner 2018) moves to where they cost least, in its first round (its
+/// `medium_build`'s). The top-down tree alone ([`build`]) is the cheaper
+/// by the surface area heuristic, but rays from inside a room (veach-ajar)
+/// find their shadows 0.8x as fast in it: reinsertion lifts its large
+/// triangles (walls, floor) out of the small ones' boxes.
+const REINSERTION: f32 = 0.05;
+
 /// The index of an empty lane.
 const NO_INDEX: u32 = u32::MAX;
 
@@ -64,21 +72,11 @@ impl BvhIntersector {
 
     /// Builds a tree over every `size` triangles of `triangles`.
     fn in_trees_of(triangles: &[[Vec3; 3]], size: usize) -> Self {
-        let params = BvhBuildParams {
-            // Leaves of one triangle: the wide tree (`Wide::collapse`)
-            // chooses its own leaves, of up to four blocks.
-            max_prims_per_leaf: 1,
-            // No second pass of reinsertion: with no collapse between, it
-            // costs as much as the first (the 1M-triangle mesh's binary
-            // tree took 1.5x the time) and paths a second gained nothing
-            // measurable.
-            post_collapse_reinsertion_batch_ratio_multiplier: 0.0,
-            ..BvhBuildParams::medium_build()
-        };
         let (mut trees, mut blocks, mut indices) = (Vec::new(), Vec::new(), Vec::new());
         for (chunk, part) in triangles.chunks(size).enumerate() {
+            let mut bvh = build::binary_tree(part);
+            ReinsertionOptimizer::default().run(&mut bvh, REINSERTION, None);
             let tris: Vec<Triangle> = part.iter().map(obvhs_triangle).collect();
-            let bvh = build_bvh2_from_tris(&tris, params, &mut Duration::default());
             let (tree, wide_blocks) = Wide::collapse(&bvh, blocks.len());
             trees.push(tree);
             // Each block's triangles in obvhs's form, and their indices
@@ -297,7 +295,9 @@ fn test_uniforms(seed: u64) -> impl FnMut() -> f32 {
 mod tests {
     use super::*;
     use crate::geometry::intersect_triangle;
+    use obvhs::BvhBuildParams;
     use obvhs::rt_triangle::RtTriangle;
+    use std::time::Duration;
 
     /// A bumpy sheet of small triangles, and rays from all around it (each
     /// with its own `t_max`).

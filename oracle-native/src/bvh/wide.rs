@@ -1,5 +1,5 @@
-//! An eight-wide BVH of our own, over obvhs's binary tree (PLOC with
-//! reinsertion, a triangle a leaf): the wide tree of least cost by the
+//! An eight-wide BVH of our own, over a binary tree of a triangle a leaf
+//! (`build.rs`, then obvhs's reinsertion): the wide tree of least cost by the
 //! surface area heuristic that the binary one holds, found by dynamic
 //! programming as Ylitie, Karras and Laine (2017) find their compressed
 //! wide trees ([`Plan`]), with leaves of up to four blocks of four

@@ -111,14 +111,6 @@ impl BvhIntersector {
         self.indices[slot / LANES][slot % LANES]
     }
 
-    /// Asks the processor to bring block `b` into its cache.
-    #[inline(always)]
-    fn prefetch_block(&self, b: usize) {
-        if let Some(block) = self.blocks.get(b) {
-            wide::prefetch(block);
-        }
-    }
-
     fn obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
         obvhs::ray::Ray::new(
             Vec3A::from(ray.origin),
@@ -170,9 +162,7 @@ impl BvhIntersector {
             }
             closer
         };
-        tree.closest(&Query::new(ray), t_max, enter, hit, |b| {
-            self.prefetch_block(b)
-        })
+        tree.closest(&Query::new(ray), t_max, enter, hit, &self.blocks)
     }
 
     /// Whether `ray` hits a triangle of `tree`, children found by `enter`.
@@ -191,9 +181,7 @@ impl BvhIntersector {
                 hits.lanes & (hits.t.cmpgt(t_min) & hits.t.cmplt(t_max)).bitmask() != 0
             })
         };
-        tree.any(&Query::new(ray), ray.tmax, enter, hit, |b| {
-            self.prefetch_block(b)
-        })
+        tree.any(&Query::new(ray), ray.tmax, enter, hit, &self.blocks)
     }
 
     /// [`closest_with`](Self::closest_with) compiled for AVX2 with its node test.

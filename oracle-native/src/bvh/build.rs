@@ -8,7 +8,7 @@
 //!
 //! On a 1M-triangle mesh the tree (after reinsertion, `bvh.rs`) costs 5 %
 //! less by the heuristic than obvhs's PLOC with the same reinsertion, and
-//! closest hits are found 1.2-1.3x as fast (docs/BENCHMARKS.md, "Against
+//! closest hits are found 1.15-1.25x as fast (docs/BENCHMARKS.md, "Against
 //! Embree").
 //!
 //! The tree is the same whatever the number of threads: a node's bins are

@@ -392,6 +392,24 @@ mod tests {
         assert_eq!(binary_tree(&[]).nodes.len(), 1);
     }
 
+    /// Triangles no plane separates (the same triangle 1000 times) are
+    /// split at the middle of the list: a tree of the least depth.
+    #[test]
+    fn triangles_no_plane_separates_are_split_in_halves() {
+        let bvh = binary_tree(&[scattered(1, 13)[0]; 1000]);
+        let mut depth = 0;
+        let mut todo = vec![(0, 0)];
+        while let Some((i, d)) = todo.pop() {
+            let node = &bvh.nodes[i];
+            depth = depth.max(d);
+            if !node.is_leaf() {
+                let first = node.first_index as usize;
+                todo.extend([(first, d + 1), (first + 1, d + 1)]);
+            }
+        }
+        assert_eq!(depth, 10);
+    }
+
     /// The tree is the same, bit for bit, on one thread and on three
     /// (a list large enough to be binned and split on several).
     #[test]

@@ -23,7 +23,7 @@ mod wide;
 
 use glam::{Vec2, Vec3, Vec3A, Vec4};
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
-use obvhs::triangle::Triangle;
+use obvhs::rt_triangle::RtTriangle;
 use rayon::prelude::*;
 
 use crate::geometry::{Hit, Intersector, Ray};
@@ -88,20 +88,19 @@ impl BvhIntersector {
             let mut bvh = build::binary_tree(part);
             let share = reinsertion_share(bvh.nodes.len());
             ReinsertionOptimizer::default().run(&mut bvh, share, None);
-            let tris: Vec<Triangle> = part.iter().map(obvhs_triangle).collect();
             let (tree, wide_blocks) = Wide::collapse(&bvh, blocks.len());
             trees.push(tree);
-            // Each block's triangles in obvhs's form, and their indices
-            // (on rayon's threads; the order is the blocks').
+            // Each block's triangles in the form of obvhs's test, and
+            // their indices (on rayon's threads; the order is the blocks').
             let lanes = |block: &[u32; LANES]| {
                 block.map(|i| (i != wide::NO_TRIANGLE).then_some(i as usize))
             };
             huge_pages::reserve(&mut blocks, wide_blocks.len());
             huge_pages::reserve(&mut indices, wide_blocks.len());
             blocks.par_extend(
-                wide_blocks
-                    .par_iter()
-                    .map(|block| Block::new(lanes(block).map(|i| i.map(|i| (&tris[i]).into())))),
+                wide_blocks.par_iter().map(|block| {
+                    Block::new(lanes(block).map(|i| i.map(|i| rt_triangle(&part[i]))))
+                }),
             );
             indices.par_extend(wide_blocks.par_iter().map(|block| {
                 lanes(block).map(|i| i.map_or(NO_INDEX, |i| (chunk * size + i) as u32))
@@ -269,13 +268,9 @@ impl Intersector for BvhIntersector {
     }
 }
 
-/// A triangle as obvhs builds over it.
-fn obvhs_triangle(t: &[Vec3; 3]) -> Triangle {
-    Triangle {
-        v0: t[0].into(),
-        v1: t[1].into(),
-        v2: t[2].into(),
-    }
+/// A triangle in the form obvhs's test takes (its edges and normal).
+fn rt_triangle([a, b, c]: &[Vec3; 3]) -> RtTriangle {
+    RtTriangle::new((*a).into(), (*b).into(), (*c).into())
 }
 
 /// Uniform numbers in `[0, 1)` for the tests, the same stream for a seed
@@ -296,7 +291,7 @@ mod tests {
     use super::*;
     use crate::geometry::intersect_triangle;
     use obvhs::BvhBuildParams;
-    use obvhs::rt_triangle::RtTriangle;
+    use obvhs::triangle::Triangle;
     use std::time::Duration;
 
     /// A bumpy sheet of small triangles, and rays from all around it (each
@@ -371,7 +366,14 @@ mod tests {
         use obvhs::ray::RayHit;
         let (tris, rays) = sheet_and_rays();
         let bvh = BvhIntersector::new(&tris);
-        let obvhs_tris: Vec<Triangle> = tris.iter().map(obvhs_triangle).collect();
+        let obvhs_tris: Vec<Triangle> = tris
+            .iter()
+            .map(|&[v0, v1, v2]| Triangle {
+                v0: v0.into(),
+                v1: v1.into(),
+                v2: v2.into(),
+            })
+            .collect();
         let cw = build_cwbvh_from_tris(
             &obvhs_tris,
             BvhBuildParams::medium_build(),

@@ -33,15 +33,14 @@ const PARALLEL: usize = 1 << 13;
 /// A triangle's bounding box and its index in the list given.
 #[derive(Clone, Copy)]
 struct Item {
-    min: Vec3A,
-    max: Vec3A,
+    bounds: Aabb,
     index: u32,
 }
 
 impl Item {
     /// Twice the box's centre (what the bins are of: no halving needed).
     fn centroid2(&self) -> Vec3A {
-        self.min + self.max
+        self.bounds.min + self.bounds.max
     }
 }
 
@@ -59,8 +58,7 @@ impl Bounds {
     };
 
     fn add(&mut self, item: &Item) {
-        self.boxes.min = self.boxes.min.min(item.min);
-        self.boxes.max = self.boxes.max.max(item.max);
+        self.boxes = self.boxes.union(&item.bounds);
         self.centroids.extend(item.centroid2());
     }
 
@@ -123,8 +121,7 @@ impl Bins {
             for axis in 0..3 {
                 let bin = binning.bin(item, axis);
                 let b = &mut bins.boxes[axis][bin];
-                b.min = b.min.min(item.min);
-                b.max = b.max.max(item.max);
+                *b = b.union(&item.bounds);
                 bins.counts[axis][bin] += 1;
             }
         }
@@ -203,8 +200,7 @@ pub(super) fn binary_tree(triangles: &[[glam::Vec3; 3]]) -> Bvh2 {
                 (Vec3A::ZERO, Vec3A::ZERO)
             };
             Item {
-                min,
-                max,
+                bounds: Aabb::new(min, max),
                 index: index as u32,
             }
         })
@@ -452,8 +448,7 @@ mod tests {
                 let [a, b, c] = t.map(Vec3A::from);
                 let (min, max) = (a.min(b).min(c), a.max(b).max(c));
                 Item {
-                    min,
-                    max,
+                    bounds: Aabb::new(min, max),
                     index: index as u32,
                 }
             })

@@ -62,6 +62,40 @@ impl Pcg32 {
             .wrapping_mul(PCG_MULTIPLIER)
             .wrapping_add(self.increment);
     }
+
+    /// The next `out.len()` numbers (a multiple of 4), the same as as many
+    /// calls of `next_u32`, drawn as four interleaved streams: state `k + 4`
+    /// is `M^4 s_k + (M^3 + M^2 + M + 1) c` (Brown 1994, "Random number
+    /// generation with arbitrary strides"), so the four multiplications of
+    /// a round do not wait on each other as one stream's do.
+    #[inline]
+    pub(crate) fn fill_u32(&mut self, out: &mut [u32]) {
+        debug_assert!(out.len().is_multiple_of(4));
+        const M: u64 = PCG_MULTIPLIER;
+        const M4: u64 = M.wrapping_mul(M).wrapping_mul(M).wrapping_mul(M);
+        const SUM4: u64 = 1 + M + M.wrapping_mul(M) + M.wrapping_mul(M).wrapping_mul(M);
+        let stride = SUM4.wrapping_mul(self.increment);
+        let mut states = [0; 4];
+        for s in &mut states {
+            *s = self.state;
+            self.step();
+        }
+        for round in out.chunks_exact_mut(4) {
+            for (value, s) in round.iter_mut().zip(&mut states) {
+                *value = output(*s);
+                *s = s.wrapping_mul(M4).wrapping_add(stride);
+            }
+        }
+        self.state = states[0];
+    }
+}
+
+/// PCG's XSH RR output function of a state.
+#[inline(always)]
+fn output(state: u64) -> u32 {
+    let rotate = (state >> 59) as u32;
+    let shifted = (((state >> 18) ^ state) >> 27) as u32;
+    shifted.rotate_right(rotate)
 }
 
 impl core::fmt::Debug for Pcg32 {
@@ -77,9 +111,7 @@ impl TryRng for Pcg32 {
     fn try_next_u32(&mut self) -> Result<u32, Infallible> {
         let state = self.state;
         self.step();
-        let rotate = (state >> 59) as u32;
-        let shifted = (((state >> 18) ^ state) >> 27) as u32;
-        Ok(shifted.rotate_right(rotate))
+        Ok(output(state))
     }
 
     #[inline]
@@ -240,6 +272,22 @@ mod tests {
             for _ in 0..1000 {
                 assert_eq!(ours.next_u32(), theirs.next_u32());
                 assert_eq!(ours.next_u64(), theirs.next_u64());
+            }
+        }
+    }
+
+    #[test]
+    fn a_batch_is_the_numbers_one_by_one() {
+        for (state, stream) in [(0, 0), (1, 2), (u64::MAX, 0x5bd1_e995), (42, u64::MAX)] {
+            let (mut one_by_one, mut batched) =
+                (Pcg32::new(state, stream), Pcg32::new(state, stream));
+            for len in [0, 4, 32, 8, 64] {
+                let mut batch = alloc::vec![0; len];
+                batched.fill_u32(&mut batch);
+                let expected: alloc::vec::Vec<u32> =
+                    (0..len).map(|_| one_by_one.next_u32()).collect();
+                assert_eq!(batch, expected, "{len} numbers");
+                assert!(batched == one_by_one, "the stream after {len} numbers");
             }
         }
     }

@@ -30,6 +30,11 @@ impl EmbreeIntersector {
     pub fn new(_triangles: &[[Vec3; 3]]) -> Result<Self, EmbreeError> {
         Err(EmbreeError::NotBuilt)
     }
+
+    /// Always [`EmbreeError::NotBuilt`].
+    pub fn with_config(_triangles: &[[Vec3; 3]], _config: &str) -> Result<Self, EmbreeError> {
+        Err(EmbreeError::NotBuilt)
+    }
 }
 
 #[cfg(not(feature = "embree"))]

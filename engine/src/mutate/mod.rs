@@ -71,13 +71,15 @@ impl Kelemen {
     }
 
     /// `values.len()` offsets, the same as as many calls of
-    /// [`offset`](Self::offset): the random words are drawn first, then turned
-    /// into offsets in a loop without a dependency between iterations, which
-    /// the compiler turns into vector instructions.
+    /// [`offset`](Self::offset): the random words are drawn first (from
+    /// four interleaved runs of the stream, whose multiplications do not
+    /// wait on each other), then turned into offsets in a loop without a
+    /// dependency between iterations, which the compiler turns into vector
+    /// instructions.
     #[inline]
-    pub fn fill<R: Rng + ?Sized>(&self, rng: &mut R, values: &mut [f32; BATCH_LEN]) {
+    pub fn fill(&self, rng: &mut Pcg32, values: &mut [f32; BATCH_LEN]) {
         let mut bits = [0u32; BATCH_LEN];
-        bits.iter_mut().for_each(|b| *b = rng.next_u32());
+        rng.fill_u32(&mut bits);
         #[cfg(all(feature = "std", target_arch = "x86_64"))]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2, the only requirement of `offsets_avx2`.

@@ -2,6 +2,8 @@
 //! the same scenes and the same rays, measured in one run, interleaved,
 //! medians of several repetitions, on `--threads` threads (1 by default);
 //! writes the ratios to a JSON file. Needs `--features embree`.
+//! `--embree-config isa=avx2` holds Embree to the instruction set the
+//! native backend uses (Embree picks AVX-512 where the processor has it).
 //!
 //! ```text
 //! cargo run --release -p strata-studies --features embree --bin backends -- --out out/bench/backends.json
@@ -45,6 +47,10 @@ struct Args {
     /// tree's nodes and cache lines) instead of at random pixels.
     #[arg(long)]
     coherent: bool,
+    /// Embree's device configuration (e.g. `isa=avx2`: no instruction set
+    /// past AVX2, where Embree would use AVX-512); Embree's defaults without.
+    #[arg(long, default_value = "")]
+    embree_config: String,
 }
 
 /// The process's resident memory, in bytes (Linux; 0 elsewhere).
@@ -109,7 +115,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let before = resident_bytes();
         let native_tree = BvhIntersector::new(&scene.triangles);
         let native_bytes = resident_bytes().saturating_sub(before);
-        let embree_tree = EmbreeIntersector::new(&scene.triangles)?;
+        let embree_tree = EmbreeIntersector::with_config(&scene.triangles, &args.embree_config)?;
         let embree_bytes = resident_bytes().saturating_sub(before + native_bytes);
         let per_triangle = |b: usize| b as f64 / scene.triangles.len() as f64;
         let r = scene.camera.resolution;
@@ -142,7 +148,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .is_some() as usize
             }));
             be.push(time(|| {
-                EmbreeIntersector::new(&scene.triangles)
+                EmbreeIntersector::with_config(&scene.triangles, &args.embree_config)
                     .map_or(0, |e| e.closest_hit(&rays[0]).is_some() as usize)
             }));
         }
@@ -240,8 +246,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::fs::write(
         &args.out,
         format!(
-            "{{\"threads\": {}, \"results\": [{}]}}\n",
+            "{{\"threads\": {}, \"embree_config\": {:?}, \"results\": [{}]}}\n",
             args.threads,
+            args.embree_config,
             rows.join(", ")
         ),
     )?;

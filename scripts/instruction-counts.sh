@@ -8,9 +8,10 @@
 # on 1 thread (seed 0); the count covers the whole process (scene loading,
 # bootstrap, set-up, reconstruction) and is divided by every path traced,
 # bootstrap included, as `strata render` reports them. With --step, each
-# method renders at 16 and at 48 paths per pixel instead, and the count is
-# the difference divided by the 32 x 128² paths between them: a chain step
-# alone, without the fixed costs. Replica exchange runs as the cost table measures
+# method renders at 16 and at 48 paths per pixel instead (ERPT, whose unit
+# of work is a pass of 101 paths a pixel here, at 202 and 404; multistage
+# MLT at 24 and 72), and the count is the difference divided by the paths
+# traced between them: a chain step alone, without the fixed costs. Replica exchange runs as the cost table measures
 # it (power tempering, 4 chains to T = 100) unless REPLICA_ARGS gives other
 # `strata render` options (e.g. "--tempering power --replicas 8 --t-max 2500
 # --exchange none"). Writes out/bench/instructions.csv (or
@@ -45,7 +46,7 @@ if [ "${1:-}" = --check ] || [ "${1:-}" = --record ]; then
 fi
 read -r -a method_args <<<"${METHOD_ARGS:-}"
 baseline=${BASELINE:-scripts/instruction-baseline.csv}
-methods=("${@:-pssmlt stratified erpt replica}")
+methods=("${@:-pssmlt stratified erpt replica multistage}")
 read -r -a methods <<<"${methods[*]}"
 read -r -a replica_args <<<"${REPLICA_ARGS:---tempering power --replicas 4 --t-max 100}"
 
@@ -71,13 +72,23 @@ count() {
   echo "$instructions $paths"
 }
 
+# The two budgets (paths per pixel) a step is measured between.
+step_spp() {
+  case $1 in
+    erpt) echo "202 404" ;;
+    multistage) echo "24 72" ;;
+    *) echo "16 48" ;;
+  esac
+}
+
 mc_per_path=""
 for method in mc "${methods[@]}"; do
   if $step; then
-    read -r low _ < <(count "$method" 16)
-    read -r high _ < <(count "$method" 48)
+    read -r low_spp high_spp < <(step_spp "$method")
+    read -r low low_paths < <(count "$method" "$low_spp")
+    read -r high high_paths < <(count "$method" "$high_spp")
     instructions=$((high - low))
-    paths=$((32 * 128 * 128))
+    paths=$((high_paths - low_paths))
   else
     read -r instructions paths < <(count "$method" 16)
   fi

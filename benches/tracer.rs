@@ -42,7 +42,7 @@ fn rays(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(2))
         .throughput(Throughput::Elements(RAYS as u64));
     for (name, scene) in scenes() {
-        let bvh = BvhIntersector::new(&scene.triangles);
+        let bvh = BvhIntersector::new(&scene.triangles).unwrap();
         let rays = camera_rays(&scene);
         g.bench_function(format!("closest/{name}"), |b| {
             b.iter(|| rays.iter().filter(|r| bvh.closest_hit(r).is_some()).count())
@@ -68,7 +68,7 @@ fn paths(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(3))
         .throughput(Throughput::Elements(PATHS as u64));
     for (name, scene) in scenes() {
-        let tracer = native_tracer(scene);
+        let tracer = native_tracer(scene).unwrap();
         let r = tracer.resolution();
         let mut sampler = IndependentSampler::new(stream(2, Domain::User, 0));
         g.bench_function(name, |b| {
@@ -93,7 +93,7 @@ fn build(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(10))
         .throughput(Throughput::Elements(scene.triangles.len() as u64));
     g.bench_function("mesh-1M", |b| {
-        b.iter(|| BvhIntersector::new(black_box(&scene.triangles)))
+        b.iter(|| BvhIntersector::new(black_box(&scene.triangles)).unwrap())
     });
     g.finish();
 }

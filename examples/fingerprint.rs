@@ -69,14 +69,14 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         first.write(&args.out, "procedural-64x48", "erpt");
         for name in ["cornell", "caustic"] {
             let scene = builtin::by_name(name, RESOLUTION).expect("a built-in scene");
-            let mut tracer = native_tracer(scene);
+            let mut tracer = native_tracer(scene)?;
             render_all(name, &tracer, &args.out)?;
             // Bidirectional paths: light tracing's splats in every method.
             tracer.sampler = PathSampler::Bidirectional;
             render_all(&format!("{name}-bidirectional"), &tracer, &args.out)?;
         }
         // Multiplexed paths: the length held by small steps, one strategy.
-        let mut tracer = native_tracer(builtin::by_name("caustic", RESOLUTION).expect("built in"));
+        let mut tracer = native_tracer(builtin::by_name("caustic", RESOLUTION).expect("built in"))?;
         tracer.sampler = PathSampler::Multiplexed;
         render_all("caustic-multiplexed", &tracer, &args.out)?;
         // Every strategy but light tracing: no splats.

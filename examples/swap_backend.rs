@@ -46,7 +46,7 @@ impl Intersector for BruteForce {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let resolution = Resolution::new(48, 48);
     let scene = builtin::cornell(resolution);
-    let bvh = PathTracer::new(scene.clone(), BvhIntersector::new(&scene.triangles));
+    let bvh = PathTracer::new(scene.clone(), BvhIntersector::new(&scene.triangles)?);
     let brute = BruteForce {
         triangles: scene.triangles.clone(),
     };

@@ -14,7 +14,7 @@ use strata::native::native_tracer;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let resolution = Resolution::new(64, 64);
-    let tracer = native_tracer(builtin::cornell(resolution));
+    let tracer = native_tracer(builtin::cornell(resolution))?;
     let settings = Settings {
         seed: 11,
         budget: Budget::samples_per_pixel(8, resolution),

@@ -24,7 +24,7 @@
 //! use strata::engine::*;
 //! use strata::native::{builtin, native_tracer};
 //!
-//! let tracer = native_tracer(builtin::cornell(Resolution::new(320, 320)));
+//! let tracer = native_tracer(builtin::cornell(Resolution::new(320, 320)))?;
 //! let settings = Settings {
 //!     seed: 1,
 //!     budget: Budget::samples_per_pixel(64, tracer.resolution()),

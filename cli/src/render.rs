@@ -99,7 +99,7 @@ pub(crate) fn run(args: &Args) -> AnyResult<Ended> {
                     .ok_or("unknown path sampler")?;
                 match args.backend {
                     Backend::Native => {
-                        let mut tracer = native_tracer(scene);
+                        let mut tracer = native_tracer(scene)?;
                         tracer.sampler = sampler;
                         (render_with(&tracer, args)?, None)
                     }

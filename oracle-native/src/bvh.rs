@@ -25,6 +25,7 @@ use glam::{Vec2, Vec3, Vec3A, Vec4};
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::rt_triangle::RtTriangle;
 use rayon::prelude::*;
+use strata_engine::Error;
 
 use crate::geometry::{Hit, Intersector, Ray};
 use leaf::{Block, LANES, Ray4};
@@ -67,6 +68,16 @@ fn reinsertion_share(nodes: usize) -> f32 {
 /// The index of an empty lane.
 const NO_INDEX: u32 = u32::MAX;
 
+/// Whether `bytes` can be had: a trial reservation, released at once.
+fn check_memory(bytes: u64) -> Result<(), Error> {
+    let failed = Error::AllocationFailed {
+        what: "BVH's build (240 bytes a triangle at its peak)",
+        bytes,
+    };
+    let len = usize::try_from(bytes).map_err(|_| failed.clone())?;
+    Vec::<u8>::new().try_reserve_exact(len).map_err(|_| failed)
+}
+
 /// The closest hit found so far: its lane of the blocks (`block * LANES +
 /// lane`) and its barycentrics.
 #[derive(Clone, Copy)]
@@ -75,10 +86,31 @@ struct Found {
     uv: Vec2,
 }
 
+/// Bytes a build holds at its peak, a triangle: 220 measured (the binary
+/// tree and its reinsertion, the wide tree's plan, the blocks), with room.
+const BUILD_BYTES_PER_TRIANGLE: u64 = 240;
+
+/// Bytes a build holds beside its triangles' (the smallest trees', 24 KB
+/// measured for 22 triangles).
+const BUILD_BYTES: u64 = 24 << 10;
+
 impl BvhIntersector {
-    /// Builds over `triangles` (an empty list gives an intersector that never hits).
-    pub fn new(triangles: &[[Vec3; 3]]) -> Self {
-        Self::in_trees_of(triangles, wide::MAX_TRIANGLES)
+    /// Builds over `triangles` (an empty list gives an intersector that
+    /// never hits); [`Error::AllocationFailed`] if the memory the build
+    /// will hold at its peak ([`memory_bound`](Self::memory_bound)), sized
+    /// from the input, cannot be had, as a render reserves its own first.
+    pub fn new(triangles: &[[Vec3; 3]]) -> Result<Self, Error> {
+        check_memory(Self::memory_bound(triangles.len()))?;
+        Ok(Self::in_trees_of(triangles, wide::MAX_TRIANGLES))
+    }
+
+    /// The most bytes a build over `triangles` triangles holds at once
+    /// (within 1.5x of the peak measured on meshes of 22 to 300 000
+    /// triangles; the tree kept is a third of it, ~80 bytes a triangle).
+    pub fn memory_bound(triangles: usize) -> u64 {
+        (triangles as u64)
+            .saturating_mul(BUILD_BYTES_PER_TRIANGLE)
+            .saturating_add(BUILD_BYTES)
     }
 
     /// Builds a tree over every `size` triangles of `triangles`.
@@ -289,6 +321,21 @@ fn test_uniforms(seed: u64) -> impl FnMut() -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A build whose memory cannot be had is a typed error, not an abort:
+    /// the bound saturates, and a trial reservation past what the address
+    /// space holds fails.
+    #[test]
+    fn a_build_without_its_memory_is_an_error() {
+        assert_eq!(BvhIntersector::memory_bound(usize::MAX), u64::MAX);
+        for bytes in [u64::MAX, 1 << 62] {
+            assert!(matches!(
+                check_memory(bytes),
+                Err(Error::AllocationFailed { bytes: b, .. }) if b == bytes
+            ));
+        }
+        assert!(check_memory(BvhIntersector::memory_bound(1000)).is_ok());
+    }
     use crate::geometry::intersect_triangle;
     use obvhs::BvhBuildParams;
     use obvhs::triangle::Triangle;
@@ -328,7 +375,7 @@ mod tests {
             return;
         }
         let (tris, rays) = sheet_and_rays();
-        let bvh = BvhIntersector::new(&tris);
+        let bvh = BvhIntersector::new(&tris).unwrap();
         let (mut hits, mut occluded) = (0, 0);
         let tree = &bvh.trees[0];
         for (k, ray) in rays.iter().enumerate() {
@@ -365,7 +412,7 @@ mod tests {
         use obvhs::cwbvh::builder::build_cwbvh_from_tris;
         use obvhs::ray::RayHit;
         let (tris, rays) = sheet_and_rays();
-        let bvh = BvhIntersector::new(&tris);
+        let bvh = BvhIntersector::new(&tris).unwrap();
         let obvhs_tris: Vec<Triangle> = tris
             .iter()
             .map(|&[v0, v1, v2]| Triangle {
@@ -408,7 +455,7 @@ mod tests {
     #[test]
     fn several_trees_find_the_hits_of_one() {
         let (tris, rays) = sheet_and_rays();
-        let one = BvhIntersector::new(&tris);
+        let one = BvhIntersector::new(&tris).unwrap();
         let several = BvhIntersector::in_trees_of(&tris, 1000);
         assert_eq!((one.trees.len(), several.trees.len()), (1, 8));
         let mut hits = 0;
@@ -442,7 +489,10 @@ mod tests {
             ][k / 3 % 3];
             with_bad.push([p, p + q, p + Vec3::Y * 0.1]);
         }
-        let (clean, dirty) = (BvhIntersector::new(&tris), BvhIntersector::new(&with_bad));
+        let (clean, dirty) = (
+            BvhIntersector::new(&tris).unwrap(),
+            BvhIntersector::new(&with_bad).unwrap(),
+        );
         let mut hits = 0;
         for (k, ray) in rays.iter().enumerate() {
             let bits = |h: Option<Hit>| h.map(|h| (h.triangle, h.t.to_bits()));
@@ -476,7 +526,7 @@ mod tests {
         // of triangles is one leaf, with no node (one node costs more).
         for n in [400, 16, 5, 2] {
             let tris = &tris[..n];
-            let bvh = BvhIntersector::new(tris);
+            let bvh = BvhIntersector::new(tris).unwrap();
             assert_eq!(bvh.trees[0].nodes() == 0, n <= 2, "{n} triangles");
             let mut misses = 0;
             for k in 0..2000 {
@@ -513,6 +563,7 @@ mod tests {
         }
         assert!(
             BvhIntersector::new(&[])
+                .unwrap()
                 .closest_hit(&Ray::new(Vec3::ZERO, Vec3::X))
                 .is_none()
         );
@@ -535,7 +586,7 @@ mod scene_rays {
         for name in ["cornell", "caustic", "door"] {
             let scene = crate::builtin::by_name(name, Resolution::new(64, 64)).unwrap();
             let tris = &scene.triangles;
-            let bvh = BvhIntersector::new(tris);
+            let bvh = BvhIntersector::new(tris).unwrap();
             let all: Vec<RtTriangle> = tris
                 .iter()
                 .map(|t| RtTriangle::new(t[0].into(), t[1].into(), t[2].into()))

@@ -67,10 +67,11 @@ pub use geometry::{Hit, Intersector, Ray};
 pub use scene::{Camera, Mesh, Scene};
 pub use tracer::{PathSampler, PathTracer};
 
-/// A path tracer over the default (eight-wide BVH) backend.
-pub fn native_tracer(scene: Scene) -> PathTracer<BvhIntersector> {
-    let accel = BvhIntersector::new(&scene.triangles);
-    PathTracer::new(scene, accel)
+/// A path tracer over the default (eight-wide BVH) backend; an error if
+/// the BVH's build cannot have its memory ([`BvhIntersector::new`]).
+pub fn native_tracer(scene: Scene) -> Result<PathTracer<BvhIntersector>, strata_engine::Error> {
+    let accel = BvhIntersector::new(&scene.triangles)?;
+    Ok(PathTracer::new(scene, accel))
 }
 
 pub use strata_engine::{PathOracle, PathSample, Radiance, Rgb};

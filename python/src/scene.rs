@@ -89,7 +89,7 @@ pub(crate) fn scene(
             scene
         }
     };
-    let mut tracer = native_tracer(scene);
+    let mut tracer = native_tracer(scene).map_err(engine_error)?;
     tracer.sampler = sampler;
     Ok(Scene::Tracer(Box::new(tracer)))
 }

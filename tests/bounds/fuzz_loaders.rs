@@ -186,7 +186,7 @@ fn check_allocations() -> Result<(), TestCaseError> {
 /// or a typed error.
 fn tiny_render(mut scene: strata::native::Scene) -> Result<bool, TestCaseError> {
     scene.camera.resolution = Resolution::new(8, 6);
-    let tracer = native_tracer(scene);
+    let tracer = native_tracer(scene).unwrap();
     let pssmlt = PssmltSettings {
         chains: 4,
         bootstrap_candidates: 256,

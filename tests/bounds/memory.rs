@@ -2,14 +2,15 @@
 //! the reservation a render makes before any work, within 1.5x of the peak
 //! of the bytes the render really holds (a tracking allocator, the
 //! reservation itself left out), on the Cornell box with unidirectional and
-//! bidirectional paths, at a preview budget and a longer one.
+//! bidirectional paths, at a preview budget and a longer one; and the
+//! BVH's build's, likewise.
 
 use crate::ALLOCATOR;
 use strata::engine::Task;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::engine::{RenderMethod, RenderShape};
-use strata::native::{PathSampler, builtin, native_tracer};
+use strata::native::{BvhIntersector, PathSampler, builtin, native_tracer};
 
 /// How far the bound may be from the peak, either way.
 const WITHIN: f64 = 1.5;
@@ -18,7 +19,7 @@ const WITHIN: f64 = 1.5;
 fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
     let _alone = crate::allocations::alone();
     let resolution = Resolution::new(96, 72);
-    let mut tracer = native_tracer(builtin::cornell(resolution));
+    let mut tracer = native_tracer(builtin::cornell(resolution)).unwrap();
     let threads = 2;
     for sampler in [PathSampler::Unidirectional, PathSampler::Bidirectional] {
         tracer.sampler = sampler;
@@ -73,5 +74,32 @@ fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
                 );
             }
         }
+    }
+}
+
+/// The BVH's memory bound ([`BvhIntersector::memory_bound`], the
+/// reservation its build makes first) within 1.5x of the peak of the bytes
+/// a build really holds (the reservation left out), on spheres of 22 to
+/// 300 000 triangles.
+#[test]
+fn the_bvh_s_memory_bound_is_within_1_5x_of_its_measured_peak() {
+    let _alone = crate::allocations::alone();
+    for (rings, segments) in [(3, 4), (10, 20), (100, 200), (300, 500)] {
+        let scene = builtin::dense_sphere(Resolution::new(8, 8), rings, segments);
+        let triangles = scene.triangles.len();
+        let bound = BvhIntersector::memory_bound(triangles);
+        ALLOCATOR.leave_out(bound as usize);
+        ALLOCATOR.reset_peak();
+        let before = ALLOCATOR.live();
+        let bvh = BvhIntersector::new(&scene.triangles).unwrap();
+        let peak = ALLOCATOR.peak() - before;
+        drop(bvh);
+        ALLOCATOR.leave_out(0);
+        let ratio = bound as f64 / peak as f64;
+        eprintln!("BVH of {triangles} triangles: peak {peak} bound {bound} ({ratio:.2}x)");
+        assert!(
+            (1.0..=WITHIN).contains(&ratio),
+            "{triangles} triangles: bound {bound} bytes, peak {peak} ({ratio:.2}x)"
+        );
     }
 }

@@ -81,7 +81,7 @@ fn same_hit(scene: &Scene, a: Option<Hit>, b: Option<Hit>) -> Result<bool, Strin
 #[test]
 fn embree_and_native_agree_on_random_rays() {
     for (name, scene) in scenes() {
-        let native = BvhIntersector::new(&scene.triangles);
+        let native = BvhIntersector::new(&scene.triangles).unwrap();
         let embree = EmbreeIntersector::new(&scene.triangles).unwrap();
         let rays = random_rays(&scene, 20_000, 1);
         let mut ties = 0;
@@ -119,7 +119,7 @@ fn embree_and_native_agree_on_random_rays() {
 #[test]
 fn raycast_images_are_identical() {
     for (name, scene) in scenes() {
-        let native = BvhIntersector::new(&scene.triangles);
+        let native = BvhIntersector::new(&scene.triangles).unwrap();
         let embree = EmbreeIntersector::new(&scene.triangles).unwrap();
         let r = scene.camera.resolution;
         let mut ties = 0;
@@ -150,7 +150,10 @@ fn renders_with_the_same_seed_agree_within_noise() {
             scene.clone(),
             EmbreeIntersector::new(&scene.triangles).unwrap(),
         );
-        let mut native = PathTracer::new(scene.clone(), BvhIntersector::new(&scene.triangles));
+        let mut native = PathTracer::new(
+            scene.clone(),
+            BvhIntersector::new(&scene.triangles).unwrap(),
+        );
         embree.sampler = sampler;
         native.sampler = sampler;
         let runs = |tracer: &dyn Fn(u64) -> Film| (0..8).map(tracer).collect::<Vec<_>>();

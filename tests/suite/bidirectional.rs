@@ -251,7 +251,7 @@ fn glass_over_floor(
 #[test]
 fn multiplexed_paths_carry_the_emission_seen_through_glass() {
     let scene = floor_under_glass(Some(Vec3::new(0.3, 0.4, 0.5)));
-    let mut tracer = native_tracer(scene);
+    let mut tracer = native_tracer(scene).unwrap();
     tracer.sampler = PathSampler::Bidirectional;
     let bidirectional = blocks(&tracer, &Method::Mc, 32, 12);
     tracer.sampler = PathSampler::Multiplexed;
@@ -284,7 +284,7 @@ fn each_strategy_alone_estimates_the_same_image() {
             if t == 1 && s < 2 {
                 continue;
             }
-            let mut tracer = native_tracer(planes());
+            let mut tracer = native_tracer(planes()).unwrap();
             tracer.sampler = PathSampler::Strategy {
                 light: s,
                 camera: t,
@@ -310,7 +310,7 @@ fn each_strategy_alone_estimates_the_same_image() {
 #[test]
 fn light_subpaths_through_glass_match_camera_subpaths() {
     let image = |s, t| {
-        let mut tracer = native_tracer(slab());
+        let mut tracer = native_tracer(slab()).unwrap();
         tracer.sampler = PathSampler::Strategy {
             light: s,
             camera: t,
@@ -376,7 +376,7 @@ fn multiplexed_strategies_join_past_the_glass_the_camera_looks_through() {
         Vec3::new(0.5, 0.2, 0.1),
     );
     let scene = glass_over_floor(camera, (0.4, 0.6), (lamp, Vec3::splat(10.0)), None);
-    let mut tracer = native_tracer(scene);
+    let mut tracer = native_tracer(scene).unwrap();
     tracer.sampler = PathSampler::Multiplexed;
     // Lengths of 2..=5 vertices by 1/(n-1)²: 0.8 picks 3; 0.5 picks t = 2.
     let mut numbers = Chosen {
@@ -433,7 +433,7 @@ fn bidirectional_and_unidirectional_images_agree() {
         // same cost: its tail (light found only by chance through glass or
         // water) is the heavier one.
         let render = |sampler, spp, seeds| {
-            let mut tracer = native_tracer(scene.clone());
+            let mut tracer = native_tracer(scene.clone()).unwrap();
             tracer.sampler = sampler;
             blocks(&tracer, &Method::Mc, spp, seeds)
         };
@@ -450,7 +450,7 @@ fn bidirectional_and_unidirectional_images_agree() {
         );
         eprintln!("{name}, no splats: worst z {z:.2}");
         // Multiplexed MLT: PSSMLT's chains on multiplexed paths.
-        let mut tracer = native_tracer(scene.clone());
+        let mut tracer = native_tracer(scene.clone()).unwrap();
         tracer.sampler = PathSampler::Multiplexed;
         let mmlt = blocks(&tracer, &multiplexed_mlt, 256, 16);
         let z = worst_z(
@@ -500,7 +500,7 @@ fn furnace(
     let exact = (0..=max_depth)
         .map(|k| f64::from(le) * f64::from(albedo).powi(k as i32))
         .sum();
-    (native_tracer(scene), exact)
+    (native_tracer(scene).unwrap(), exact)
 }
 
 /// The furnace: inside a closed box whose walls all emit `Le` and reflect
@@ -647,7 +647,8 @@ fn stratified_mcmc_on_bidirectional_paths_agrees_with_mc_on_the_caustic() {
             .collect();
         spread(&summary)
     };
-    let mut tracer = native_tracer(by_name("caustic", Resolution::new(SIDE, SIDE)).unwrap());
+    let mut tracer =
+        native_tracer(by_name("caustic", Resolution::new(SIDE, SIDE)).unwrap()).unwrap();
     tracer.sampler = PathSampler::Bidirectional;
     let mc = image_and_caustic(block_runs(&tracer, &Method::Mc, 256, 12));
     let stratified = Method::from_name("stratified").unwrap();
@@ -672,7 +673,8 @@ fn stratified_mcmc_on_bidirectional_paths_agrees_with_mc_on_the_caustic() {
 /// centre's, one light subpath replayed) it reads 3.9x bright, z 8.1.
 #[test]
 fn stratified_mcmc_estimates_light_tracing_alone_without_bias() {
-    let mut tracer = native_tracer(by_name("caustic", Resolution::new(SIDE, SIDE)).unwrap());
+    let mut tracer =
+        native_tracer(by_name("caustic", Resolution::new(SIDE, SIDE)).unwrap()).unwrap();
     tracer.sampler = PathSampler::Strategy {
         light: 4,
         camera: 1,
@@ -773,7 +775,7 @@ fn a_splat_rate_reweights_light_tracing_without_bias() {
     let smooth_slab = ("smooth slab", slab_of_roughness(0.0));
     let through_glass = ("floor through glass", floor_through_glass());
     for (name, scene) in scenes.into_iter().chain([smooth_slab, through_glass]) {
-        let mut tracer = native_tracer(scene);
+        let mut tracer = native_tracer(scene).unwrap();
         tracer.sampler = PathSampler::Bidirectional;
         // Seeds of their own: the same paths reweighted would agree far
         // better than independent estimates, and the z-test could not fail.
@@ -806,7 +808,7 @@ fn paths_without_light_tracing_never_splat() {
     for name in strata::native::builtin::NAMES {
         let scene = by_name(name, resolution).unwrap();
         let lit = !scene.lights.is_empty();
-        let mut tracer = native_tracer(scene);
+        let mut tracer = native_tracer(scene).unwrap();
         let mut splats = |sampler| {
             tracer.sampler = sampler;
             let mut numbers = IndependentSampler::new(stream(7, Domain::User, 0));

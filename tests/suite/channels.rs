@@ -83,7 +83,7 @@ fn mc(spp: u64) -> &'static [(f64, f64)] {
 }
 
 fn scene() -> impl PathOracle {
-    native_tracer(builtin::saturated(Resolution::new(40, 40)))
+    native_tracer(builtin::saturated(Resolution::new(40, 40))).unwrap()
 }
 
 /// The largest |z| of `method` against MC over `budgets`, with where.

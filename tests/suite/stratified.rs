@@ -190,7 +190,7 @@ fn the_reconstruction_converges_to_the_procedural_image() {
 #[test]
 fn the_environment_plane_is_close_to_mc_and_far_below_pssmlt() {
     let res = Resolution::new(32, 24);
-    let tracer = native_tracer(builtin::envplane(res));
+    let tracer = native_tracer(builtin::envplane(res)).unwrap();
     let reference = run(&tracer, 99, 2048, Method::Mc).film;
     let pssmlt = Method::Pssmlt(PssmltSettings {
         chains: 64,
@@ -325,7 +325,8 @@ fn the_log_domain_solver_reconstructs_too() {
 #[test]
 fn every_builtin_scene_renders() {
     for name in builtin::NAMES {
-        let tracer = native_tracer(builtin::by_name(name, Resolution::new(16, 12)).unwrap());
+        let tracer =
+            native_tracer(builtin::by_name(name, Resolution::new(16, 12)).unwrap()).unwrap();
         let out = stratified(&tracer, 1, 24);
         let film = &out.film;
         assert!(

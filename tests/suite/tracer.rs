@@ -64,7 +64,7 @@ fn furnace() {
     walls.indices.iter_mut().for_each(|t| t.swap(1, 2)); // face inward
     scene.add_mesh(&walls, m, Some(Vec3::splat(emitted)));
     scene.max_depth = 1000;
-    let tracer = native_tracer(scene);
+    let tracer = native_tracer(scene).unwrap();
     let exact = (emitted / (1.0 - albedo)) as f64;
     for c in 0..3 {
         let (mean, se) = mean_se(&mc_runs(&tracer, 64, 12), |f| f.channel_mean(c));
@@ -96,7 +96,7 @@ fn furnace() {
 #[test]
 fn environment_plane() {
     let res = Resolution::new(16, 12);
-    let tracer = native_tracer(builtin::envplane(res));
+    let tracer = native_tracer(builtin::envplane(res)).unwrap();
     // Bottom rows see only the plane (albedo 0.5, environment 1).
     let bottom = |f: &Film| (0..16).map(|x| f.pixel(x, 11)[0]).sum::<f64>() / 16.0;
     let (mean, se) = mean_se(&mc_runs(&tracer, 32, 10), bottom);
@@ -119,7 +119,8 @@ fn the_tracer_is_pure_on_every_builtin_scene() {
             (n, PathSampler::Bidirectional),
         ]
     }) {
-        let mut tracer = native_tracer(builtin::by_name(name, Resolution::new(32, 24)).unwrap());
+        let mut tracer =
+            native_tracer(builtin::by_name(name, Resolution::new(32, 24)).unwrap()).unwrap();
         tracer.sampler = sampler;
         for (i, p) in [(3.5, 20.2), (16.0, 12.0), (30.9, 1.1)]
             .into_iter()
@@ -165,7 +166,7 @@ fn the_emission_seen_directly_is_the_same_traced_alone() {
         .into_iter()
         .enumerate()
         {
-            let mut tracer = native_tracer(builtin::by_name(name, resolution).unwrap());
+            let mut tracer = native_tracer(builtin::by_name(name, resolution).unwrap()).unwrap();
             tracer.sampler = sampler;
             assert!(tracer.separates_emission(), "{name} ({sampler:?})");
             for j in 0..resolution.pixel_count() {
@@ -191,8 +192,8 @@ fn the_emission_seen_directly_is_the_same_traced_alone() {
 #[test]
 fn tempering_only_acts_above_temperature_one() {
     let scene = builtin::caustic(Resolution::new(48, 36));
-    let plain = native_tracer(scene.clone());
-    let mut regularized = native_tracer(scene);
+    let plain = native_tracer(scene.clone()).unwrap();
+    let mut regularized = native_tracer(scene).unwrap();
     regularized.regularization = Some(Regularization {
         initial: 0.0,
         decay: 0.5,
@@ -230,7 +231,7 @@ fn tempering_only_acts_above_temperature_one() {
 
 #[test]
 fn same_seed_same_image_on_one_and_two_threads() {
-    let tracer = native_tracer(builtin::cornell(Resolution::new(24, 24)));
+    let tracer = native_tracer(builtin::cornell(Resolution::new(24, 24))).unwrap();
     let pssmlt = Method::Pssmlt(PssmltSettings {
         chains: 24,
         bootstrap_candidates: 2048,
@@ -252,7 +253,7 @@ fn nan_from_a_broken_material_does_not_poison_the_image() {
     scene.materials[0] = Material::Diffuse {
         reflectance: Texture::Constant(Vec3::new(f32::NAN, 0.5, 0.5)),
     };
-    let tracer = native_tracer(scene);
+    let tracer = native_tracer(scene).unwrap();
     let out = run(&tracer, 1, 8, Method::Mc);
     assert!(out.stats.invalid_samples > 0);
     assert!(out.film.data().iter().all(|v| v.is_finite()));
@@ -277,7 +278,7 @@ fn nan_from_a_broken_material_does_not_poison_the_image() {
 fn pssmlt_and_mc_agree_on_cornell_and_door() {
     for name in ["cornell", "door"] {
         let res = Resolution::new(24, 18);
-        let tracer = native_tracer(builtin::by_name(name, res).unwrap());
+        let tracer = native_tracer(builtin::by_name(name, res).unwrap()).unwrap();
         let mc = mc_runs(&tracer, 64, 10);
         let pss: Vec<Film> = (0..10)
             .map(|seed| {
@@ -301,7 +302,8 @@ fn pssmlt_and_mc_agree_on_cornell_and_door() {
 /// render is refused with a typed error instead of running identical chains.
 #[test]
 fn replica_exchange_with_oracle_tempering_agrees_with_mc() {
-    let diffuse = native_tracer(builtin::by_name("cornell", Resolution::new(16, 12)).unwrap());
+    let diffuse =
+        native_tracer(builtin::by_name("cornell", Resolution::new(16, 12)).unwrap()).unwrap();
     let mut ensemble = EnsembleSettings::geometric(4, 100.0).unwrap();
     ensemble.tempering = Tempering::Oracle;
     let replica = ReplicaSettings {
@@ -322,7 +324,7 @@ fn replica_exchange_with_oracle_tempering_agrees_with_mc() {
     ));
     let name = "caustic";
     let res = Resolution::new(16, 12);
-    let mut tracer = native_tracer(builtin::by_name(name, res).unwrap());
+    let mut tracer = native_tracer(builtin::by_name(name, res).unwrap()).unwrap();
     let mc = mc_runs(&tracer, 64, 10);
     // The thesis runs it on bidirectional paths and on multiplexed MLT
     // (sec. 5.4), roughening the two joined vertices.
@@ -385,7 +387,7 @@ WorldEnd
     let scene = strata::native::pbrt::parse(&text, std::path::Path::new("furnace.pbrt"))
         .expect("a valid scene")
         .scene;
-    let film = run(&native_tracer(scene), 0, 64, Method::Mc).film;
+    let film = run(&native_tracer(scene).unwrap(), 0, 64, Method::Mc).film;
     // The sphere fills most of the image; paths trapped inside for more than
     // 1024 bounces (total internal reflection between facets) are rare.
     let (mean, min) = film

@@ -758,7 +758,7 @@ mod tests {
             None,
         );
         scene.max_depth = 12;
-        let tracer = native_tracer(scene);
+        let tracer = native_tracer(scene).unwrap();
         let longest = tracer.scene.max_depth as usize + 2;
         let camera = tracer.projection;
         let mut numbers = Numbers(0x9e37_79b9_7f4a_7c15);

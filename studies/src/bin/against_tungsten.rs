@@ -87,7 +87,7 @@ fn main() -> AnyResult<()> {
         };
         let mut scene = pbrt::load(&root.join(pbrt_file))?.scene;
         scene.camera.resolution = Resolution::new(SIDE, SIDE);
-        let tracer = native_tracer(scene);
+        let tracer = native_tracer(scene)?;
         let (mut ours, mut theirs) = (Runs::default(), Runs::default());
         for seed in 1..=args.runs {
             let settings = Settings {

@@ -62,7 +62,7 @@ fn main() -> AnyResult<()> {
     std::fs::create_dir_all(&args.out)?;
     let resolution = Resolution::new(args.size, args.size);
     let scene = common::scene("caustic", Some(args.size), Some(args.size), 96)?;
-    let mut tracer = native_tracer(scene);
+    let mut tracer = native_tracer(scene)?;
     tracer.sampler = PathSampler::Bidirectional;
     let reference = cached_mc(&tracer, "reference", 4096, 1000, &args.out)?;
     tracer.sampler = PathSampler::Strategy {

@@ -114,7 +114,7 @@ fn main() -> AnyResult<()> {
         .unwrap_or_else(|| PathBuf::from("out/channels").join(&args.scene));
     std::fs::create_dir_all(&dir)?;
     let scene = common::scene(&args.scene, args.width, args.height, 96)?;
-    let mut tracer = native_tracer(scene);
+    let mut tracer = native_tracer(scene)?;
     tracer.sampler = PathSampler::from_name(&args.path_sampler).expect("a listed name");
     let r = tracer.resolution();
     let reference = cached_mc(&tracer, "reference", args.reference_spp, 1000, &dir)?;

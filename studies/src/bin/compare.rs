@@ -145,7 +145,7 @@ fn main() -> AnyResult<()> {
         return Ok(());
     }
     let scene = common::scene(&args.scene, args.width, args.height, 128)?;
-    let tracer = native_tracer(scene);
+    let tracer = native_tracer(scene)?;
     let resolution = tracer.resolution();
     std::fs::create_dir_all(&dir)?;
     let reference = reference(&tracer, &args, &dir)?;

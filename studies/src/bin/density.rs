@@ -117,6 +117,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         run(&image, Some(&image.reference()), &args)
     } else {
         let scene = builtin::by_name(&args.scene, res).ok_or("unknown scene")?;
-        run(&native_tracer(scene), None, &args)
+        run(&native_tracer(scene)?, None, &args)
     }
 }

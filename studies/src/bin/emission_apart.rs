@@ -54,7 +54,7 @@ fn mse(a: &Film, b: &Film) -> f64 {
 fn main() -> AnyResult<()> {
     let args = Args::parse();
     let scene = common::scene(&args.scene, Some(96), Some(96), 96)?;
-    let mut tracer = native_tracer(scene);
+    let mut tracer = native_tracer(scene)?;
     tracer.sampler = PathSampler::from_name(&args.path_sampler).expect("a listed name");
     let dir =
         PathBuf::from("out/emission_apart").join(format!("{}-{}", args.scene, args.path_sampler));

@@ -103,7 +103,7 @@ fn main() -> AnyResult<()> {
     });
     std::fs::create_dir_all(&dir)?;
     let scene = common::scene(&args.scene, Some(args.width), Some(args.height), 96)?;
-    let mut tracer = native_tracer(scene);
+    let mut tracer = native_tracer(scene)?;
     tracer.sampler = PathSampler::Bidirectional;
     let reference = cached_mc(&tracer, "reference", args.reference_spp, 1000, &dir)?;
     tracer.sampler = PathSampler::from_name(&args.path_sampler).expect("a path sampler's name");

@@ -48,7 +48,7 @@ fn main() -> AnyResult<()> {
     std::fs::create_dir_all(&args.out)?;
     println!("scene,rel_mse,rel_mse_without_fireflies,l1,seconds,efficiency");
     for name in &args.scenes {
-        let mut tracer = native_tracer(scene(name, None, None, args.side)?);
+        let mut tracer = native_tracer(scene(name, None, None, args.side)?)?;
         tracer.sampler =
             PathSampler::from_name(&args.path_sampler).ok_or("no such path sampler")?;
         let cached = format!("{name}-{}", args.path_sampler);

@@ -65,7 +65,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let resolution = Resolution::new(w.parse()?, h.parse()?);
         let scene = builtin::by_name(&args.scene, resolution)
             .ok_or_else(|| format!("no built-in scene {}", args.scene))?;
-        let mut tracer = native_tracer(scene);
+        let mut tracer = native_tracer(scene)?;
         tracer.sampler = PathSampler::from_name(&args.path_sampler)
             .ok_or_else(|| format!("no path sampler {}", args.path_sampler))?;
         let channels = 3;

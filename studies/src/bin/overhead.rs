@@ -163,7 +163,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .num_threads(args.threads)
         .build()?;
     let procedural = ProceduralImage::showcase(Resolution::new(256, 192));
-    let cornell = native_tracer(builtin::cornell(Resolution::new(128, 128)));
+    let cornell = native_tracer(builtin::cornell(Resolution::new(128, 128)))?;
     let (kelemen, gaussian) = (
         SmallStep::Kelemen(Kelemen::DEFAULT),
         SmallStep::Gaussian(Gaussian::DEFAULT),

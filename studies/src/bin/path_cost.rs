@@ -277,12 +277,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         let mut scene = pbrt::load_shared(name)?.scene;
         scene.camera.resolution = size;
-        let tracer = native_tracer(scene);
+        let tracer = native_tracer(scene)?;
         let metered = Metered(native_tracer({
             let mut scene = pbrt::load_shared(name)?.scene;
             scene.camera.resolution = size;
             scene
-        }));
+        })?);
         let pool = |threads| rayon::ThreadPoolBuilder::new().num_threads(threads).build();
         let two = pool(2)?;
         // Paths per pixel that take MC about `seconds` on 2 threads.

@@ -85,7 +85,7 @@ fn main() -> AnyResult<()> {
         .unwrap_or_else(|| PathBuf::from("out/path_samplers").join(&args.scene));
     std::fs::create_dir_all(&dir)?;
     let scene = common::scene(&args.scene, Some(args.width), Some(args.height), 96)?;
-    let mut tracer = native_tracer(scene);
+    let mut tracer = native_tracer(scene)?;
     tracer.sampler = PathSampler::Bidirectional;
     let reference = cached_mc(&tracer, "reference", args.reference_spp, 1000, &dir)?;
     let mut csv = std::fs::File::create(dir.join("path_samplers.csv"))?;

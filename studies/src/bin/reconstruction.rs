@@ -91,7 +91,7 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
             scene
         }
     };
-    let tracer = native_tracer(scene);
+    let tracer = native_tracer(scene)?;
     let r = tracer.resolution();
     let reference = strata::io::read_film(&args.reference)?;
     if reference.resolution() != r {

@@ -106,7 +106,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let reference = downsample(&reference, reference.resolution().width / args.size);
     let mut scene = pbrt::load(&dir.join("scene.pbrt"))?.scene;
     scene.camera.resolution = Resolution::new(args.size, args.size);
-    let tracer = native_tracer(scene);
+    let tracer = native_tracer(scene)?;
     let mut method = Method::from_name(&args.method).ok_or("unknown method")?;
     let gruson_2020 = SmallStep::Kelemen(Kelemen::GRUSON_2020);
     match &mut method {

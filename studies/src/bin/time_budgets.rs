@@ -53,7 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             scene
         }
     };
-    let tracer = native_tracer(scene);
+    let tracer = native_tracer(scene)?;
     let r = tracer.resolution();
     let mut csv = String::from(
         "scene,width,height,method,budget_s,elapsed_s,overrun_s,paths,reconstruction_cut\n",

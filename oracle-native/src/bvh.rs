@@ -321,6 +321,10 @@ fn test_uniforms(seed: u64) -> impl FnMut() -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::intersect_triangle;
+    use obvhs::BvhBuildParams;
+    use obvhs::triangle::Triangle;
+    use std::time::Duration;
 
     /// A build whose memory cannot be had is a typed error, not an abort:
     /// the bound saturates, and a trial reservation past what the address
@@ -336,10 +340,6 @@ mod tests {
         }
         assert!(check_memory(BvhIntersector::memory_bound(1000)).is_ok());
     }
-    use crate::geometry::intersect_triangle;
-    use obvhs::BvhBuildParams;
-    use obvhs::triangle::Triangle;
-    use std::time::Duration;
 
     /// A bumpy sheet of small triangles, and rays from all around it (each
     /// with its own `t_max`).

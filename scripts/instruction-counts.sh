@@ -5,6 +5,8 @@
 # the engine costs or saves to the instruction, run after run.
 #
 # Each method renders the pbrt Cornell box at 128x128 with 16 paths per pixel
+# (ERPT 202, two passes of its start paths; multistage MLT 24: each above
+# its smallest budget)
 # on 1 thread (seed 0); the count covers the whole process (scene loading,
 # bootstrap, set-up, reconstruction) and is divided by every path traced,
 # bootstrap included, as `strata render` reports them. With --step, each
@@ -72,7 +74,8 @@ count() {
   echo "$instructions $paths"
 }
 
-# The two budgets (paths per pixel) a step is measured between.
+# The two budgets (paths per pixel) a step is measured between; the first
+# is the whole-process count's.
 step_spp() {
   case $1 in
     erpt) echo "202 404" ;;
@@ -90,7 +93,8 @@ for method in mc "${methods[@]}"; do
     instructions=$((high - low))
     paths=$((high_paths - low_paths))
   else
-    read -r instructions paths < <(count "$method" 16)
+    read -r spp _ < <(step_spp "$method")
+    read -r instructions paths < <(count "$method" "$spp")
   fi
   per_path=$(awk -v i="$instructions" -v p="$paths" 'BEGIN {printf "%.0f", i / p}')
   mc_per_path=${mc_per_path:-$per_path}

@@ -360,6 +360,23 @@ impl Normalization {
         }
     }
 
+    /// The value of [`pooled`](Self::pooled)`(estimates)`, without pooling
+    /// the squares it does not need (replica exchange re-estimates every
+    /// level's normalization after every sweep).
+    pub(crate) fn pooled_value<'a>(estimates: impl IntoIterator<Item = &'a Normalization>) -> f64 {
+        let (mut samples, mut sum) = (0, ExactSum::default());
+        for e in estimates {
+            samples += e.samples;
+            sum.add(e.sum);
+        }
+        Normalization {
+            samples,
+            sum: sum.value(),
+            squares: 0.0,
+        }
+        .value()
+    }
+
     /// Samples so far.
     pub fn samples(&self) -> u64 {
         self.samples

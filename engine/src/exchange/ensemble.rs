@@ -195,7 +195,7 @@ impl<R: Radiance> Ensemble<R> {
     pub fn refresh_normalizations(&mut self, priors: &[Normalization]) {
         let levels = self.normalizations.iter_mut().zip(priors);
         for ((b, prior), own) in levels.zip(&self.large_steps) {
-            *b = Normalization::pooled([prior, own]).value();
+            *b = Normalization::pooled_value([prior, own]);
         }
     }
 

@@ -158,12 +158,12 @@ const SPLIT: u8 = 16;
 /// The cheapest wide tree over a binary one, by dynamic programming over
 /// the binary tree (Ylitie, Karras and Laine 2017, their conversion of a
 /// binary BVH to a wide one: the least SAH cost of each subtree held in one
-/// to eight slots of a wide node, children before parents). Its tables
-/// take ~40 bytes a binary node (~80 a triangle) while the tree is built.
+/// to eight slots of a wide node, children before parents). It keeps ~10
+/// bytes a binary node (~20 a triangle); the costs live only while the
+/// walk needs them, on a stack as deep as the tree.
 struct Plan {
-    /// For each binary node and `i` in `0..8`: the least cost of its subtree
-    /// held in at most `i + 1` slots, and how.
-    cost: Vec<[f32; 8]>,
+    /// For each binary node and `i` in `0..8`: how its subtree is best held
+    /// in at most `i + 1` slots.
     choice: Vec<[u8; 8]>,
     /// For each binary node held as a wide node of its own: how many of the
     /// eight slots its left child's subtree takes.
@@ -171,14 +171,13 @@ struct Plan {
 }
 
 impl Plan {
-    fn new(bvh: &Bvh2) -> Self {
+    /// The plan, and the least cost it finds (the root held in one slot).
+    fn new(bvh: &Bvh2) -> (Self, f32) {
         let n = bvh.nodes.len();
         let mut plan = Plan {
-            cost: vec![[0.0; 8]; n],
             choice: vec![[AS_LEAF; 8]; n],
             left_slots: vec![0; n],
         };
-        let mut count = vec![0u32; n];
         let leaf_cost = |area: f32, count: u32| {
             if count <= LEAF_SIZE {
                 area * BLOCK_COST * count.div_ceil(LANES as u32) as f32
@@ -186,34 +185,32 @@ impl Plan {
                 f32::INFINITY
             }
         };
-        // The inner nodes, children before their parents: the reverse of a
-        // pre-order. (A binary leaf's row is its cost as a leaf in every
-        // entry, found when its parent needs it: half the nodes never
-        // written.)
-        let mut order = Vec::with_capacity(n / 2);
-        let mut todo = vec![0u32];
-        while let Some(i) = todo.pop() {
-            let node = &bvh.nodes[i as usize];
-            if !node.is_leaf() {
-                order.push(i);
-                todo.extend([node.first_index, node.first_index + 1]);
-            }
-        }
-        for &i in order.iter().rev() {
-            let i = i as usize;
+        // A walk in post-order (a left subtree, the right one, their
+        // parent): `todo` holds the nodes to visit, each with whether its
+        // children are done; `done` the subtrees finished and not yet taken
+        // by their parents, each as its least costs in one to eight slots
+        // and its triangles. (A binary leaf costs the same in every number
+        // of slots, and keeps its choice, as a leaf.)
+        let mut todo = vec![(0usize, false)];
+        let mut done: Vec<([f32; 8], u32)> = Vec::new();
+        while let Some((i, children_done)) = todo.pop() {
             let node = &bvh.nodes[i];
-            let area = node.aabb.half_area();
-            let (l, r) = (node.first_index as usize, node.first_index as usize + 1);
-            // A child's costs and triangles.
-            let row = |plan: &Plan, c: usize| match &bvh.nodes[c] {
-                leaf if leaf.is_leaf() => (
-                    [leaf_cost(leaf.aabb.half_area(), leaf.prim_count); 8],
-                    leaf.prim_count,
-                ),
-                _ => (plan.cost[c], count[c]),
+            if node.is_leaf() {
+                let cost = leaf_cost(node.aabb.half_area(), node.prim_count);
+                done.push(([cost; 8], node.prim_count));
+                continue;
+            }
+            let left = node.first_index as usize;
+            if !children_done {
+                todo.extend([(i, true), (left + 1, false), (left, false)]);
+                continue;
+            }
+            let (Some((right, right_count)), Some((left, left_count))) = (done.pop(), done.pop())
+            else {
+                unreachable!("both subtrees of a node are done before it");
             };
-            let ((left, left_count), (right, right_count)) = (row(&plan, l), row(&plan, r));
-            count[i] = left_count + right_count;
+            let count = left_count + right_count;
+            let area = node.aabb.half_area();
             // The two subtrees spread over 2 to 8 slots, the left one's
             // share of the cheapest.
             // (A split of one slot to the left stands where no cost
@@ -228,10 +225,11 @@ impl Plan {
                 }
             }
             plan.left_slots[i] = spread[8].1;
-            let as_leaf = leaf_cost(area, count[i]);
+            let as_leaf = leaf_cost(area, count);
             let as_node = area * NODE_COST + spread[8].0;
-            let (cost, choice) = (&mut plan.cost[i], &mut plan.choice[i]);
-            (cost[0], choice[0]) = if count[i] <= LEAF_SIZE && as_leaf <= as_node {
+            let mut cost = [0.0; 8];
+            let choice = &mut plan.choice[i];
+            (cost[0], choice[0]) = if count <= LEAF_SIZE && as_leaf <= as_node {
                 (as_leaf, AS_LEAF)
             } else {
                 (as_node, AS_NODE)
@@ -244,8 +242,10 @@ impl Plan {
                     (cost[slots - 2], IN_FEWER)
                 };
             }
+            done.push((cost, count));
         }
-        plan
+        let root_cost = done.pop().map_or(0.0, |(cost, _)| cost[0]);
+        (plan, root_cost)
     }
 
     /// The binary nodes that take the slots a wide node made of binary
@@ -344,7 +344,7 @@ impl Wide {
             ],
             child: [EMPTY; 8],
         };
-        let plan = Plan::new(bvh);
+        let (plan, _) = Plan::new(bvh);
         let (mut blocks, mut primitives_of, mut walk) = (Vec::new(), Vec::new(), Vec::new());
         // A leaf of binary node `c`'s primitives, its blocks added.
         let mut leaf_of = |c: usize, blocks: &mut Vec<[u32; LANES]>| {
@@ -624,7 +624,7 @@ mod tests {
     #[test]
     fn the_tree_holds_every_triangle_once_at_the_plans_cost() {
         let bvh = binary_tree();
-        let plan = Plan::new(&bvh);
+        let (_, planned) = Plan::new(&bvh);
         let (tree, blocks) = Wide::collapse(&bvh, 0);
         let mut held: Vec<u32> = blocks
             .iter()
@@ -656,7 +656,7 @@ mod tests {
                 cost += half_area(node, lane) * weight as f64;
             }
         }
-        let planned = plan.cost[0][0] as f64;
+        let planned = planned as f64;
         assert!(
             (cost - planned).abs() < 1e-4 * planned,
             "{cost} against {planned}"

@@ -40,6 +40,20 @@ fn permutations(c: &mut Criterion) {
                 })
             },
         );
+        // What a render's IS permutation move does: the values themselves,
+        // in the range that needs no scaling.
+        let values: Vec<f64> = v.iter().map(|&l| l.exp()).collect();
+        group.bench_with_input(
+            BenchmarkId::new("subset_values_normalize_and_sample", m),
+            &m,
+            |b, _| {
+                b.iter(|| {
+                    sampler.normalize_values(black_box(&values));
+                    sampler.sample(&mut rng, &mut o);
+                    black_box(&o);
+                })
+            },
+        );
         group.bench_with_input(
             BenchmarkId::new("enumerate_normalization", m),
             &m,

@@ -241,6 +241,10 @@ pub struct PermutationSampler {
     listed: Vec<u8>,
     /// The product of each listed permutation's values (see [`Table::Listed`]).
     products: Vec<f64>,
+    /// [`fill_plain`](Self::fill_plain)'s values of each lower state at the
+    /// levels of four sets (scratch).
+    #[serde(skip)]
+    lanes: Vec<Lanes>,
 }
 
 impl PermutationSampler {
@@ -275,6 +279,7 @@ impl PermutationSampler {
             weights: vec![0.0; chains],
             products: vec![0.0; listed.len() / chains],
             listed,
+            lanes: Vec::new(),
         })
     }
 
@@ -357,13 +362,87 @@ impl PermutationSampler {
         }
     }
 
-    /// The table over the values as they are (in `scaled`); returns `b_O`.
+    /// The table over the values as they are (in `scaled`, more chains
+    /// than are listed); returns `b_O`.
+    ///
+    /// The sets are taken four at a time, those that differ only in the two
+    /// highest states (`S = L + j 2^(M-2)` for `j` in `0..4`; one in each
+    /// quarter of the table), the `L` of more states first, so that every
+    /// set above is done when it is read (and the four sets of one `L` do
+    /// not wait on those of the `L` before). The four sums add their terms
+    /// of the lower states `k` together, in increasing `k`, a multiply-add
+    /// over four lanes (all four have `k` free, or none); then, still in
+    /// increasing `k`, the terms of the two highest states, which are sets
+    /// of the same four. Each sum adds its terms in the order a set alone
+    /// would, so the table holds the bits of
+    /// [`fill_level`](Self::fill_level)'s sums (a test compares them).
     fn fill_plain(&mut self) -> f64 {
+        const _: () = assert!(LISTED_CHAINS >= 2, "the quarters need 3 chains or more");
         let m = self.chains;
+        debug_assert!(m > LISTED_CHAINS);
         self.table = Table::Linear;
-        self.factor[(1 << m) - 1] = 1.0;
-        for level in (0..m).rev() {
-            self.fill_level(level);
+        let low = m - 2;
+        let blocks = 1usize << low;
+        let (high, highest) = (low, low + 1);
+        let value = |level: usize, k: usize| self.scaled[level * m + k];
+        // For each count `c` of lower states in `L` and each lower state
+        // `k`: the values of `k` at the four sets' levels, `c + popcount(j)`;
+        // then for each `c`, the values of the two highest states at the
+        // levels of the sets they are free in.
+        // (Kept from call to call: the entries past `low` stay zero.)
+        self.lanes.resize(low + 1, Lanes::ZERO);
+        for (c, lanes) in self.lanes.iter_mut().enumerate() {
+            lanes.highest = [
+                value(c, high),
+                value(c, highest),
+                value(c + 1, high),
+                value(c + 1, highest),
+            ];
+            if c < low {
+                for (k, lane) in lanes.lower.iter_mut().enumerate().take(low) {
+                    let (own, one, two) = (value(c, k), value(c + 1, k), value(c + 2, k));
+                    *lane = [own, one, one, two];
+                }
+            }
+        }
+        let (lower, upper) = self.factor.split_at_mut(2 * blocks);
+        let (q0, q1) = lower.split_at_mut(blocks);
+        let (q2, q3) = upper.split_at_mut(blocks);
+        let (q0, q1, q2, q3) = (
+            &mut q0[..blocks],
+            &mut q1[..blocks],
+            &mut q2[..blocks],
+            &mut q3[..blocks],
+        );
+        let full = (blocks - 1) as u32;
+        for c in (0..=low).rev() {
+            let Lanes { lower, highest } = &self.lanes[c];
+            let [own_high, own_highest, one_high, one_highest] = *highest;
+            // The sets of `c` lower states, in increasing order (`by_level`
+            // lists every set so; those below `blocks` hold no highest state).
+            for &l in self.by_level[c]
+                .iter()
+                .take_while(|&&l| (l as usize) < blocks)
+            {
+                let mut sums = [0.0f64; 4];
+                let mut free = full & !l;
+                while free != 0 {
+                    let k = free.trailing_zeros() as usize;
+                    free &= free - 1;
+                    let above = (l | 1 << k) as usize & (blocks - 1);
+                    let set = [q0[above], q1[above], q2[above], q3[above]];
+                    for j in 0..4 {
+                        sums[j] += lower[k][j] * set[j];
+                    }
+                }
+                // The set of every state (the last `L`, with both highest) is 1.
+                let both = if l == full { 1.0 } else { sums[3] };
+                let with_high = sums[1] + one_highest * both;
+                let with_highest = sums[2] + one_high * both;
+                let neither = (sums[0] + own_high * with_high) + own_highest * with_highest;
+                let l = l as usize;
+                (q0[l], q1[l], q2[l], q3[l]) = (neither, with_high, with_highest, both);
+            }
         }
         self.factor[0]
     }
@@ -513,6 +592,25 @@ impl PermutationSampler {
     }
 }
 
+/// The values [`PermutationSampler::fill_plain`] weighs the four sets of
+/// an `L` of `c` lower states by: for each lower state `k` (up to 32, so
+/// that a bit's index never passes them), its values at the four sets'
+/// levels (`c`, `c + 1`, `c + 1`, `c + 2`); and the two highest states'
+/// at the levels of the sets they are free in (`c` then `c + 1`, each the
+/// higher state second).
+#[derive(Clone, Debug)]
+struct Lanes {
+    lower: [[f64; 4]; 33],
+    highest: [f64; 4],
+}
+
+impl Lanes {
+    const ZERO: Lanes = Lanes {
+        lower: [[0.0; 4]; 33],
+        highest: [0.0; 4],
+    };
+}
+
 /// `products[p] = Π_i values[listed[p M + i]]` for every listed permutation
 /// `p` of `M` chains (`values`: the `M x M` values, then zeros); returns
 /// their sum. One loop of `M` per permutation, unrolled for each `M`.
@@ -607,6 +705,38 @@ mod tests {
                 (fast - slow).abs() < 1e-9 * slow.abs().max(1.0),
                 "M={m}: {fast} vs {slow}"
             );
+        }
+    }
+
+    /// The table filled four sets at a time holds the bits of each set's
+    /// sum taken alone, term by term in increasing `k`, with zeros among
+    /// the values.
+    #[test]
+    fn the_table_in_quarters_holds_each_sum_term_by_term() {
+        for m in LISTED_CHAINS + 1..=12 {
+            let mut rng = stream(21, Domain::User, m as u64);
+            let values: Vec<f64> = (0..m * m)
+                .map(|_| match uniform_f64(&mut rng) {
+                    u if u < 0.1 => 0.0,
+                    u => libm::exp(-10.0 * u),
+                })
+                .collect();
+            let mut s = PermutationSampler::new(m).unwrap();
+            s.scaled.copy_from_slice(&values);
+            let b = s.fill_plain();
+            let mut expected = vec![0.0f64; 1 << m];
+            expected[(1 << m) - 1] = 1.0;
+            for set in (0..(1usize << m) - 1).rev() {
+                let level = set.count_ones() as usize;
+                let mut f = 0.0;
+                for k in (0..m).filter(|k| set & (1 << k) == 0) {
+                    f += values[level * m + k] * expected[set | 1 << k];
+                }
+                expected[set] = f;
+            }
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&s.factor), bits(&expected), "M={m}");
+            assert_eq!(b.to_bits(), expected[0].to_bits());
         }
     }
 

@@ -388,8 +388,8 @@ impl PermutationSampler {
         // For each count `c` of lower states in `L` and each lower state
         // `k`: the values of `k` at the four sets' levels, `c + popcount(j)`;
         // then for each `c`, the values of the two highest states at the
-        // levels of the sets they are free in.
-        // (Kept from call to call: the entries past `low` stay zero.)
+        // levels of the sets they are free in. (Kept from call to call;
+        // the entries past `low` stay zero and are never read.)
         self.lanes.resize(low + 1, Lanes::ZERO);
         for (c, lanes) in self.lanes.iter_mut().enumerate() {
             lanes.highest = [
@@ -429,6 +429,8 @@ impl PermutationSampler {
                 while free != 0 {
                     let k = free.trailing_zeros() as usize;
                     free &= free - 1;
+                    // (The mask changes nothing: it shows the compiler
+                    // that the index is in the quarters' range.)
                     let above = (l | 1 << k) as usize & (blocks - 1);
                     let set = [q0[above], q1[above], q2[above], q3[above]];
                     for j in 0..4 {

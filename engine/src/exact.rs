@@ -228,6 +228,33 @@ pub(crate) struct Band<'a> {
 }
 
 impl Band<'_> {
+    /// Asks the processor to bring pixel `pixel`'s sums (counted from the
+    /// band's first) into its cache, all three lines they may span (x86_64;
+    /// elsewhere nothing).
+    #[inline(always)]
+    pub fn prefetch(&self, pixel: usize) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+            let at = self
+                .sums
+                .as_ptr()
+                .wrapping_add(pixel * self.channels)
+                .cast::<i8>();
+            let end = at.wrapping_add(self.channels * core::mem::size_of::<ExactSum>() - 1);
+            // SAFETY: a prefetch is a hint: it reads nothing and never
+            // faults, whatever the address.
+            #[allow(unsafe_code)]
+            unsafe {
+                _mm_prefetch::<_MM_HINT_T0>(at);
+                _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(64));
+                _mm_prefetch::<_MM_HINT_T0>(end);
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = pixel;
+    }
+
     /// Adds `weight * radiance` to the band's pixel `pixel` (counted from
     /// the band's first).
     #[inline]

@@ -85,6 +85,13 @@ impl<R> LayerSplats<R> {
     }
 }
 
+/// How many splats ahead of the one it adds the merge asks the processor
+/// for a pixel's sums: a band's splats land on its pixels at random, and
+/// a film of 1280x720 (110 MB of exact sums) misses the caches on nearly
+/// every one (PSSMLT at 16 paths a pixel: 0.974x the time; 8 ahead
+/// 0.976x, no difference at 128x128).
+const PREFETCH_AHEAD: usize = 16;
+
 impl<R> RoundBuffers<R> {
     pub fn new(bands: SplatBands) -> Self {
         Self {
@@ -223,7 +230,11 @@ impl SplatBands {
             parallel::for_each(&mut bands, |values| {
                 let band = values.first / self.pixels_per_band;
                 for w in work.iter() {
-                    for s in w.buffers().layers[layer].band(band) {
+                    let splats = w.buffers().layers[layer].band(band);
+                    for (i, s) in splats.iter().enumerate() {
+                        if let Some(ahead) = splats.get(i + PREFETCH_AHEAD) {
+                            values.prefetch(ahead.pixel as usize - values.first);
+                        }
                         values.add(s.pixel as usize - values.first, s.weight, &s.radiance);
                     }
                 }

@@ -107,7 +107,7 @@ impl BvhIntersector {
 
     /// The most bytes a build over `triangles` triangles holds at once
     /// (within 1.5x of the peak measured on meshes of 382 to 300 000
-    /// triangles; the tree kept is a third of it, ~80 bytes a triangle).
+    /// triangles; the tree kept is two fifths of it, ~84 bytes a triangle).
     pub fn memory_bound(triangles: usize) -> u64 {
         (triangles as u64)
             .saturating_mul(BUILD_BYTES_PER_TRIANGLE)

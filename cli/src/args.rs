@@ -14,7 +14,7 @@ use strata::native::PathSampler;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub(crate) enum Backend {
-    /// The pure-Rust obvhs BVH.
+    /// The pure-Rust eight-wide BVH (`strata-native`): no C++ toolchain needed.
     Native,
     /// Embree 4 (build with `--features embree` after scripts/install-embree.sh).
     Embree,

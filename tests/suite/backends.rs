@@ -1,6 +1,6 @@
-//! Embree and the native obvhs backend agree (needs `--features embree`, after
-//! scripts/install-embree.sh): on random rays through every built-in scene and
-//! a ~1M-triangle mesh (hit or miss, triangle, distance to 1e-5 relative), on
+//! Embree and the native backend (its own eight-wide BVH) agree (needs
+//! `--features embree`, after scripts/install-embree.sh): on random rays
+//! through every built-in scene and a ~1M-triangle mesh (hit or miss, triangle, distance to 1e-5 relative), on
 //! raycast images, and on renders with the same seed (within noise).
 #![cfg(feature = "embree")]
 
@@ -53,7 +53,7 @@ fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
 /// either backend may resolve: another triangle at the same distance (a
 /// shared edge, or coplanar faces such as a box standing on a floor), or a
 /// hit against a miss where the hit grazes a triangle's edge (barycentric
-/// within 1e-4; obvhs's test is not watertight) or starts on the surface
+/// within 1e-4; the Möller–Trumbore test is not watertight) or starts on the surface
 /// (t < 1e-3). Returns whether it was such a tie.
 fn same_hit(scene: &Scene, a: Option<Hit>, b: Option<Hit>) -> Result<bool, String> {
     let point = |h: Hit| {

@@ -1,7 +1,8 @@
 //! Embree and the native backend (its own eight-wide BVH) agree (needs
 //! `--features embree`, after scripts/install-embree.sh): on random rays
-//! through every built-in scene and a ~1M-triangle mesh (hit or miss, triangle, distance to 1e-5 relative), on
-//! raycast images, and on renders with the same seed (within noise).
+//! through every built-in scene and a ~1M-triangle mesh (hit or miss,
+//! triangle, distance to 1e-5 relative), on raycast images, and on renders
+//! with the same seed (within noise).
 #![cfg(feature = "embree")]
 
 use glam::Vec3;

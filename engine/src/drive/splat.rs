@@ -281,7 +281,8 @@ pub(crate) struct Splatting<W> {
 pub(crate) type SplatSums = (Vec<ExactFilm>, Vec<u64>, u64);
 
 impl<W: Runs> Splatting<W> {
-    /// `work` splatting into black films; a unit costs each worker
+    /// `work` splatting into black films (those of `spare` that are of the
+    /// film's shape, new ones for the rest); a unit costs each worker
     /// `unit_samples` traces; a sample budget is planned for
     /// `planned_workers` workers (more than `work` holds when it is one
     /// task's share).
@@ -290,18 +291,36 @@ impl<W: Runs> Splatting<W> {
         bands: SplatBands,
         unit_samples: u64,
         planned_workers: u64,
+        spare: Vec<ExactFilm>,
     ) -> Result<Self, Error> {
+        if work.is_empty() {
+            return Err(checkpoint::does_not_fit());
+        }
         let resolution = bands.resolution;
+        let channels = W::Radiance::CHANNELS;
+        let mut spare = spare
+            .into_iter()
+            .filter(|f| f.resolution() == resolution && f.channels() == channels);
         let films = (0..bands.layers)
-            .map(|_| ExactFilm::try_new(resolution, W::Radiance::CHANNELS))
+            .map(|_| match spare.next() {
+                Some(black) => {
+                    debug_assert!(black.is_black(), "a spare film is black");
+                    Ok(black)
+                }
+                None => ExactFilm::try_new(resolution, channels),
+            })
             .collect::<Result<_, _>>()?;
-        Self::resumed(
+        // Not checked as a checkpoint's are (`resumed`): black films fit,
+        // and reading every sum of a 1280x720 film costs a pass over it.
+        Ok(Self {
             work,
             bands,
+            films,
+            visits: vec![0; resolution.pixel_count()],
+            units: 0,
             unit_samples,
             planned_workers,
-            (films, vec![0; resolution.pixel_count()], 0),
-        )
+        })
     }
 
     /// `W·H / (u n)`: one estimate of the image per unit of every worker

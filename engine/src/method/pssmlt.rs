@@ -113,10 +113,10 @@ where
     O: PathOracle,
     I: Importance<O::Radiance> + ?Sized,
 {
-    let (mut run, position) = Pssmlt::start(settings, job)?;
+    let (mut run, position) = Pssmlt::start(settings, job, Vec::new())?;
     let saver = run.saver();
     let cancelled = job.drive(&mut run.chains, position, saver)?;
-    Ok(run.finish(cancelled))
+    Ok(run.finish(cancelled).0)
 }
 
 /// The layers PSSMLT splats into: the chains' part of every sample's weight,
@@ -163,11 +163,13 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     /// The bootstrap and the chains started from it (this job's task's
-    /// share of them: chain `c` belongs to task `c mod count`), or for a
-    /// resumed job the chains as they were, with the round loop's position.
+    /// share of them: chain `c` belongs to task `c mod count`), splatting
+    /// into the black films of `spare` where they fit; or for a resumed job
+    /// the chains as they were, with the round loop's position.
     pub(crate) fn start(
         settings: &PssmltSettings,
         job: &Job<'a, O, I>,
+        spare: Vec<ExactFilm>,
     ) -> Result<(Self, Option<Position>), Error> {
         let (oracle, importance) = (job.oracle, job.importance);
         let bands = SplatBands::new(job.resolution).with_layers(LAYERS);
@@ -211,7 +213,7 @@ where
         };
         let work = parallel::map_indices(job.task.share(chains) as usize, start);
         let run = Self {
-            chains: Splatting::new(work, bands, 1, chains)?,
+            chains: Splatting::new(work, bands, 1, chains, spare)?,
             bootstrap: bootstrap.traced(),
             prior,
         };
@@ -233,28 +235,27 @@ where
         }
     }
 
-    /// The normalized image and the counters.
-    pub(crate) fn finish(self, cancelled: bool) -> Output {
+    /// The normalized image and the counters, and its films, black again
+    /// (for a next render of the same film: [`start`](Self::start)'s
+    /// `spare`).
+    pub(crate) fn finish(self, cancelled: bool) -> (Output, Vec<ExactFilm>) {
         let samples = self.chains.samples();
         let prior = self.prior;
-        let ((films, visits, units), work) = self.chains.into_parts();
+        let ((mut films, visits, units), work) = self.chains.into_parts();
         let chains: Vec<Summary> = work.iter().map(|w| summary(&w.chain)).collect();
         let estimates = units * chains.len() as u64;
         let pixels = visits.len();
         let (stats, scale, r) = finish(self.bootstrap, prior, pixels, estimates, &chains, samples);
-        let film = image(
-            films[CHAIN_PART].rounded(),
-            films[LARGE_STEP_PART].values(),
-            scale,
-            r,
-        );
-        Output {
+        let mut film = films[CHAIN_PART].take_rounded();
+        films[LARGE_STEP_PART].take_into(&mut film, |chain, large| pixel(chain, large, scale, r));
+        let output = Output {
             film,
             stats,
             cancelled,
             visits,
             extras: Extras::None,
-        }
+        };
+        (output, films)
     }
 }
 
@@ -355,9 +356,16 @@ fn pooled<'a>(
 /// depend on another's (a render split into tasks splats the same).
 fn image(mut chain: Film, large: impl Iterator<Item = f64>, scale: f64, r: f64) -> Film {
     for (c, l) in chain.data_mut().iter_mut().zip(large) {
-        *c = scale * (r * *c + l);
+        *c = pixel(*c, l, scale, r);
     }
     chain
+}
+
+/// A value of [`image`] from its chain part `chain` and large-step part
+/// `large`.
+#[inline]
+fn pixel(chain: f64, large: f64, scale: f64, r: f64) -> f64 {
+    scale * (r * chain + large)
 }
 
 /// A chain and what it produced in the current round.

@@ -268,7 +268,7 @@ where
             set_up,
             ladder,
             priors,
-            ensembles: Splatting::new(mine, bands, traces_per_sweep, ensembles)?,
+            ensembles: Splatting::new(mine, bands, traces_per_sweep, ensembles, Vec::new())?,
         };
         Ok((run, None))
     }

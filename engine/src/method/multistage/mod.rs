@@ -269,6 +269,9 @@ where
         done.estimate(&mut estimate, &mut luminance, &mut variance);
     }
     let mut cancelled = false;
+    // Each stage's films, black again, for the next (a 1280x720 film's
+    // memory is 150 MB: made once, not once a stage).
+    let mut films = Vec::new();
     let first = done.stages.len();
     for (s, &k) in grids.iter().enumerate().skip(first) {
         let weight_done = done.weight_done;
@@ -336,10 +339,11 @@ where
             beside: None,
             finish_within: false,
         };
-        let (mut run, position) = Pssmlt::start(&settings.pssmlt, &stage_job)?;
+        let (mut run, position) = Pssmlt::start(&settings.pssmlt, &stage_job, films)?;
         let saver = run.saver();
         let stopped = stage_job.drive(&mut run.chains, position, saver)?;
-        let out = run.finish(stopped);
+        let out;
+        (out, films) = run.finish(stopped);
         done.add(&out, k);
         if let Some(beside) = job.beside {
             beside.keep_up(

@@ -142,21 +142,24 @@ impl Method {
             }
             Method::MultiStage(s) => {
                 // One PSSMLT stage, and beside it the estimate so far, the
-                // stages' sums and per pixel its luminance, deviation,
-                // importance and adaptation.
+                // stages' sums (film, deviations and visits) and per pixel
+                // its luminance, deviation, importance and adaptation.
                 // (The emission apart counted once, below.)
                 let pssmlt = super::pssmlt::PssmltSettings {
                     emission_rays: 0.0,
                     ..s.pssmlt
                 };
+                // Its paths carry one more channel, their squared
+                // deviation (`multistage::Probed`).
                 let stage = Method::Pssmlt(pssmlt).memory(&RenderShape {
                     task: Task::WHOLE,
+                    channels: channels + 1,
                     ..*shape
                 });
                 // The sums of the runs finished before the last: film,
                 // deviations and visits.
                 let run = film + 16 * pixels;
-                stage as u128 + 2 * film + 4 * 8 * pixels + runs_kept(s.runs, task) * run
+                stage as u128 + 2 * film + 6 * 8 * pixels + runs_kept(s.runs, task) * run
             }
         };
         // The emission seen directly, estimated apart (`emission_rays`;

@@ -27,18 +27,13 @@ pub fn tvi(la: f64) -> f64 {
     libm::pow(10.0, log_threshold)
 }
 
-/// The `q`-quantile of `values` (sorted copy; nearest rank).
-fn quantile(values: &[f64], q: f64) -> f64 {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * q) as usize]
-}
-
 /// The noise target of Hoberock and Hart 2010, sec. 4.3.5 per pixel (see the module docs).
 /// `mean` is the luminance estimate, `variance` the deviation estimate per
 /// pixel, `adaptation` the region-averaged luminance. Luminance is scaled so
 /// that the image mean is 100 cd/m², a display-like adaptation level (the
-/// seed does not say how scene units map to `tvi`'s).
+/// seed does not say how scene units map to `tvi`'s). It holds three
+/// values a pixel besides its arguments (the target, its logarithms and
+/// the filtered target), a fourth while it finds the percentiles.
 pub(super) fn noise_target(
     resolution: Resolution,
     mean: &[f64],
@@ -51,21 +46,27 @@ pub(super) fn noise_target(
     } else {
         1.0
     };
-    let error: Vec<f64> = variance
+    // The visible error, made the target in place below.
+    let mut target: Vec<f64> = variance
         .iter()
         .zip(adaptation)
         .map(|(v, la)| libm::sqrt(v.max(0.0)) * to_cd / tvi(la * to_cd))
         .collect();
-    let sampled: Vec<f64> = error
-        .iter()
-        .zip(mean)
-        .filter(|(e, m)| **m > 0.0 && **e > 0.0)
-        .map(|(e, _)| *e)
-        .collect();
-    if sampled.is_empty() {
-        return vec![1.0; error.len()];
-    }
-    let (p5, p95) = (quantile(&sampled, 0.05), quantile(&sampled, 0.95));
+    // The 5th and 95th percentiles (nearest rank) of the sampled pixels'.
+    let (p5, p95) = {
+        let mut sampled: Vec<f64> = target
+            .iter()
+            .zip(mean)
+            .filter(|(e, m)| **m > 0.0 && **e > 0.0)
+            .map(|(e, _)| *e)
+            .collect();
+        if sampled.is_empty() {
+            return vec![1.0; target.len()];
+        }
+        sampled.sort_by(f64::total_cmp);
+        let rank = |q: f64| sampled[((sampled.len() - 1) as f64 * q) as usize];
+        (rank(0.05), rank(0.95))
+    };
     // Step 1: contrast p95/p5 at most 2, by a power law around p5.
     let gamma = if p95 > 2.0 * p5 {
         core::f64::consts::LN_2 / libm::log(p95 / p5)
@@ -75,24 +76,21 @@ pub(super) fn noise_target(
     let compress = |e: f64| p5 * libm::pow(e / p5, gamma);
     let (low, high) = (p5, compress(p95));
     // Step 2: clamp; unsampled pixels get the 95th percentile.
-    let target: Vec<f64> = error
-        .iter()
-        .zip(mean)
-        .map(|(&e, &m)| {
-            if m > 0.0 && e > 0.0 {
-                compress(e).clamp(low, high)
-            } else {
-                high
-            }
-        })
-        .collect();
+    for (t, &m) in target.iter_mut().zip(mean) {
+        *t = if m > 0.0 && *t > 0.0 {
+            compress(*t).clamp(low, high)
+        } else {
+            high
+        };
+    }
     // Step 3: bilateral filter (5x5, spatial sigma 1.5 px, range sigma 0.25
-    // in log target).
+    // in log target), each pixel's logarithm taken once.
+    let logs: Vec<f64> = target.iter().map(|&t| libm::log(t)).collect();
     let (w, h) = (resolution.width as i64, resolution.height as i64);
     let mut out = vec![0.0; target.len()];
     for y in 0..h {
         for x in 0..w {
-            let centre = libm::log(target[(y * w + x) as usize]);
+            let centre = logs[(y * w + x) as usize];
             let (mut sum, mut weights) = (0.0, 0.0);
             for dy in -2..=2i64 {
                 for dx in -2..=2i64 {
@@ -100,13 +98,13 @@ pub(super) fn noise_target(
                     if nx < 0 || ny < 0 || nx >= w || ny >= h {
                         continue;
                     }
-                    let t = target[(ny * w + nx) as usize];
-                    let dr = libm::log(t) - centre;
+                    let at = (ny * w + nx) as usize;
+                    let dr = logs[at] - centre;
                     let weight = libm::exp(
                         -((dx * dx + dy * dy) as f64) / (2.0 * 1.5 * 1.5)
                             - dr * dr / (2.0 * 0.0625),
                     );
-                    sum += weight * t;
+                    sum += weight * target[at];
                     weights += weight;
                 }
             }

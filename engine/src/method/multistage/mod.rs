@@ -616,7 +616,9 @@ impl StagesDone {
     /// pixel.
     fn estimate(&self, estimate: &mut Film, luminance: &mut [f64], variance: &mut [f64]) {
         let inverse = 1.0 / self.stats.samples.max(1) as f64;
-        *estimate = self.sum.scaled(inverse);
+        // In place: a second film of the image's size would be the peak.
+        estimate.data_mut().copy_from_slice(self.sum.data());
+        estimate.scale(inverse);
         for (i, (l, v)) in luminance.iter_mut().zip(variance.iter_mut()).enumerate() {
             *l = estimate.luminance(i);
             *v = self.deviation_sum[i] * inverse;

@@ -191,11 +191,6 @@ impl ExactFilm {
         self.channels
     }
 
-    /// Whether no term has reached any sum.
-    pub(crate) fn is_black(&self) -> bool {
-        self.sums.iter().all(|s| *s == ExactSum::default())
-    }
-
     /// Adds `weight * radiance` to the pixel with index `pixel` (row-major).
     #[inline]
     pub fn add<R: Radiance>(&mut self, pixel: usize, weight: f64, radiance: &R) {

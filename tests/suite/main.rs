@@ -27,3 +27,4 @@ mod stopped;
 mod stratified;
 mod tasks;
 mod tracer;
+mod user_sizes;

@@ -282,7 +282,8 @@ pub(crate) type SplatSums = (Vec<ExactFilm>, Vec<u64>, u64);
 
 impl<W: Runs> Splatting<W> {
     /// `work` splatting into black films (those of `spare` that are of the
-    /// film's shape, new ones for the rest); a unit costs each worker
+    /// film's shape, black as `ExactFilm::take_rounded` leaves them; new
+    /// ones for the rest); a unit costs each worker
     /// `unit_samples` traces; a sample budget is planned for
     /// `planned_workers` workers (more than `work` holds when it is one
     /// task's share).
@@ -303,10 +304,7 @@ impl<W: Runs> Splatting<W> {
             .filter(|f| f.resolution() == resolution && f.channels() == channels);
         let films = (0..bands.layers)
             .map(|_| match spare.next() {
-                Some(black) => {
-                    debug_assert!(black.is_black(), "a spare film is black");
-                    Ok(black)
-                }
+                Some(black) => Ok(black),
                 None => ExactFilm::try_new(resolution, channels),
             })
             .collect::<Result<_, _>>()?;

@@ -1,0 +1,148 @@
+//! Every method at the size users render, 1280x720, at a preview budget (4
+//! paths a pixel; stratified MCMC's smallest, one sweep, is 8), against
+//! the exact image of an analytic target (`ProceduralImage::showcase`: a
+//! dim ramp, three coloured blobs, a small rectangle 40 times brighter,
+//! black parts). Per channel, the image mean
+//! and the mean of each of `REGIONS_X` x `REGIONS_Y` regions agree with
+//! the exact values to within [`t_max`] standard errors of the renders'
+//! spread (`SEEDS` of them).
+//!
+//! The small films of `channels.rs` and `images.rs` test the estimators'
+//! statistics with many seeds; here what grows with the film runs at a
+//! user's size (exact films of 110 MB and their 32 splat bands, multi-stage
+//! MLT's 20 stages, stratified MCMC's 921 600 tile chains and its solver
+//! on the whole film), so that a band, a region or a channel out of place
+//! fails: one splat band of 32 dropped fails PSSMLT, replica exchange and
+//! multi-stage MLT at |t| 23-46 (checked). A region is 57 600 pixels, so
+//! an error in a few rows of a dark part of the image passes.
+
+use strata::engine::analytic::ProceduralImage;
+use strata::engine::method::{ErptSettings, StratifiedSettings};
+use strata::engine::{Film, Method, Resolution};
+
+use crate::common::run;
+
+/// Renders per method (ERPT's more: its quanta make its renders' means
+/// skewed, which a spread of six misjudges).
+const SEEDS: u64 = 6;
+const ERPT_SEEDS: u64 = 16;
+/// Regions across and down (320x180 pixels each).
+const REGIONS_X: usize = 4;
+const REGIONS_Y: usize = 4;
+/// The largest |t| accepted of `seeds` renders: Student's t with 5 degrees
+/// of freedom exceeds 10 with probability 1.7e-4, with 15 it exceeds 6
+/// with probability 2.4e-5, so over a method's 51 values a correct
+/// estimator fails with probability below 1 %. (A region 2 % off is ~10
+/// standard errors out at these budgets.)
+fn t_max(seeds: u64) -> f64 {
+    match seeds {
+        6 => 10.0,
+        16 => 6.0,
+        _ => unreachable!("a threshold for {seeds} renders"),
+    }
+}
+
+/// Per channel, the image mean, then each region's mean, region by region.
+fn summary(film: &Film) -> Vec<f64> {
+    let r = film.resolution();
+    let (w, h) = (r.width as usize, r.height as usize);
+    let channels = film.channels();
+    let regions = REGIONS_X * REGIONS_Y;
+    let mut sums = vec![0.0; (1 + regions) * channels];
+    for y in 0..h {
+        for x in 0..w {
+            let region = 1 + (y * REGIONS_Y / h) * REGIONS_X + x * REGIONS_X / w;
+            for (c, v) in film.pixel(x as u32, y as u32).iter().enumerate() {
+                sums[c] += v / (w * h) as f64;
+                sums[region * channels + c] += v * regions as f64 / (w * h) as f64;
+            }
+        }
+    }
+    sums
+}
+
+/// The largest |t| of `seeds` renders of `method` at `spp` paths a pixel
+/// against the exact image, with where it is.
+fn worst_t(method: Method, spp: u64, seeds: u64) -> (f64, String) {
+    let image = ProceduralImage::showcase(Resolution::new(1280, 720));
+    let exact = summary(&image.reference());
+    let renders: Vec<Vec<f64>> = (0..seeds)
+        .map(|seed| summary(&run(&image, seed, spp, method.clone()).film))
+        .collect();
+    let n = seeds as f64;
+    let mut worst = (0.0, String::new());
+    for (i, &exact) in exact.iter().enumerate() {
+        let values: Vec<f64> = renders.iter().map(|r| r[i]).collect();
+        let mean = values.iter().sum::<f64>() / n;
+        let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        let se = (var / n).sqrt();
+        let t = if se > 0.0 {
+            (mean - exact) / se
+        } else if (mean - exact).abs() <= 1e-9 * exact.abs().max(1e-9) {
+            0.0
+        } else {
+            f64::INFINITY
+        };
+        if t.abs() >= worst.0 {
+            let (part, c) = (i / 3, i % 3);
+            let place = match part {
+                0 => "the image".to_string(),
+                r => format!("region {}", r - 1),
+            };
+            worst = (
+                t.abs(),
+                format!("{place}, channel {c}: {mean:.6} vs exact {exact:.6}, t = {t:.1}"),
+            );
+        }
+    }
+    worst
+}
+
+fn check(name: &str, method: Method, spp: u64) {
+    check_with(name, method, spp, SEEDS);
+}
+
+fn check_with(name: &str, method: Method, spp: u64, seeds: u64) {
+    let (t, at) = worst_t(method, spp, seeds);
+    eprintln!("{name} at 1280x720: largest |t| {t:.2} ({at})");
+    assert!(t < t_max(seeds), "{name} at 1280x720: {at}");
+}
+
+#[test]
+fn mc_is_right_everywhere_at_1280x720() {
+    check("mc", Method::Mc, 4);
+}
+
+#[test]
+fn pssmlt_is_right_everywhere_at_1280x720() {
+    check("pssmlt", Method::Pssmlt(Default::default()), 4);
+}
+
+#[test]
+fn replica_exchange_is_right_everywhere_at_1280x720() {
+    check("replica", Method::Replica(Default::default()), 4);
+}
+
+#[test]
+fn erpt_is_right_everywhere_at_1280x720() {
+    // Chains of 3 steps: one pass is the budget, 4 paths a pixel.
+    let erpt = ErptSettings {
+        chain_length: 3,
+        ..Default::default()
+    };
+    check_with("erpt", Method::Erpt(erpt), 4, ERPT_SEEDS);
+}
+
+#[test]
+fn multistage_mlt_is_right_everywhere_at_1280x720() {
+    check("multistage", Method::MultiStage(Default::default()), 4);
+}
+
+#[test]
+fn stratified_mcmc_is_right_everywhere_at_1280x720() {
+    check(
+        "stratified",
+        Method::Stratified(StratifiedSettings::default()),
+        8,
+    );
+}

@@ -328,6 +328,7 @@ impl Band<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::oracle::Rgb;
     use crate::rng::{self, Domain, uniform_f64};
     use alloc::vec;
 
@@ -464,5 +465,38 @@ mod tests {
         assert!(whole.fits(r, 1) && !whole.fits(r, 3));
         let film = whole.scaled(0.5);
         assert_eq!(film.data()[4], whole.sums[4].value() * 0.5);
+    }
+
+    /// A film of many pieces (the rounding's unit of work) rounds every sum
+    /// to its own value, in its place, whichever way it is rounded, and
+    /// `take_rounded` and `take_into` leave it black.
+    #[test]
+    fn a_large_film_rounds_each_sum_in_its_place() {
+        let r = Resolution::new(301, 200);
+        let mut film = ExactFilm::try_new(r, 3).unwrap();
+        let all = terms(3000);
+        // Most sums left at zero, as a preview's are; the others distinct.
+        for (i, t) in all.iter().enumerate() {
+            film.add((i * 7919) % r.pixel_count(), *t, &Rgb([1.0, 0.5, -2.0]));
+        }
+        let values: Vec<f64> = film.sums.iter().map(ExactSum::value).collect();
+        assert!(
+            values.len() > 10 * (1 << 14),
+            "pieces: {}",
+            values.len() >> 14
+        );
+        assert!(values.iter().filter(|v| **v != 0.0).count() > 8000);
+        let bits = |f: &Film| f.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let expected: Vec<u64> = values.iter().map(|v| v.to_bits()).collect();
+        assert_eq!(bits(&film.rounded()), expected);
+        let mut taken = film.clone();
+        assert_eq!(bits(&taken.take_rounded()), expected);
+        assert_eq!(taken, ExactFilm::try_new(r, 3).unwrap());
+        let mut into = Film::new(r, 3);
+        into.data_mut().fill(1.0);
+        film.take_into(&mut into, |v, sum| v + 2.0 * sum);
+        let combined: Vec<u64> = values.iter().map(|s| (1.0 + 2.0 * s).to_bits()).collect();
+        assert_eq!(bits(&into), combined);
+        assert_eq!(film, ExactFilm::try_new(r, 3).unwrap());
     }
 }

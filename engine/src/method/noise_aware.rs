@@ -46,12 +46,20 @@ pub(super) fn noise_target(
     } else {
         1.0
     };
-    // The visible error, made the target in place below.
-    let mut target: Vec<f64> = variance
-        .iter()
-        .zip(adaptation)
-        .map(|(v, la)| libm::sqrt(v.max(0.0)) * to_cd / tvi(la * to_cd))
-        .collect();
+    // The visible error, made the target in place below; in pieces on
+    // the render's threads (a `tvi` a pixel), as the steps below.
+    const PIECE: usize = 1 << 12;
+    let mut target = vec![0.0; variance.len()];
+    crate::parallel::for_each_chunk(&mut target, PIECE, |i, piece| {
+        let at = i * PIECE..;
+        for ((e, v), la) in piece
+            .iter_mut()
+            .zip(&variance[at.clone()])
+            .zip(&adaptation[at])
+        {
+            *e = libm::sqrt(v.max(0.0)) * to_cd / tvi(la * to_cd);
+        }
+    });
     // The 5th and 95th percentiles (nearest rank) of the sampled pixels'.
     let (p5, p95) = {
         let mut sampled: Vec<f64> = target
@@ -63,8 +71,10 @@ pub(super) fn noise_target(
         if sampled.is_empty() {
             return vec![1.0; target.len()];
         }
-        sampled.sort_by(f64::total_cmp);
-        let rank = |q: f64| sampled[((sampled.len() - 1) as f64 * q) as usize];
+        let mut rank = |q: f64| {
+            let k = ((sampled.len() - 1) as f64 * q) as usize;
+            *sampled.select_nth_unstable_by(k, f64::total_cmp).1
+        };
         (rank(0.05), rank(0.95))
     };
     // Step 1: contrast p95/p5 at most 2, by a power law around p5.
@@ -76,20 +86,27 @@ pub(super) fn noise_target(
     let compress = |e: f64| p5 * libm::pow(e / p5, gamma);
     let (low, high) = (p5, compress(p95));
     // Step 2: clamp; unsampled pixels get the 95th percentile.
-    for (t, &m) in target.iter_mut().zip(mean) {
-        *t = if m > 0.0 && *t > 0.0 {
-            compress(*t).clamp(low, high)
-        } else {
-            high
-        };
-    }
+    crate::parallel::for_each_chunk(&mut target, PIECE, |i, piece| {
+        for (t, &m) in piece.iter_mut().zip(&mean[i * PIECE..]) {
+            *t = if m > 0.0 && *t > 0.0 {
+                compress(*t).clamp(low, high)
+            } else {
+                high
+            };
+        }
+    });
     // Step 3: bilateral filter (5x5, spatial sigma 1.5 px, range sigma 0.25
-    // in log target), each pixel's logarithm taken once.
-    let logs: Vec<f64> = target.iter().map(|&t| libm::log(t)).collect();
+    // in log target), each pixel's logarithm taken once, a row a task (25
+    // exponentials a pixel).
+    let mut logs = target.clone();
+    crate::parallel::for_each_chunk(&mut logs, PIECE, |_, piece| {
+        piece.iter_mut().for_each(|t| *t = libm::log(*t));
+    });
     let (w, h) = (resolution.width as i64, resolution.height as i64);
     let mut out = vec![0.0; target.len()];
-    for y in 0..h {
-        for x in 0..w {
+    crate::parallel::for_each_chunk(&mut out, w.max(1) as usize, |y, row| {
+        let y = y as i64;
+        for (x, filtered) in (0..w).zip(row.iter_mut()) {
             let centre = logs[(y * w + x) as usize];
             let (mut sum, mut weights) = (0.0, 0.0);
             for dy in -2..=2i64 {
@@ -108,9 +125,9 @@ pub(super) fn noise_target(
                     weights += weight;
                 }
             }
-            out[(y * w + x) as usize] = sum / weights;
+            *filtered = sum / weights;
         }
-    }
+    });
     out
 }
 

@@ -149,6 +149,9 @@ impl ExactSum {
     }
 }
 
+/// Sums a task of a film's rounding rounds.
+const PIECE: usize = 1 << 14;
+
 /// A film of exact sums (see the module docs): `width x height` pixels,
 /// `channels` sums each, row-major. What methods accumulate into when their
 /// image must not depend on how the work was split.
@@ -217,10 +220,9 @@ impl ExactFilm {
         self.sums.iter().map(ExactSum::value)
     }
 
-    /// The sums, rounded to f64, as a film (in pieces on the render's
-    /// threads: a 1280x720 film holds 2.8 million sums).
+    /// The sums, rounded to f64, as a film (in pieces of [`PIECE`] on the
+    /// render's threads: a 1280x720 film holds 2.8 million sums).
     pub fn rounded(&self) -> Film {
-        const PIECE: usize = 1 << 14;
         let mut film = Film::new(self.resolution, self.channels);
         crate::parallel::for_each_chunk(film.data_mut(), PIECE, |i, values| {
             for (v, s) in values.iter_mut().zip(&self.sums[i * PIECE..]) {
@@ -231,8 +233,7 @@ impl ExactFilm {
     }
 
     /// The sums, rounded to f64, as a film, leaving this film black to be
-    /// filled again (a multi-stage render's next stage): a sum no term
-    /// reached is read, not written.
+    /// filled again (a multi-stage render's next stage).
     pub(crate) fn take_rounded(&mut self) -> Film {
         let mut film = Film::new(self.resolution, self.channels);
         self.take_into(&mut film, |_, sum| sum);
@@ -243,7 +244,6 @@ impl ExactFilm {
     /// same shape) as `combine(v, sum)`, leaving this film black as
     /// [`take_rounded`](Self::take_rounded) does.
     pub(crate) fn take_into(&mut self, film: &mut Film, combine: impl Fn(f64, f64) -> f64 + Sync) {
-        const PIECE: usize = 1 << 14;
         let mut pieces: Vec<(&mut [f64], &mut [ExactSum])> = film
             .data_mut()
             .chunks_mut(PIECE)
@@ -481,9 +481,9 @@ mod tests {
         }
         let values: Vec<f64> = film.sums.iter().map(ExactSum::value).collect();
         assert!(
-            values.len() > 10 * (1 << 14),
+            values.len() > 10 * PIECE,
             "pieces: {}",
-            values.len() >> 14
+            values.len() / PIECE
         );
         assert!(values.iter().filter(|v| **v != 0.0).count() > 8000);
         let bits = |f: &Film| f.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();

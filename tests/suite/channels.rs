@@ -14,8 +14,10 @@ use std::sync::OnceLock;
 
 use strata::engine::method::{ErptSettings, MultiStageSettings, PssmltSettings};
 use strata::engine::target::MaxChannel;
-use strata::engine::{Budget, Film, Method, PathOracle, Resolution, Settings, Silent, render};
+use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::native::{builtin, native_tracer};
+
+use crate::common::region_means;
 
 /// Renders per method and budget.
 const SEEDS: u64 = 16;
@@ -25,23 +27,6 @@ const REGIONS: usize = 4;
 /// here, for which |t| > 5.5 has probability ~5e-6; over the ~150
 /// comparisons of a method that is a familywise false alarm below 1e-3.
 const Z_MAX: f64 = 5.5;
-
-/// Per channel, the image mean and each block's mean of one render.
-fn summary(film: &Film) -> Vec<f64> {
-    let r = film.resolution();
-    let (w, h) = (r.width as usize, r.height as usize);
-    let mut sums = vec![0.0; (1 + REGIONS * REGIONS) * 3];
-    for y in 0..h {
-        for x in 0..w {
-            let block = 1 + (y * REGIONS / h) * REGIONS + x * REGIONS / w;
-            for (c, v) in film.pixel(x as u32, y as u32).iter().enumerate() {
-                sums[c] += v / (w * h) as f64;
-                sums[block * 3 + c] += v * (REGIONS * REGIONS) as f64 / (w * h) as f64;
-            }
-        }
-    }
-    sums
-}
 
 /// Mean and standard error over the renders of every summary value.
 fn spread(summaries: &[Vec<f64>]) -> Vec<(f64, f64)> {
@@ -63,10 +48,11 @@ fn summaries<O: PathOracle>(oracle: &O, method: &Method, spp: u64) -> Vec<Vec<f6
                 budget: Budget::samples_per_pixel(spp, oracle.resolution()),
                 method: method.clone(),
             };
-            summary(
+            region_means(
                 &render(oracle, &MaxChannel, &settings, &Silent)
                     .unwrap()
                     .film,
+                REGIONS,
             )
         })
         .collect()

@@ -67,6 +67,25 @@ pub fn check(label: &str, runs: &[Film], reference: &Film) -> f64 {
     worst
 }
 
+/// Per channel, the image mean, then the mean of each of `regions` x
+/// `regions` blocks of the film, block by block (row by row of blocks).
+pub fn region_means(film: &Film, regions: usize) -> Vec<f64> {
+    let r = film.resolution();
+    let (w, h) = (r.width as usize, r.height as usize);
+    let channels = film.channels();
+    let mut sums = vec![0.0; (1 + regions * regions) * channels];
+    for y in 0..h {
+        for x in 0..w {
+            let block = 1 + (y * regions / h) * regions + x * regions / w;
+            for (c, v) in film.pixel(x as u32, y as u32).iter().enumerate() {
+                sums[c] += v / (w * h) as f64;
+                sums[block * channels + c] += v * (regions * regions) as f64 / (w * h) as f64;
+            }
+        }
+    }
+    sums
+}
+
 /// The mean of `values` and its standard error.
 pub fn mean_and_standard_error(values: &[f64]) -> (f64, f64) {
     let n = values.len() as f64;

@@ -2,10 +2,9 @@
 //! paths a pixel; stratified MCMC's smallest, one sweep, is 8), against
 //! the exact image of an analytic target (`ProceduralImage::showcase`: a
 //! dim ramp, three coloured blobs, a small rectangle 40 times brighter,
-//! black parts). Per channel, the image mean
-//! and the mean of each of `REGIONS_X` x `REGIONS_Y` regions agree with
-//! the exact values to within [`t_max`] standard errors of the renders'
-//! spread (`SEEDS` of them).
+//! black parts). Per channel, the image mean and the mean of each of
+//! `REGIONS` x `REGIONS` regions agree with the exact values to within
+//! [`t_max`] standard errors of the renders' spread.
 //!
 //! The small films of `channels.rs` and `images.rs` test the estimators'
 //! statistics with many seeds; here what grows with the film runs at a
@@ -18,22 +17,22 @@
 
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::method::{ErptSettings, StratifiedSettings};
-use strata::engine::{Film, Method, Resolution};
+use strata::engine::{Method, Resolution};
 
-use crate::common::run;
+use crate::common::{mean_and_standard_error, region_means, run};
 
 /// Renders per method (ERPT's more: its quanta make its renders' means
 /// skewed, which a spread of six misjudges).
 const SEEDS: u64 = 6;
 const ERPT_SEEDS: u64 = 16;
 /// Regions across and down (320x180 pixels each).
-const REGIONS_X: usize = 4;
-const REGIONS_Y: usize = 4;
+const REGIONS: usize = 4;
 /// The largest |t| accepted of `seeds` renders: Student's t with 5 degrees
 /// of freedom exceeds 10 with probability 1.7e-4, with 15 it exceeds 6
 /// with probability 2.4e-5, so over a method's 51 values a correct
-/// estimator fails with probability below 1 %. (A region 2 % off is ~10
-/// standard errors out at these budgets.)
+/// estimator fails with probability below 1 %. (MC's regions' standard
+/// errors are ~0.2 % of their means here: a region 2 % off is ~10 of
+/// them.)
 fn t_max(seeds: u64) -> f64 {
     match seeds {
         6 => 10.0,
@@ -42,40 +41,18 @@ fn t_max(seeds: u64) -> f64 {
     }
 }
 
-/// Per channel, the image mean, then each region's mean, region by region.
-fn summary(film: &Film) -> Vec<f64> {
-    let r = film.resolution();
-    let (w, h) = (r.width as usize, r.height as usize);
-    let channels = film.channels();
-    let regions = REGIONS_X * REGIONS_Y;
-    let mut sums = vec![0.0; (1 + regions) * channels];
-    for y in 0..h {
-        for x in 0..w {
-            let region = 1 + (y * REGIONS_Y / h) * REGIONS_X + x * REGIONS_X / w;
-            for (c, v) in film.pixel(x as u32, y as u32).iter().enumerate() {
-                sums[c] += v / (w * h) as f64;
-                sums[region * channels + c] += v * regions as f64 / (w * h) as f64;
-            }
-        }
-    }
-    sums
-}
-
 /// The largest |t| of `seeds` renders of `method` at `spp` paths a pixel
 /// against the exact image, with where it is.
 fn worst_t(method: Method, spp: u64, seeds: u64) -> (f64, String) {
     let image = ProceduralImage::showcase(Resolution::new(1280, 720));
-    let exact = summary(&image.reference());
+    let exact = region_means(&image.reference(), REGIONS);
     let renders: Vec<Vec<f64>> = (0..seeds)
-        .map(|seed| summary(&run(&image, seed, spp, method.clone()).film))
+        .map(|seed| region_means(&run(&image, seed, spp, method.clone()).film, REGIONS))
         .collect();
-    let n = seeds as f64;
     let mut worst = (0.0, String::new());
     for (i, &exact) in exact.iter().enumerate() {
         let values: Vec<f64> = renders.iter().map(|r| r[i]).collect();
-        let mean = values.iter().sum::<f64>() / n;
-        let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
-        let se = (var / n).sqrt();
+        let (mean, se) = mean_and_standard_error(&values);
         let t = if se > 0.0 {
             (mean - exact) / se
         } else if (mean - exact).abs() <= 1e-9 * exact.abs().max(1e-9) {

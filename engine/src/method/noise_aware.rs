@@ -31,9 +31,10 @@ pub fn tvi(la: f64) -> f64 {
 /// `mean` is the luminance estimate, `variance` the deviation estimate per
 /// pixel, `adaptation` the region-averaged luminance. Luminance is scaled so
 /// that the image mean is 100 cd/m², a display-like adaptation level (the
-/// seed does not say how scene units map to `tvi`'s). It holds three
-/// values a pixel besides its arguments (the target, its logarithms and
-/// the filtered target), a fourth while it finds the percentiles.
+/// seed does not say how scene units map to `tvi`'s). It holds at most
+/// three values a pixel besides its arguments: the target, its logarithms
+/// and the filtered target (the target and a copy of its sampled pixels'
+/// while it finds the percentiles).
 pub(super) fn noise_target(
     resolution: Resolution,
     mean: &[f64],

@@ -625,3 +625,64 @@ mod scene_rays {
         }
     }
 }
+
+#[cfg(test)]
+mod flat_walls {
+    use super::*;
+    use obvhs::rt_triangle::RtTriangle;
+
+    /// Rays aimed at the shared edges and corners of a grid of triangles on
+    /// axis-aligned walls (whose boxes are flat, and whose edges are their
+    /// boxes' faces): the closest hit is at the distance a test of every
+    /// triangle finds, bit for bit. The traversal's boxes and the triangle
+    /// test round differently; exit distances widened by `WIDEN` keep a
+    /// box's triangle from being hit where its box is passed by.
+    #[test]
+    fn rays_at_the_edges_of_flat_walls_find_the_closest_of_all_triangles() {
+        let n = 30;
+        let mut tris = Vec::new();
+        for axis in 0..3 {
+            for i in 0..n {
+                for j in 0..n {
+                    let at = |u: usize, v: usize| {
+                        let (u, v) = (
+                            u as f32 / n as f32 * 2.0 - 1.0,
+                            v as f32 / n as f32 * 2.0 - 1.0,
+                        );
+                        let mut p = [0.3 * axis as f32 - 0.3; 3];
+                        p[(axis + 1) % 3] = u;
+                        p[(axis + 2) % 3] = v;
+                        Vec3::from(p)
+                    };
+                    tris.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+                    tris.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+                }
+            }
+        }
+        let bvh = BvhIntersector::new(&tris).unwrap();
+        let all: Vec<RtTriangle> = tris.iter().map(rt_triangle).collect();
+        let mut rnd = super::test_uniforms(2024);
+        let mut hits = 0;
+        for k in 0..60_000 {
+            let t = &tris[(rnd() * tris.len() as f32) as usize % tris.len()];
+            // A vertex, or a point on an edge.
+            let a = (rnd() * 3.0) as usize % 3;
+            let s = if k % 2 == 0 { 0.0 } else { rnd() };
+            let target = t[a] + s * (t[(a + 1) % 3] - t[a]);
+            let origin = Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5) * 6.0;
+            let ray = Ray::new(origin, (target - origin).normalize());
+            let query = BvhIntersector::obvhs_ray(&ray);
+            let brute = all
+                .iter()
+                .map(|t| t.intersect(&query))
+                .filter(|&t| t > query.tmin)
+                .fold(f32::INFINITY, f32::min);
+            let brute = (brute < query.tmax).then_some(brute.to_bits());
+            let found = bvh.closest_hit(&ray).map(|h| h.t.to_bits());
+            assert_eq!(found, brute, "ray {k}");
+            assert_eq!(bvh.occluded(&ray), brute.is_some(), "ray {k}");
+            hits += found.is_some() as u32;
+        }
+        assert!(hits > 30_000, "{hits}");
+    }
+}

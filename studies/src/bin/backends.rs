@@ -2,6 +2,10 @@
 //! the same scenes and the same rays, measured in one run, interleaved,
 //! medians of several repetitions, on `--threads` threads (1 by default);
 //! writes the ratios to a JSON file. Needs `--features embree`.
+//! Closest hits are measured twice: camera rays, and bounce rays (a path's
+//! second ray, from the camera rays' hits into the hemisphere), which start
+//! among the boxes around a surface; occlusion on camera rays cut short of
+//! their hit; and whole paths of the native path tracer.
 //! `--embree-config isa=avx2` holds Embree to the instruction set the
 //! native backend uses (Embree picks AVX-512 where the processor has it).
 //!
@@ -13,6 +17,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Parser;
+use glam::Vec3;
 use strata::embree::EmbreeIntersector;
 use strata::engine::oracle::DropSplats;
 use strata::engine::rng::{Domain, stream, uniform_f32};
@@ -98,7 +103,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = Args::parse();
     let mut rows = Vec::new();
     println!(
-        "| scene | closest hit, Embree / native | occlusion | paths | build, native / Embree | bytes a triangle, native / Embree |"
+        "| scene | closest hit, Embree / native | bounce | occlusion | paths | build, native / Embree | bytes a triangle, native / Embree |"
     );
     let size = Resolution::new(128, 128);
     let mut scenes = builtin::benchmark_set(size);
@@ -164,7 +169,31 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 ..*ray
             })
             .collect();
-        let closest = |b: &(dyn Intersector + Sync)| {
+        // A path's second rays: from each camera ray's hit, moved off the
+        // surface as the tracer moves a vertex (1e-4 scaled by the point's
+        // magnitude), in a direction uniform over the hemisphere the camera
+        // ray came from. They start among the boxes around their surface,
+        // which camera rays meet only at their end.
+        let mut rng = stream(8, Domain::User, 0);
+        let bounces: Vec<Ray> = rays
+            .iter()
+            .filter_map(|ray| {
+                let hit = native.intersector().closest_hit(ray)?;
+                let [a, b, c] = scene.triangles[hit.triangle as usize];
+                let n = (b - a).cross(c - a).normalize_or_zero();
+                let n = if n.dot(ray.direction) > 0.0 { -n } else { n };
+                let mut d = Vec3::ZERO;
+                while d.length_squared() < 1e-4 || d.length_squared() > 1.0 {
+                    let mut u = || 2.0 * uniform_f32(&mut rng) - 1.0;
+                    d = Vec3::new(u(), u(), u());
+                }
+                let d = if d.dot(n) < 0.0 { -d } else { d };
+                let p = ray.origin + hit.t * ray.direction;
+                let origin = p + n * 1e-4 * (1.0 + p.abs().max_element());
+                Some(Ray::new(origin, d.normalize()))
+            })
+            .collect();
+        let closest_of = |rays: &[Ray], b: &(dyn Intersector + Sync)| {
             on_threads(args.threads, rays.len(), &|_, part| {
                 rays[part]
                     .iter()
@@ -172,6 +201,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .count()
             })
         };
+        let closest = |b: &(dyn Intersector + Sync)| closest_of(&rays, b);
+        let bounce = |b: &(dyn Intersector + Sync)| closest_of(&bounces, b);
         let occluded = |b: &(dyn Intersector + Sync)| {
             on_threads(args.threads, shadow.len(), &|_, part| {
                 shadow[part].iter().filter(|r| b.occluded(r)).count()
@@ -203,24 +234,38 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .radiance
                 .0[1]
         };
-        let (mut cn, mut ce, mut on, mut oe, mut pn, mut pe) =
-            (vec![], vec![], vec![], vec![], vec![], vec![]);
+        let [
+            mut cn,
+            mut ce,
+            mut bn,
+            mut be,
+            mut on,
+            mut oe,
+            mut pn,
+            mut pe,
+        ] = std::array::from_fn(|_| Vec::new());
         for _ in 0..args.repeats {
             cn.push(time(|| closest(native.intersector())));
             ce.push(time(|| closest(embree.intersector())));
+            bn.push(time(|| bounce(native.intersector())));
+            be.push(time(|| bounce(embree.intersector())));
             on.push(time(|| occluded(native.intersector())));
             oe.push(time(|| occluded(embree.intersector())));
             pn.push(time(|| paths(&trace_native)));
             pe.push(time(|| paths(&trace_embree)));
         }
         let (rc_n, rc_e) = (rate(&cn, args.rays), rate(&ce, args.rays));
+        let (rb_n, rb_e) = (rate(&bn, bounces.len()), rate(&be, bounces.len()));
         let (ro_n, ro_e) = (rate(&on, args.rays), rate(&oe, args.rays));
         let (rp_n, rp_e) = (rate(&pn, args.paths), rate(&pe, args.paths));
         println!(
-            "| {name} | {:.2} ({:.2} / {:.2} M rays/s) | {:.2} ({:.2} / {:.2}) | {:.2} ({:.3} / {:.3} M paths/s) | {:.2} ({:.0} / {:.0} ms) | {:.0} / {:.0} |",
+            "| {name} | {:.2} ({:.2} / {:.2} M rays/s) | {:.2} ({:.2} / {:.2}) | {:.2} ({:.2} / {:.2}) | {:.2} ({:.3} / {:.3} M paths/s) | {:.2} ({:.0} / {:.0} ms) | {:.0} / {:.0} |",
             rc_e / rc_n,
             rc_e / 1e6,
             rc_n / 1e6,
+            rb_e / rb_n,
+            rb_e / 1e6,
+            rb_n / 1e6,
             ro_e / ro_n,
             ro_e / 1e6,
             ro_n / 1e6,
@@ -234,7 +279,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             per_triangle(embree_bytes)
         );
         rows.push(format!(
-            "{{\"scene\": \"{name}\", \"triangles\": {}, \"closest_rays_per_s\": {{\"embree\": {rc_e:.0}, \"native\": {rc_n:.0}}}, \"occlusion_rays_per_s\": {{\"embree\": {ro_e:.0}, \"native\": {ro_n:.0}}}, \"paths_per_s\": {{\"embree\": {rp_e:.0}, \"native\": {rp_n:.0}}}, \"native_over_embree_paths\": {:.4}, \"build_seconds\": {{\"embree\": {build_e:.4}, \"native\": {build_n:.4}}}, \"resident_bytes\": {{\"embree\": {embree_bytes}, \"native\": {native_bytes}}}}}",
+            "{{\"scene\": \"{name}\", \"triangles\": {}, \"closest_rays_per_s\": {{\"embree\": {rc_e:.0}, \"native\": {rc_n:.0}}}, \"bounce_rays_per_s\": {{\"embree\": {rb_e:.0}, \"native\": {rb_n:.0}}}, \"occlusion_rays_per_s\": {{\"embree\": {ro_e:.0}, \"native\": {ro_n:.0}}}, \"paths_per_s\": {{\"embree\": {rp_e:.0}, \"native\": {rp_n:.0}}}, \"native_over_embree_paths\": {:.4}, \"build_seconds\": {{\"embree\": {build_e:.4}, \"native\": {build_n:.4}}}, \"resident_bytes\": {{\"embree\": {embree_bytes}, \"native\": {native_bytes}}}}}",
             scene.triangles.len(),
             rp_n / rp_e
         ));

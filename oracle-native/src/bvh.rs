@@ -7,9 +7,10 @@
 //!
 //! The build reorders primitives; the triangles are stored in the
 //! tree's order once at build time, in blocks of four for the inner loop,
-//! with their indices in the list given beside them, so neither needs an
-//! indirection (through the tree's index they cost 5-8 % of the closest-hit rate
-//! on a 1M-triangle mesh). A closest hit's barycentrics are the block test's
+//! each block with its triangles' indices in the list given, so neither
+//! needs an indirection (through the tree's index they cost 5-8 % of the
+//! closest-hit rate on a 1M-triangle mesh; from an array beside the blocks,
+//! a closest hit on it waited on one more cache miss for its index). A closest hit's barycentrics are the block test's
 //! own: a second test of its triangle for them would cost a fifth of a
 //! closest hit's instructions on small scenes, and the vertices kept for it
 //! 40 bytes a triangle.
@@ -37,11 +38,9 @@ pub struct BvhIntersector {
     /// empty scene), each over its own run of the blocks below.
     trees: Vec<Wide>,
     /// The triangles in the trees' order, four to a block (the last of a
-    /// leaf's blocks may have empty lanes).
+    /// leaf's blocks may have empty lanes), with their indices in the list
+    /// given.
     blocks: Vec<Block>,
-    /// The index in the list given of the triangle in each lane of the
-    /// blocks ([`NO_INDEX`] for an empty lane).
-    indices: Vec<[u32; LANES]>,
     /// Whether the processor has AVX2, for the node test of `bvh/avx2.rs`.
     avx2: bool,
 }
@@ -64,9 +63,6 @@ const FULL_REINSERTION: usize = 1 << 16;
 fn reinsertion_share(nodes: usize) -> f32 {
     (FULL_REINSERTION as f32 / nodes as f32).clamp(REINSERTION, 1.0)
 }
-
-/// The index of an empty lane.
-const NO_INDEX: u32 = u32::MAX;
 
 /// Whether `bytes` can be had: a trial reservation, released at once.
 fn check_memory(bytes: u64) -> Result<(), Error> {
@@ -107,7 +103,7 @@ impl BvhIntersector {
 
     /// The most bytes a build over `triangles` triangles holds at once
     /// (within 1.5x of the peak measured on meshes of 382 to 300 000
-    /// triangles; the tree kept is two fifths of it, ~84 bytes a triangle).
+    /// triangles; the tree kept is two fifths of it, ~77 bytes a triangle).
     pub fn memory_bound(triangles: usize) -> u64 {
         (triangles as u64)
             .saturating_mul(BUILD_BYTES_PER_TRIANGLE)
@@ -116,7 +112,7 @@ impl BvhIntersector {
 
     /// Builds a tree over every `size` triangles of `triangles`.
     fn in_trees_of(triangles: &[[Vec3; 3]], size: usize) -> Self {
-        let (mut trees, mut blocks, mut indices) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut trees, mut blocks) = (Vec::new(), Vec::new());
         for (chunk, part) in triangles.chunks(size).enumerate() {
             let mut bvh = build::binary_tree(part);
             let share = reinsertion_share(bvh.nodes.len());
@@ -125,26 +121,21 @@ impl BvhIntersector {
             // (Freed before the blocks are made: the build's peak is lower.)
             drop(bvh);
             trees.push(tree);
-            // Each block's triangles in the form of obvhs's test, and
+            // Each block's triangles in the form of obvhs's test, with
             // their indices (on rayon's threads; the order is the blocks').
-            let lanes = |block: &[u32; LANES]| {
-                block.map(|i| (i != wide::NO_TRIANGLE).then_some(i as usize))
-            };
             huge_pages::reserve(&mut blocks, wide_blocks.len());
-            huge_pages::reserve(&mut indices, wide_blocks.len());
-            blocks.par_extend(
-                wide_blocks.par_iter().map(|block| {
-                    Block::new(lanes(block).map(|i| i.map(|i| rt_triangle(&part[i]))))
-                }),
-            );
-            indices.par_extend(wide_blocks.par_iter().map(|block| {
-                lanes(block).map(|i| i.map_or(NO_INDEX, |i| (chunk * size + i) as u32))
+            blocks.par_extend(wide_blocks.par_iter().map(|block| {
+                Block::new(block.map(|i| {
+                    (i != wide::NO_TRIANGLE).then(|| {
+                        let i = i as usize;
+                        (rt_triangle(&part[i]), (chunk * size + i) as u32)
+                    })
+                }))
             }));
         }
         Self {
             trees,
             blocks,
-            indices,
             #[cfg(target_arch = "x86_64")]
             avx2: std::is_x86_feature_detected!("avx2"),
             #[cfg(not(target_arch = "x86_64"))]
@@ -154,7 +145,7 @@ impl BvhIntersector {
 
     /// The index of the triangle in lane `slot % LANES` of block `slot / LANES`.
     fn index(&self, slot: usize) -> u32 {
-        self.indices[slot / LANES][slot % LANES]
+        self.blocks[slot / LANES].index[slot % LANES]
     }
 
     fn obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {

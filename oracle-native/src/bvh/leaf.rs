@@ -12,21 +12,29 @@ use obvhs::rt_triangle::RtTriangle;
 pub(super) const LANES: usize = 4;
 
 /// Four triangles, a coordinate of each in the lanes of a vector: the first
-/// vertex, obvhs's two edges (`v0 - v1`, `v2 - v0`) and its normal, 192
-/// bytes. (The normal recomputed per test instead, 144 bytes: closest hits
-/// on the 1M-triangle mesh 1.06x as fast, paths a second no faster, and on
-/// AArch64 glam's fused cross product would give obvhs's normal other
-/// bits.) A lane without a triangle has NaN coordinates: every ray misses
-/// it. Aligned to cache lines, a block is three of them, not four (closest
-/// hits on the 1M-triangle mesh 1.07x as fast).
+/// vertex, obvhs's two edges (`v0 - v1`, `v2 - v0`) and its normal, then
+/// the index of each in the list the tree was built over: 208 bytes. A lane
+/// without a triangle has NaN coordinates: every ray misses it.
+///
+/// The indices in an array beside the blocks made a closest hit wait on one
+/// more cache miss, for its triangle's index, before the shading could read
+/// the triangle's data: here they come with the block (paths on a
+/// 1M-triangle mesh 1.08x as fast, the same bytes a triangle). The normal
+/// recomputed in the test instead (160 bytes): the mesh's paths as fast, the
+/// small scenes' closest hits 2-5 % slower.
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(64))]
+#[repr(C, align(16))]
 pub(super) struct Block {
     v0: [Vec4; 3],
     e1: [Vec4; 3],
     e2: [Vec4; 3],
     ng: [Vec4; 3],
+    /// The index of each lane's triangle ([`NO_INDEX`] for an empty lane).
+    pub(super) index: [u32; LANES],
 }
+
+/// The index of an empty lane.
+pub(super) const NO_INDEX: u32 = u32::MAX;
 
 /// What a block test needs of a ray, each number in every lane.
 pub(super) struct Ray4 {
@@ -47,11 +55,14 @@ impl Ray4 {
 }
 
 impl Block {
-    /// A block of the triangles in its lanes (`None` for an empty lane).
-    pub(super) fn new(triangles: [Option<RtTriangle>; LANES]) -> Self {
+    /// A block of the triangles in its lanes, each with its index (`None`
+    /// for an empty lane).
+    pub(super) fn new(triangles: [Option<(RtTriangle, u32)>; LANES]) -> Self {
         let lanes = |coordinate: fn(&RtTriangle) -> glam::Vec3A| {
             [0, 1, 2].map(|axis| {
-                Vec4::from_array(triangles.map(|t| t.map_or(f32::NAN, |t| coordinate(&t)[axis])))
+                Vec4::from_array(
+                    triangles.map(|t| t.map_or(f32::NAN, |(t, _)| coordinate(&t)[axis])),
+                )
             })
         };
         Block {
@@ -59,6 +70,7 @@ impl Block {
             e1: lanes(|t| t.e1),
             e2: lanes(|t| t.e2),
             ng: lanes(|t| t.ng),
+            index: triangles.map(|t| t.map_or(NO_INDEX, |(_, i)| i)),
         }
     }
 
@@ -134,7 +146,8 @@ mod tests {
             let target = if k % 2 == 0 { shared } else { point() };
             let ray = obvhs::ray::Ray::new(origin, (target - origin).normalize(), 0.01, 20.0);
             let t_max = [20.0, 8.0, 0.5][k % 3];
-            let found = Block::new(triangles).intersect(&Ray4::new(&ray), t_max);
+            let found =
+                Block::new(triangles.map(|t| t.map(|t| (t, 0)))).intersect(&Ray4::new(&ray), t_max);
             for lane in 0..LANES {
                 let own = triangles[lane].map_or(f32::INFINITY, |tri| {
                     tri.intersect(&obvhs::ray::Ray { tmax: t_max, ..ray })

@@ -328,7 +328,7 @@ fn primitives(bvh: &Bvh2, i: usize, todo: &mut Vec<usize>, out: &mut Vec<u32>) {
 
 /// Asks the processor to bring the four cache lines from the one `at` is
 /// in into its cache (x86_64; elsewhere nothing): a node's (224 bytes at
-/// 32-byte alignment) or a block's (192 at 64, and the next's first line).
+/// 32-byte alignment) or a block's (208 at 16).
 #[inline(always)]
 fn prefetch(at: *const u8) {
     #[cfg(target_arch = "x86_64")]

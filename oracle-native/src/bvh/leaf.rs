@@ -2,8 +2,12 @@
 //! Trumbore 1997) in obvhs's form (`RtTriangle::intersect`), a triangle a
 //! lane of glam's four-float vectors (SSE2 on x86_64, NEON on AArch64,
 //! scalar elsewhere), as Embree's `Triangle4` leaves are tested (Wald et al.
-//! 2014). Each lane does obvhs's operations in obvhs's order, so a lane's
-//! distance is the one triangle test's, bit for bit, on every target.
+//! 2014). Each lane does obvhs's operations in obvhs's order, each product
+//! and difference rounded, so on x86_64 a lane's distance is the one
+//! triangle test's, bit for bit. (glam's cross product on AArch64 fuses a
+//! multiply and a subtraction, which the lanes do not: there obvhs's own
+//! test, and the normals stored from it, may differ in their last bits.
+//! Not tested: no AArch64 machine runs these tests.)
 
 use glam::Vec4;
 use obvhs::rt_triangle::RtTriangle;

@@ -401,14 +401,15 @@ impl Clock {
     }
 
     /// `share` of the time left of `limit` (a time budget started with
-    /// this clock).
+    /// this clock) less `reserve` seconds kept for other work.
     #[cfg(feature = "std")]
     pub(crate) fn share_of_remaining(
         &self,
         limit: core::time::Duration,
         share: f64,
+        reserve: f64,
     ) -> core::time::Duration {
-        let left = (limit.as_secs_f64() - self.seconds()).max(0.0);
+        let left = (limit.as_secs_f64() - self.seconds() - reserve).max(0.0);
         core::time::Duration::try_from_secs_f64(left * share).unwrap_or(core::time::Duration::MAX)
     }
 }

@@ -97,8 +97,15 @@ pub(super) fn noise_target(
         }
     });
     // Step 3: bilateral filter (5x5, spatial sigma 1.5 px, range sigma 0.25
-    // in log target), each pixel's logarithm taken once, a row a task (25
-    // exponentials a pixel).
+    // in log target), each pixel's logarithm taken once, a row a task: an
+    // exponential a neighbour, but for a neighbour of the same target (the
+    // clamped pixels, and every unsampled one: large regions), whose weight
+    // is the spatial one, the same number read from a table.
+    let weight = |dx: i64, dy: i64, dr: f64| {
+        libm::exp(-((dx * dx + dy * dy) as f64) / (2.0 * 1.5 * 1.5) - dr * dr / (2.0 * 0.0625))
+    };
+    let spatial: [f64; 25] =
+        core::array::from_fn(|i| weight(i as i64 % 5 - 2, i as i64 / 5 - 2, 0.0));
     let mut logs = target.clone();
     crate::parallel::for_each_chunk(&mut logs, PIECE, |_, piece| {
         piece.iter_mut().for_each(|t| *t = libm::log(*t));
@@ -118,10 +125,11 @@ pub(super) fn noise_target(
                     }
                     let at = (ny * w + nx) as usize;
                     let dr = logs[at] - centre;
-                    let weight = libm::exp(
-                        -((dx * dx + dy * dy) as f64) / (2.0 * 1.5 * 1.5)
-                            - dr * dr / (2.0 * 0.0625),
-                    );
+                    let weight = if dr == 0.0 {
+                        spatial[(5 * (dy + 2) + dx + 2) as usize]
+                    } else {
+                        weight(dx, dy, dr)
+                    };
                     sum += weight * target[at];
                     weights += weight;
                 }

@@ -223,10 +223,11 @@ where
         let budget = match job.budget {
             Budget::Samples(total) => Budget::Samples(run_samples(total, r, runs)),
             #[cfg(feature = "std")]
-            Budget::Time(limit) => Budget::Time(
-                job.clock
-                    .share_of_remaining(limit, 1.0 / (owned - j) as f64),
-            ),
+            Budget::Time(limit) => Budget::Time(job.clock.share_of_remaining(
+                limit,
+                1.0 / (owned - j) as f64,
+                0.0,
+            )),
         };
         let before: u64 = finished.partials.iter().map(P::samples).sum();
         let beside = job.beside.map(|outer| RunBeside {

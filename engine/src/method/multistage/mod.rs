@@ -273,22 +273,37 @@ where
     // memory is 150 MB: made once, not once a stage).
     let mut films = Vec::new();
     let first = done.stages.len();
+    // Under a time budget, the seconds the last stage took beyond its share
+    // (its importance, start, merge and estimate): kept back for each stage
+    // still to come, so the stages' fixed costs fit in the budget.
+    #[cfg(feature = "std")]
+    let mut overhead = 0.0f64;
     for (s, &k) in grids.iter().enumerate().skip(first) {
         let weight_done = done.weight_done;
         let stats = done.stats;
-        let budget = match job.budget {
-            Budget::Samples(total) => Budget::Samples(stage_share(total, k, weight_sum)),
-            #[cfg(feature = "std")]
-            Budget::Time(limit) => Budget::Time(
-                job.clock
-                    .share_of_remaining(limit, k as f64 / (weight_sum - weight_done) as f64),
-            ),
-        };
+        #[cfg(feature = "std")]
+        let stage_start = job.clock.seconds();
         let regions = RegionMeans::new(&estimate, k);
         let noise = if settings.noise_aware && stats.samples > 0 {
             noise_factors(&regions, &luminance, &variance, resolution)
         } else {
             vec![1.0; pixels]
+        };
+        // The share is taken after the stage's importance is made: what that
+        // took is not the stage's to sample in.
+        let budget = match job.budget {
+            Budget::Samples(total) => Budget::Samples(stage_share(total, k, weight_sum)),
+            #[cfg(feature = "std")]
+            Budget::Time(limit) => {
+                let made = job.clock.seconds() - stage_start;
+                let later = (grids.len() - s - 1) as f64;
+                let reserve = (overhead - made).max(0.0) + overhead * later;
+                Budget::Time(job.clock.share_of_remaining(
+                    limit,
+                    k as f64 / (weight_sum - weight_done) as f64,
+                    reserve,
+                ))
+            }
         };
         let staged = FnImportance(
             |sample: &PathSample<Probed<O::Radiance>>, film: FilmPoint| {
@@ -352,6 +367,10 @@ where
             );
         }
         done.estimate(&mut estimate, &mut luminance, &mut variance);
+        #[cfg(feature = "std")]
+        if let Budget::Time(share) = budget {
+            overhead = (job.clock.seconds() - stage_start - share.as_secs_f64()).max(0.0);
+        }
         if out.cancelled {
             // A stopped stage's state is the render's to continue from.
             if let (Some(last), Some(state)) = (job.last, stage_last.into_inner()) {

@@ -24,9 +24,11 @@
 //! importance changes.
 //!
 //! Each stage is a PSSMLT render driven by the round loop, with its share of
-//! the budget (samples or time, in proportion to its grid size); the
-//! observer sees one progress over all stages and previews of the combined
-//! image.
+//! the budget (samples or time, in proportion to its grid size; a time
+//! share is taken after the stage's importance is made, less what the
+//! stages to come are expected to take beyond their shares, as the last
+//! one did); the observer sees one progress over all stages and previews
+//! of the combined image.
 
 mod settings;
 

@@ -34,7 +34,8 @@ pub fn tvi(la: f64) -> f64 {
 /// seed does not say how scene units map to `tvi`'s). It holds at most
 /// three values a pixel besides its arguments: the target, its logarithms
 /// and the filtered target (the target and a copy of its sampled pixels'
-/// while it finds the percentiles).
+/// while it finds the percentiles), and the filter's three rows of weights
+/// a thread.
 pub(super) fn noise_target(
     resolution: Resolution,
     mean: &[f64],
@@ -97,47 +98,121 @@ pub(super) fn noise_target(
         }
     });
     // Step 3: bilateral filter (5x5, spatial sigma 1.5 px, range sigma 0.25
-    // in log target), each pixel's logarithm taken once, a row a task: an
-    // exponential a neighbour, but for a neighbour of the same target (the
-    // clamped pixels, and every unsampled one: large regions), whose weight
-    // is the spatial one, the same number read from a table.
+    // in log target), each pixel's logarithm taken once.
+    let mut logs = target.clone();
+    crate::parallel::for_each_chunk(&mut logs, PIECE, |_, piece| {
+        piece.iter_mut().for_each(|t| *t = libm::log(*t));
+    });
+    let mut out = vec![0.0; target.len()];
+    bilateral(resolution, &logs, &target, &mut out);
+    out
+}
+
+/// The neighbours of a pixel after it in row order: each pair of pixels
+/// has one weight, computed at the first of the two.
+const FORWARD: [(i64, i64); 12] = [
+    (1, 0),
+    (2, 0),
+    (-2, 1),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+    (2, 1),
+    (-2, 2),
+    (-1, 2),
+    (0, 2),
+    (1, 2),
+    (2, 2),
+];
+
+/// Rows of pixels a task of [`bilateral`] filters.
+const BAND: usize = 32;
+
+/// `out` = `values` filtered by the bilateral filter of noise-aware MLT
+/// (5x5, spatial sigma 1.5 px, range sigma 0.25 in `logs`, the values'
+/// logarithms), on the render's threads a band of rows a task.
+///
+/// A pair of pixels has the same weight seen from either (the same
+/// squared distance, and differences of logarithms of opposite sign, the
+/// same square): each is computed once, at the pair's first pixel in row
+/// order, and kept in a ring of the last three rows' weights (a band's
+/// first two rows' come from the two rows above it, computed again). Where
+/// the two logarithms are equal (clamped and unsampled pixels: large
+/// regions), the weight is the spatial one, read from a table. Each
+/// pixel's weights are summed in the order of the 5x5 window, so the
+/// result does not depend on the bands.
+fn bilateral(resolution: Resolution, logs: &[f64], values: &[f64], out: &mut [f64]) {
     let weight = |dx: i64, dy: i64, dr: f64| {
         libm::exp(-((dx * dx + dy * dy) as f64) / (2.0 * 1.5 * 1.5) - dr * dr / (2.0 * 0.0625))
     };
     let spatial: [f64; 25] =
         core::array::from_fn(|i| weight(i as i64 % 5 - 2, i as i64 / 5 - 2, 0.0));
-    let mut logs = target.clone();
-    crate::parallel::for_each_chunk(&mut logs, PIECE, |_, piece| {
-        piece.iter_mut().for_each(|t| *t = libm::log(*t));
-    });
+    let pair = |dx: i64, dy: i64, dr: f64| {
+        if dr == 0.0 {
+            spatial[(5 * (dy + 2) + dx + 2) as usize]
+        } else {
+            weight(dx, dy, dr)
+        }
+    };
     let (w, h) = (resolution.width as i64, resolution.height as i64);
-    let mut out = vec![0.0; target.len()];
-    crate::parallel::for_each_chunk(&mut out, w.max(1) as usize, |y, row| {
-        let y = y as i64;
-        for (x, filtered) in (0..w).zip(row.iter_mut()) {
-            let centre = logs[(y * w + x) as usize];
-            let (mut sum, mut weights) = (0.0, 0.0);
-            for dy in -2..=2i64 {
-                for dx in -2..=2i64 {
-                    let (nx, ny) = (x + dx, y + dy);
-                    if nx < 0 || ny < 0 || nx >= w || ny >= h {
-                        continue;
-                    }
-                    let at = (ny * w + nx) as usize;
-                    let dr = logs[at] - centre;
-                    let weight = if dr == 0.0 {
-                        spatial[(5 * (dy + 2) + dx + 2) as usize]
-                    } else {
-                        weight(dx, dy, dr)
-                    };
-                    sum += weight * target[at];
-                    weights += weight;
-                }
+    let at = |x: i64, y: i64| (y * w + x) as usize;
+    let inside = |x: i64, y: i64| x >= 0 && y >= 0 && x < w && y < h;
+    // The forward weights of row `y` (0 where the neighbour is outside).
+    let forward_row = |y: i64, row: &mut [[f64; 12]]| {
+        for (x, weights) in (0..w).zip(row.iter_mut()) {
+            let centre = logs[at(x, y)];
+            for (k, &(dx, dy)) in FORWARD.iter().enumerate() {
+                let (nx, ny) = (x + dx, y + dy);
+                weights[k] = if inside(nx, ny) {
+                    pair(dx, dy, logs[at(nx, ny)] - centre)
+                } else {
+                    0.0
+                };
             }
-            *filtered = sum / weights;
+        }
+    };
+    let width = w.max(1) as usize;
+    crate::parallel::for_each_chunk(out, BAND * width, |band, rows| {
+        let mut ring = vec![[0.0f64; 12]; 3 * width];
+        let first = (band * BAND) as i64;
+        let last = first + (rows.len() / width) as i64;
+        for y in (first - 2).max(0)..first {
+            forward_row(y, &mut ring[(y % 3) as usize * width..][..width]);
+        }
+        for y in first..last {
+            forward_row(y, &mut ring[(y % 3) as usize * width..][..width]);
+            let row = &mut rows[(y - first) as usize * width..][..width];
+            for (x, filtered) in (0..w).zip(row.iter_mut()) {
+                let (mut sum, mut weights) = (0.0, 0.0);
+                for dy in -2..=2i64 {
+                    for dx in -2..=2i64 {
+                        let (nx, ny) = (x + dx, y + dy);
+                        if !inside(nx, ny) {
+                            continue;
+                        }
+                        let weight = if (dy, dx) == (0, 0) {
+                            spatial[12]
+                        } else if dy > 0 || (dy == 0 && dx > 0) {
+                            ring[(y % 3) as usize * width + x as usize][slot(dx, dy)]
+                        } else {
+                            ring[(ny % 3) as usize * width + nx as usize][slot(-dx, -dy)]
+                        };
+                        sum += weight * values[at(nx, ny)];
+                        weights += weight;
+                    }
+                }
+                *filtered = sum / weights;
+            }
         }
     });
-    out
+}
+
+/// The index in [`FORWARD`] of the offset `(dx, dy)`.
+fn slot(dx: i64, dy: i64) -> usize {
+    match dy {
+        0 => (dx - 1) as usize,
+        _ => 2 + 5 * (dy - 1) as usize + (dx + 2) as usize,
+    }
 }
 
 #[cfg(test)]
@@ -158,6 +233,69 @@ mod tests {
                 assert!(t < previous * 1.05, "tvi jumps at {la}: {previous} -> {t}");
             }
             previous = t;
+        }
+    }
+
+    /// The banded filter, each pair's weight computed once, gives every
+    /// pixel the bits of the 5x5 window summed directly: on films smaller
+    /// than the window, and not a whole number of bands, with regions of
+    /// equal values (the table's weights) among random ones.
+    #[test]
+    fn the_banded_filter_is_the_direct_window_bit_for_bit() {
+        let direct = |w: i64, h: i64, logs: &[f64], values: &[f64]| -> Vec<f64> {
+            (0..w * h)
+                .map(|i| {
+                    let (x, y) = (i % w, i / w);
+                    let (mut sum, mut weights) = (0.0, 0.0);
+                    for dy in -2..=2i64 {
+                        for dx in -2..=2i64 {
+                            let (nx, ny) = (x + dx, y + dy);
+                            if nx < 0 || ny < 0 || nx >= w || ny >= h {
+                                continue;
+                            }
+                            let at = (ny * w + nx) as usize;
+                            let dr = logs[at] - logs[i as usize];
+                            let weight = libm::exp(
+                                -((dx * dx + dy * dy) as f64) / (2.0 * 1.5 * 1.5)
+                                    - dr * dr / (2.0 * 0.0625),
+                            );
+                            sum += weight * values[at];
+                            weights += weight;
+                        }
+                    }
+                    sum / weights
+                })
+                .collect()
+        };
+        let mut state = 12345u64;
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for (w, h) in [(1, 1), (3, 2), (7, 33), (40, 70), (129, 65)] {
+            let values: Vec<f64> = (0..w * h)
+                .map(|i| {
+                    if (i / 5) % 3 == 0 {
+                        1.5
+                    } else {
+                        1.0 + uniform()
+                    }
+                })
+                .collect();
+            let logs: Vec<f64> = values.iter().map(|v| libm::log(*v)).collect();
+            let mut out = vec![0.0; values.len()];
+            bilateral(
+                Resolution::new(w as u32, h as u32),
+                &logs,
+                &values,
+                &mut out,
+            );
+            let expected = direct(w, h, &logs, &values);
+            for (i, (a, b)) in out.iter().zip(&expected).enumerate() {
+                assert_eq!(a.to_bits(), b.to_bits(), "{w}x{h}, pixel {i}");
+            }
         }
     }
 

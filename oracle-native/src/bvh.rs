@@ -9,11 +9,12 @@
 //! tree's order once at build time, in blocks of four for the inner loop,
 //! each block with its triangles' indices in the list given, so neither
 //! needs an indirection (through the tree's index they cost 5-8 % of the
-//! closest-hit rate on a 1M-triangle mesh; from an array beside the blocks,
-//! a closest hit on it waited on one more cache miss for its index). A closest hit's barycentrics are the block test's
-//! own: a second test of its triangle for them would cost a fifth of a
-//! closest hit's instructions on small scenes, and the vertices kept for it
-//! 40 bytes a triangle.
+//! closest-hit rate on a 1M-triangle mesh; from an array beside the
+//! blocks, a closest hit on it waited on one more cache miss for its
+//! index). A closest hit's barycentrics are the block test's own: a second
+//! test of its triangle for them would cost a fifth of a closest hit's
+//! instructions on small scenes, and the vertices kept for it 40 bytes a
+//! triangle.
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
@@ -600,34 +601,20 @@ mod scene_rays {
                 let d = Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5).normalize();
                 let d = if d.dot(normal) < 0.0 { -d } else { d };
                 let ray = Ray::new(p + normal * 1e-4, d);
-                let query = BvhIntersector::obvhs_ray(&ray);
-                let brute = all
-                    .iter()
-                    .map(|t| t.intersect(&query))
-                    .filter(|&t| t > query.tmin)
-                    .fold(f32::INFINITY, f32::min);
-                let brute = (brute < query.tmax).then_some(brute.to_bits());
-                let found = bvh.closest_hit(&ray).map(|h| h.t.to_bits());
-                assert_eq!(found, brute, "{name}, ray {k}");
-                assert_eq!(bvh.occluded(&ray), brute.is_some(), "{name}, ray {k}");
-                hits += found.is_some() as u32;
+                hits +=
+                    finds_the_closest_of_all(&bvh, &all, &ray, &format!("{name}, ray {k}")) as u32;
             }
             assert!(hits > 10_000, "{name}: {hits}");
         }
     }
-}
-
-#[cfg(test)]
-mod flat_walls {
-    use super::*;
-    use obvhs::rt_triangle::RtTriangle;
 
     /// Rays aimed at the shared edges and corners of a grid of triangles on
     /// axis-aligned walls (whose boxes are flat, and whose edges are their
     /// boxes' faces): the closest hit is at the distance a test of every
     /// triangle finds, bit for bit. The traversal's boxes and the triangle
     /// test round differently; exit distances widened by `WIDEN` keep a
-    /// box's triangle from being hit where its box is passed by.
+    /// box's triangle from being hit where its box is passed by (without
+    /// any one of its three uses this test fails).
     #[test]
     fn rays_at_the_edges_of_flat_walls_find_the_closest_of_all_triangles() {
         let n = 30;
@@ -636,13 +623,9 @@ mod flat_walls {
             for i in 0..n {
                 for j in 0..n {
                     let at = |u: usize, v: usize| {
-                        let (u, v) = (
-                            u as f32 / n as f32 * 2.0 - 1.0,
-                            v as f32 / n as f32 * 2.0 - 1.0,
-                        );
                         let mut p = [0.3 * axis as f32 - 0.3; 3];
-                        p[(axis + 1) % 3] = u;
-                        p[(axis + 2) % 3] = v;
+                        p[(axis + 1) % 3] = u as f32 / n as f32 * 2.0 - 1.0;
+                        p[(axis + 2) % 3] = v as f32 / n as f32 * 2.0 - 1.0;
                         Vec3::from(p)
                     };
                     tris.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
@@ -662,18 +645,30 @@ mod flat_walls {
             let target = t[a] + s * (t[(a + 1) % 3] - t[a]);
             let origin = Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5) * 6.0;
             let ray = Ray::new(origin, (target - origin).normalize());
-            let query = BvhIntersector::obvhs_ray(&ray);
-            let brute = all
-                .iter()
-                .map(|t| t.intersect(&query))
-                .filter(|&t| t > query.tmin)
-                .fold(f32::INFINITY, f32::min);
-            let brute = (brute < query.tmax).then_some(brute.to_bits());
-            let found = bvh.closest_hit(&ray).map(|h| h.t.to_bits());
-            assert_eq!(found, brute, "ray {k}");
-            assert_eq!(bvh.occluded(&ray), brute.is_some(), "ray {k}");
-            hits += found.is_some() as u32;
+            hits += finds_the_closest_of_all(&bvh, &all, &ray, &format!("ray {k}")) as u32;
         }
         assert!(hits > 30_000, "{hits}");
+    }
+
+    /// Asserts that `bvh` finds the closest hit of `ray` at the distance a
+    /// test of `all` its triangles finds, bit for bit, and that it is
+    /// occluded where that test hits; whether it hits.
+    fn finds_the_closest_of_all(
+        bvh: &BvhIntersector,
+        all: &[RtTriangle],
+        ray: &Ray,
+        what: &str,
+    ) -> bool {
+        let query = BvhIntersector::obvhs_ray(ray);
+        let brute = all
+            .iter()
+            .map(|t| t.intersect(&query))
+            .filter(|&t| t > query.tmin)
+            .fold(f32::INFINITY, f32::min);
+        let brute = (brute < query.tmax).then_some(brute.to_bits());
+        let found = bvh.closest_hit(ray).map(|h| h.t.to_bits());
+        assert_eq!(found, brute, "{what}");
+        assert_eq!(bvh.occluded(ray), brute.is_some(), "{what}");
+        found.is_some()
     }
 }

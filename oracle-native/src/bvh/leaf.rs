@@ -38,7 +38,7 @@ pub(super) struct Block {
 }
 
 /// The index of an empty lane.
-pub(super) const NO_INDEX: u32 = u32::MAX;
+const NO_INDEX: u32 = u32::MAX;
 
 /// What a block test needs of a ray, each number in every lane.
 pub(super) struct Ray4 {

@@ -141,9 +141,13 @@ impl Method {
                     + (s.bootstrap_candidates as u128 * CANDIDATE).max(wave)
             }
             Method::MultiStage(s) => {
-                // One PSSMLT stage, and beside it the estimate so far, the
-                // stages' sums (film, deviations and visits) and per pixel
-                // its luminance, deviation, importance and adaptation.
+                // One PSSMLT stage, and beside it two films (the estimate
+                // so far, the stages' sum) and nine values a pixel: the
+                // stages' deviation and visit sums, the estimate's
+                // luminance and deviation, the importance and adaptation,
+                // and the region means (a value a region, a region a pixel
+                // at the last stages) with their sums and counts while they
+                // are made.
                 // (The emission apart counted once, below.)
                 let pssmlt = super::pssmlt::PssmltSettings {
                     emission_rays: 0.0,
@@ -159,7 +163,7 @@ impl Method {
                 // The sums of the runs finished before the last: film,
                 // deviations and visits.
                 let run = film + 16 * pixels;
-                stage as u128 + 2 * film + 6 * 8 * pixels + runs_kept(s.runs, task) * run
+                stage as u128 + 2 * film + 9 * 8 * pixels + runs_kept(s.runs, task) * run
             }
         };
         // The emission seen directly, estimated apart (`emission_rays`;

@@ -17,7 +17,7 @@ use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
 use strata::native::{builtin, native_tracer};
 
-use crate::common::region_means;
+use crate::common::{mean_and_standard_error, region_means};
 
 /// Renders per method and budget.
 const SEEDS: u64 = 16;
@@ -30,13 +30,8 @@ const Z_MAX: f64 = 5.5;
 
 /// Mean and standard error over the renders of every summary value.
 fn spread(summaries: &[Vec<f64>]) -> Vec<(f64, f64)> {
-    let n = summaries.len() as f64;
     (0..summaries[0].len())
-        .map(|i| {
-            let m = summaries.iter().map(|s| s[i]).sum::<f64>() / n;
-            let var = summaries.iter().map(|s| (s[i] - m).powi(2)).sum::<f64>() / (n - 1.0);
-            (m, (var / n).sqrt())
-        })
+        .map(|i| mean_and_standard_error(&summaries.iter().map(|s| s[i]).collect::<Vec<_>>()))
         .collect()
 }
 

@@ -152,6 +152,9 @@ pub enum Domain {
     /// The emission seen directly: pixel `i`'s pilot ray, which decides
     /// how many rays the estimate traces (`emission`).
     EmissionPilot = 0x1656_67b1_9e37_79f9,
+    /// The pilot paths that measure how many numbers a path reads, for a
+    /// render's memory bound (`RenderShape::of`).
+    NumbersPilot = 0x5851_f42d_4c95_7f2d,
     /// Anything a test or caller wants to seed.
     User = 0xa076_1d64_78bd_642f,
 }

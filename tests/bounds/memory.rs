@@ -1,27 +1,41 @@
 //! The memory bound: every method's [`RenderMethod::memory_bound`],
-//! the reservation a render makes before any work, within 1.5x of the peak
+//! the reservation a render makes before any work, at most 1.5x the peak
 //! of the bytes the render really holds (a tracking allocator, the
-//! reservation itself left out), on the Cornell box with unidirectional and
-//! bidirectional paths, at a preview budget and a longer one; and the
-//! BVH's build's, likewise.
+//! reservation itself left out) and at least 0.95x of it, on the Cornell box
+//! with unidirectional and bidirectional paths and on the door scene, whose
+//! paths read twice the numbers, at a preview budget and a longer one; and
+//! the BVH's build's, likewise.
 
 use crate::ALLOCATOR;
 use strata::engine::Task;
 use strata::engine::target::MaxChannel;
-use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
+use strata::engine::{Budget, Method, Resolution, Settings, Silent, render};
 use strata::engine::{RenderMethod, RenderShape};
 use strata::native::{BvhIntersector, PathSampler, builtin, native_tracer};
 
-/// How far the bound may be from the peak, either way.
+/// How far above the peak the bound may be.
 const WITHIN: f64 = 1.5;
+
+/// How far below the peak the bound may be: ERPT's wave grows its vectors
+/// by doubling, which its bound counts as half as much again on average
+/// (0.96-0.97x its peak at worst, measured on the built-in scenes).
+const BELOW: f64 = 0.95;
 
 #[test]
 fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
     let _alone = crate::allocations::alone();
     let resolution = Resolution::new(96, 72);
-    let mut tracer = native_tracer(builtin::cornell(resolution)).unwrap();
     let threads = 2;
-    for sampler in [PathSampler::Unidirectional, PathSampler::Bidirectional] {
+    let cases = [
+        ("cornell", PathSampler::Unidirectional),
+        ("cornell", PathSampler::Bidirectional),
+        // Paths of ~40 numbers against the Cornell box's ~24: stratified
+        // MCMC's tile chains hold them (its bound was 0.84x its peak here
+        // when it counted the Cornell box's numbers for every scene).
+        ("door", PathSampler::Unidirectional),
+    ];
+    for (scene, sampler) in cases {
+        let mut tracer = native_tracer(builtin::by_name(scene, resolution).unwrap()).unwrap();
         tracer.sampler = sampler;
         for method in Method::all() {
             let name = method.name();
@@ -41,12 +55,8 @@ fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
                     method: method.clone(),
                 };
                 let bound = method.memory_bound(&RenderShape {
-                    resolution,
-                    channels: 3,
-                    splats_per_path: tracer.splats_per_path(),
                     workers: threads,
-                    budget,
-                    task: Task::WHOLE,
+                    ..RenderShape::of(&tracer, budget, Task::WHOLE)
                 });
                 let pool = rayon::ThreadPoolBuilder::new()
                     .num_threads(threads)
@@ -63,14 +73,11 @@ fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
                     peak
                 });
                 let ratio = bound as f64 / peak as f64;
-                eprintln!(
-                    "{} {name} {spp} spp: peak {peak} bound {bound} ({ratio:.2}x)",
-                    sampler.name()
-                );
+                let case = format!("{scene}, {} {name} {spp} spp", sampler.name());
+                eprintln!("{case}: peak {peak} bound {bound} ({ratio:.2}x)");
                 assert!(
-                    (1.0 / WITHIN..=WITHIN).contains(&ratio),
-                    "{} {name} {spp} spp: bound {bound} bytes, peak {peak} ({ratio:.2}x)",
-                    sampler.name()
+                    (BELOW..=WITHIN).contains(&ratio),
+                    "{case}: bound {bound} bytes, peak {peak} ({ratio:.2}x)"
                 );
             }
         }

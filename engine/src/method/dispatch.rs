@@ -265,6 +265,9 @@ pub struct RenderShape {
     pub channels: usize,
     /// The oracle's splats a path ([`PathOracle::splats_per_path`]).
     pub splats_per_path: f64,
+    /// The numbers a path of the oracle reads on average (what a chain's
+    /// state holds), as a pilot measures it ([`RenderShape::of`]).
+    pub numbers_per_path: f64,
     /// The threads that render.
     pub workers: usize,
     /// The render's budget.
@@ -275,12 +278,22 @@ pub struct RenderShape {
 
 impl RenderShape {
     /// The shape of a render of `oracle` with `budget`, for `task`, on the
-    /// current thread pool.
+    /// current thread pool. It traces a pilot of a few hundred paths of
+    /// its own (to measure [`numbers_per_path`](Self::numbers_per_path)).
     pub fn of<O: PathOracle>(oracle: &O, budget: Budget, task: Task) -> Self {
+        Self {
+            numbers_per_path: super::memory::numbers_per_path(oracle),
+            ..Self::unmeasured(oracle, budget, task)
+        }
+    }
+
+    /// [`of`](Self::of) without the pilot: no numbers a path.
+    pub(crate) fn unmeasured<O: PathOracle>(oracle: &O, budget: Budget, task: Task) -> Self {
         Self {
             resolution: oracle.resolution(),
             channels: O::Radiance::CHANNELS,
             splats_per_path: oracle.splats_per_path(),
+            numbers_per_path: 0.0,
             workers: parallel::threads(),
             budget,
             task,

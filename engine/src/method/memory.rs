@@ -5,8 +5,50 @@
 use super::dispatch::{Method, RenderMethod, RenderShape};
 use super::erpt;
 use crate::drive::Budget;
-
+use crate::oracle::{DropSplats, FilmPoint, PathOracle, Sampler, Temperature};
+use crate::rng::{self, Domain};
+use crate::sample::IndependentSampler;
 use crate::task::Task;
+
+/// Paths the pilot of [`numbers_per_path`] traces.
+const PILOT_PATHS: usize = 1024;
+
+/// The numbers a path of `oracle` reads on average: the mean over a pilot
+/// of [`PILOT_PATHS`] paths, at pixels spread evenly over the film, with
+/// numbers of their own ([`Domain::NumbersPilot`]: the same whatever the
+/// seed), their splats dropped. 0 for an empty film.
+pub(super) fn numbers_per_path<O: PathOracle>(oracle: &O) -> f64 {
+    /// An independent sampler that counts what it serves.
+    struct Counting {
+        numbers: IndependentSampler,
+        served: u64,
+    }
+    impl Sampler for Counting {
+        fn next_1d(&mut self) -> f32 {
+            self.served += 1;
+            self.numbers.next_1d()
+        }
+    }
+    let resolution = oracle.resolution();
+    let pixels = resolution.pixel_count();
+    if pixels == 0 {
+        return 0.0;
+    }
+    let mut sampler = Counting {
+        numbers: IndependentSampler::new(rng::stream(0, Domain::NumbersPilot, 0)),
+        served: 0,
+    };
+    for i in 0..PILOT_PATHS {
+        let pixel = (i as u128 * pixels as u128 / PILOT_PATHS as u128) as usize;
+        let jitter = FilmPoint {
+            x: sampler.numbers.next_1d(),
+            y: sampler.numbers.next_1d(),
+        };
+        let film = resolution.pixel_point(pixel, jitter);
+        oracle.trace(film, &mut sampler, Temperature::ONE, &mut DropSplats);
+    }
+    sampler.served as f64 / PILOT_PATHS as f64
+}
 
 /// The finished runs' sums a render of `runs` independent runs keeps
 /// besides the running one: a whole render's pooled as each ends (one), a
@@ -48,6 +90,7 @@ impl Method {
             resolution,
             channels,
             splats_per_path,
+            numbers_per_path,
             workers,
             budget,
             task,
@@ -81,7 +124,8 @@ impl Method {
         };
         let workers = workers as u128;
         let bytes = match method {
-            Method::Mc => exact + film + pixels * splats * queued / 100,
+            // Each worker's path and pass buffers beside the films.
+            Method::Mc => exact + film + pixels * splats * queued / 100 + workers * CHAIN,
             // The bootstrap's candidates are let go before the first round.
             Method::Pssmlt(s) => {
                 counted
@@ -123,10 +167,19 @@ impl Method {
                 let run = pixels * (4 * tile * channels as u128 + 24 + 8 * (channels as u128 + 2))
                     + light
                     + emission;
+                // A tile chain holds its state's numbers: the pilot's mean
+                // and a quarter more (chains dwell on bright paths, which
+                // roulette spares: longer than the mean).
+                let numbers = if numbers_per_path.is_finite() {
+                    libm::ceil(numbers_per_path.clamp(0.0, 1e9) * 1.25) as u128
+                } else {
+                    0
+                };
+                let tile_chain = TILE_CHAIN + NUMBER * numbers;
                 counted
                     + light
                     + emission
-                    + pixels * (TILE_CHAIN + per_tile)
+                    + pixels * (tile_chain + per_tile)
                     + workers * CHAIN
                     + runs_kept(s.runs, task) * run
             }
@@ -187,9 +240,11 @@ mod sizes {
     /// stream) and its path with splats.
     pub const CHAIN: u128 = 4096;
     /// A tile chain of stratified MCMC at rest (112 bytes, and its primary
-    /// sample's numbers, 3 bytes each, ~20 on the Cornell box) and the
-    /// pixel's uniform samples (40 bytes), fitted to the measured peak.
-    pub const TILE_CHAIN: u128 = 200;
+    /// sample's streams) and the pixel's uniform samples (40 bytes),
+    /// fitted to the measured peak.
+    pub const TILE_CHAIN: u128 = 160;
+    /// A number of a tile chain's primary sample at rest (24 bits).
+    pub const NUMBER: u128 = 3;
     /// Per pixel of its tile: the state's value there (RGB and importance
     /// in `f32`) and the tile's `G_s(k)` (`f32`).
     pub const TILE_PIXEL: u128 = 28;

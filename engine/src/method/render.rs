@@ -272,12 +272,15 @@ where
         return Err(Error::EmptyResolution);
     }
     settings.validate()?;
-    check_memory(
-        settings
-            .method
-            .memory_bound(&RenderShape::of(oracle, settings.budget, task)),
-        "render's films, chains and buffers (a bound for this method, film and budget)",
-    )?;
+    // A time budget counts the pilots too (the numbers' below,
+    // `emission::sightings`).
+    let clock = Clock::start(settings.budget);
+    // The bound without the numbers a path reads first: a film too large
+    // for the machine is refused before any path (the pilot that measures
+    // them traces).
+    let what = "render's films, chains and buffers (a bound for this method, film and budget)";
+    let unmeasured = RenderShape::unmeasured(oracle, settings.budget, task);
+    check_memory(settings.method.memory_bound(&unmeasured), what)?;
     let samples = match settings.budget {
         Budget::Samples(n) => Some(n),
         #[cfg(feature = "std")]
@@ -294,10 +297,11 @@ where
             });
         }
     }
+    // Then the whole bound, after every refusal that needs no path.
+    let shape = RenderShape::of(oracle, settings.budget, task);
+    check_memory(settings.method.memory_bound(&shape), what)?;
     let oracle_id = || OracleId::of(oracle);
     let checkpoints = Checkpointer::new(settings, task, O::Radiance::CHANNELS, &oracle_id);
-    // A time budget counts the emission's pilot too (`emission::sightings`).
-    let clock = Clock::start(settings.budget);
     let (emission, resume) = EmissionApart::new(
         oracle,
         settings.method.emission_rays(),

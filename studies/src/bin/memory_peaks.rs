@@ -1,7 +1,8 @@
 //! Every method's memory bound ([`RenderMethod::memory_bound`], the reservation a
 //! render makes before any work) against the peak of the bytes it really
 //! holds (a tracking global allocator; the reservation itself left out), on
-//! a built-in scene at several film sizes and budgets. Writes a CSV.
+//! a built-in scene or a shared pbrt scene (`cornell-box`, `veach-ajar`) at
+//! several film sizes and budgets. Writes a CSV.
 //!
 //! ```text
 //! cargo run --release -p strata-studies --bin memory_peaks -- --sizes 320x240,1280x720 --spp 1,32
@@ -20,8 +21,8 @@ use allocations::Tracking;
 use clap::Parser;
 use strata::engine::Task;
 use strata::engine::target::MaxChannel;
-use strata::engine::{Budget, Method, PathOracle, Resolution, Settings, Silent, render};
-use strata::native::{PathSampler, builtin, native_tracer};
+use strata::engine::{Budget, Method, Resolution, Settings, Silent, render};
+use strata::native::{PathSampler, builtin, native_tracer, pbrt};
 
 #[global_allocator]
 static ALLOCATOR: Tracking = Tracking::new();
@@ -29,7 +30,7 @@ static ALLOCATOR: Tracking = Tracking::new();
 /// Memory bound against measured peak.
 #[derive(Parser, Debug)]
 struct Args {
-    /// A built-in scene.
+    /// A built-in scene, or a shared pbrt scene (`scenes/NAME/scene.pbrt`).
     #[arg(long, default_value = "cornell")]
     scene: String,
     /// Film sizes, WIDTHxHEIGHT.
@@ -63,12 +64,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .split_once('x')
             .ok_or_else(|| format!("size {size}: expected WIDTHxHEIGHT"))?;
         let resolution = Resolution::new(w.parse()?, h.parse()?);
-        let scene = builtin::by_name(&args.scene, resolution)
-            .ok_or_else(|| format!("no built-in scene {}", args.scene))?;
+        let scene = match builtin::by_name(&args.scene, resolution) {
+            Some(scene) => scene,
+            None => {
+                let mut scene = pbrt::load_shared(&args.scene)?.scene;
+                scene.camera.resolution = resolution;
+                scene
+            }
+        };
         let mut tracer = native_tracer(scene)?;
         tracer.sampler = PathSampler::from_name(&args.path_sampler)
             .ok_or_else(|| format!("no path sampler {}", args.path_sampler))?;
-        let channels = 3;
+        let numbers = RenderShape::of(&tracer, Budget::Samples(1), Task::WHOLE).numbers_per_path;
+        println!("{size}: {numbers:.1} numbers a path (the pilot's)");
         for mut method in Method::all() {
             if !args.methods.is_empty() && !args.methods.iter().any(|m| m == method.name()) {
                 continue;
@@ -90,12 +98,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     method: method.clone(),
                 };
                 let bound = method.memory_bound(&RenderShape {
-                    resolution,
-                    channels,
-                    splats_per_path: tracer.splats_per_path(),
                     workers: threads,
-                    budget: settings.budget,
-                    task: Task::WHOLE,
+                    ..RenderShape::of(&tracer, settings.budget, Task::WHOLE)
                 });
                 ALLOCATOR.leave_out(bound as usize);
                 ALLOCATOR.reset_peak();

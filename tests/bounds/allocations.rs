@@ -19,9 +19,9 @@ pub fn alone() -> MutexGuard<'static, ()> {
 /// [`Tracking::reset_peak`].
 pub struct Tracking {
     largest: AtomicUsize,
-    /// The size of the next allocation not to count live (0: none), and
-    /// the address of the one left out, until it is freed.
-    unseen: AtomicUsize,
+    /// The sizes of the next allocations not to count live, one each (0:
+    /// none), and the address of the one left out, until it is freed.
+    unseen: [AtomicUsize; 2],
     unseen_at: AtomicUsize,
     live: AtomicUsize,
     peak: AtomicUsize,
@@ -43,10 +43,11 @@ impl Tracking {
     /// out (then remembered until freed).
     fn leaves_out(&self, size: usize, at: *mut u8) -> bool {
         size != 0
-            && self
-                .unseen
-                .compare_exchange(size, 0, Ordering::Relaxed, Ordering::Relaxed)
-                .is_ok()
+            && self.unseen.iter().any(|unseen| {
+                unseen
+                    .compare_exchange(size, 0, Ordering::Relaxed, Ordering::Relaxed)
+                    .is_ok()
+            })
             && {
                 self.unseen_at.store(at as usize, Ordering::Relaxed);
                 true
@@ -99,7 +100,7 @@ impl Tracking {
     pub const fn new() -> Self {
         Self {
             largest: AtomicUsize::new(0),
-            unseen: AtomicUsize::new(0),
+            unseen: [AtomicUsize::new(0), AtomicUsize::new(0)],
             unseen_at: AtomicUsize::new(0),
             live: AtomicUsize::new(0),
             peak: AtomicUsize::new(0),
@@ -111,11 +112,20 @@ impl Tracking {
         self.largest.swap(0, Ordering::Relaxed)
     }
 
-    /// Leaves the next allocation of exactly `size` bytes out of the live
-    /// count (0: none), e.g. a reservation that is made and let go before
-    /// any page is touched.
-    pub fn leave_out(&self, size: usize) {
-        self.unseen.store(size, Ordering::Relaxed);
+    /// Leaves the next allocation of exactly each of `sizes` bytes (at
+    /// most two; none for an empty slice) out of the live count, e.g. the
+    /// reservations a render makes and lets go before any page is touched.
+    pub fn leave_out(&self, sizes: &[usize]) {
+        assert!(sizes.len() <= self.unseen.len());
+        for (i, unseen) in self.unseen.iter().enumerate() {
+            unseen.store(sizes.get(i).copied().unwrap_or(0), Ordering::Relaxed);
+        }
+    }
+
+    /// Whether every allocation [`leave_out`](Self::leave_out) named has
+    /// been made (and left out).
+    pub fn left_out_all(&self) -> bool {
+        self.unseen.iter().all(|u| u.load(Ordering::Relaxed) == 0)
     }
 
     /// Bytes live now.

@@ -1,10 +1,10 @@
 //! The memory bound: every method's [`RenderMethod::memory_bound`],
 //! the reservation a render makes before any work, at most 1.5x the peak
 //! of the bytes the render really holds (a tracking allocator, the
-//! reservation itself left out) and at least 0.95x of it, on the Cornell box
-//! with unidirectional and bidirectional paths and on the door scene, whose
-//! paths read twice the numbers, at a preview budget and a longer one; and
-//! the BVH's build's, likewise.
+//! reservation itself left out) and at least that peak, on the Cornell box
+//! with unidirectional and bidirectional paths and on the door and pool
+//! scenes, whose paths read 1.7 times the numbers, at a preview budget and
+//! a longer one; and the BVH's build's, likewise.
 
 use crate::ALLOCATOR;
 use strata::engine::Task;
@@ -13,16 +13,11 @@ use strata::engine::{Budget, Method, Resolution, Settings, Silent, render};
 use strata::engine::{RenderMethod, RenderShape};
 use strata::native::{BvhIntersector, PathSampler, builtin, native_tracer};
 
-/// How far above the peak the bound may be.
+/// How far above the peak the bound may be (it may not be below).
 const WITHIN: f64 = 1.5;
 
-/// How far below the peak the bound may be: ERPT's wave grows its vectors
-/// by doubling, which its bound counts as half as much again on average
-/// (0.96-0.97x its peak at worst, measured on the built-in scenes).
-const BELOW: f64 = 0.95;
-
 #[test]
-fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
+fn every_methods_memory_bound_is_at_least_its_measured_peak_and_within_1_5x() {
     let _alone = crate::allocations::alone();
     let resolution = Resolution::new(96, 72);
     let threads = 2;
@@ -30,9 +25,12 @@ fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
         ("cornell", PathSampler::Unidirectional),
         ("cornell", PathSampler::Bidirectional),
         // Paths of ~40 numbers against the Cornell box's ~24: stratified
-        // MCMC's tile chains hold them (its bound was 0.84x its peak here
-        // when it counted the Cornell box's numbers for every scene).
+        // MCMC's tile chains hold them (its bound was 0.84x its peak on
+        // both when it counted the Cornell box's numbers for every scene).
         ("door", PathSampler::Unidirectional),
+        // Where most of ERPT's start paths start chains (its bound was
+        // 0.84x its peak here when it left out their samplers).
+        ("pool", PathSampler::Unidirectional),
     ];
     for (scene, sampler) in cases {
         let mut tracer = native_tracer(builtin::by_name(scene, resolution).unwrap()).unwrap();
@@ -54,29 +52,38 @@ fn every_methods_memory_bound_is_within_1_5x_of_its_measured_peak() {
                     budget,
                     method: method.clone(),
                 };
-                let bound = method.memory_bound(&RenderShape {
+                let shape = RenderShape {
                     workers: threads,
                     ..RenderShape::of(&tracer, budget, Task::WHOLE)
+                };
+                let bound = method.memory_bound(&shape);
+                // `render` reserves twice: the bound without the numbers a
+                // path reads (before its pilot traces), then the whole.
+                let unmeasured = method.memory_bound(&RenderShape {
+                    numbers_per_path: 0.0,
+                    ..shape
                 });
                 let pool = rayon::ThreadPoolBuilder::new()
                     .num_threads(threads)
                     .build()
                     .unwrap();
                 let peak = pool.install(|| {
-                    ALLOCATOR.leave_out(bound as usize);
+                    ALLOCATOR.leave_out(&[unmeasured as usize, bound as usize]);
                     ALLOCATOR.reset_peak();
                     let before = ALLOCATOR.live();
                     let out = render(&tracer, &MaxChannel, &settings, &Silent).unwrap();
                     let peak = ALLOCATOR.peak() - before;
                     drop(out);
-                    ALLOCATOR.leave_out(0);
+                    // Else the peak would count a reservation.
+                    assert!(ALLOCATOR.left_out_all(), "{name}: reserved other sizes");
+                    ALLOCATOR.leave_out(&[]);
                     peak
                 });
                 let ratio = bound as f64 / peak as f64;
                 let case = format!("{scene}, {} {name} {spp} spp", sampler.name());
                 eprintln!("{case}: peak {peak} bound {bound} ({ratio:.2}x)");
                 assert!(
-                    (BELOW..=WITHIN).contains(&ratio),
+                    (1.0..=WITHIN).contains(&ratio),
                     "{case}: bound {bound} bytes, peak {peak} ({ratio:.2}x)"
                 );
             }
@@ -97,13 +104,14 @@ fn the_bvh_s_memory_bound_is_within_1_5x_of_its_measured_peak() {
         let scene = builtin::dense_sphere(Resolution::new(8, 8), rings, segments);
         let triangles = scene.triangles.len();
         let bound = BvhIntersector::memory_bound(triangles);
-        ALLOCATOR.leave_out(bound as usize);
+        ALLOCATOR.leave_out(&[bound as usize]);
         ALLOCATOR.reset_peak();
         let before = ALLOCATOR.live();
         let bvh = BvhIntersector::new(&scene.triangles).unwrap();
         let peak = ALLOCATOR.peak() - before;
         drop(bvh);
-        ALLOCATOR.leave_out(0);
+        assert!(ALLOCATOR.left_out_all(), "the build reserved another size");
+        ALLOCATOR.leave_out(&[]);
         let ratio = bound as f64 / peak as f64;
         eprintln!("BVH of {triangles} triangles: peak {peak} bound {bound} ({ratio:.2}x)");
         // The smallest builds hold a few KB: their bound is its constant.

@@ -15,8 +15,12 @@ use super::stratified::StratifiedSettings;
 use super::{erpt, mc, multistage, pssmlt, replica, runs, stratified};
 use crate::drive::Budget;
 use crate::error::Error;
-use crate::oracle::{PathOracle, Radiance, Resolution};
+use crate::oracle::{
+    DropSplats, FilmPoint, PathOracle, Radiance, Resolution, Sampler, Temperature,
+};
 use crate::parallel;
+use crate::rng::{self, Domain};
+use crate::sample::IndependentSampler;
 use crate::target::Importance;
 use crate::task::Task;
 
@@ -282,7 +286,7 @@ impl RenderShape {
     /// its own (to measure [`numbers_per_path`](Self::numbers_per_path)).
     pub fn of<O: PathOracle>(oracle: &O, budget: Budget, task: Task) -> Self {
         Self {
-            numbers_per_path: super::memory::numbers_per_path(oracle),
+            numbers_per_path: numbers_per_path(oracle),
             ..Self::unmeasured(oracle, budget, task)
         }
     }
@@ -299,4 +303,44 @@ impl RenderShape {
             task,
         }
     }
+}
+
+/// Paths the pilot of [`numbers_per_path`] traces.
+const PILOT_PATHS: usize = 1024;
+
+/// The numbers a path of `oracle` reads on average: the mean over a pilot
+/// of [`PILOT_PATHS`] paths, at pixels spread evenly over the film, with
+/// numbers of their own ([`Domain::NumbersPilot`]: the same whatever the
+/// seed), their splats dropped. 0 for an empty film.
+fn numbers_per_path<O: PathOracle>(oracle: &O) -> f64 {
+    /// An independent sampler that counts what it serves.
+    struct Counting {
+        numbers: IndependentSampler,
+        served: u64,
+    }
+    impl Sampler for Counting {
+        fn next_1d(&mut self) -> f32 {
+            self.served += 1;
+            self.numbers.next_1d()
+        }
+    }
+    let resolution = oracle.resolution();
+    let pixels = resolution.pixel_count();
+    if pixels == 0 {
+        return 0.0;
+    }
+    let mut sampler = Counting {
+        numbers: IndependentSampler::new(rng::stream(0, Domain::NumbersPilot, 0)),
+        served: 0,
+    };
+    for i in 0..PILOT_PATHS {
+        let pixel = (i as u128 * pixels as u128 / PILOT_PATHS as u128) as usize;
+        let jitter = FilmPoint {
+            x: sampler.numbers.next_1d(),
+            y: sampler.numbers.next_1d(),
+        };
+        let film = resolution.pixel_point(pixel, jitter);
+        oracle.trace(film, &mut sampler, Temperature::ONE, &mut DropSplats);
+    }
+    sampler.served as f64 / PILOT_PATHS as f64
 }

@@ -5,50 +5,7 @@
 use super::dispatch::{Method, RenderMethod, RenderShape};
 use super::erpt;
 use crate::drive::Budget;
-use crate::oracle::{DropSplats, FilmPoint, PathOracle, Sampler, Temperature};
-use crate::rng::{self, Domain};
-use crate::sample::IndependentSampler;
 use crate::task::Task;
-
-/// Paths the pilot of [`numbers_per_path`] traces.
-const PILOT_PATHS: usize = 1024;
-
-/// The numbers a path of `oracle` reads on average: the mean over a pilot
-/// of [`PILOT_PATHS`] paths, at pixels spread evenly over the film, with
-/// numbers of their own ([`Domain::NumbersPilot`]: the same whatever the
-/// seed), their splats dropped. 0 for an empty film.
-pub(super) fn numbers_per_path<O: PathOracle>(oracle: &O) -> f64 {
-    /// An independent sampler that counts what it serves.
-    struct Counting {
-        numbers: IndependentSampler,
-        served: u64,
-    }
-    impl Sampler for Counting {
-        fn next_1d(&mut self) -> f32 {
-            self.served += 1;
-            self.numbers.next_1d()
-        }
-    }
-    let resolution = oracle.resolution();
-    let pixels = resolution.pixel_count();
-    if pixels == 0 {
-        return 0.0;
-    }
-    let mut sampler = Counting {
-        numbers: IndependentSampler::new(rng::stream(0, Domain::NumbersPilot, 0)),
-        served: 0,
-    };
-    for i in 0..PILOT_PATHS {
-        let pixel = (i as u128 * pixels as u128 / PILOT_PATHS as u128) as usize;
-        let jitter = FilmPoint {
-            x: sampler.numbers.next_1d(),
-            y: sampler.numbers.next_1d(),
-        };
-        let film = resolution.pixel_point(pixel, jitter);
-        oracle.trace(film, &mut sampler, Temperature::ONE, &mut DropSplats);
-    }
-    sampler.served as f64 / PILOT_PATHS as f64
-}
 
 /// The finished runs' sums a render of `runs` independent runs keeps
 /// besides the running one: a whole render's pooled as each ends (one), a
@@ -76,11 +33,13 @@ fn runs_kept(runs: u32, task: Task) -> u128 {
 /// centre's splats; and the contributions waiting to be merged: a round's
 /// (PSSMLT and replica exchange: a round is a 64th of a sample budget,
 /// at most 2^21 paths, each with its proposal and state), a block's
-/// start paths and a wave of its chains' steps (ERPT, which merges a
-/// block's chains in waves of 2^17 steps), a pass's splats (MC). The
-/// sizes were measured with the native tracer, unidirectional and
-/// bidirectional, by `studies/src/bin/memory_peaks.rs` (docs/BENCHMARKS.md), and
-/// `tests/bounds/memory.rs` checks the bound within 1.5x of the measured peak.
+/// start paths, their samplers and a wave of its chains' steps (ERPT, which
+/// merges a block's chains in waves of 2^17 steps), a pass's splats (MC).
+/// A chain's numbers are 1.25x the mean the shape's pilot measured
+/// ([`RenderShape::of`]). The sizes were measured with the native tracer,
+/// unidirectional and bidirectional, by `studies/src/bin/memory_peaks.rs`
+/// (docs/BENCHMARKS.md), and `tests/bounds/memory.rs` checks the bound at
+/// least the measured peak and within 1.5x of it.
 impl Method {
     /// The bound itself ([`RenderMethod::memory_bound`](super::RenderMethod::memory_bound)).
     pub(super) fn memory(&self, shape: &RenderShape) -> u64 {
@@ -120,9 +79,19 @@ impl Method {
                 #[cfg(feature = "std")]
                 Budget::Time(_) => ROUND_PATHS,
             };
-            contributions(most.min(ROUND_PATHS.max(unit)), 2)
+            // Proposal and current, in vectors that grew by doubling
+            // while the round ran: half as much again.
+            contributions(most.min(ROUND_PATHS.max(unit)), 3)
         };
         let workers = workers as u128;
+        // The numbers a chain's state holds: the pilot's mean and a quarter
+        // more (chains dwell on bright paths, which roulette spares: longer
+        // than the mean).
+        let numbers = if numbers_per_path.is_finite() {
+            libm::ceil(numbers_per_path.clamp(0.0, 1e9) * 1.25) as u128
+        } else {
+            0
+        };
         let bytes = match method {
             // Each worker's path and pass buffers beside the films.
             Method::Mc => exact + film + pixels * splats * queued / 100 + workers * CHAIN,
@@ -167,14 +136,6 @@ impl Method {
                 let run = pixels * (4 * tile * channels as u128 + 24 + 8 * (channels as u128 + 2))
                     + light
                     + emission;
-                // A tile chain holds its state's numbers: the pilot's mean
-                // and a quarter more (chains dwell on bright paths, which
-                // roulette spares: longer than the mean).
-                let numbers = if numbers_per_path.is_finite() {
-                    libm::ceil(numbers_per_path.clamp(0.0, 1e9) * 1.25) as u128
-                } else {
-                    0
-                };
                 let tile_chain = TILE_CHAIN + NUMBER * numbers;
                 counted
                     + light
@@ -188,8 +149,13 @@ impl Method {
                 // in vectors that grew by doubling while it ran: half as
                 // much again.
                 let wave = contributions(erpt::BLOCK_PATHS + erpt::WAVE_STEPS, 3);
+                // The block's start paths that start chains keep their
+                // sampler (its numbers in `f32`, the state's and the
+                // proposal's) and their path: at most every one.
+                let starts = erpt::BLOCK_PATHS as u128 * (START + 8 * numbers);
                 counted
                     + exact
+                    + starts
                     + workers * CHAIN
                     + (s.bootstrap_candidates as u128 * CANDIDATE).max(wave)
             }
@@ -245,6 +211,9 @@ mod sizes {
     pub const TILE_CHAIN: u128 = 160;
     /// A number of a tile chain's primary sample at rest (24 bits).
     pub const NUMBER: u128 = 3;
+    /// An ERPT start path that starts chains, beside its numbers: its
+    /// sampler's streams and batches of offsets, and its path.
+    pub const START: u128 = 2048;
     /// Per pixel of its tile: the state's value there (RGB and importance
     /// in `f32`) and the tile's `G_s(k)` (`f32`).
     pub const TILE_PIXEL: u128 = 28;

@@ -97,17 +97,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     budget: Budget::Samples(paths),
                     method: method.clone(),
                 };
-                let bound = method.memory_bound(&RenderShape {
+                let shape = RenderShape {
                     workers: threads,
                     ..RenderShape::of(&tracer, settings.budget, Task::WHOLE)
+                };
+                let bound = method.memory_bound(&shape);
+                // `render` reserves twice: the bound without the numbers a
+                // path reads (before its pilot traces), then the whole.
+                let unmeasured = method.memory_bound(&RenderShape {
+                    numbers_per_path: 0.0,
+                    ..shape
                 });
-                ALLOCATOR.leave_out(bound as usize);
+                ALLOCATOR.leave_out(&[unmeasured as usize, bound as usize]);
                 ALLOCATOR.reset_peak();
                 let before = ALLOCATOR.live();
                 let out = render(&tracer, &MaxChannel, &settings, &Silent)?;
                 let peak = ALLOCATOR.peak().saturating_sub(before);
                 drop(out);
-                ALLOCATOR.leave_out(0);
+                if !ALLOCATOR.left_out_all() {
+                    return Err(format!("{}: reserved other sizes", method.name()).into());
+                }
+                ALLOCATOR.leave_out(&[]);
                 let ratio = bound as f64 / peak.max(1) as f64;
                 println!(
                     "{size:>9} {:<11} {paths:>9} paths: peak {:>8.2} MB, bound {:>8.2} MB ({ratio:.2}x)",

@@ -282,8 +282,8 @@ pub struct RenderShape {
 
 impl RenderShape {
     /// The shape of a render of `oracle` with `budget`, for `task`, on the
-    /// current thread pool. It traces a pilot of a few hundred paths of
-    /// its own (to measure [`numbers_per_path`](Self::numbers_per_path)).
+    /// current thread pool. It traces a pilot of 1 024 paths of its own
+    /// (to measure [`numbers_per_path`](Self::numbers_per_path)).
     pub fn of<O: PathOracle>(oracle: &O, budget: Budget, task: Task) -> Self {
         Self {
             numbers_per_path: numbers_per_path(oracle),

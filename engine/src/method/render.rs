@@ -297,9 +297,17 @@ where
             });
         }
     }
-    // Then the whole bound, after every refusal that needs no path.
-    let shape = RenderShape::of(oracle, settings.budget, task);
-    check_memory(settings.method.memory_bound(&shape), what)?;
+    // Then, after every refusal that needs no path, the whole bound where
+    // it counts the numbers a path reads (stratified MCMC's tile chains,
+    // ERPT's start paths): only there does the pilot trace.
+    let reading = RenderShape {
+        numbers_per_path: 1.0,
+        ..unmeasured
+    };
+    if settings.method.memory_bound(&reading) != settings.method.memory_bound(&unmeasured) {
+        let shape = RenderShape::of(oracle, settings.budget, task);
+        check_memory(settings.method.memory_bound(&shape), what)?;
+    }
     let oracle_id = || OracleId::of(oracle);
     let checkpoints = Checkpointer::new(settings, task, O::Radiance::CHANNELS, &oracle_id);
     let (emission, resume) = EmissionApart::new(

@@ -102,13 +102,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     ..RenderShape::of(&tracer, settings.budget, Task::WHOLE)
                 };
                 let bound = method.memory_bound(&shape);
-                // `render` reserves twice: the bound without the numbers a
-                // path reads (before its pilot traces), then the whole.
+                // `render` reserves the bound without the numbers a path
+                // reads (before its pilot traces), then the whole where
+                // they count.
                 let unmeasured = method.memory_bound(&RenderShape {
                     numbers_per_path: 0.0,
                     ..shape
                 });
-                ALLOCATOR.leave_out(&[unmeasured as usize, bound as usize]);
+                let reserved = if unmeasured == bound {
+                    vec![bound as usize]
+                } else {
+                    vec![unmeasured as usize, bound as usize]
+                };
+                ALLOCATOR.leave_out(&reserved);
                 ALLOCATOR.reset_peak();
                 let before = ALLOCATOR.live();
                 let out = render(&tracer, &MaxChannel, &settings, &Silent)?;

@@ -1,17 +1,36 @@
 //! The global allocator of the tests that bound memory: the system's,
 //! remembering the largest single request and the peak of the bytes live,
-//! so that a case can prove it asked for no more than a bound; and the lock
-//! that runs those tests one at a time (each counts the whole process's
+//! so that a case can prove it asked for no more than a bound; the sizes a
+//! render reserves before any work, which it leaves out; and the lock that
+//! runs those tests one at a time (each counts the whole process's
 //! allocations).
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard};
+use strata::engine::{Method, RenderMethod, RenderShape};
 
 /// Held by each test of this binary while it runs: none runs beside another.
 pub fn alone() -> MutexGuard<'static, ()> {
     static LOCK: Mutex<()> = Mutex::new(());
     LOCK.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// The sizes a render of `method` on `shape` reserves and lets go before
+/// any work, for [`Tracking::leave_out`]: the bound without the numbers a
+/// path reads (before the pilot that measures them traces), then the whole
+/// bound where the numbers count (`render`'s order).
+pub fn reservations(method: &Method, shape: &RenderShape) -> Vec<usize> {
+    let bound = method.memory_bound(shape);
+    let unmeasured = method.memory_bound(&RenderShape {
+        numbers_per_path: 0.0,
+        ..*shape
+    });
+    if unmeasured == bound {
+        vec![bound as usize]
+    } else {
+        vec![unmeasured as usize, bound as usize]
+    }
 }
 
 /// The system allocator, remembering the largest request since the last

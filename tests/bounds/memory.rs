@@ -7,6 +7,7 @@
 //! a longer one; and the BVH's build's, likewise.
 
 use crate::ALLOCATOR;
+use crate::allocations::reservations;
 use strata::engine::Task;
 use strata::engine::target::MaxChannel;
 use strata::engine::{Budget, Method, Resolution, Settings, Silent, render};
@@ -57,18 +58,7 @@ fn every_methods_memory_bound_is_at_least_its_measured_peak_and_within_1_5x() {
                     ..RenderShape::of(&tracer, budget, Task::WHOLE)
                 };
                 let bound = method.memory_bound(&shape);
-                // `render` reserves the bound without the numbers a path
-                // reads (before its pilot traces), then the whole where
-                // they count.
-                let unmeasured = method.memory_bound(&RenderShape {
-                    numbers_per_path: 0.0,
-                    ..shape
-                });
-                let reserved = if unmeasured == bound {
-                    vec![bound as usize]
-                } else {
-                    vec![unmeasured as usize, bound as usize]
-                };
+                let reserved = reservations(&method, &shape);
                 let pool = rayon::ThreadPoolBuilder::new()
                     .num_threads(threads)
                     .build()

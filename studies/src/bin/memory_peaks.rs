@@ -17,7 +17,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use strata::engine::{RenderMethod, RenderShape};
 
-use allocations::Tracking;
+use allocations::{Tracking, reservations};
 use clap::Parser;
 use strata::engine::Task;
 use strata::engine::target::MaxChannel;
@@ -102,18 +102,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     ..RenderShape::of(&tracer, settings.budget, Task::WHOLE)
                 };
                 let bound = method.memory_bound(&shape);
-                // `render` reserves the bound without the numbers a path
-                // reads (before its pilot traces), then the whole where
-                // they count.
-                let unmeasured = method.memory_bound(&RenderShape {
-                    numbers_per_path: 0.0,
-                    ..shape
-                });
-                let reserved = if unmeasured == bound {
-                    vec![bound as usize]
-                } else {
-                    vec![unmeasured as usize, bound as usize]
-                };
+                let reserved = reservations(&method, &shape);
                 ALLOCATOR.leave_out(&reserved);
                 ALLOCATOR.reset_peak();
                 let before = ALLOCATOR.live();

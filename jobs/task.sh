@@ -14,10 +14,10 @@
 # core), STRATA (the strata command; default: the one on PATH),
 # STRATA_CHECKPOINT_KEY (if set, checkpoints and parts are sealed with it).
 #
-# A task that is run again finds its finished part and does nothing; one
-# that was stopped (preempted, requeued; SIGTERM saves a checkpoint)
-# continues from its checkpoint, written every 10 minutes and removed once
-# the part is written.
+# A task that is run again finds its finished part and does nothing but
+# remove a checkpoint left beside it; one that was stopped (preempted,
+# requeued; SIGTERM saves a checkpoint) continues from its checkpoint,
+# written every 10 minutes and removed once the part is written.
 set -euo pipefail
 index=${1:?usage: jobs/task.sh INDEX COUNT}
 count=${2:?usage: jobs/task.sh INDEX COUNT}
@@ -28,7 +28,11 @@ read -r -a render_args <<<"${RENDER_ARGS:---method pssmlt --spp 64 --seed 1}"
 threads=${THREADS:-$(nproc)}
 out="$dir/part-$index"
 mkdir -p "$dir"
-[ -f "$out.part" ] && exit 0
+if [ -f "$out.part" ]; then
+  # Finished: a checkpoint left by a stop between the two is stale.
+  rm -f "$out.ckpt"
+  exit 0
+fi
 resume=()
 [ -f "$out.ckpt" ] && resume=(--resume "$out.ckpt")
 "$strata" render "$scene" "${render_args[@]}" --threads "$threads" \

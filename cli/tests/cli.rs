@@ -508,7 +508,11 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
     let partial = merge(&[0, 2], &["--partial"]);
     assert_eq!(partial.status.code(), Some(0));
     assert!(String::from_utf8_lossy(&partial.stderr).contains("merged 2 of 3 tasks"));
-    // A task run again finds its part and does nothing.
+    // A task run again finds its part and does nothing but remove a
+    // checkpoint left beside it (a stop between writing the one and
+    // removing the other).
+    let stale = dir.join("part-1.ckpt");
+    std::fs::write(&stale, b"left by a stop").unwrap();
     let again = Command::new("jobs/task.sh")
         .args(["1", "3"])
         .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
@@ -517,6 +521,7 @@ fn tasks_run_by_xargs_merge_to_the_files_of_the_unsplit_render() {
         .status()
         .unwrap();
     assert!(again.success());
+    assert!(!stale.exists(), "the stale checkpoint was kept");
     // What would replace another task's part or checkpoint is refused before
     // any work, the part kept (every task of a job array given one --out
     // overwrote the part before); so is resuming a task's part as a whole

@@ -89,8 +89,9 @@ fn every_methods_memory_bound_is_at_least_its_measured_peak_and_within_1_5x() {
 
 /// The BVH's memory bound ([`BvhIntersector::memory_bound`], the
 /// reservation its build makes first) at least the peak of the bytes a
-/// build really holds (the reservation left out) and within 1.5x of it, on
-/// spheres of 2 362 to 300 000 triangles; 32 KiB over at most on 22 and 382.
+/// build really holds (the reservation left out; the highest of eight
+/// builds below 10 000 triangles) and within 1.5x of it, on spheres of 2 362
+/// to 300 000 triangles; 32 KiB over at most on 22 and 382.
 #[test]
 fn the_bvh_s_memory_bound_is_within_1_5x_of_its_measured_peak() {
     let _alone = crate::allocations::alone();
@@ -100,19 +101,27 @@ fn the_bvh_s_memory_bound_is_within_1_5x_of_its_measured_peak() {
         let scene = builtin::dense_sphere(Resolution::new(8, 8), rings, segments);
         let triangles = scene.triangles.len();
         let bound = BvhIntersector::memory_bound(triangles);
-        ALLOCATOR.leave_out(&[bound as usize]);
-        ALLOCATOR.reset_peak();
-        let before = ALLOCATOR.live();
-        let bvh = BvhIntersector::new(&scene.triangles).unwrap();
-        let peak = ALLOCATOR.peak() - before;
-        drop(bvh);
-        assert!(ALLOCATOR.left_out_all(), "the build reserved another size");
-        ALLOCATOR.leave_out(&[]);
+        // How rayon's threads interleave moves a small build's peak (382
+        // triangles: 49-63 KB over CI's runs): the bound must hold the
+        // highest, so the small builds are measured eight times.
+        let builds = if triangles < 10_000 { 8 } else { 1 };
+        let peak = (0..builds)
+            .map(|_| {
+                ALLOCATOR.leave_out(&[bound as usize]);
+                ALLOCATOR.reset_peak();
+                let before = ALLOCATOR.live();
+                let bvh = BvhIntersector::new(&scene.triangles).unwrap();
+                let peak = ALLOCATOR.peak() - before;
+                drop(bvh);
+                assert!(ALLOCATOR.left_out_all(), "the build reserved another size");
+                ALLOCATOR.leave_out(&[]);
+                peak
+            })
+            .max()
+            .unwrap();
         let ratio = bound as f64 / peak as f64;
         eprintln!("BVH of {triangles} triangles: peak {peak} bound {bound} ({ratio:.2}x)");
-        // The smallest builds hold a few KB: their bound is its constant,
-        // and how rayon's threads interleave moves their peak by ~8 KB
-        // (382 triangles: 55-63 KB, 1.33-1.54x).
+        // The smallest builds hold a few KB: their bound is its constant.
         let close = if triangles < 1000 {
             bound <= peak as u64 + (32 << 10)
         } else {

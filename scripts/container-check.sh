@@ -54,10 +54,10 @@ debian_rootfs() {
 }
 label=strata-check.stand-in
 base() {
-  local name=$1
-  if podman image exists "$name" || podman pull -q "$name" >/dev/null 2>&1; then
+  local name=$1 image=docker.io/library/$1
+  if podman image exists "$image" || podman pull -q "$image" >/dev/null 2>&1; then
     # A stand-in an earlier run made is said again.
-    if [ "$(podman image inspect --format "{{index .Labels \"$label\"}}" "$name")" = true ]; then
+    if [ "$(podman image inspect --format "{{index .Labels \"$label\"}}" "$image")" = true ]; then
       standins+=("$name")
     fi
     return
@@ -67,7 +67,7 @@ base() {
   case $name in
   debian:*)
     tar -C "$rootfs" -c . |
-      podman import -q --change "LABEL $label=true" - "docker.io/library/$name" >/dev/null
+      podman import -q --change "LABEL $label=true" - "$image" >/dev/null
     ;;
   rust:*)
     # The official image's parts: Debian, gcc, a Rust toolchain on the PATH.
@@ -84,7 +84,7 @@ EOF
     [ -d /usr/local/share/ca-certificates ] &&
       authorities=(-v /usr/local/share/ca-certificates:/usr/local/share/ca-certificates:ro)
     podman build "${runtime[@]}" --network host --pull=never -q "${authorities[@]}" --label "$label=true" \
-      -t "docker.io/library/$name" -f "$work/rust.containerfile" "$sysroot" >/dev/null 2>"$work/rust-build.log"
+      -t "$image" -f "$work/rust.containerfile" "$sysroot" >/dev/null 2>"$work/rust-build.log"
     ;;
   esac
 }

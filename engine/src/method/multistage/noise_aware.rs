@@ -1,12 +1,13 @@
 //! Noise-aware MLT's per-pixel target (Hoberock and Hart 2010, sec.
 //! 4.3.4-4.3.5): the visible noise, `RMS / tvi(L_a)`, with its contrast
 //! limited and unsampled pixels raised (multi-stage MLT's importance uses
-//! it; see [`multistage`](super::multistage)).
+//! it; see [`multistage`](super)).
 
 use alloc::vec;
 use alloc::vec::Vec;
 
-use crate::oracle::Resolution;
+use super::regions::RegionMeans;
+use crate::oracle::{FilmPoint, Resolution};
 
 /// Ward, Rushmeier and Piatko's (1997) piecewise threshold-versus-intensity
 /// function: the just-noticeable luminance difference at adaptation
@@ -36,7 +37,7 @@ pub fn tvi(la: f64) -> f64 {
 /// and the filtered target (the target and a copy of its sampled pixels'
 /// while it finds the percentiles), and the filter's three rows of weights
 /// a thread.
-pub(super) fn noise_target(
+fn noise_target(
     resolution: Resolution,
     mean: &[f64],
     variance: &[f64],
@@ -213,6 +214,27 @@ fn slot(dx: i64, dy: i64) -> usize {
         0 => (dx - 1) as usize,
         _ => 2 + 5 * (dy - 1) as usize + (dx + 2) as usize,
     }
+}
+
+/// Noise-aware MLT's per-pixel factor of the importance (Hoberock and
+/// Hart 2010, sec. 4.3.4-4.3.5): [`noise_target`] of the estimate's
+/// `luminance` and `variance`, adapted to the region means `regions`.
+pub(super) fn noise_factors(
+    regions: &RegionMeans,
+    luminance: &[f64],
+    variance: &[f64],
+    resolution: Resolution,
+) -> Vec<f64> {
+    let width = resolution.width as usize;
+    let adaptation: Vec<f64> = (0..resolution.pixel_count())
+        .map(|i| {
+            regions.at(FilmPoint {
+                x: (i % width) as f32 + 0.5,
+                y: (i / width) as f32 + 0.5,
+            })
+        })
+        .collect();
+    noise_target(resolution, luminance, variance, &adaptation)
 }
 
 #[cfg(test)]

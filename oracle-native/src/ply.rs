@@ -346,4 +346,23 @@ mod tests {
         let e = parse(fewer.as_bytes()).unwrap_err().1;
         assert!(e.contains("more data than its header declares"), "{e}");
     }
+
+    /// Nothing is reserved from a header's counts: four billion vertices
+    /// declared over a few bytes end where the bytes do, in a typed error.
+    #[test]
+    fn counts_the_bytes_do_not_back_are_errors_not_allocations() {
+        for count in ["4000000000", "18446744073709551615"] {
+            let huge = ASCII.replace("element vertex 4", &format!("element vertex {count}"));
+            let e = parse(huge.as_bytes()).unwrap_err().1;
+            assert!(e.contains("ends before"), "{count}: {e}");
+        }
+        let list = ASCII.replace("4 0 1 2 3", "4294967295 0 1 2 3");
+        let list = list.replace("list uchar int", "list uint int");
+        assert!(
+            parse(list.as_bytes())
+                .unwrap_err()
+                .1
+                .contains("ends before")
+        );
+    }
 }

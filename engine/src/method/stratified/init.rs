@@ -8,7 +8,7 @@ use alloc::vec;
 use alloc::vec::Vec;
 use core::sync::atomic::{AtomicU64, Ordering};
 
-use super::StratifiedSettings;
+use super::settings::StratifiedSettings;
 use super::tile::{Context, Start, TileChain, Waking};
 use crate::bootstrap::Bootstrap;
 use crate::chain::{PathChain, Traced};

@@ -11,7 +11,7 @@ use alloc::vec::Vec;
 
 use super::light::LightTracing;
 use super::regularizer::{Draws, Halves, LargeSteps, Samples, anchor_total, fall_back, take_known};
-use super::{Solver, StratifiedSettings};
+use super::settings::{Solver, StratifiedSettings};
 #[cfg(feature = "std")]
 use crate::drive::Budget;
 use crate::emission::SeenEmission;

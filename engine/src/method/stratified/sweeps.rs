@@ -9,11 +9,11 @@ use alloc::vec::Vec;
 
 use serde::{Deserialize, Serialize};
 
-use super::StratifiedSettings;
 use super::light::LightTracing;
 use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
 use super::regularizer::{Draws, Samples};
+use super::settings::StratifiedSettings;
 use super::tile::{Context, Row, Start, TileChain, Waking, accumulate};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Import circles among a crate's modules: `scripts/import-circles.py DIR`
 (a crate's src/) prints every circle of modules that import one another
-(`use crate::...`, `use super::...`, a parent's paths into its children;
+(`use crate::...`, `use super::...`, a parent's paths into its children, `self::child::` too;
 tests and doc comments left out) and exits 1 if there is one. CI runs it
 on the engine and the other crates."""
 import os,re,collections,sys
@@ -44,10 +44,10 @@ for m,f in mods.items():
             if t in mods: target=t; break
         if target is None: target=tuple(cur)
         if target in mods and target!=m: edges[m].add(target)
-    # A parent's own paths into its children (`child::item`, `use child::`).
+    # A parent's own paths into its children (`child::item`, `self::child::item`, `use child::`).
     if is_mod:
         for child in re.findall(r'^\s*(?:pub(?:\([^)]*\))?\s+)?mod\s+(\w+);', src, re.M):
-            if re.search(r'(?<![:\w])' + child + r'::', src):
+            if re.search(r'(?:(?<![:\w])|(?<=\bself::))' + child + r'::', src):
                 edges[m].add(tuple(list(m) + [child]))
 index={};low={};stack=[];on=set();sccs=[];i=[0]
 sys.setrecursionlimit(10000)

@@ -17,7 +17,7 @@ use crate::drive::Budget;
 use crate::emission::SeenEmission;
 use crate::error::Error;
 use crate::film::Film;
-use crate::method::Job;
+use crate::method::job::Job;
 use crate::oracle::PathOracle;
 use crate::reconstruct::{self, WeightedSettings};
 use crate::tiles::Tiles;

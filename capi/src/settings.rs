@@ -154,9 +154,6 @@ pub extern "C" fn strata_settings_set(
     };
     match s.method.set(name, value) {
         Ok(()) => StrataStatus::Ok,
-        Err(e @ Error::UnknownSetting { .. }) => {
-            fail(StrataStatus::InvalidArgument, format!("`{name}`: {e}"))
-        }
         Err(e) => fail(StrataStatus::InvalidArgument, e.to_string()),
     }
 }
@@ -184,9 +181,6 @@ pub extern "C" fn strata_settings_set_choice(
     };
     match s.method.set_choice(name, value) {
         Ok(()) => StrataStatus::Ok,
-        Err(e @ Error::UnknownSetting { .. }) => {
-            fail(StrataStatus::InvalidArgument, format!("`{name}`: {e}"))
-        }
         Err(e @ Error::UnknownChoice { .. }) => fail(
             StrataStatus::InvalidArgument,
             format!("{e}, got \"{value}\""),

@@ -41,6 +41,8 @@ pub enum Error {
     },
     /// A name the method's settings table does not have.
     UnknownSetting {
+        /// The name asked for.
+        name: alloc::string::String,
         /// The method.
         method: &'static str,
         /// Its settings' names.
@@ -236,8 +238,12 @@ impl fmt::Display for Error {
                  the method's current choices)"
             ),
             Error::NotANumber { name } => write!(f, "`{name}` takes a number"),
-            Error::UnknownSetting { method, settings } => {
-                write!(f, "{method} has no such setting; it has:")?;
+            Error::UnknownSetting {
+                name,
+                method,
+                settings,
+            } => {
+                write!(f, "`{name}`: {method} has no such setting; it has:")?;
                 for name in settings {
                     write!(f, " {name}")?;
                 }

@@ -174,12 +174,14 @@ impl Scene {
 
 /// `spp` paths a pixel or `time` seconds (16 spp without either).
 pub(crate) fn budget(
-    spp: Option<u64>,
+    spp: Option<i64>,
     time: Option<f64>,
     resolution: Resolution,
 ) -> PyResult<Budget> {
     match (spp, time) {
-        (Some(spp), None) => Ok(Budget::samples_per_pixel(spp, resolution)),
+        (Some(spp), None) => u64::try_from(spp)
+            .map(|spp| Budget::samples_per_pixel(spp, resolution))
+            .map_err(|_| PyValueError::new_err(format!("spp: {spp} is not a number of paths"))),
         (None, Some(t)) => Duration::try_from_secs_f64(t)
             .ok()
             .filter(|_| t > 0.0)
@@ -193,13 +195,14 @@ pub(crate) fn budget(
 /// The threads a render of `scene` runs on: `threads`, or every core, or 1
 /// for a Python oracle (it holds the GIL for each path: more threads only
 /// wait for it; 2 threads traced half the paths a second of 1).
-pub(crate) fn pool(threads: Option<usize>, scene: &Scene) -> PyResult<rayon::ThreadPool> {
+pub(crate) fn pool(threads: Option<i64>, scene: &Scene) -> PyResult<rayon::ThreadPool> {
     let threads = threads.or(scene.python().map(|_| 1));
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(threads) = threads {
-        if threads == 0 {
-            return Err(PyValueError::new_err("threads: at least 1"));
-        }
+        let threads = usize::try_from(threads)
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(|| PyValueError::new_err(format!("threads: {threads}; at least 1")))?;
         pool = pool.num_threads(threads);
     }
     pool.build()

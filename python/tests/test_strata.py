@@ -77,7 +77,7 @@ def test_bad_settings_raise_value_and_type_errors():
         strata.render("procedural", "metropolis")
     with pytest.raises(ValueError, match="chains"):
         strata.render("procedural", "pssmlt", chains=0)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="`no_such_setting`: mc has no such setting"):
         strata.render("procedural", "mc", no_such_setting=1)
     with pytest.raises(ValueError):
         strata.render("procedural", "pssmlt", small_step="no-such-kernel")
@@ -85,6 +85,10 @@ def test_bad_settings_raise_value_and_type_errors():
         strata.render("procedural", "pssmlt", chains=[1])
     with pytest.raises(ValueError):
         strata.render("procedural", "mc", spp=0)
+    with pytest.raises(ValueError, match="spp: -1"):
+        strata.render("procedural", "mc", spp=-1)
+    with pytest.raises(ValueError, match="threads: -2"):
+        strata.render("procedural", "mc", threads=-2)
     with pytest.raises(ValueError):
         strata.render("procedural", "mc", time=float("nan"))
     with pytest.raises(ValueError):

@@ -255,7 +255,8 @@ impl Method {
 
     /// The row called `name`, or an error naming this method's settings.
     fn known(&self, name: &str) -> Result<&'static Setting, Error> {
-        self.setting(name).ok_or(Error::UnknownSetting {
+        self.setting(name).ok_or_else(|| Error::UnknownSetting {
+            name: name.into(),
             method: self.name(),
             settings: self.settings().iter().map(|s| s.name).collect(),
         })
@@ -290,6 +291,7 @@ mod tests {
     use super::*;
     use crate::method::RenderMethod;
     use crate::mutate::{Kelemen, SmallStep};
+    use alloc::string::ToString;
 
     /// Every method's defaults lie in the table, and every row can be read.
     #[test]
@@ -398,10 +400,15 @@ mod tests {
         }
         // Names a method does not have, and settings that do not apply now.
         let mut mc = Method::Mc;
-        assert!(matches!(
-            mc.set("chains", 4.0),
-            Err(Error::UnknownSetting { .. })
-        ));
+        let unknown = mc.set("chains", 4.0).unwrap_err();
+        assert!(matches!(unknown, Error::UnknownSetting { .. }));
+        // The message names what was asked for, for every front end.
+        assert!(
+            unknown
+                .to_string()
+                .starts_with("`chains`: mc has no such setting"),
+            "{unknown}"
+        );
         stratified.set_choice("solver", "log").unwrap();
         assert_eq!(stratified.get("alpha"), None);
         assert_eq!(

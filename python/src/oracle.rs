@@ -4,7 +4,7 @@
 
 use std::sync::Mutex;
 
-use pyo3::exceptions::PyRuntimeError;
+use pyo3::exceptions::{PyRuntimeError, PyTypeError};
 use pyo3::prelude::*;
 use strata::engine::{
     FilmPoint, PathOracle, PathSample, Resolution, Rgb, Sampler, SplatSink, Temperature,
@@ -152,7 +152,16 @@ impl PyOracle {
         let lent = Bound::new(py, PySampler { lent: Some(lent) })?;
         let result = self.callable.call1(py, (film.x, film.y, lent.clone()));
         lent.borrow_mut().lent = None;
-        let (r, g, b): (f32, f32, f32) = result?.extract(py)?;
+        let result = result?;
+        let (r, g, b): (f32, f32, f32) = result.extract(py).map_err(|_| {
+            let got = result
+                .bind(py)
+                .repr()
+                .map_or_else(|_| "?".into(), |r| r.to_string());
+            PyTypeError::new_err(format!(
+                "an oracle returns (r, g, b), three numbers, not {got}"
+            ))
+        })?;
         Ok(Rgb([r, g, b]))
     }
 }

@@ -114,12 +114,12 @@ impl Batch {
         let out = self.function.call1(py, (x, y, u))?;
         let numpy = py.import("numpy")?;
         let out = numpy.call_method1("asarray", (out, "float64"))?;
+        let shape: Vec<usize> = out.getattr("shape")?.extract()?;
         let out = out
             .cast_into::<PyArray2<f64>>()
-            .map_err(|_| shape_error(n))?;
-        if out.shape() != [n, 3] {
-            return Err(shape_error(n));
-        }
+            .ok()
+            .filter(|out| out.shape() == [n, 3])
+            .ok_or_else(|| shape_error(n, &shape))?;
         let out = out.readonly();
         let out = out.as_slice()?;
         Ok(out
@@ -129,9 +129,10 @@ impl Batch {
     }
 }
 
-fn shape_error(n: usize) -> PyErr {
+/// A vectorized oracle's result of the wrong `shape` for `n` paths.
+fn shape_error(n: usize, shape: &[usize]) -> PyErr {
     PyValueError::new_err(format!(
-        "a vectorized oracle returns an array of shape ({n}, 3) for {n} paths"
+        "a vectorized oracle returns an array of shape ({n}, 3) for {n} paths, not {shape:?}"
     ))
 }
 

@@ -5,6 +5,7 @@ command's for the same seed, bit for bit."""
 
 import math
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -150,6 +151,12 @@ def test_an_exception_in_the_oracle_reaches_the_caller_and_stops_the_render():
     assert raised.traceback[-1].name == "broken"
     # It stopped: far fewer calls than the budget's 40 million paths.
     assert len(calls) < 1_000_000
+
+
+def test_an_oracle_returning_other_than_three_numbers_is_told_what_it_returned():
+    for returned in [(1.0, 2.0), ("a", 0.0, 0.0), None]:
+        with pytest.raises(TypeError, match=r"returns \(r, g, b\), three numbers, not " + re.escape(repr(returned))):
+            strata.render(lambda x, y, s, r=returned: r, "mc", spp=1, width=2, height=2)
 
 
 def test_a_sampler_kept_beyond_its_call_raises():
@@ -383,7 +390,7 @@ def test_a_numpy_oracle_that_raises_or_returns_a_wrong_shape_stops_the_render():
     with pytest.raises(ZeroDivisionError, match="numpy oracle's own error") as raised:
         strata.render(strata.Vectorized(broken, 3), "pssmlt", spp=10_000, width=64, height=64)
     assert raised.traceback[-1].name == "broken"
-    with pytest.raises(ValueError, match=r"shape \(\d+, 3\)"):
+    with pytest.raises(ValueError, match=r"shape \((\d+), 3\) for \1 paths, not \[\1, 2\]"):
         strata.render(strata.Vectorized(lambda x, y, u: u, 2), "mc", spp=1, width=8, height=8)
     with pytest.raises(ValueError, match="dimensions"):
         strata.Vectorized(lambda x, y, u: u, 0)

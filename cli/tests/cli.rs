@@ -735,3 +735,133 @@ fn sealed_checkpoints_and_parts_open_with_their_key_only() {
     assert_eq!(code, Some(0), "{stderr}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The `strata` command lines of the README's shell blocks (`strata ...`
+/// and `cargo run --release -- ...`), each an argument list, continuation
+/// lines joined and comments dropped.
+fn readme_commands() -> Vec<Vec<String>> {
+    let readme = include_str!("../../README.md");
+    let mut commands = Vec::new();
+    for block in readme.split("```sh\n").skip(1) {
+        let block = block.split("```").next().unwrap_or("");
+        let joined = block.replace("\\\n", " ");
+        for line in joined.lines() {
+            let line = line.split(" #").next().unwrap_or("").trim();
+            let args = if let Some(rest) = line.strip_prefix("strata ") {
+                rest
+            } else if let Some(rest) = line.strip_prefix("cargo run --release -- ") {
+                rest
+            } else {
+                continue;
+            };
+            assert!(!args.contains(['"', '\'']), "quoted arguments: {line}");
+            commands.push(args.split_whitespace().map(String::from).collect());
+        }
+    }
+    commands
+}
+
+/// The value after `flag` in `args`.
+fn flag<'a>(args: &'a [String], flag: &str) -> Option<&'a str> {
+    let at = args.iter().position(|a| a == flag)?;
+    args.get(at + 1).map(String::as_str)
+}
+
+/// `args` with the value after `flag` replaced by `value`.
+fn with_flag(args: &[String], flag: &str, value: String) -> Vec<String> {
+    let mut args = args.to_vec();
+    if let Some(at) = args.iter().position(|a| a == flag) {
+        args[at + 1] = value;
+    }
+    args
+}
+
+/// Every `strata` command the README shows runs as written, in a directory
+/// of its own that holds the repository's `scenes/`, but smaller: each
+/// render at most 16 paths a pixel on a film of 64x36 unless it names its
+/// size (flags added, the same for a render and its `--resume`). A render
+/// of task `I` of `N` runs for every `I` (its `--out` ending in `I`), so
+/// that the merge has every part. Each writes what its `--out` names: a
+/// PNG and an EXR, or a task's part. Fails when the README names a flag, a
+/// scene or a method the command does not have.
+#[test]
+fn the_readme_s_commands_run() {
+    let commands = readme_commands();
+    assert!(
+        commands.len() >= 5 && commands.iter().any(|c| c[0] == "merge"),
+        "{commands:?}"
+    );
+    let dir = std::env::temp_dir().join(format!("strata-readme-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scenes = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes");
+    std::os::unix::fs::symlink(scenes, dir.join("scenes")).unwrap();
+    let run = |args: &[String]| {
+        let output = Command::new(env!("CARGO_BIN_EXE_strata"))
+            .args(args)
+            .current_dir(&dir)
+            .output()
+            .expect("the strata binary runs");
+        assert_eq!(
+            output.status.code(),
+            Some(0),
+            "strata {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let out = flag(args, "--out").expect("every command names its --out");
+        let written: &[&str] = match flag(args, "--task-count") {
+            Some(_) => &["part"],
+            None => &["png", "exr"],
+        };
+        for extension in written {
+            let file = dir.join(format!("{out}.{extension}"));
+            assert!(file.is_file(), "strata {}: no {file:?}", args.join(" "));
+        }
+    };
+    for mut args in commands {
+        match args[0].as_str() {
+            "render" => {
+                if let Some(spp) = flag(&args, "--spp") {
+                    let spp = spp.parse::<u64>().unwrap().min(16);
+                    args = with_flag(&args, "--spp", spp.to_string());
+                }
+                if flag(&args, "--width").is_none() {
+                    args.extend(["--width", "64", "--height", "36"].map(String::from));
+                }
+                let Some(count) = flag(&args, "--task-count") else {
+                    run(&args);
+                    continue;
+                };
+                let out = flag(&args, "--out").unwrap();
+                let stem = out.trim_end_matches(|c: char| c.is_ascii_digit());
+                for index in 0..count.parse::<u64>().unwrap() {
+                    let task = with_flag(&args, "--task-index", index.to_string());
+                    run(&with_flag(&task, "--out", format!("{stem}{index}")));
+                }
+            }
+            "merge" => {
+                // The shell's glob, expanded here.
+                let mut expanded = Vec::new();
+                for arg in &args {
+                    let Some((prefix, suffix)) = arg.split_once('*') else {
+                        expanded.push(arg.clone());
+                        continue;
+                    };
+                    let parent = dir.join(prefix).parent().unwrap().to_path_buf();
+                    let mut parts: Vec<String> = std::fs::read_dir(&parent)
+                        .unwrap()
+                        .map(|e| e.unwrap().path())
+                        .map(|p| p.strip_prefix(&dir).unwrap().to_str().unwrap().to_owned())
+                        .filter(|p| p.starts_with(prefix) && p.ends_with(suffix))
+                        .collect();
+                    parts.sort();
+                    assert!(!parts.is_empty(), "nothing matches {arg}");
+                    expanded.extend(parts);
+                }
+                run(&expanded);
+            }
+            other => panic!("a README command the test does not know: strata {other}"),
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -73,6 +73,16 @@ def test_a_render_is_the_commands_for_the_same_seed(tmp_path):
         assert (tmp_path / f"{method}-python.exr").read_bytes() == (tmp_path / f"{method}.exr").read_bytes()
 
 
+def test_the_readme_s_python_line_runs():
+    readme = open(os.path.join(os.path.dirname(__file__), "..", "..", "README.md")).read()
+    lines = [line for line in readme.splitlines() if line.startswith('python -c "')]
+    assert len(lines) == 1, lines
+    code = lines[0][len('python -c "') : lines[0].rindex('"')]
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=HANG)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "(256, 256, 3)", out.stdout
+
+
 def test_bad_settings_raise_value_and_type_errors():
     with pytest.raises(ValueError, match="unknown method"):
         strata.render("procedural", "metropolis")

@@ -14,7 +14,7 @@ use alloc::vec::Vec;
 
 use serde::Serialize;
 
-use super::Rounds;
+use super::rounds::Rounds;
 use crate::checkpoint;
 use crate::error::Error;
 use crate::exact::ExactFilm;

@@ -2,10 +2,15 @@
 """Import circles among a crate's modules: `scripts/import-circles.py DIR`
 (a crate's src/) prints every circle of modules that import one another
 (`use crate::...`, `use super::...`, a parent's paths into its children, `self::child::` too;
-tests and doc comments left out) and exits 1 if there is one. CI runs it
-on the engine and the other crates."""
+tests and doc comments left out) and exits 1 if there is one. With
+`--parents`, a module that imports from its parent module fails too (the
+engine's rule: a parent re-exports its children, they import one another).
+CI runs it, with `--parents`, on every crate (a module's imports from the
+crate's root are not its parent's)."""
 import os,re,collections,sys
-root=sys.argv[1] if len(sys.argv) > 1 else 'engine/src'
+args=[a for a in sys.argv[1:] if a != '--parents']
+parents='--parents' in sys.argv[1:]
+root=args[0] if args else 'engine/src'
 os.chdir(root)
 files=[]
 for r,_,fs in os.walk('.'):
@@ -70,4 +75,8 @@ for c in sccs:
     for a in c:
         for b in edges[a]:
             if b in c: print('   ', '::'.join(a) or 'lib', '->', '::'.join(b) or 'lib')
-sys.exit(1 if sccs else 0)
+upward=[(a,b) for a in mods for b in edges[a] if a[:-1]==b and len(a)>1]
+if parents:
+    for a,b in sorted(upward):
+        print('imports its parent:', '::'.join(a), '->', '::'.join(b))
+sys.exit(1 if sccs or (parents and upward) else 0)

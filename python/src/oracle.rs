@@ -153,15 +153,21 @@ impl PyOracle {
         let result = self.callable.call1(py, (film.x, film.y, lent.clone()));
         lent.borrow_mut().lent = None;
         let result = result?;
-        let (r, g, b): (f32, f32, f32) = result.extract(py).map_err(|_| {
-            let got = result
-                .bind(py)
-                .repr()
-                .map_or_else(|_| "?".into(), |r| r.to_string());
-            PyTypeError::new_err(format!(
-                "an oracle returns (r, g, b), three numbers, not {got}"
-            ))
-        })?;
+        // A tuple, or any sequence of three numbers (a list, a numpy array).
+        let rgb = result
+            .extract::<(f32, f32, f32)>(py)
+            .map(|(r, g, b)| [r, g, b]);
+        let [r, g, b] = rgb
+            .or_else(|_| result.extract::<[f32; 3]>(py))
+            .map_err(|_| {
+                let got = result
+                    .bind(py)
+                    .repr()
+                    .map_or_else(|_| "?".into(), |r| r.to_string());
+                PyTypeError::new_err(format!(
+                    "an oracle returns (r, g, b), three numbers, not {got}"
+                ))
+            })?;
         Ok(Rgb([r, g, b]))
     }
 }

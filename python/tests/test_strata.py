@@ -164,6 +164,10 @@ def test_an_exception_in_the_oracle_reaches_the_caller_and_stops_the_render():
 
 
 def test_an_oracle_returning_other_than_three_numbers_is_told_what_it_returned():
+    # Any sequence of three numbers is a colour.
+    for returned in [(0.5, 0.25, 1.0), [0.5, 0.25, 1.0], np.array([0.5, 0.25, 1.0])]:
+        r = strata.render(lambda x, y, s, r=returned: r, "mc", spp=1, width=2, height=2)
+        assert np.array_equal(r.image, np.broadcast_to(np.float32([0.5, 0.25, 1.0]), (2, 2, 3)))
     for returned in [(1.0, 2.0), ("a", 0.0, 0.0), None]:
         with pytest.raises(TypeError, match=r"returns \(r, g, b\), three numbers, not " + re.escape(repr(returned))):
             strata.render(lambda x, y, s, r=returned: r, "mc", spp=1, width=2, height=2)

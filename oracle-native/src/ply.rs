@@ -1,13 +1,14 @@
 //! PLY meshes (ASCII, binary little- and big-endian): positions, optional
 //! normals and texture coordinates, polygon faces (fan-triangulated).
 //!
-//! Read here, not by a crate: `ply-rs` and its maintained fork `ply-rs-bw`
-//! reserve each element's count from the header before reading it
-//! (`Vec::with_capacity(count)`), so a header declaring four billion
-//! vertices aborts the process, and they hold every vertex as a map of its
-//! named properties. This reader grows what it keeps only as the file's
-//! bytes are read, so a count the bytes do not back ends in a typed error,
-//! and keeps positions, normals and texture coordinates as flat arrays.
+//! Read here, not by a crate: `ply-rs` (last released as 0.1.3) and its
+//! maintained fork `ply-rs-bw` hold every vertex as a map of its named
+//! properties, and the fork reserves each element's count from the header
+//! before reading it (`Vec::with_capacity(count)`), so a header declaring
+//! four billion vertices aborts the process. This reader grows what it
+//! keeps only as the file's bytes are read, so a count the bytes do not
+//! back ends in a typed error, and keeps positions, normals and texture
+//! coordinates as flat arrays.
 
 use std::path::Path;
 

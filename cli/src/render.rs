@@ -74,7 +74,15 @@ pub(crate) fn run(args: &Args) -> AnyResult<Ended> {
                 let scene = match builtin::by_name(name, resolution) {
                     Some(scene) => scene,
                     None => {
-                        let loaded = strata::native::pbrt::load(std::path::Path::new(name))?;
+                        let path = std::path::Path::new(name);
+                        if !path.exists() {
+                            return Err(format!(
+                                "{name}: no such file, and no built-in scene of that name ({}, procedural, mixture)",
+                                builtin::NAMES.join(", ")
+                            )
+                            .into());
+                        }
+                        let loaded = strata::native::pbrt::load(path)?;
                         for skipped in &loaded.ignored {
                             warn!("note: {name}: ignored {skipped}");
                         }

@@ -44,7 +44,19 @@ fn render_writes_png_and_exr_and_exit_codes_say_how_it_went() {
     assert_eq!(missing.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&missing.stderr);
     assert!(
-        stderr.starts_with("error: ") && stderr.contains("no-such-scene.pbrt"),
+        stderr.starts_with("error: ")
+            && stderr.contains("no-such-scene.pbrt: no such file, and no built-in scene")
+            && stderr.contains("cornell, door"),
+        "{stderr}"
+    );
+    // A scene's directory for its file: the error names the file.
+    let scenes = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/cornell-box");
+    let directory = strata(&["render", scenes, "--out", out_arg]);
+    let stderr = String::from_utf8_lossy(&directory.stderr);
+    assert!(
+        directory.status.code() == Some(1)
+            && stderr.contains("a directory, not a file: name a scene in it")
+            && stderr.contains("cornell-box/scene.pbrt"),
         "{stderr}"
     );
 

@@ -21,6 +21,9 @@ pub const MAX_TEXTURE_TEXELS: u64 = 1 << 26;
 pub(crate) fn read(path: &Path) -> Result<Vec<u8>, SceneError> {
     let refuse = |why: String| SceneError::at(path, 0, why);
     let meta = std::fs::metadata(path).map_err(|e| SceneError::io(path, e))?;
+    if meta.is_dir() {
+        return Err(refuse(directory(path)));
+    }
     if !meta.is_file() {
         return Err(refuse("not a regular file".into()));
     }
@@ -39,6 +42,28 @@ pub(crate) fn read(path: &Path) -> Result<Vec<u8>, SceneError> {
         .read_to_end(&mut bytes)
         .map_err(|e| SceneError::io(path, e))?;
     Ok(bytes)
+}
+
+/// Why a directory is not a scene: with the `.pbrt` files it holds, when
+/// it holds any (`scenes/cornell-box` for `scenes/cornell-box/scene.pbrt`).
+fn directory(path: &Path) -> String {
+    let mut scenes: Vec<String> = std::fs::read_dir(path)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|entry| entry.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "pbrt"))
+        .map(|p| p.display().to_string())
+        .collect();
+    scenes.sort();
+    if scenes.is_empty() {
+        "a directory, not a file".into()
+    } else {
+        format!(
+            "a directory, not a file: name a scene in it ({})",
+            scenes.join(", ")
+        )
+    }
 }
 
 /// The text of the regular file `path` ([`read`]), which must be UTF-8.

@@ -12,7 +12,7 @@ use strata::engine::{
     Film, FilmPoint, Kind, Resolution, SmallStep, Temperature, Value, check_purity,
 };
 
-use crate::errors::engine_error;
+use crate::errors::{engine_error, whole};
 use crate::image::to_numpy;
 use crate::oracle::PyOracle;
 use crate::vectorized::{Vectorized, VectorizedOracle};
@@ -101,10 +101,15 @@ pub(crate) fn compare<'py>(
 pub(crate) fn reference<'py>(
     py: Python<'py>,
     scene: &str,
-    width: u32,
-    height: u32,
-    seed: u64,
+    width: i128,
+    height: i128,
+    seed: i128,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let (width, height, seed): (u32, u32, u64) = (
+        whole("width", width)?,
+        whole("height", height)?,
+        whole("seed", seed)?,
+    );
     let size = Resolution::new(width.max(1), height.max(1));
     let film = match scene {
         "procedural" => ProceduralImage::showcase(size).reference(),
@@ -125,11 +130,17 @@ pub(crate) fn reference<'py>(
 #[pyo3(signature = (oracle, width, height, trials=16, seed=0))]
 pub(crate) fn check_purity_of(
     oracle: &Bound<'_, PyAny>,
-    width: u32,
-    height: u32,
-    trials: u32,
-    seed: u64,
+    width: i128,
+    height: i128,
+    trials: i128,
+    seed: i128,
 ) -> PyResult<()> {
+    let (width, height, trials, seed): (u32, u32, u32, u64) = (
+        whole("width", width)?,
+        whole("height", height)?,
+        whole("trials", trials)?,
+        whole("seed", seed)?,
+    );
     let resolution = Resolution::new(width.max(1), height.max(1));
     let centre = FilmPoint {
         x: width as f32 / 2.0,

@@ -13,6 +13,35 @@ create_exception!(
     "A render failed (the message says why)."
 );
 
+/// A whole number from Python, for an argument that holds an unsigned
+/// type: its range, and its name in messages.
+pub(crate) trait Whole: TryFrom<i128> + Copy {
+    /// The range, as a message says it.
+    const RANGE: &'static str;
+}
+
+impl Whole for u32 {
+    const RANGE: &'static str = "0 to 2**32 - 1";
+}
+
+impl Whole for u64 {
+    const RANGE: &'static str = "0 to 2**64 - 1";
+}
+
+/// `value`, the argument `name`, as a `T`, or a `ValueError` naming both
+/// and `T`'s range (pyo3's own is an `OverflowError` naming neither:
+/// "can't convert negative int to unsigned").
+pub(crate) fn whole<T: Whole>(name: &str, value: i128) -> PyResult<T> {
+    T::try_from(value).map_err(|_| {
+        PyValueError::new_err(format!("{name}: {value} is out of range ({})", T::RANGE))
+    })
+}
+
+/// [`whole`] of an argument that may be `None`.
+pub(crate) fn whole_or_none<T: Whole>(name: &str, value: Option<i128>) -> PyResult<Option<T>> {
+    value.map(|v| whole(name, v)).transpose()
+}
+
 /// `error` as the exception a Python user expects.
 pub(crate) fn engine_error(error: Error) -> PyErr {
     let message = error.to_string();

@@ -13,7 +13,7 @@ use strata::engine::{
     Checkpoint, Error, Extras, Film, MaxChannel, Output, PathOracle, Settings, Task,
 };
 
-use crate::errors::engine_error;
+use crate::errors::{engine_error, whole, whole_or_none};
 use crate::image::to_numpy;
 use crate::scene::{self, Scene, WithOracle};
 use crate::watch::{Every, Watch};
@@ -167,13 +167,18 @@ fn asked(
     method: &str,
     spp: Option<i64>,
     time: Option<f64>,
-    seed: u64,
+    seed: i128,
     threads: Option<i64>,
     path_sampler: &str,
-    size: (Option<u32>, Option<u32>),
+    (width, height): (Option<i128>, Option<i128>),
     preset: Option<&str>,
     settings: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Asked> {
+    let seed = whole("seed", seed)?;
+    let size = (
+        whole_or_none("width", width)?,
+        whole_or_none("height", height)?,
+    );
     let method = scene::method(method, preset, settings)?;
     let scene = scene::scene(scene, size, path_sampler, seed)?;
     let budget = scene::budget(spp, time, scene.resolution())?;
@@ -215,11 +220,11 @@ pub(crate) fn render(
     method: &str,
     spp: Option<i64>,
     time: Option<f64>,
-    seed: u64,
+    seed: i128,
     threads: Option<i64>,
     path_sampler: &str,
-    width: Option<u32>,
-    height: Option<u32>,
+    width: Option<i128>,
+    height: Option<i128>,
     progress: Option<Py<PyAny>>,
     preview: Option<Py<PyAny>>,
     preview_every: f64,
@@ -295,15 +300,15 @@ pub(crate) fn render_task<'py>(
     py: Python<'py>,
     scene: &Bound<'_, PyAny>,
     method: &str,
-    index: u32,
-    count: u32,
+    index: i128,
+    count: i128,
     spp: Option<i64>,
     time: Option<f64>,
-    seed: u64,
+    seed: i128,
     threads: Option<i64>,
     path_sampler: &str,
-    width: Option<u32>,
-    height: Option<u32>,
+    width: Option<i128>,
+    height: Option<i128>,
     preset: Option<&str>,
     key: Option<Vec<u8>>,
     settings: Option<&Bound<'_, PyDict>>,
@@ -324,7 +329,10 @@ pub(crate) fn render_task<'py>(
     let part = Part {
         settings: &asked.settings,
         watch: &watch,
-        task: Task { index, count },
+        task: Task {
+            index: whole("index", index)?,
+            count: whole("count", count)?,
+        },
     };
     let part = run(py, &asked.pool, &asked.scene, &watch, &part)?;
     match key {

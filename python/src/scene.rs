@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::{PyFileNotFoundError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
@@ -80,8 +80,14 @@ pub(crate) fn scene(
     let scene = match builtin::by_name(&name, size) {
         Some(scene) => scene,
         None => {
-            let loaded = pbrt::load(std::path::Path::new(&name))
-                .map_err(|e| PyValueError::new_err(e.to_string()))?;
+            let path = std::path::Path::new(&name);
+            if !path.exists() {
+                return Err(PyFileNotFoundError::new_err(format!(
+                    "{name}: no such file, and no built-in scene of that name ({}, procedural, mixture)",
+                    builtin::NAMES.join(", ")
+                )));
+            }
+            let loaded = pbrt::load(path).map_err(|e| PyValueError::new_err(e.to_string()))?;
             let mut scene = loaded.scene;
             if width.is_some() || height.is_some() {
                 scene.camera.resolution = size;

@@ -52,12 +52,15 @@ pub(crate) struct Vectorized {
 #[pymethods]
 impl Vectorized {
     #[new]
-    fn new(function: Py<PyAny>, dimensions: usize) -> PyResult<Self> {
-        if !(1..=MOST_DIMENSIONS).contains(&dimensions) {
-            return Err(PyValueError::new_err(format!(
-                "dimensions: {dimensions} is not in 1..={MOST_DIMENSIONS}"
-            )));
-        }
+    fn new(function: Py<PyAny>, dimensions: i128) -> PyResult<Self> {
+        let dimensions = usize::try_from(dimensions)
+            .ok()
+            .filter(|d| (1..=MOST_DIMENSIONS).contains(d))
+            .ok_or_else(|| {
+                PyValueError::new_err(format!(
+                    "dimensions: {dimensions} is not in 1..={MOST_DIMENSIONS}"
+                ))
+            })?;
         Ok(Vectorized {
             function,
             dimensions,

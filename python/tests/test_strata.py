@@ -98,6 +98,21 @@ def test_bad_settings_raise_value_and_type_errors():
         strata.render("procedural", "mc", spp=0)
     with pytest.raises(ValueError, match="spp: -1"):
         strata.render("procedural", "mc", spp=-1)
+    # Python's ints outside an argument's range: a ValueError naming it.
+    with pytest.raises(ValueError, match=r"seed: -1 is out of range \(0 to 2\*\*64 - 1\)"):
+        strata.render("procedural", "mc", seed=-1)
+    with pytest.raises(ValueError, match="seed: 18446744073709551616 is out of range"):
+        strata.render("procedural", "mc", seed=2**64)
+    with pytest.raises(ValueError, match="width: -1 is out of range"):
+        strata.render("procedural", "mc", width=-1, height=4)
+    with pytest.raises(ValueError, match="index: -1 is out of range"):
+        strata.render_task("procedural", "mc", -1, 2)
+    with pytest.raises(ValueError, match="seed: -3 is out of range"):
+        strata.reference("mixture", seed=-3)
+    with pytest.raises(ValueError, match="trials: -1 is out of range"):
+        strata.check_purity(lambda x, y, s: (0, 0, 0), 4, 4, trials=-1)
+    with pytest.raises(ValueError, match="dimensions: -2 is not in"):
+        strata.vectorized(dimensions=-2)(lambda x, y, u: u)
     with pytest.raises(ValueError, match="threads: -2"):
         strata.render("procedural", "mc", threads=-2)
     with pytest.raises(ValueError):
@@ -106,8 +121,8 @@ def test_bad_settings_raise_value_and_type_errors():
         strata.render("procedural", "mc", spp=4, time=1.0)
     with pytest.raises(ValueError):
         strata.render("procedural", "mc", width=0, height=4)
-    with pytest.raises(ValueError):
-        strata.render("no-such-scene.pbrt")
+    with pytest.raises(FileNotFoundError, match="no built-in scene of that name .cornell, door"):
+        strata.render("cornel")
     with pytest.raises(TypeError):
         strata.render(42)
     with pytest.raises(ValueError, match="width and height"):

@@ -30,7 +30,7 @@ pub(crate) struct Args {
     #[arg(long, default_value = "pssmlt", value_parser = PossibleValuesParser::new(Method::NAMES))]
     pub(crate) method: String,
     /// Samples (paths) per pixel.
-    #[arg(long, default_value_t = 64, conflicts_with = "time")]
+    #[arg(long, default_value_t = 64, conflicts_with = "time", value_parser = at_least_one::<u64>)]
     pub(crate) spp: u64,
     /// Time budget in seconds instead of --spp (set-up included).
     #[arg(long, value_parser = positive_seconds)]
@@ -59,11 +59,11 @@ pub(crate) struct Args {
     pub(crate) path_sampler: String,
     /// Image width (256 for a built-in scene; a .pbrt file's own unless
     /// given, and given --height alone, the width that keeps its aspect).
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<u32>)]
     pub(crate) width: Option<u32>,
     /// Image height (256 for a built-in scene; a .pbrt file's own unless
     /// given, and given --width alone, the height that keeps its aspect).
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<u32>)]
     pub(crate) height: Option<u32>,
     /// Start from a named preset of the method's settings (gruson2020: the
     /// stratified-MCMC paper's step sizes and large-step probability, for
@@ -160,6 +160,18 @@ pub(crate) fn out_path(text: &str) -> Result<PathBuf, String> {
                 format!("{text}/")
             }
         ))
+    }
+}
+
+/// `--spp`, `--width`, `--height`: a whole number from 1 (0 holds no work).
+pub(crate) fn at_least_one<T>(text: &str) -> Result<T, String>
+where
+    T: std::str::FromStr<Err = std::num::ParseIntError> + From<u8> + PartialOrd,
+{
+    match text.parse::<T>() {
+        Ok(n) if n >= T::from(1) => Ok(n),
+        Ok(_) => Err("at least 1".into()),
+        Err(e) => Err(e.to_string()),
     }
 }
 

@@ -150,7 +150,9 @@ fn empty_budgets_and_absurd_exposures_are_refused_and_dotted_names_kept() {
         strata(&args)
     };
     for (extra, code, says) in [
-        (&["--spp", "0"][..], 1, "budget"),
+        (&["--spp", "0"][..], 2, "--spp"),
+        (&["--width", "0"], 2, "--width"),
+        (&["--height", "0"], 2, "--height"),
         (&["--time", "0"], 2, "time budget"),
         (&["--time", "1e-300"], 2, "time budget"),
         (&["--time", "nan"], 2, "time budget"),

@@ -9,7 +9,7 @@ use crate::out::AnyResult;
 use clap::ValueEnum;
 use clap::builder::PossibleValuesParser;
 use strata::engine::Task;
-use strata::engine::{Kind, Method, Resolution, Setting};
+use strata::engine::{Kind, Method, Setting};
 use strata::native::PathSampler;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -125,22 +125,6 @@ impl Args {
 /// More threads than this many per core only add switching (2048 threads
 /// took 7 s for a 0.03 s job).
 pub(crate) const THREADS_PER_CORE: usize = 4;
-
-/// A scene file's resolution `own` with the `--width` and `--height`
-/// given: one side alone keeps `own`'s aspect ratio (rounded, at least 1).
-pub(crate) fn keep_aspect(own: Resolution, width: Option<u32>, height: Option<u32>) -> Resolution {
-    // `given * to / from`, rounded; `from` is never 0 for a loaded scene.
-    let scaled = |given: u32, to: u32, from: u32| {
-        let side = (given as u64 * to as u64 + from as u64 / 2) / (from as u64).max(1);
-        side.clamp(1, u32::MAX as u64) as u32
-    };
-    match (width, height) {
-        (Some(w), Some(h)) => Resolution::new(w, h),
-        (Some(w), None) => Resolution::new(w, scaled(w, own.height, own.width)),
-        (None, Some(h)) => Resolution::new(scaled(h, own.width, own.height), h),
-        (None, None) => own,
-    }
-}
 
 /// `--out`: a path whose last part names the files, not a directory
 /// (`o/` wrote `o/.png`).

@@ -6,7 +6,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use strata::engine::RenderMethod;
 
-use crate::args::{Args, Backend, THREADS_PER_CORE, differences, keep_aspect, method};
+use crate::args::{Args, Backend, THREADS_PER_CORE, differences, method};
 use crate::files::{
     checkpoint_bytes, checkpoint_key, checkpoint_limit, checkpoint_path, open_checkpoint, output,
     part_path, prepare_outputs, read_checkpoint, replace, write,
@@ -87,8 +87,7 @@ pub(crate) fn run(args: &Args) -> AnyResult<Ended> {
                             warn!("note: {name}: ignored {skipped}");
                         }
                         let mut scene = loaded.scene;
-                        scene.camera.resolution =
-                            keep_aspect(scene.camera.resolution, args.width, args.height);
+                        scene.camera.resize(args.width, args.height);
                         scene
                     }
                 };

@@ -1,9 +1,9 @@
 //! The command's own checks: its flags against the engine's settings
-//! table, its paths and aspect ratios.
+//! table, its paths.
 
 use strata::engine::RenderMethod;
 
-use crate::args::{Args, keep_aspect, method};
+use crate::args::{Args, method};
 use crate::files::{own_file, part_path};
 use crate::{Command, parse};
 use strata::engine::MaxChannel;
@@ -17,25 +17,6 @@ fn args(line: &[&str]) -> Args {
         Command::Render(args) => *args,
         _ => unreachable!(),
     }
-}
-
-/// One of `--width` and `--height` given for a scene file keeps its
-/// aspect ratio (it took 256 for the other side: veach-ajar's 1280x720
-/// at `--width 320` rendered 320x256).
-#[test]
-fn one_side_given_keeps_a_scene_files_aspect() {
-    let own = Resolution::new(1280, 720);
-    let r = |w, h| Resolution::new(w, h);
-    assert_eq!(keep_aspect(own, Some(320), None), r(320, 180));
-    assert_eq!(keep_aspect(own, None, Some(90)), r(160, 90));
-    assert_eq!(keep_aspect(own, Some(100), None), r(100, 56));
-    assert_eq!(keep_aspect(own, Some(1), None), r(1, 1));
-    assert_eq!(keep_aspect(own, Some(7), Some(3)), r(7, 3));
-    assert_eq!(keep_aspect(own, None, None), own);
-    assert_eq!(
-        keep_aspect(r(1, 4), Some(u32::MAX), None),
-        r(u32::MAX, u32::MAX)
-    );
 }
 
 /// A task whose OUT.part (or checkpoint) another task took while it

@@ -81,6 +81,25 @@ impl Camera {
         }
     }
 
+    /// The film made `width` x `height` pixels; one side given alone keeps
+    /// the film's aspect ratio (the other side rounded, at least 1), and
+    /// neither keeps the film. How a front end sizes a scene file's film:
+    /// veach-ajar's 1280x720 at a width of 320 is 320x180.
+    pub fn resize(&mut self, width: Option<u32>, height: Option<u32>) {
+        let own = self.resolution;
+        // `given * to / from`, rounded; a film's sides are never 0.
+        let scaled = |given: u32, to: u32, from: u32| {
+            let side = (given as u64 * to as u64 + from as u64 / 2) / (from as u64).max(1);
+            side.clamp(1, u32::MAX as u64) as u32
+        };
+        self.resolution = match (width, height) {
+            (Some(w), Some(h)) => Resolution::new(w, h),
+            (Some(w), None) => Resolution::new(w, scaled(w, own.height, own.width)),
+            (None, Some(h)) => Resolution::new(scaled(h, own.width, own.height), h),
+            (None, None) => own,
+        };
+    }
+
     /// The image plane's aspect factors `(sx, sy)` and `tan(fov / 2)`: at
     /// distance 1 in camera space it spans `±sx·tan` by `±sy·tan`.
     fn plane(&self) -> (f32, f32, f32) {
@@ -364,4 +383,33 @@ impl Scene {
 /// Rec. 709 luminance.
 pub fn luminance(c: Vec3) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One side given keeps the film's aspect ratio (the command took 256
+    /// for the other side once: veach-ajar's 1280x720 at `--width 320`
+    /// rendered 320x256, and Python did until 2026-12-03).
+    #[test]
+    fn one_side_given_keeps_the_films_aspect() {
+        let r = |w, h| Resolution::new(w, h);
+        let resized = |own, width, height| {
+            let mut camera = Camera::look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 40.0, own);
+            camera.resize(width, height);
+            camera.resolution
+        };
+        let own = r(1280, 720);
+        assert_eq!(resized(own, Some(320), None), r(320, 180));
+        assert_eq!(resized(own, None, Some(90)), r(160, 90));
+        assert_eq!(resized(own, Some(100), None), r(100, 56));
+        assert_eq!(resized(own, Some(1), None), r(1, 1));
+        assert_eq!(resized(own, Some(7), Some(3)), r(7, 3));
+        assert_eq!(resized(own, None, None), own);
+        assert_eq!(
+            resized(r(1, 4), Some(u32::MAX), None),
+            r(u32::MAX, u32::MAX)
+        );
+    }
 }

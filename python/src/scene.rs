@@ -89,9 +89,7 @@ pub(crate) fn scene(
             }
             let loaded = pbrt::load(path).map_err(|e| PyValueError::new_err(e.to_string()))?;
             let mut scene = loaded.scene;
-            if width.is_some() || height.is_some() {
-                scene.camera.resolution = size;
-            }
+            scene.camera.resize(width, height);
             scene
         }
     };

@@ -83,6 +83,31 @@ def test_the_readme_s_python_line_runs():
     assert out.stdout.strip() == "(256, 256, 3)", out.stdout
 
 
+SCENE_64x32 = """
+LookAt 0 0 5  0 0 0  0 1 0
+Camera "perspective" "float fov" [ 40 ]
+Film "image" "integer xresolution" [ 64 ] "integer yresolution" [ 32 ]
+WorldBegin
+  AttributeBegin
+    AreaLightSource "diffuse" "rgb L" [ 4 4 4 ]
+    Shape "trianglemesh" "integer indices" [ 0 1 2 ] "point P" [ -1 -1 0 1 -1 0 0 1 0 ]
+  AttributeEnd
+WorldEnd
+"""
+
+
+def test_a_scene_files_film_keeps_its_aspect_given_one_side(tmp_path):
+    """A pbrt file's own film unless told; one side given keeps its aspect
+    ratio (the other side was 256: a 64x32 film at width 16 was 16x256)."""
+    scene = tmp_path / "scene.pbrt"
+    scene.write_text(SCENE_64x32)
+    shape = lambda **size: strata.render(str(scene), "mc", spp=1, **size).image.shape
+    assert shape() == (32, 64, 3)
+    assert shape(width=16) == (8, 16, 3)
+    assert shape(height=4) == (4, 8, 3)
+    assert shape(width=5, height=7) == (7, 5, 3)
+
+
 def test_bad_settings_raise_value_and_type_errors():
     with pytest.raises(ValueError, match="unknown method"):
         strata.render("procedural", "metropolis")

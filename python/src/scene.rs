@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use pyo3::exceptions::{PyFileNotFoundError, PyTypeError, PyValueError};
+use pyo3::exceptions::{PyFileNotFoundError, PyTypeError, PyUserWarning, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use strata::engine::analytic::{GaussianMixture, ProceduralImage};
@@ -88,6 +88,14 @@ pub(crate) fn scene(
                 )));
             }
             let loaded = pbrt::load(path).map_err(|e| PyValueError::new_err(e.to_string()))?;
+            // What the loader skipped, as the command's notes say it: a
+            // `UserWarning` each (an error under `-W error`).
+            let py = scene.py();
+            for skipped in &loaded.ignored {
+                let text = format!("{name}: ignored {skipped}").replace('\0', "?");
+                let message = std::ffi::CString::new(text).unwrap_or_default();
+                PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)?;
+            }
             let mut scene = loaded.scene;
             scene.camera.resize(width, height);
             scene

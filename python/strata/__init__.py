@@ -113,7 +113,8 @@ def render(
 
     scene: a built-in (``"cornell"``, ``"door"``, ``"envplane"``,
         ``"caustic"``, ``"saturated"``, ``"pool"``), a pbrt-v3 file (a name
-        that is neither raises ``FileNotFoundError``), an analytic target (``"procedural"``, ``"mixture"``: their exact images
+        that is neither raises ``FileNotFoundError``; what the loader skips
+        is a ``UserWarning`` each), an analytic target (``"procedural"``, ``"mixture"``: their exact images
         are :func:`reference`), or an oracle written in Python: a callable
         ``f(x, y, sampler) -> (r, g, b)`` at film point ``(x, y)`` (pixels,
         ``y`` from the top) drawing every random number from

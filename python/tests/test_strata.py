@@ -108,6 +108,15 @@ def test_a_scene_files_film_keeps_its_aspect_given_one_side(tmp_path):
     assert shape(width=5, height=7) == (7, 5, 3)
 
 
+def test_what_a_scene_file_holds_that_is_skipped_is_a_warning(tmp_path):
+    """The loader's skipped directives reach Python as warnings, as they
+    reach the command's user as notes."""
+    scene = tmp_path / "scene.pbrt"
+    scene.write_text(SCENE_64x32.replace("WorldEnd", 'Shape "sphere" "float radius" 1\nWorldEnd'))
+    with pytest.warns(UserWarning, match='ignored Shape "sphere"'):
+        strata.render(str(scene), "mc", spp=1, width=8)
+
+
 def test_bad_settings_raise_value_and_type_errors():
     with pytest.raises(ValueError, match="unknown method"):
         strata.render("procedural", "metropolis")

@@ -15,6 +15,7 @@ use strata::engine::{
 use crate::errors::{engine_error, whole};
 use crate::image::to_numpy;
 use crate::oracle::PyOracle;
+use crate::scene::resolution;
 use crate::vectorized::{Vectorized, VectorizedOracle};
 
 /// The effective sample size of a series (Geyer 1992's initial positive
@@ -110,7 +111,7 @@ pub(crate) fn reference<'py>(
         whole("height", height)?,
         whole("seed", seed)?,
     );
-    let size = Resolution::new(width.max(1), height.max(1));
+    let size = resolution(width, height)?;
     let film = match scene {
         "procedural" => ProceduralImage::showcase(size).reference(),
         "mixture" => GaussianMixture::random(12, 4, (0.02, 0.1), size, seed).reference(1.0),
@@ -141,7 +142,7 @@ pub(crate) fn check_purity_of(
         whole("trials", trials)?,
         whole("seed", seed)?,
     );
-    let resolution = Resolution::new(width.max(1), height.max(1));
+    let resolution = resolution(width, height)?;
     let centre = FilmPoint {
         x: width as f32 / 2.0,
         y: height as f32 / 2.0,

@@ -106,7 +106,8 @@ pub(crate) fn scene(
     Ok(Scene::Tracer(Box::new(tracer)))
 }
 
-fn resolution(width: u32, height: u32) -> PyResult<Resolution> {
+/// A film of `width` x `height` pixels, or a `ValueError` if it has none.
+pub(crate) fn resolution(width: u32, height: u32) -> PyResult<Resolution> {
     if width == 0 || height == 0 {
         return Err(PyValueError::new_err(format!(
             "a film of {width}x{height} pixels has none"

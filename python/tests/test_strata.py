@@ -143,6 +143,10 @@ def test_bad_settings_raise_value_and_type_errors():
         strata.render_task("procedural", "mc", -1, 2)
     with pytest.raises(ValueError, match="seed: -3 is out of range"):
         strata.reference("mixture", seed=-3)
+    with pytest.raises(ValueError, match="0x4 pixels has none"):
+        strata.reference("procedural", width=0, height=4)
+    with pytest.raises(ValueError, match="4x0 pixels has none"):
+        strata.check_purity(lambda x, y, s: (0, 0, 0), 4, 0)
     with pytest.raises(ValueError, match="trials: -1 is out of range"):
         strata.check_purity(lambda x, y, s: (0, 0, 0), 4, 4, trials=-1)
     with pytest.raises(ValueError, match="dimensions: -2 is not in"):

@@ -389,9 +389,8 @@ pub fn luminance(c: Vec3) -> f32 {
 mod tests {
     use super::*;
 
-    /// One side given keeps the film's aspect ratio (the command took 256
-    /// for the other side once: veach-ajar's 1280x720 at `--width 320`
-    /// rendered 320x256, and Python did until 2026-12-03).
+    /// One side given keeps the film's aspect ratio (the other side was
+    /// 256 once: veach-ajar's 1280x720 at a width of 320 rendered 320x256).
     #[test]
     fn one_side_given_keeps_the_films_aspect() {
         let r = |w, h| Resolution::new(w, h);

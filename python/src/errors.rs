@@ -1,5 +1,6 @@
-//! The engine's errors as Python exceptions: bad settings and budgets are
-//! `ValueError`s, anything else a `strata.Error`.
+//! Errors as a Python user expects them: the engine's (bad settings and
+//! budgets are `ValueError`s, anything else a `strata.Error`), and whole
+//! numbers out of an argument's range (`ValueError`s that name it).
 
 use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyValueError};
@@ -13,9 +14,9 @@ create_exception!(
     "A render failed (the message says why)."
 );
 
-/// A whole number from Python, for an argument that holds an unsigned
-/// type: its range, and its name in messages.
-pub(crate) trait Whole: TryFrom<i128> + Copy {
+/// An unsigned type a whole-number argument from Python is converted to,
+/// with its range as an error message gives it.
+pub(crate) trait Whole: TryFrom<i128> {
     /// The range, as a message says it.
     const RANGE: &'static str;
 }

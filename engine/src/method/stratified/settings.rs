@@ -265,6 +265,21 @@ impl Fields for StratifiedSettings {
                 Solver::LogDomain(_) => Err(Error::NotApplicable { name: "alpha" }),
             },
         ),
+        Field::whole(
+            "solver_iterations",
+            (0, 100_000),
+            "the weighted solver's iterations (Gruson et al. 2020: 1000; 0: eq. 12's starting point); fewer reconstruct a large preview sooner",
+            |s| match s.solver {
+                Solver::Weighted(w) => Some(w.iterations.into()),
+                Solver::LogDomain(_) => None,
+            },
+            |s, n| match &mut s.solver {
+                Solver::Weighted(w) => put(&mut w.iterations, n as u32),
+                Solver::LogDomain(_) => Err(Error::NotApplicable {
+                    name: "solver_iterations",
+                }),
+            },
+        ),
         Field::flag(
             "cross_validate_alpha",
             "choose alpha per render from 0.05, 0.2, 1 and 5 on half the large steps",

@@ -415,13 +415,13 @@ mod tests {
             stratified.set("alpha", 1.0),
             Err(Error::NotApplicable { name: "alpha" })
         );
-        assert_eq!(stratified.get("solver_iterations"), None);
-        assert_eq!(
-            stratified.set("solver_iterations", 200.0),
-            Err(Error::NotApplicable {
-                name: "solver_iterations"
-            })
-        );
+        for name in ["solver_iterations", "preview_iterations"] {
+            assert_eq!(stratified.get(name), None);
+            assert_eq!(
+                stratified.set(name, 200.0),
+                Err(Error::NotApplicable { name })
+            );
+        }
         pssmlt.set_choice("small_step", "gaussian").unwrap();
         assert!(matches!(
             pssmlt.set("small_step_min", 0.001),

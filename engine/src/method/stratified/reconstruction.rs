@@ -68,6 +68,7 @@ pub(super) fn reconstruct_image(
     let mut solver = settings.solver;
     let mut alpha = None;
     if let Solver::Weighted(w) = &mut solver {
+        *w = solver_after(settings, *w, sweeps);
         if let Some(halves) = halves {
             let candidates = candidates(sweeps);
             w.alpha =
@@ -156,7 +157,7 @@ pub(super) fn preview<S: Copy + Into<f64>, T: AsRef<[S]>>(
 /// weighted solver's set-up and one block of its iterations between weight
 /// refreshes, on a problem of this film's size, scaled to the solves and
 /// blocks the reconstruction runs (every channel's, the cross-validation's
-/// candidates, fewer below [`FEW_SWEEPS`]), and a quarter more for the
+/// candidates, fewer of both below [`FEW_SWEEPS`]), and a quarter more for the
 /// work around them. If it still runs late, the solver stops at the
 /// budget's end ([`reconstruct::weighted`]'s `stop`).
 pub(super) struct ReconstructionTime {
@@ -164,9 +165,9 @@ pub(super) struct ReconstructionTime {
     set_up: f64,
     /// Seconds of one block of iterations.
     block: f64,
-    settings: WeightedSettings,
+    solver: WeightedSettings,
+    settings: StratifiedSettings,
     channels: f64,
-    cross_validate: bool,
     /// At most half the time budget.
     most: f64,
 }
@@ -197,9 +198,9 @@ impl ReconstructionTime {
             return Some(ReconstructionTime {
                 set_up,
                 block: (one_block - set_up).max(0.0),
-                settings: *w,
+                solver: *w,
+                settings: *settings,
                 channels: <O::Radiance as crate::oracle::Radiance>::CHANNELS as f64,
-                cross_validate: settings.cross_validate_alpha,
                 most: 0.5 * limit.as_secs_f64(),
             });
         }
@@ -210,13 +211,13 @@ impl ReconstructionTime {
 
     /// Seconds the reconstruction is expected to take after `sweeps` sweeps.
     pub(super) fn seconds(&self, sweeps: u64) -> f64 {
-        let w = &self.settings;
+        let w = solver_after(&self.settings, self.solver, sweeps);
         let every = w.reweight_every.max(1);
         let (mut solves, mut blocks) = (
             self.channels,
             self.channels * w.iterations.div_ceil(every) as f64,
         );
-        if self.cross_validate {
+        if self.settings.cross_validate_alpha {
             let candidates = candidates(sweeps).len() as f64;
             solves += candidates;
             blocks += candidates * (w.iterations / 4).div_ceil(every) as f64;
@@ -279,6 +280,22 @@ const ALPHAS: [f64; 4] = [0.05, 0.2, 1.0, 5.0];
 /// scene, where `α` = 5 halves the MSE: saturated 4.99x MC's -> 2.67x, the
 /// Cornell box 6.23x -> 3.63x; docs/RESULTS.md).
 const FEW_SWEEPS: u64 = 8;
+
+/// The weighted solver `w` of `settings` after `sweeps` sweeps: below
+/// [`FEW_SWEEPS`] with cross-validation, at most
+/// [`preview_iterations`](StratifiedSettings::preview_iterations) iterations.
+fn solver_after(
+    settings: &StratifiedSettings,
+    w: WeightedSettings,
+    sweeps: u64,
+) -> WeightedSettings {
+    let iterations = if settings.cross_validate_alpha && sweeps < FEW_SWEEPS {
+        w.iterations.min(settings.preview_iterations)
+    } else {
+        w.iterations
+    };
+    WeightedSettings { iterations, ..w }
+}
 
 /// The `α`s cross-validation chooses from after `sweeps` sweeps.
 fn candidates(sweeps: u64) -> &'static [f64] {

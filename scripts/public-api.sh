@@ -14,6 +14,8 @@ import html, re, sys
 docs = sys.argv[1]
 
 def text(fragment):
+    # A declaration of many fields is folded behind a "Show N fields" summary.
+    fragment = re.sub(r"<summary[^>]*>.*?</summary>", "", fragment, flags=re.S)
     return html.unescape(re.sub(r"<[^>]+>", "", fragment)).strip()
 
 def between(page, start, ends):

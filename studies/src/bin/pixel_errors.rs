@@ -149,7 +149,7 @@ fn main() -> AnyResult<()> {
         sorted.sort_by(|a, b| b.total_cmp(a));
         let worst: f64 = sorted[..(sorted.len() / 100).max(1)].iter().sum();
         println!(
-            "{}: relMSE {:.4}, the worst 1 % of pixels {:.2} of it",
+            "{}: relMSE {:.4e}, the worst 1 % of pixels {:.2} of it",
             path.display(),
             total / terms.len() as f64,
             worst / total

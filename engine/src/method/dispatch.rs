@@ -207,7 +207,9 @@ impl RenderMethod for Method {
             Method::Replica(_) => "one sweep of every ensemble",
             Method::Stratified(_) => "one sweep of every tile",
             Method::Erpt(_) => "one pass of start paths",
-            Method::MultiStage(_) => "one step of every chain in every stage",
+            Method::MultiStage(_) => {
+                "one step of every chain in every stage (under a time budget, in the first)"
+            }
         }
     }
 

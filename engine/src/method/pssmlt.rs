@@ -157,6 +157,17 @@ fn summary<R: Radiance>(chain: &PathChain<R>) -> Summary {
     )
 }
 
+/// Black films for [`Pssmlt::start`]'s `spare`: one a layer, of `channels`
+/// on a film of `resolution`.
+pub(crate) fn black_films(
+    resolution: Resolution,
+    channels: usize,
+) -> Result<Vec<ExactFilm>, Error> {
+    (0..LAYERS)
+        .map(|_| ExactFilm::try_new(resolution, channels))
+        .collect()
+}
+
 impl<'a, O, I> Pssmlt<'a, O, I>
 where
     O: PathOracle,

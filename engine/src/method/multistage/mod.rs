@@ -28,11 +28,13 @@
 //! share is taken after the stage's importance is made, less what the
 //! stages to come are expected to take beyond their shares, as the last
 //! one did); the observer sees one progress over all stages and previews
-//! of the combined image.
+//! of the combined image. Under a time budget too short for every stage's
+//! fixed costs (ours), the run ends with the stages the time pays for, the
+//! last of them taking the rest of the time.
 //!
 //! | file | owns |
 //! |---|---|
-//! | `schedule.rs` | the stages' grids (Alg. 2) and their shares of a sample budget |
+//! | `schedule.rs` | the stages' grids (Alg. 2), their shares of a sample budget, the stages a time budget pays for |
 //! | `regions.rs` | the importance's denominator: the estimate's mean over a stage's grid |
 //! | `run.rs` | one run: its stages in order, each a PSSMLT render; runs pooled into the image |
 //! | `done.rs` | the stages done: their sums, the estimate, what checkpoints and runs carry |

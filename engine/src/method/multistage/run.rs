@@ -11,6 +11,8 @@ use super::done::StagesDone;
 use super::noise_aware::noise_factors;
 use super::probe::{ProbeOracle, Probed};
 use super::regions::RegionMeans;
+#[cfg(feature = "std")]
+use super::schedule::{Paid, time_left_pays_for};
 use super::schedule::{grids_of, stage_share};
 use super::settings::MultiStageSettings;
 use super::stage::{StageCheckpoints, StageObserver};
@@ -19,7 +21,7 @@ use crate::error::Error;
 use crate::film::Film;
 use crate::method::job::Job;
 use crate::method::output::{Extras, Output};
-use crate::method::pssmlt::Pssmlt;
+use crate::method::pssmlt::{Pssmlt, black_films};
 use crate::method::runs::Pooled;
 use crate::oracle::{FilmPoint, PathOracle, PathSample, Radiance, Resolution};
 use crate::target::{FnImportance, Importance};
@@ -51,8 +53,13 @@ where
     }
     let mut cancelled = false;
     // Each stage's films, black again, for the next (a 1280x720 film's
-    // memory is 150 MB: made once, not once a stage).
-    let mut films = Vec::new();
+    // memory is 150 MB: made once, not once a stage), made before the
+    // first stage so that its fixed costs, which tell a time budget what
+    // the stages to come cost, are those of every stage.
+    let mut films = match resumed_stage {
+        None => black_films(resolution, <Probed<O::Radiance> as Radiance>::CHANNELS)?,
+        Some(_) => Vec::new(),
+    };
     let first = done.stages.len();
     // Under a time budget, the seconds the last stage took beyond its share
     // (its importance, start, merge and estimate): kept back for each stage
@@ -64,6 +71,22 @@ where
         let stats = done.stats;
         #[cfg(feature = "std")]
         let stage_start = job.clock.seconds();
+        // Under a time budget, once a stage has measured the fixed costs:
+        // what the time left can pay for.
+        #[cfg(feature = "std")]
+        let last_stage = match job.budget {
+            Budget::Time(limit) if s > first => {
+                let left = limit.as_secs_f64() - stage_start;
+                match time_left_pays_for(left, overhead, grids.len() - s - 1) {
+                    Paid::Nothing => break,
+                    Paid::ThisStageAlone => true,
+                    Paid::EveryStage => false,
+                }
+            }
+            _ => false,
+        };
+        #[cfg(not(feature = "std"))]
+        let last_stage = false;
         let regions = RegionMeans::new(&estimate, k);
         let noise = if settings.noise_aware && stats.samples > 0 {
             noise_factors(&regions, &luminance, &variance, resolution)
@@ -77,13 +100,16 @@ where
             #[cfg(feature = "std")]
             Budget::Time(limit) => {
                 let made = job.clock.seconds() - stage_start;
-                let later = (grids.len() - s - 1) as f64;
+                let (share, later) = if last_stage {
+                    (1.0, 0.0)
+                } else {
+                    (
+                        k as f64 / (weight_sum - weight_done) as f64,
+                        (grids.len() - s - 1) as f64,
+                    )
+                };
                 let reserve = (overhead - made).max(0.0) + overhead * later;
-                Budget::Time(job.clock.share_of_remaining(
-                    limit,
-                    k as f64 / (weight_sum - weight_done) as f64,
-                    reserve,
-                ))
+                Budget::Time(job.clock.share_of_remaining(limit, share, reserve))
             }
         };
         let staged = FnImportance(
@@ -111,7 +137,12 @@ where
             samples: stats.samples,
             stage_samples: AtomicU64::new(0),
             fraction: weight_done as f64 / weight_sum as f64,
-            share: k as f64 / weight_sum as f64,
+            // The run's last stage finishes its progress.
+            share: if last_stage {
+                (weight_sum - weight_done) as f64 / weight_sum as f64
+            } else {
+                k as f64 / weight_sum as f64
+            },
             beside: job.beside.map(|b| {
                 let mut film = Film::new(resolution, O::Radiance::CHANNELS);
                 b.add_to(&mut film);
@@ -158,6 +189,9 @@ where
                 let _ = last.set(state);
             }
             cancelled = true;
+            break;
+        }
+        if last_stage {
             break;
         }
     }

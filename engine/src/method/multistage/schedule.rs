@@ -1,5 +1,6 @@
 //! Multi-stage MLT's schedule (Hoberock and Hart 2010, Alg. 2): the grid of
-//! regions of each stage, and each stage's share of a sample budget.
+//! regions of each stage, each stage's share of a sample budget, and under a
+//! time budget the stages the time left can pay for.
 
 use alloc::vec::Vec;
 
@@ -39,6 +40,39 @@ pub(super) fn stage_share(total: u64, k: u32, weight_sum: u64) -> u64 {
     ((total as u128 * k as u128 / weight_sum.max(1) as u128) as u64).max(1)
 }
 
+/// What the time left can pay for when a stage is about to start.
+#[cfg(feature = "std")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Paid {
+    /// Not even this stage's fixed costs: the run ends with the stages done.
+    Nothing,
+    /// This stage, which then takes all of the time left and is the run's
+    /// last (a resumed render goes on with the next).
+    ThisStageAlone,
+    /// This stage and the ones after it, each with its share.
+    EveryStage,
+}
+
+/// What `left` seconds can pay for when a stage is about to start, `later`
+/// stages after it, each stage's fixed costs (its importance, start, merge
+/// and estimate: a pass or more over the film) taken as the `overhead` of
+/// the last stage. The stages to come are paid for when their fixed costs
+/// leave at least half of the time left to sample in. Ours, not Hoberock and
+/// Hart's (2010): Alg. 2 has twenty stages on a 1280x720 film, whose fixed
+/// costs take most of a budget of a few seconds there and all of it at
+/// 3840x2160; each stage's image is unbiased, so the stages done make the
+/// image (docs/BENCHMARKS.md, "Time budgets").
+#[cfg(feature = "std")]
+pub(super) fn time_left_pays_for(left: f64, overhead: f64, later: usize) -> Paid {
+    if left <= overhead {
+        Paid::Nothing
+    } else if overhead * later as f64 > 0.5 * left {
+        Paid::ThisStageAlone
+    } else {
+        Paid::EveryStage
+    }
+}
+
 /// The smallest sample budget of multi-stage MLT on `resolution`: the
 /// first stage (the smallest share) gets one step of every chain.
 pub(crate) fn smallest_budget(settings: &MultiStageSettings, resolution: Resolution) -> u64 {
@@ -55,6 +89,19 @@ pub(crate) fn smallest_budget(settings: &MultiStageSettings, resolution: Resolut
 mod tests {
     use super::*;
     use alloc::vec;
+
+    #[cfg(feature = "std")]
+    #[test]
+    fn the_time_left_pays_for_stages_whose_fixed_costs_leave_half_of_it() {
+        // 20 stages to come at 0.08 s each: 1.6 s, more than half of 3 s.
+        assert_eq!(time_left_pays_for(3.0, 0.08, 20), Paid::ThisStageAlone);
+        assert_eq!(time_left_pays_for(3.2, 0.08, 20), Paid::EveryStage);
+        assert_eq!(time_left_pays_for(3.0, 0.08, 0), Paid::EveryStage);
+        assert_eq!(time_left_pays_for(0.08, 0.08, 0), Paid::Nothing);
+        assert_eq!(time_left_pays_for(-1.0, 0.0, 3), Paid::Nothing);
+        // Nothing measured yet (a stage without fixed costs): every stage.
+        assert_eq!(time_left_pays_for(1.0, 0.0, 20), Paid::EveryStage);
+    }
 
     #[test]
     fn stage_grids_follow_algorithm_2() {

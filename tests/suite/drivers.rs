@@ -641,39 +641,64 @@ fn time_budgets_end_the_render() {
 /// 1920x1080, more than half of a second on any machine) runs the stages
 /// it can pay for, the last of them with the rest of the time, where it
 /// ran all 20 with one step of every chain each and overran the budget
-/// (3840x2160 at 5 s: 22-32 s, 5 376 paths). How long it takes is measured
-/// by `studies/src/bin/time_budgets.rs`, not here.
+/// (3840x2160 at 5 s: 22-32 s, 5 376 paths). Under 50 ms, less than the
+/// set-up takes, only the first stage's one step of every chain runs. The
+/// progress ends at 1 either way. How long a render takes is measured by
+/// `studies/src/bin/time_budgets.rs`, not here.
 #[test]
 fn multi_stage_mlt_runs_the_stages_a_short_time_budget_pays_for() {
     let resolution = Resolution::new(1920, 1080);
     let image = ProceduralImage::showcase(resolution);
     let multistage = MultiStageSettings::default();
     let scheduled = strata::engine::method::stage_grids(1920, multistage.linear_stages).len();
-    let s = Settings {
-        seed: 1,
-        budget: Budget::Time(Duration::from_secs(1)),
-        method: Method::MultiStage(multistage),
-    };
-    let start = Instant::now();
-    let out = render(&image, &MaxChannel, &s, &Silent).unwrap();
-    assert!(start.elapsed() < common::HANG);
-    assert!(out.stats.samples > 0 && !out.cancelled);
-    let stages = out.extras.stages().unwrap();
-    assert!(
-        stages.len() < scheduled,
-        "{} of {scheduled} stages in 1 s at 1920x1080",
-        stages.len()
-    );
-    // A last stage after the first took the rest of the time (the first,
-    // whose share is 1/13 883 of the time, may be all the time left pays for).
-    let last = stages.last().unwrap();
-    assert!(
-        stages.len() == 1 || 2 * last.samples > out.stats.samples,
-        "the last of {} stages traced {} of {} paths",
-        stages.len(),
-        last.samples,
-        out.stats.samples
-    );
+    for millis in [50, 1000] {
+        let s = Settings {
+            seed: 1,
+            budget: Budget::Time(Duration::from_millis(millis)),
+            method: Method::MultiStage(multistage),
+        };
+        let start = Instant::now();
+        let progress = Fractions::default();
+        let out = render(&image, &MaxChannel, &s, &progress).unwrap();
+        assert!(start.elapsed() < common::HANG);
+        assert!(out.stats.samples > 0 && !out.cancelled);
+        let fractions = progress.0.into_inner().unwrap();
+        assert_eq!(
+            fractions.last(),
+            Some(&1.0),
+            "{millis} ms: the progress ends at 1"
+        );
+        let stages = out.extras.stages().unwrap();
+        if millis == 50 {
+            assert_eq!(stages.len(), 1, "50 ms");
+            continue;
+        }
+        assert!(
+            stages.len() < scheduled,
+            "{} of {scheduled} stages in 1 s at 1920x1080",
+            stages.len()
+        );
+        // A last stage after the first took the rest of the time (the first,
+        // whose share is 1/13 883 of the time, may be all the time left pays for).
+        let last = stages.last().unwrap();
+        assert!(
+            stages.len() == 1 || 2 * last.samples > out.stats.samples,
+            "the last of {} stages traced {} of {} paths",
+            stages.len(),
+            last.samples,
+            out.stats.samples
+        );
+    }
+}
+
+/// Records the progress's fractions.
+#[derive(Default)]
+struct Fractions(Mutex<Vec<f64>>);
+
+impl Observer for Fractions {
+    fn progress(&self, p: &Progress) {
+        self.0.lock().unwrap().push(p.fraction);
+    }
 }
 
 /// Set-up loops keep the time budget and listen to cancel (a large

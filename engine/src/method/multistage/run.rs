@@ -16,6 +16,8 @@ use super::schedule::{Paid, time_left_pays_for};
 use super::schedule::{grids_of, stage_share};
 use super::settings::MultiStageSettings;
 use super::stage::{StageCheckpoints, StageObserver};
+#[cfg(feature = "std")]
+use crate::drive::Progress;
 use crate::drive::{Budget, Clock};
 use crate::error::Error;
 use crate::film::Film;
@@ -78,7 +80,14 @@ where
             Budget::Time(limit) if s > first => {
                 let left = limit.as_secs_f64() - stage_start;
                 match time_left_pays_for(left, overhead, grids.len() - s - 1) {
-                    Paid::Nothing => break,
+                    Paid::Nothing => {
+                        // The time is spent: the progress ends here.
+                        job.observer.progress(&Progress {
+                            samples: done.stats.samples,
+                            fraction: 1.0,
+                        });
+                        break;
+                    }
                     Paid::ThisStageAlone => true,
                     Paid::EveryStage => false,
                 }

@@ -208,7 +208,7 @@ impl RenderMethod for Method {
             Method::Stratified(_) => "one sweep of every tile",
             Method::Erpt(_) => "one pass of start paths",
             Method::MultiStage(_) => {
-                "one step of every chain in every stage (under a time budget, in the first)"
+                "one step of every chain in every stage; under a time budget, in the first"
             }
         }
     }

@@ -88,8 +88,8 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
 
 /// Every method (and the variants that take other code paths) on `oracle`.
 fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), Error> {
-    let budget = Budget::samples_per_pixel(SPP, oracle.resolution());
-    let run = |name: &str, method: Method| -> Result<(), Error> {
+    let spp = |spp| Budget::samples_per_pixel(spp, oracle.resolution());
+    let run_for = |name: &str, method: Method, budget: Budget| -> Result<(), Error> {
         let mut settings = Settings {
             seed: SEED,
             budget,
@@ -117,6 +117,7 @@ fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), 
         }
         Ok(())
     };
+    let run = |name: &str, method: Method| run_for(name, method, spp(SPP));
     run("mc", Method::Mc)?;
     for (name, small_step) in [
         ("pssmlt", SmallStep::Kelemen(Kelemen::DEFAULT)),
@@ -178,6 +179,10 @@ fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), 
         stratified.mutation.small_step = SmallStep::Kelemen(Kelemen::GRUSON_2020);
         run(name, Method::Stratified(stratified))?;
     }
+    // A preview at the defaults: 5 sweeps, below the 8 from which the
+    // solver runs all its iterations (`preview_iterations` of them here).
+    let preview = Method::Stratified(StratifiedSettings::default());
+    run_for("stratified-preview", preview, spp(32))?;
     let erpt = ErptSettings {
         small_step: SmallStep::Kelemen(Kelemen::GRUSON_2020),
         chain_length: 20,

@@ -62,6 +62,9 @@ where
         None => black_films(resolution, <Probed<O::Radiance> as Radiance>::CHANNELS)?,
         Some(_) => Vec::new(),
     };
+    // The estimate beside the stages (the emission seen directly) for their
+    // previews: one film, filled again at every stage.
+    let mut beside_film: Option<Film> = None;
     let first = done.stages.len();
     // Under a time budget, the seconds the last stage took beyond its share
     // (its importance, start, merge and estimate): kept back for each stage
@@ -153,9 +156,11 @@ where
                 k as f64 / weight_sum as f64
             },
             beside: job.beside.map(|b| {
-                let mut film = Film::new(resolution, O::Radiance::CHANNELS);
-                b.add_to(&mut film);
-                film
+                let film =
+                    beside_film.get_or_insert_with(|| Film::new(resolution, O::Radiance::CHANNELS));
+                film.data_mut().fill(0.0);
+                b.add_to(film);
+                &*film
             }),
         };
         let stage_last = OnceCell::new();

@@ -47,7 +47,7 @@ pub(super) struct StageObserver<'a> {
     pub(super) share: f64,
     /// The render's estimate beside the stages (the emission seen
     /// directly, which stays as it is during a stage), added to previews.
-    pub(super) beside: Option<Film>,
+    pub(super) beside: Option<&'a Film>,
 }
 
 impl Observer for StageObserver<'_> {

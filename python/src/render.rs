@@ -26,7 +26,8 @@ pub(crate) struct Render {
     /// The image: height x width x 3, float32, linear radiance.
     #[pyo3(get)]
     image: Py<PyArray3<f32>>,
-    /// Paths, bootstrap paths, invalid paths, acceptance, seconds, ...
+    /// Paths, bootstrap paths, invalid paths, acceptance, seconds, and
+    /// stratified MCMC's sweeps or multi-stage MLT's stages (their grids).
     #[pyo3(get)]
     stats: Py<PyDict>,
 }
@@ -85,6 +86,12 @@ fn stats<'py>(py: Python<'py>, output: &Output, seconds: f64) -> PyResult<Bound<
     d.set_item("seconds", seconds)?;
     if let Extras::Stratified(x) = &output.extras {
         d.set_item("sweeps", x.counters.sweeps)?;
+    }
+    // Multi-stage MLT: the grid of each stage run (under a short time
+    // budget, fewer than Alg. 2's).
+    if let Some(stages) = output.extras.stages() {
+        let grids: Vec<u32> = stages.iter().map(|s| s.grid).collect();
+        d.set_item("stages", grids)?;
     }
     Ok(d)
 }

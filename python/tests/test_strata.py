@@ -51,6 +51,15 @@ def test_an_image_is_a_float32_array_and_is_saved():
     assert r._repr_png_()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_the_stats_name_stratified_sweeps_and_multi_stage_grids():
+    # Alg. 2 of Hoberock and Hart (2010) on a side of 24: doubling to 8,
+    # then 10 linear steps to 24.
+    r = strata.render("procedural", "multistage", spp=128, width=24, height=16, seed=1)
+    assert r.stats["stages"] == [1, 2, 4, 8, 9, 11, 12, 14, 16, 17, 19, 20, 22, 24]
+    s = strata.render("procedural", "stratified", spp=32, width=24, height=16, seed=1)
+    assert s.stats["sweeps"] >= 1 and "stages" not in s.stats
+
+
 def test_the_same_seed_gives_the_same_image_whatever_the_threads():
     one = strata.render("caustic", "pssmlt", spp=4, width=24, height=24, seed=5, threads=1)
     two = strata.render("caustic", "pssmlt", spp=4, width=24, height=24, seed=5, threads=2)

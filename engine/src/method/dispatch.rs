@@ -206,7 +206,10 @@ impl RenderMethod for Method {
             Method::Pssmlt(_) => "one step of every chain",
             Method::Replica(_) => "one sweep of every ensemble",
             Method::Stratified(_) => "one sweep of every tile",
-            Method::Erpt(_) => "one pass of start paths",
+            Method::Erpt(_) => {
+                "one pass of start paths, each with its chains: a shorter `chain_length` \
+                 makes it smaller"
+            }
             Method::MultiStage(_) => {
                 "one step of every chain in every stage; under a time budget, in the first"
             }

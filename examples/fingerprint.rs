@@ -17,7 +17,8 @@ use clap::Parser;
 use strata::engine::analytic::ProceduralImage;
 use strata::engine::exchange::{EnsembleSettings, ExchangeKind, Tempering};
 use strata::engine::method::{
-    ErptSettings, MultiStageSettings, PssmltSettings, ReplicaSettings, Solver, StratifiedSettings,
+    Anchor, ErptSettings, MultiStageSettings, PssmltSettings, ReplicaSettings, Solver,
+    StratifiedSettings,
 };
 use strata::engine::mutate::{Adaptive, Gaussian, Kelemen, MutationParams, SmallStep};
 use strata::engine::reconstruct::LogSettings;
@@ -172,8 +173,11 @@ fn render_all<O: PathOracle>(scene: &str, oracle: &O, out: &Path) -> Result<(), 
         ("stratified", Solver::default()),
         ("stratified-log", Solver::LogDomain(LogSettings::default())),
     ] {
+        // Blocks of 8 pixels, 5 x 3 on these films: the default's 32 would
+        // be one block, the total alone.
         let mut stratified = StratifiedSettings {
             solver,
+            anchor: Anchor::Blocks { side: 8 },
             ..Default::default()
         };
         stratified.mutation.small_step = SmallStep::Kelemen(Kelemen::GRUSON_2020);

@@ -92,9 +92,10 @@ pub use exchange::{
 };
 pub use film::Film;
 pub use method::{
-    ErptSettings, Extras, Initialization, Job, Method, MultiStageSettings, Output, PssmltSettings,
-    RenderMethod, RenderShape, ReplicaExtras, ReplicaSettings, Settings, Solver, StratifiedExtras,
-    StratifiedSettings, StratifiedStats, merge, part_of, render, render_task, resume, resume_task,
+    Anchor, ErptSettings, Extras, Initialization, Job, Method, MultiStageSettings, Output,
+    PssmltSettings, RenderMethod, RenderShape, ReplicaExtras, ReplicaSettings, Settings, Solver,
+    StratifiedExtras, StratifiedSettings, StratifiedStats, merge, part_of, render, render_task,
+    resume, resume_task,
 };
 pub use mutate::{Adaptive, Custom, Gaussian, Kelemen, Kernel, MutationParams, SmallStep};
 pub use oracle::{

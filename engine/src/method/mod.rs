@@ -48,5 +48,5 @@ pub use output::{Extras, Output, ReplicaExtras, Stage, StratifiedExtras, Stratif
 pub use pssmlt::PssmltSettings;
 pub use render::{render, resume};
 pub use replica::ReplicaSettings;
-pub use stratified::{Initialization, Solver, StratifiedSettings};
+pub use stratified::{Anchor, Initialization, Solver, StratifiedSettings};
 pub use tasks::{merge, part_of, render_task, resume_task};

@@ -102,8 +102,9 @@ pub struct StratifiedStats {
     /// Pixels whose large steps all saw the same radiance (an emitter or a
     /// constant environment seen directly) and took it.
     pub known_pixels: u64,
-    /// The factor that gave the image the regularizer's total (1 without
-    /// [`StratifiedSettings::anchor_total`](crate::StratifiedSettings::anchor_total)).
+    /// The factor the anchor scaled the image's total by
+    /// ([`StratifiedSettings::anchor`](crate::StratifiedSettings::anchor); 1
+    /// with [`Anchor::None`](crate::Anchor::None)).
     pub total_scale: f64,
     /// The weighted solver's `α` (cross-validated or the solver's own; 0
     /// for the log-domain solver).

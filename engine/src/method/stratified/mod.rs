@@ -57,10 +57,11 @@
 //!   standard errors below its Monte Carlo estimate takes that estimate, so
 //!   rare bright paths that the tile chains found too late (start-up bias,
 //!   Gruson et al. 2020, sec. 5 and Fig. 9) are not dimmed.
-//! * **The image's total** (ours, not in Gruson et al. 2020): each channel of the
-//!   reconstructed pixels is scaled so that the channel's total over the
-//!   image is the regularizer's ([`StratifiedSettings::anchor_total`]), which
-//!   makes every channel's image mean unbiased at every budget.
+//! * **The anchor** (ours, not in Gruson et al. 2020): each channel of the
+//!   reconstructed pixels is scaled so that its total over every block of 32
+//!   pixels a side, then over the image, is the regularizer's
+//!   ([`StratifiedSettings::anchor`]): every channel's image mean is unbiased
+//!   at every budget, and regions are right from the first sweeps.
 //!
 //! A tile's chain does not know its normalization, so steps spent before it
 //! is initialized scale all its `G_s(k)` by the same factor, which the
@@ -76,7 +77,7 @@
 //! | `light.rs` | light tracing's splats, estimated apart by Monte Carlo |
 //! | `local.rs` | local replica exchange and state borrowing |
 //! | `init.rs` | the global chains' initialization |
-//! | `regularizer.rs` | every pixel's uniform samples (summed per pixel as they are drawn), the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the total it anchors |
+//! | `regularizer.rs` | every pixel's uniform samples (summed per pixel as they are drawn), the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the anchor |
 //! | `reconstruction.rs` | the normalizations, the image, the choice of `α`, the time they are expected to take |
 //! | `sweeps.rs` | the state between rounds, a sweep (steps by tile rows in phases, exchanges from `exchange_after` on), what sweeps cost, the budget's remainder, the checkpoint; a run's sums (`SweptRun`) and their pool into the output |
 //! | `settings.rs` | `StratifiedSettings`, `Initialization`, `Solver`: each setting declared once |
@@ -93,7 +94,7 @@ mod tile;
 
 use alloc::vec::Vec;
 
-pub use self::settings::{Initialization, Solver, StratifiedSettings};
+pub use self::settings::{Anchor, Initialization, Solver, StratifiedSettings};
 
 use self::init::initialize;
 use self::light::LightTracing;

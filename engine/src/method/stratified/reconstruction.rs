@@ -10,7 +10,7 @@ use alloc::vec;
 use alloc::vec::Vec;
 
 use super::light::LightTracing;
-use super::regularizer::{Draws, Halves, LargeSteps, Samples, anchor_total, fall_back, take_known};
+use super::regularizer::{Draws, Halves, LargeSteps, Samples, anchor, fall_back, take_known};
 use super::settings::{Solver, StratifiedSettings};
 #[cfg(feature = "std")]
 use crate::drive::Budget;
@@ -103,11 +103,7 @@ pub(super) fn reconstruct_image(
         Some(sigmas) => fall_back(&mut film, &regularizer, &samples, sigmas, &mut taken),
         None => 0,
     };
-    let total_scale = if settings.anchor_total {
-        anchor_total(&mut film, &regularizer, &taken)
-    } else {
-        1.0
-    };
+    let total_scale = anchor(&mut film, &regularizer, &taken, settings.anchor);
     Ok(Reconstructed {
         film,
         regularizer,
@@ -143,9 +139,7 @@ pub(super) fn preview<S: Copy + Into<f64>, T: AsRef<[S]>>(
         let b = reconstruct::initial_normalizations(tiles, &g, &mc);
         set_channel(&mut film, c, &reconstruct::image(tiles, &g, &b, 1));
     }
-    if settings.anchor_total {
-        anchor_total(&mut film, &regularizer, &[]);
-    }
+    anchor(&mut film, &regularizer, &[], settings.anchor);
     light.add_to(&mut film, sweeps);
     if let Some(emission) = emission {
         emission.add_to(&mut film);

@@ -1,7 +1,7 @@
 //! The large steps' Monte Carlo estimate, the regularizer `Î` of Gruson et al. 2020
 //! eq. 11, and four uses of it that are ours, not Gruson et al.'s (2020): the two
 //! halves that choose the solver's `α` ([`Halves`]), the known pixels
-//! ([`take_known`]), the fallback to it and the image's total.
+//! ([`take_known`]), the fallback to it and the anchor.
 //!
 //! Every large step a tile chain's coin chose (probability `p`, drawn at
 //! every step, also while the tile is dark and makes only large steps) is an
@@ -18,7 +18,7 @@
 //! fewer than 32 large steps (their sample variance is unreliable) are left
 //! alone.
 //!
-//! **The image's total.** The reconstruction anchors the normalizations
+//! **The anchor.** The reconstruction anchors the normalizations
 //! `b_s` with the tiles' mean MC estimates `Î_s` under IRLS weights `1 /
 //! (|e_s - Î_s| + ...)` (Gruson et al. 2020, eq. 13-16): once the overlaps agree, the
 //! common scale of a region is close to a weighted *median* of its `Î_s`.
@@ -26,20 +26,31 @@
 //! their mean: a light reached by 30 % of paths came out 3 % dark at 8 spp
 //! and 6 % bright at 32, a block where 4 % of paths carry most of the
 //! energy 28 % dark at 8-64 spp, the built-in Cornell box 24 % bright at
-//! 8 spp. [`anchor_total`] scales each channel of the reconstructed pixels
+//! 8 spp. [`Anchor::Total`] scales each channel of the reconstructed pixels
 //! (not those that took the regularizer's value) so that the channel's total
 //! is the regularizer's. The scaled image's total then *is* the MC estimate
 //! of the image's total, channel by channel, unbiased (each pixel's pooled
 //! mean is, given its sample count, since whether a step is large does not
 //! depend on the path), so every channel's image mean is right at every
-//! budget; the pixels keep the reconstruction's relative values. The price
-//! is the MC total's noise in the common scale, small wherever the image is
-//! not dominated by rare paths (see docs/RESULTS.md).
+//! budget; the pixels keep the reconstruction's relative values.
+//!
+//! Regions need more: in the first sweeps the tiles of a region lit only by
+//! light that few paths find (the Cornell box's ceiling) start from states
+//! that are not their target's, and at 1280x720 and 8 spp the total alone
+//! left the ceiling 1-8 % dark and gave its deficit to the rest of the
+//! image. [`Anchor::Blocks`] first does the same block by block (32 pixels a
+//! side by default), each pixel scaled by the bilinear blend of the factors
+//! of the four blocks around it, then anchors the total: the image keeps the
+//! reconstruction's detail within a block and takes the regularizer's
+//! values between blocks. The price is `Î`'s noise at the scale of a block,
+//! small against the pixels' own wherever the image is not dominated by
+//! rare paths (see docs/RESULTS.md).
 
 use alloc::vec;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
 
+use super::settings::Anchor;
 use crate::film::Film;
 use crate::oracle::Radiance;
 use crate::tiles::Tiles;
@@ -373,49 +384,207 @@ pub(super) fn fall_back(
 }
 
 /// Scales each channel of the reconstructed pixels of `film` (those not
-/// `taken` from the regularizer; `taken` may be empty: none) so that the
-/// channel's total over the image is the regularizer's (a channel whose
-/// reconstructed total is 0, or whose regularizer leaves them nothing, is
-/// left as it is). Returns the factor of the totals over every channel,
-/// after over before (1 if unchanged).
-pub(super) fn anchor_total(film: &mut Film, regularizer: &Film, taken: &[bool]) -> f64 {
+/// `taken` from the regularizer; `taken` may be empty: none) as `anchor`
+/// says (see the module docs). Returns the factor of the image's total over
+/// every channel, after over before (1 if unchanged).
+pub(super) fn anchor(film: &mut Film, regularizer: &Film, taken: &[bool], anchor: Anchor) -> f64 {
+    let before: f64 = film.data().iter().sum();
+    match anchor {
+        Anchor::None => return 1.0,
+        Anchor::Total => {}
+        Anchor::Blocks { side } => anchor_blocks(film, regularizer, taken, side as usize),
+    }
+    let resolution = film.resolution();
+    let whole = resolution.width.max(resolution.height) as usize;
+    anchor_blocks(film, regularizer, taken, whole);
+    let after: f64 = film.data().iter().sum();
+    if before > 0.0 { after / before } else { 1.0 }
+}
+
+/// Scales each channel of the pixels of `film` not `taken` so that every
+/// `side`-pixel square block's total is the regularizer's (a block whose
+/// regularizer leaves its reconstructed pixels nothing, or whose
+/// reconstruction is 0, is left to its neighbours), each pixel by the
+/// bilinear blend of the factors of the four blocks whose centres are
+/// around it, so that no block's edge shows. Since a block's pixels also
+/// take its neighbours' factors, the factors are fitted: each round
+/// multiplies every block's factor by what its total lacks, until none
+/// lacks more than [`FITTED`] of it (iterative proportional fitting). A
+/// block as large as the film anchors the image's total, in one round.
+fn anchor_blocks(film: &mut Film, regularizer: &Film, taken: &[bool], side: usize) {
     let channels = film.channels();
+    let blocks = Blocks::new(film, side);
     let is_taken = |j: usize| taken.get(j).copied().unwrap_or(false);
-    // Per channel: the regularizer's total, the taken pixels' total, the others'.
-    let mut sums = vec![[0.0f64; 3]; channels];
+    // Per block and channel: the regularizer's total, the taken pixels'.
+    let mut wanted = vec![[0.0f64; 2]; blocks.count() * channels];
     let pixels = film
         .data()
         .chunks(channels)
         .zip(regularizer.data().chunks(channels));
     for (j, (pixel, mc)) in pixels.enumerate() {
-        for (c, sum) in sums.iter_mut().enumerate() {
+        let block = blocks.of(j) * channels;
+        for (c, sum) in wanted[block..block + channels].iter_mut().enumerate() {
             sum[0] += mc[c];
-            sum[if is_taken(j) { 1 } else { 2 }] += pixel[c];
+            if is_taken(j) {
+                sum[1] += pixel[c];
+            }
         }
     }
-    let factors: Vec<f64> = sums
-        .iter()
-        .map(|[want, taken, rest]| {
-            let left = want - taken;
-            if left > 0.0 && *rest > 0.0 {
-                left / rest
-            } else {
-                1.0
+    // Per block and channel, its reconstructed pixels' total as shares
+    // that the 3x3 blocks around it scale (row-major, the block itself in
+    // the middle): each round then costs a pass over the blocks, not the film.
+    let mut shares = vec![[0.0f64; 9]; wanted.len()];
+    for (j, pixel) in film.data().chunks(channels).enumerate() {
+        if !is_taken(j) {
+            let block = blocks.of(j);
+            for (around, weight) in blocks.blend(j) {
+                let k = blocks.neighbour(block, around);
+                for (c, v) in pixel.iter().enumerate() {
+                    shares[block * channels + c][k] += v * weight;
+                }
             }
-        })
-        .collect();
+        }
+    }
+    let mut factors = vec![1.0; wanted.len()];
+    for _ in 0..FIT_ROUNDS {
+        let lacks: Vec<f64> = (0..wanted.len())
+            .map(|i| {
+                let (block, c) = (i / channels, i % channels);
+                let scaled: f64 = (0..9)
+                    .filter_map(|k| blocks.around(block, k))
+                    .map(|(k, other)| shares[i][k] * factors[other * channels + c])
+                    .sum();
+                let [want, taken] = wanted[i];
+                let left = want - taken;
+                if left > 0.0 && scaled > 0.0 {
+                    left / scaled
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        if lacks.iter().all(|r| (r - 1.0).abs() <= FITTED) {
+            break;
+        }
+        factors.iter_mut().zip(&lacks).for_each(|(f, r)| *f *= r);
+    }
     for (j, pixel) in film.data_mut().chunks_mut(channels).enumerate() {
         if !is_taken(j) {
-            pixel.iter_mut().zip(&factors).for_each(|(v, f)| *v *= f);
+            for (c, v) in pixel.iter_mut().enumerate() {
+                *v *= blocks.factor(&factors, j, c);
+            }
         }
     }
-    let before: f64 = sums.iter().map(|[_, taken, rest]| taken + rest).sum();
-    let after: f64 = sums
-        .iter()
-        .zip(&factors)
-        .map(|([_, t, r], f)| t + f * r)
-        .sum();
-    if before > 0.0 { after / before } else { 1.0 }
+}
+
+/// The anchor's fit stops when no block's total is further than this from
+/// the regularizer's, relatively.
+const FITTED: f64 = 1e-6;
+
+/// The anchor's fit stops after this many rounds whatever is left (it
+/// takes 20-40: each round leaves at most ~3/4 of what a block lacks).
+const FIT_ROUNDS: usize = 100;
+
+/// A film cut into blocks of about `side` pixels a side (as many along each
+/// axis as the side fits, rounded, at least one; their edges spread evenly,
+/// so that no block is much narrower than the others), and where each pixel
+/// lies between their centres.
+struct Blocks {
+    width: usize,
+    height: usize,
+    channels: usize,
+    /// Blocks across and down.
+    across: usize,
+    down: usize,
+}
+
+impl Blocks {
+    fn new(film: &Film, side: usize) -> Self {
+        let resolution = film.resolution();
+        let (width, height) = (resolution.width as usize, resolution.height as usize);
+        let fit = |length: usize| ((length + side / 2) / side).clamp(1, length.max(1));
+        Self {
+            width,
+            height,
+            channels: film.channels(),
+            across: fit(width),
+            down: fit(height),
+        }
+    }
+
+    fn count(&self) -> usize {
+        self.across * self.down
+    }
+
+    /// The block holding pixel `j`.
+    fn of(&self, j: usize) -> usize {
+        let (x, y) = (j % self.width, j / self.width);
+        Self::along(y, self.height, self.down) * self.across
+            + Self::along(x, self.width, self.across)
+    }
+
+    /// Along one axis of `length` pixels cut into `blocks`, the block
+    /// holding pixel `x`: the last whose first pixel, `i length / blocks`
+    /// rounded down, is at most `x`.
+    fn along(x: usize, length: usize, blocks: usize) -> usize {
+        ((x + 1) * blocks - 1) / length
+    }
+
+    /// Along one axis of `length` pixels cut into `blocks`, the blocks
+    /// whose centres are either side of pixel `x`, and the second's weight
+    /// (beyond the first and last centres one block, whose factor is then
+    /// applied exactly).
+    fn between(x: usize, length: usize, blocks: usize) -> (usize, usize, f64) {
+        let centre = |i: usize| (i * length / blocks + (i + 1) * length / blocks) as f64 / 2.0;
+        let p = x as f64 + 0.5;
+        let own = Self::along(x, length, blocks);
+        let (first, second) = match p < centre(own) {
+            true if own > 0 => (own - 1, own),
+            false if own + 1 < blocks => (own, own + 1),
+            _ => return (own, own, 0.0),
+        };
+        let t = (p - centre(first)) / (centre(second) - centre(first));
+        (first, second, t)
+    }
+
+    /// The blocks whose centres are around pixel `j`, each with its weight
+    /// in the pixel's bilinear blend.
+    fn blend(&self, j: usize) -> [(usize, f64); 4] {
+        let (x0, x1, tx) = Self::between(j % self.width, self.width, self.across);
+        let (y0, y1, ty) = Self::between(j / self.width, self.height, self.down);
+        let at = |x: usize, y: usize| y * self.across + x;
+        [
+            (at(x0, y0), (1.0 - tx) * (1.0 - ty)),
+            (at(x1, y0), tx * (1.0 - ty)),
+            (at(x0, y1), (1.0 - tx) * ty),
+            (at(x1, y1), tx * ty),
+        ]
+    }
+
+    /// Where block `other`, one of the 3x3 around `block`, lies among them
+    /// (row-major).
+    fn neighbour(&self, block: usize, other: usize) -> usize {
+        let dx = other % self.across + 1 - block % self.across;
+        let dy = other / self.across + 1 - block / self.across;
+        dy * 3 + dx
+    }
+
+    /// The `k`-th of the 3x3 blocks around `block` (row-major), if the film
+    /// has it: `k` and the block.
+    fn around(&self, block: usize, k: usize) -> Option<(usize, usize)> {
+        let x = (block % self.across + k % 3).checked_sub(1)?;
+        let y = (block / self.across + k / 3).checked_sub(1)?;
+        (x < self.across && y < self.down).then_some((k, y * self.across + x))
+    }
+
+    /// Channel `c` of pixel `j`'s factor: the bilinear blend of the
+    /// `factors` (block-major, channel-minor) of the blocks around it.
+    fn factor(&self, factors: &[f64], j: usize, c: usize) -> f64 {
+        self.blend(j)
+            .iter()
+            .map(|&(block, weight)| factors[block * self.channels + c] * weight)
+            .sum()
+    }
 }
 
 /// Gives every pixel whose large-step samples all agree (at least
@@ -448,4 +617,137 @@ pub(super) fn take_known(
         }
     }
     replaced
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Anchor, anchor};
+    use crate::film::Film;
+    use crate::oracle::Resolution;
+    use crate::rng::Pcg32;
+    use alloc::vec::Vec;
+
+    /// A film of `w` x `h` pixels and 3 channels of values in [0, scale).
+    fn random_film(w: u32, h: u32, rng: &mut Pcg32, scale: f64) -> Film {
+        let mut film = Film::new(Resolution::new(w, h), 3);
+        for v in film.data_mut() {
+            *v = rng.uniform() * scale;
+        }
+        film
+    }
+
+    /// Channel `c`'s total over block (`bx`, `by`) of `film` cut into
+    /// `across` x `down` blocks with edges spread evenly.
+    fn block_total(film: &Film, (across, down): (u32, u32), bx: u32, by: u32, c: usize) -> f64 {
+        let w = film.resolution().width;
+        let h = film.resolution().height;
+        let mut total = 0.0;
+        for y in by * h / down..(by + 1) * h / down {
+            for x in bx * w / across..(bx + 1) * w / across {
+                total += film.data()[(y * w + x) as usize * 3 + c];
+            }
+        }
+        total
+    }
+
+    /// With blocks, every block's total is the regularizer's, channel by
+    /// channel, on a film whose size is no multiple of the side (blocks of
+    /// 17-18 pixels across, 15 down), while the taken pixels keep their
+    /// values.
+    #[test]
+    fn every_block_takes_the_regularizers_total() {
+        let mut rng = Pcg32::new(7, 1);
+        let (w, h, side) = (70, 45, 16);
+        // A reconstruction 10-40 % off the regularizer, differently by block.
+        let regularizer = random_film(w, h, &mut rng, 1.0);
+        let mut film = regularizer.clone();
+        for (j, v) in film.data_mut().iter_mut().enumerate() {
+            let (x, y) = (j / 3 % w as usize, j / 3 / w as usize);
+            *v *= 0.6 + 0.3 * ((x / 16 + 2 * (y / 16)) % 3) as f64 + 0.01 * rng.uniform();
+        }
+        let taken: Vec<bool> = (0..w * h).map(|j| j % 7 == 0).collect();
+        let before = film.clone();
+        anchor(&mut film, &regularizer, &taken, Anchor::Blocks { side });
+        // 70 / 16 = 4.4 blocks across, 45 / 16 = 2.8 down.
+        let blocks = (4, 3);
+        for by in 0..blocks.1 {
+            for bx in 0..blocks.0 {
+                for c in 0..3 {
+                    let got = block_total(&film, blocks, bx, by, c);
+                    let want = block_total(&regularizer, blocks, bx, by, c);
+                    assert!(
+                        (got / want - 1.0).abs() < 1e-5,
+                        "block ({bx}, {by}): {got} vs {want}"
+                    );
+                }
+            }
+        }
+        for (j, _) in taken.iter().enumerate().filter(|(_, t)| **t) {
+            assert_eq!(
+                film.data()[j * 3..j * 3 + 3],
+                before.data()[j * 3..j * 3 + 3]
+            );
+        }
+    }
+
+    /// A uniform error is taken away uniformly: with every pixel of the
+    /// reconstruction 0.8 of the regularizer's, blocks give back the
+    /// regularizer, pixel by pixel (no block edge shows).
+    #[test]
+    fn a_uniform_error_leaves_no_block_edges() {
+        let mut rng = Pcg32::new(3, 5);
+        let regularizer = random_film(50, 33, &mut rng, 2.0);
+        let mut film = regularizer.clone();
+        film.data_mut().iter_mut().for_each(|v| *v *= 0.8);
+        anchor(&mut film, &regularizer, &[], Anchor::Blocks { side: 8 });
+        for (a, b) in film.data().iter().zip(regularizer.data()) {
+            assert!((a - b).abs() <= 1e-9 * b, "{a} vs {b}");
+        }
+    }
+
+    /// The total alone scales every pixel not taken by one factor per
+    /// channel, (the regularizer's total less the taken pixels') over the
+    /// others' total, exactly; `None` changes nothing; a black film or
+    /// regularizer is left as it is.
+    #[test]
+    fn the_total_scales_by_one_factor_and_black_is_left_alone() {
+        let mut rng = Pcg32::new(11, 2);
+        let regularizer = random_film(9, 4, &mut rng, 1.0);
+        let film = random_film(9, 4, &mut rng, 3.0);
+        let taken: Vec<bool> = (0..36).map(|j| j % 5 == 0).collect();
+        let mut total = film.clone();
+        let scale = anchor(&mut total, &regularizer, &taken, Anchor::Total);
+        for c in 0..3 {
+            let sum = |f: &Film, pick: &dyn Fn(usize) -> bool| -> f64 {
+                (0..36)
+                    .filter(|&j| pick(j))
+                    .map(|j| f.data()[j * 3 + c])
+                    .sum()
+            };
+            let factor = (sum(&regularizer, &|_| true) - sum(&film, &|j| taken[j]))
+                / sum(&film, &|j| !taken[j]);
+            for (j, &taken) in taken.iter().enumerate() {
+                let want = if taken { 1.0 } else { factor } * film.data()[j * 3 + c];
+                assert_eq!(total.data()[j * 3 + c], want);
+            }
+        }
+        let ratio = total.data().iter().sum::<f64>() / film.data().iter().sum::<f64>();
+        assert!((scale - ratio).abs() < 1e-12);
+        let mut none = film.clone();
+        assert_eq!(anchor(&mut none, &regularizer, &taken, Anchor::None), 1.0);
+        assert_eq!(none, film);
+        for anchor_kind in [Anchor::Total, Anchor::Blocks { side: 2 }] {
+            let mut black = Film::new(film.resolution(), 3);
+            anchor(&mut black, &regularizer, &[], anchor_kind);
+            assert!(black.data().iter().all(|&v| v == 0.0));
+            let mut unlit = film.clone();
+            anchor(
+                &mut unlit,
+                &Film::new(film.resolution(), 3),
+                &[],
+                anchor_kind,
+            );
+            assert_eq!(unlit, film);
+        }
+    }
 }

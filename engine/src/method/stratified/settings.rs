@@ -1,7 +1,7 @@
 //! Stratified MCMC's settings (Gruson et al. 2020, sec. 3-4, and ours),
 //! each declared once with its range and help: the tile shape, exchanges,
 //! initialization, the reconstruction's solver, and what we added (the
-//! fallback to the regularizer, the anchored total, regularizer paths, the
+//! fallback to the regularizer, the anchor, regularizer paths, the
 //! emission seen directly apart, runs).
 
 use serde::{Deserialize, Serialize};
@@ -52,6 +52,62 @@ impl Solver {
         .find(|s| s.name() == name)
     }
 }
+
+/// How the reconstructed image is scaled to the regularizer `Î`, the large
+/// steps' unbiased Monte Carlo estimate (ours, not in Gruson et al. 2020).
+/// The reconstruction anchors the normalizations with IRLS weights (eq.
+/// 13-16), close to a weighted *median* of the tiles' MC means, which is not
+/// their mean when few large steps make those means skewed; and tiles that
+/// start far from where a region's light comes from leave that region dark
+/// or bright for the first few sweeps. See `regularizer.rs` for what each
+/// cost and docs/RESULTS.md for the measures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum Anchor {
+    /// Not at all: Gruson et al.'s (2020) image.
+    None,
+    /// Each channel's total over the image is `Î`'s: every channel's image
+    /// mean is unbiased, regions may not be.
+    Total,
+    /// Each channel's total over every block of `side` x `side` pixels is
+    /// `Î`'s (blended between the blocks' centres), then over the image.
+    Blocks {
+        /// The blocks' side, in pixels.
+        side: u32,
+    },
+}
+
+impl Anchor {
+    /// The anchors' names, as [`name`](Self::name) gives them.
+    pub const NAMES: [&'static str; 3] = ["none", "total", "blocks"];
+
+    /// A short name for command lines and the C API.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Anchor::None => "none",
+            Anchor::Total => "total",
+            Anchor::Blocks { .. } => "blocks",
+        }
+    }
+
+    /// The anchor called `name` (one of [`NAMES`](Self::NAMES)); blocks of
+    /// the default side.
+    pub fn from_name(name: &str) -> Option<Anchor> {
+        [
+            Anchor::None,
+            Anchor::Total,
+            Anchor::Blocks { side: ANCHOR_BLOCK },
+        ]
+        .into_iter()
+        .find(|a| a.name() == name)
+    }
+}
+
+/// The anchor's blocks' side by default: on the Cornell box at 1280x720 and
+/// 8 paths a pixel, 16-64 pixels leave regions within 0.4-0.5 % RMS of an
+/// MC reference (1.75 % with the total alone), and 32 adds least of `Î`'s
+/// noise where rare bright paths dominate (docs/RESULTS.md).
+const ANCHOR_BLOCK: u32 = 32;
 
 /// Global-chain initialization of the tile chains (Gruson et al. 2020, sec. 3.3 and 4).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -167,14 +223,10 @@ pub struct StratifiedSettings {
     /// reconstruction then dims the brightest pixels. Pixels with fewer than
     /// 32 large steps are left alone.
     pub fallback_sigmas: Option<f64>,
-    /// Scale the image so that its total is the regularizer's, the large
-    /// steps' unbiased Monte Carlo estimate of it (true by default). Our
-    /// addition, not in Gruson et al. 2020: the reconstruction anchors the
-    /// normalizations with IRLS weights, close to a weighted *median* of the
-    /// tiles' MC means, which is not their mean when few large steps make
-    /// those means skewed; see `regularizer.rs` for what it cost and why the
-    /// scaled image is unbiased.
-    pub anchor_total: bool,
+    /// How the image is scaled to the regularizer, the large steps'
+    /// unbiased Monte Carlo estimate ([`Anchor::Blocks`] of 32 pixels by
+    /// default).
+    pub anchor: Anchor,
     /// Plain MC paths per pixel and sweep traced for the regularizer alone,
     /// one tile at a time at its centre pixel (0 by default: Gruson et al.'s (2020) large
     /// steps only). Ours: the regularizer is the reconstruction's
@@ -212,7 +264,7 @@ impl Default for StratifiedSettings {
             cross_validate_alpha: true,
             preview_iterations: 200,
             fallback_sigmas: Some(3.0),
-            anchor_total: true,
+            anchor: Anchor::Blocks { side: ANCHOR_BLOCK },
             regularizer_paths: 0,
             emission_rays: EMISSION_RAYS,
             runs: 1,
@@ -318,6 +370,28 @@ impl Fields for StratifiedSettings {
             |s| Some(s.fallback_sigmas.unwrap_or(0.0)),
             |s, sigmas| put(&mut s.fallback_sigmas, (sigmas != 0.0).then_some(sigmas)),
         ),
+        Field::choice(
+            "anchor",
+            &Anchor::NAMES,
+            "scale the image to the large steps' MC estimate: none; its total; blocks, then the total",
+            |s| s.anchor.name(),
+            |s, name| Anchor::from_name(name).map(|anchor| s.anchor = anchor),
+        ),
+        Field::whole(
+            "anchor_block",
+            (1, 1 << 16),
+            "the side of the anchor's blocks, in pixels (with anchor blocks)",
+            |s| match s.anchor {
+                Anchor::Blocks { side } => Some(side.into()),
+                _ => None,
+            },
+            |s, n| match &mut s.anchor {
+                Anchor::Blocks { side } => put(side, n as u32),
+                _ => Err(Error::NotApplicable {
+                    name: "anchor_block",
+                }),
+            },
+        ),
         Field::whole(
             "regularizer_paths",
             (0, 4096),
@@ -389,6 +463,9 @@ impl StratifiedSettings {
         let init = &self.initialization;
         check_probability("init_coverage", init.coverage)?;
         check_probability("init_budget", init.max_budget_fraction)?;
+        if self.anchor == (Anchor::Blocks { side: 0 }) {
+            return Err(Error::invalid("anchor_block", 0.0, "a side >= 1"));
+        }
         if let Some(k) = self.fallback_sigmas
             && !(k.is_finite() && k > 0.0)
         {

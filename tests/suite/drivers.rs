@@ -438,6 +438,15 @@ fn invalid_settings_are_typed_errors_before_any_work() {
         }),
         "fallback_sigmas",
     );
+    for side in [0, 3, (1 << 16) + 1] {
+        refuse(
+            Method::Stratified(StratifiedSettings {
+                anchor: strata::engine::Anchor::Blocks { side },
+                ..Default::default()
+            }),
+            "anchor_block",
+        );
+    }
     refuse(
         Method::Stratified(StratifiedSettings {
             shape: strata::engine::tiles::TileShape::Square { radius: 0 },

@@ -69,10 +69,11 @@ pub enum Anchor {
     /// Each channel's total over the image is `Î`'s: every channel's image
     /// mean is unbiased, regions may not be.
     Total,
-    /// Each channel's total over every block of `side` x `side` pixels is
-    /// `Î`'s (blended between the blocks' centres), then over the image.
+    /// Each channel's total over every block of about `side` x `side`
+    /// pixels is `Î`'s (blended between the blocks' centres), then over the
+    /// image.
     Blocks {
-        /// The blocks' side, in pixels.
+        /// The blocks' side, in pixels (4 to 65536).
         side: u32,
     },
 }
@@ -108,6 +109,11 @@ impl Anchor {
 /// MC reference (1.75 % with the total alone), and 32 adds least of `Î`'s
 /// noise where rare bright paths dominate (docs/RESULTS.md).
 const ANCHOR_BLOCK: u32 = 32;
+
+/// The anchor's smallest blocks: at 4 pixels a side the fit holds 6.5
+/// bytes a pixel and channel (104 a block), at 1 it would hold 104, and the
+/// image would be `Î`'s.
+const MIN_ANCHOR_BLOCK: u32 = 4;
 
 /// Global-chain initialization of the tile chains (Gruson et al. 2020, sec. 3.3 and 4).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -379,7 +385,7 @@ impl Fields for StratifiedSettings {
         ),
         Field::whole(
             "anchor_block",
-            (1, 1 << 16),
+            (MIN_ANCHOR_BLOCK as u64, 1 << 16),
             "the side of the anchor's blocks, in pixels (with anchor blocks)",
             |s| match s.anchor {
                 Anchor::Blocks { side } => Some(side.into()),
@@ -463,8 +469,14 @@ impl StratifiedSettings {
         let init = &self.initialization;
         check_probability("init_coverage", init.coverage)?;
         check_probability("init_budget", init.max_budget_fraction)?;
-        if self.anchor == (Anchor::Blocks { side: 0 }) {
-            return Err(Error::invalid("anchor_block", 0.0, "a side >= 1"));
+        if let Anchor::Blocks { side } = self.anchor
+            && !(MIN_ANCHOR_BLOCK..=1 << 16).contains(&side)
+        {
+            return Err(Error::invalid(
+                "anchor_block",
+                side as f64,
+                "a side of 4 to 65536 pixels",
+            ));
         }
         if let Some(k) = self.fallback_sigmas
             && !(k.is_finite() && k > 0.0)

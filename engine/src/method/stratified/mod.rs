@@ -80,7 +80,7 @@
 //! | `regularizer.rs` | every pixel's uniform samples (summed per pixel as they are drawn), the large steps' Monte Carlo estimate and its two halves, the known pixels, the fallback to it and the anchor |
 //! | `reconstruction.rs` | the normalizations, the image, the choice of `α`, the time they are expected to take |
 //! | `sweeps.rs` | the state between rounds, a sweep (steps by tile rows in phases, exchanges from `exchange_after` on), what sweeps cost, the budget's remainder, the checkpoint; a run's sums (`SweptRun`) and their pool into the output |
-//! | `settings.rs` | `StratifiedSettings`, `Initialization`, `Solver`: each setting declared once |
+//! | `settings.rs` | `StratifiedSettings`, `Initialization`, `Solver`, `Anchor`: each setting declared once |
 //! | this file | counters, a run from a fresh start or a resumed state, the smallest budget |
 
 mod init;

@@ -105,9 +105,10 @@ impl Anchor {
 }
 
 /// The anchor's blocks' side by default: on the Cornell box at 1280x720 and
-/// 8 paths a pixel, 16-64 pixels leave regions within 0.4-0.5 % RMS of an
-/// MC reference (1.75 % with the total alone), and 32 adds least of `Î`'s
-/// noise where rare bright paths dominate (docs/RESULTS.md).
+/// 8 paths a pixel, 16-64 pixels leave regions within 0.4 % RMS of an MC
+/// reference (1.75 % with the total alone); on the caustic, where `Î`'s
+/// noise is the price, 16 cost most in MAPE and 64 in MSE
+/// (docs/RESULTS.md, "The anchor").
 const ANCHOR_BLOCK: u32 = 32;
 
 /// The anchor's smallest blocks: at 4 pixels a side the fit holds 6.5

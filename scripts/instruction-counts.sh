@@ -5,14 +5,12 @@
 # the engine costs or saves to the instruction, run after run.
 #
 # Each method renders the pbrt Cornell box at 128x128 with 16 paths per pixel
-# (ERPT 202, two passes of its start paths; multistage MLT 24: each above
-# its smallest budget)
+# (multistage MLT 24, above its smallest budget)
 # on 1 thread (seed 0); the count covers the whole process (scene loading,
 # bootstrap, set-up, reconstruction) and is divided by every path traced,
 # bootstrap included, as `strata render` reports them. With --step, each
-# method renders at 16 and at 48 paths per pixel instead (ERPT, whose unit
-# of work is a pass of 101 paths a pixel here, at 202 and 404; multistage
-# MLT at 24 and 72), and the count is the difference divided by the paths
+# method renders at 16 and at 48 paths per pixel instead (multistage MLT
+# at 24 and 72), and the count is the difference divided by the paths
 # traced between them: a chain step alone, without the fixed costs. Replica exchange runs as the cost table measures
 # it (power tempering, 4 chains to T = 100) unless REPLICA_ARGS gives other
 # `strata render` options (e.g. "--tempering power --replicas 8 --t-max 2500
@@ -78,7 +76,6 @@ count() {
 # is the whole-process count's.
 step_spp() {
   case $1 in
-    erpt) echo "202 404" ;;
     multistage) echo "24 72" ;;
     *) echo "16 48" ;;
   esac

@@ -69,12 +69,13 @@ fn render_writes_png_and_exr_and_exit_codes_say_how_it_went() {
 /// refused, with a reason, on an analytic target and as an unknown name.
 /// `strata render SCENE --path-sampler SAMPLER --method METHOD` on a 16x16
 /// film at 8 spp into `out` (at least the method's smallest budget: ERPT's
-/// pass of start paths with chains of 100 steps is 101, multi-stage MLT's
-/// first stage takes a step of every chain with 1/115 of the budget);
+/// pass starts 16 chains on average, 534 start paths at 0.03 a path, 3 a
+/// pixel here with their chains: 12; multi-stage MLT's first stage takes a
+/// step of every chain with 1/115 of the budget);
 /// asserts it succeeded and wrote the EXR, and returns its standard error.
 fn render_small(scene: &str, sampler: &str, method: &str, out: &std::path::Path) -> String {
     let spp = match method {
-        "erpt" => "101",
+        "erpt" => "12",
         "multistage" => "115",
         _ => "8",
     };

@@ -42,8 +42,8 @@ fn every_methods_memory_bound_is_at_least_its_measured_peak_and_within_1_5x() {
             let mut budgets: Vec<u64> = [1, 32]
                 .map(|spp| (spp * resolution.pixel_count() as u64).max(smallest))
                 .to_vec();
-            // ERPT's and multi-stage's smallest budget is above 32 spp here:
-            // one render of it.
+            // Multi-stage MLT's smallest budget is above 32 spp here: one
+            // render of it.
             budgets.dedup();
             for samples in budgets {
                 let budget = Budget::Samples(samples);

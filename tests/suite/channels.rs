@@ -116,11 +116,10 @@ fn stratified_mcmc_is_right_in_every_channel_and_region() {
 
 #[test]
 fn erpt_is_right_in_every_channel_and_region() {
-    // Chains of 15 steps: a pass (the smallest budget) is 16 paths per
-    // pixel, so both budgets are whole passes.
+    // A pass (the smallest budget) is 4 paths per pixel, so both budgets
+    // are whole passes.
     let erpt = ErptSettings {
         bootstrap_candidates: 5_000,
-        chain_length: 15,
         ..Default::default()
     };
     check("erpt", Method::Erpt(erpt), &BUDGETS[..2]);

@@ -60,7 +60,6 @@ pub fn small_methods() -> Vec<Method> {
             ..Default::default()
         }),
         Method::Erpt(ErptSettings {
-            chain_length: 20,
             bootstrap_candidates: 5_000,
             ..Default::default()
         }),

@@ -168,12 +168,8 @@ fn replica_exchange_is_right_everywhere_at_1280x720() {
 
 #[test]
 fn erpt_is_right_everywhere_at_1280x720() {
-    // Chains of 3 steps: one pass is the budget, 4 paths a pixel.
-    let erpt = ErptSettings {
-        chain_length: 3,
-        ..Default::default()
-    };
-    check_with("erpt", Method::Erpt(erpt), 4, ERPT_SEEDS);
+    // One pass is the budget, 4 paths a pixel.
+    check_with("erpt", Method::Erpt(ErptSettings::default()), 4, ERPT_SEEDS);
 }
 
 #[test]

@@ -34,7 +34,8 @@ fn runs_kept(runs: u32, task: Task) -> u128 {
 /// (PSSMLT and replica exchange: a round is a 64th of a sample budget,
 /// at most 2^21 paths, each with its proposal and state), a block's
 /// start paths, their samplers and a wave of its chains' steps (ERPT, which
-/// merges a block's chains in waves of 2^17 steps), a pass's splats (MC).
+/// merges a block's chains in waves of a block's expected chains), a pass's
+/// splats (MC).
 /// A chain's numbers are 1.25x the mean the shape's pilot measured
 /// ([`RenderShape::of`]). The sizes were measured with the native tracer,
 /// unidirectional and bidirectional, by `studies/src/bin/memory_peaks.rs`
@@ -148,11 +149,11 @@ impl Method {
                 // A block's start paths and a wave's proposals and states,
                 // in vectors that grew by doubling while it ran: half as
                 // much again.
-                let wave = contributions(erpt::BLOCK_PATHS + erpt::WAVE_STEPS, 3);
+                let wave = contributions(erpt::BLOCK_PATHS + erpt::wave_steps(s), 3);
                 // The block's start paths that start chains keep their
                 // sampler (its numbers in `f32`, the state's and the
-                // proposal's) and their path: at most every one.
-                let starts = erpt::BLOCK_PATHS as u128 * (START + 8 * numbers);
+                // proposal's) and their path.
+                let starts = erpt::kept_starts(s) as u128 * (START + 8 * numbers);
                 counted
                     + exact
                     + starts

@@ -5,7 +5,7 @@ use alloc::vec::Vec;
 use serde::Deserialize;
 
 use super::chains::Totals;
-use super::plan::{BLOCK, part_of_pass, scale, starts};
+use super::plan::{BLOCK, part_of_pass, scale, starts_fit};
 use crate::chain::{Normalization, Traced};
 use crate::checkpoint;
 use crate::drive::RenderStats;
@@ -62,13 +62,18 @@ pub(crate) fn merge(
         type Rest = (Vec<u64>, Vec<Totals>, usize, u64, usize);
         let (v, t, starts, p, done): Rest = part.take()?;
         let blocks = starts.div_ceil(BLOCK);
-        if v.len() != visits.len() || starts != self::starts(resolution) || done >= blocks {
+        // Every part's passes are of the same start paths (the same `r`).
+        let (first, _) = head.get_or_insert((starts, (bootstrap, b, normalization)));
+        if v.len() != visits.len()
+            || !starts_fit(starts, resolution)
+            || *first != starts
+            || done >= blocks
+        {
             return Err(part.damaged());
         }
         visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
         totals.extend_from_slice(&t);
         passes += p as f64 + part_of_pass(done, starts);
-        head.get_or_insert((starts, (bootstrap, b, normalization)));
         part.release();
     }
     let (starts, bootstrap) = head.ok_or_else(checkpoint::does_not_fit)?;

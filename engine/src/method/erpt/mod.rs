@@ -3,8 +3,9 @@
 //! that uses primary sample space mutations", chain length 100).
 //!
 //! Every pass traces one path per pixel, uniform in the pixel, like MC (on
-//! films of fewer than [`MIN_STARTS`](plan::MIN_STARTS) pixels, `⌈MIN_STARTS / pixels⌉` per
-//! pixel, so that a pass of a tiny film is not one path that may be black). A
+//! small films more, the same number in every pixel, so that a pass has at
+//! least 16 start paths and starts 16 chains on average: a pass of a tiny
+//! film is not a few paths that may start no chain and leave it black). A
 //! path `y` of importance `I(y)` then starts `⌊I(y) / (N e_d) + ξ⌋` chains of
 //! `N` small steps on the target `I`; each step deposits the energy `e_d` at
 //! the chain's state, coloured `f/I` (by expected values: `a e_d f(y)/I(y)`
@@ -48,5 +49,5 @@ mod settings;
 
 pub(crate) use merge::merge;
 pub(crate) use passes::render;
-pub(crate) use plan::{BLOCK_PATHS, WAVE_STEPS, planned_passes, smallest_budget};
+pub(crate) use plan::{BLOCK_PATHS, kept_starts, planned_passes, smallest_budget, wave_steps};
 pub use settings::ErptSettings;

@@ -50,8 +50,8 @@ struct Passes<'a, O: PathOracle, I: ?Sized> {
     work: Vec<Segment<O::Radiance>>,
     film: ExactFilm,
     visits: Vec<u64>,
-    /// Start paths per pass: a whole number of paths per pixel, at least
-    /// [`MIN_STARTS`](super::plan::MIN_STARTS).
+    /// Start paths per pass: a whole number of paths per pixel
+    /// ([`starts`](super::plan::starts)).
     starts: usize,
     /// Passes completed.
     passes: u64,
@@ -84,7 +84,7 @@ where
                 let fits = saved.film.fits(resolution, O::Radiance::CHANNELS)
                     && saved.visits.len() == resolution.pixel_count()
                     && saved.totals.len() == TASKS
-                    && saved.starts == starts(resolution)
+                    && saved.starts == starts(settings, resolution)
                     && saved.done < saved.starts.div_ceil(BLOCK)
                     && energy(settings, saved.b).is_normal()
                     && saved.b > 0.0;
@@ -109,7 +109,7 @@ where
                     film: ExactFilm::try_new(resolution, O::Radiance::CHANNELS)?,
                     visits: alloc::vec![0; resolution.pixel_count()],
                     totals: alloc::vec![Totals::default(); TASKS],
-                    starts: starts(resolution),
+                    starts: starts(settings, resolution),
                     passes: 0,
                     done: 0,
                 };
@@ -235,14 +235,11 @@ where
                 self.block_starts.push(start);
             }
         }
-        // The chains run in waves of at most `WAVE_STEPS` steps, each merged
-        // before the next, so that a block whose few bright start paths
-        // start many chains (or whose chains are long) holds no more splats
-        // than an average one.
-        // A wave's tasks take consecutive chains: every pixel receives the
+        // The chains run in waves (`wave_chains`), each merged before the
+        // next. A wave's tasks take consecutive chains: every pixel receives the
         // chains' splats in chain order whatever the waves.
         let tasks = self.work.len() as u64;
-        let wave = wave_chains(settings).max(tasks);
+        let wave = wave_chains(settings);
         let (block_starts, chain_ends) = (&self.block_starts, &self.chain_ends);
         let mut first = 0;
         loop {

@@ -5,7 +5,7 @@
 
 use rand_core::Rng;
 
-use super::settings::ErptSettings;
+use super::settings::{CHAINS_PER_PATH, ErptSettings};
 use crate::oracle::Resolution;
 use crate::rng::{self, Domain, Permutation};
 
@@ -18,32 +18,81 @@ pub(super) const BLOCK: usize = TASKS * PIXELS_PER_TASK;
 pub(crate) const BLOCK_PATHS: u64 = BLOCK as u64;
 /// The fewest start paths of a pass.
 pub(super) const MIN_STARTS: usize = 16;
+/// The fewest chains a pass starts on average (`r` a start path): a pass of
+/// a one-pixel film with `r = 0.03` and 16 start paths started none 61 % of
+/// the time where 30 % of the paths are lit, and rendered it black.
+const MIN_CHAINS: f64 = 16.0;
 
-/// Start paths of a pass over `resolution`: every pixel, at least
-/// [`MIN_STARTS`] in all.
-pub(super) fn starts(resolution: Resolution) -> usize {
-    resolution.pixel_count() * MIN_STARTS.div_ceil(resolution.pixel_count())
+/// The fewest start paths of a pass with `r` chains a start path:
+/// [`MIN_STARTS`], and enough to start [`MIN_CHAINS`] (at most 16 000, at
+/// the smallest `r`).
+fn fewest_starts(r: f64) -> usize {
+    // `max` and `min` take the number over a NaN: an unchecked `r` gives a
+    // count in range.
+    (libm::ceil(MIN_CHAINS / r))
+        .max(MIN_STARTS as f64)
+        .min(MIN_CHAINS / CHAINS_PER_PATH.0) as usize
+}
+
+/// Start paths of a pass over `resolution`: every pixel the same number of
+/// times, at least [`fewest_starts`] in all.
+pub(super) fn starts(settings: &ErptSettings, resolution: Resolution) -> usize {
+    // An empty film is refused before any pass; a count for it is no panic.
+    let pixels = resolution.pixel_count().max(1);
+    pixels * fewest_starts(settings.chains_per_path).div_ceil(pixels)
+}
+
+/// Whether `starts`, read from a saved state, can be a pass's start paths
+/// over `resolution` for some `r`: every pixel the same whole number of
+/// times, as many as the smallest `r` asks at most.
+pub(super) fn starts_fit(starts: usize, resolution: Resolution) -> bool {
+    let pixels = resolution.pixel_count();
+    pixels > 0
+        && starts.is_multiple_of(pixels)
+        && (1..=fewest_starts(CHAINS_PER_PATH.0).div_ceil(pixels)).contains(&(starts / pixels))
 }
 
 /// The smallest sample budget of ERPT on `resolution`: one pass.
 pub(crate) fn smallest_budget(settings: &ErptSettings, resolution: Resolution) -> u64 {
-    libm::ceil(starts(resolution) as f64 * settings.paths_per_pixel()) as u64
+    libm::ceil(starts(settings, resolution) as f64 * settings.paths_per_pixel()) as u64
 }
 
 /// Passes a budget of `samples` paths buys on `resolution` (at least one).
 pub(crate) fn planned_passes(settings: &ErptSettings, resolution: Resolution, samples: u64) -> u64 {
-    let pass = starts(resolution) as f64 * settings.paths_per_pixel();
+    let pass = starts(settings, resolution) as f64 * settings.paths_per_pixel();
     ((samples as f64 / pass) as u64).max(1)
 }
 
-/// Chain steps run between two merges at most (by whole chains, at least
-/// one a task): about a block's expected steps with the default settings,
-/// whatever the chains' length and count.
-pub(crate) const WAVE_STEPS: u64 = 1 << 17;
-
-/// The most chains run between two merges.
+/// Chains run between two merges at most: a block's expected chains,
+/// `BLOCK r`, within [`MAX_WAVE_STEPS`] (and at least one a task). The many
+/// chains of a few bright start paths run in waves of that size, each
+/// merged before the next, so that such a block holds no more splats than
+/// an average one.
 pub(super) fn wave_chains(settings: &ErptSettings) -> u64 {
-    WAVE_STEPS / settings.chain_length.max(1) as u64
+    let most = MAX_WAVE_STEPS / u64::from(settings.chain_length.max(1));
+    (libm::ceil(BLOCK as f64 * settings.chains_per_path) as u64)
+        .min(most)
+        .max(TASKS as u64)
+}
+
+/// The most chain steps of a wave (but for one chain a task): a block's
+/// expected steps with chains of 100 steps and one chain a path.
+const MAX_WAVE_STEPS: u64 = 1 << 17;
+
+/// Chain steps of a wave at most.
+pub(crate) fn wave_steps(settings: &ErptSettings) -> u64 {
+    wave_chains(settings).saturating_mul(settings.chain_length.into())
+}
+
+/// The most start paths of a block that start chains, for the memory
+/// bound. A path starts one with probability at most `r I / b`, whose mean
+/// over the film is `r`, and a block's start pixels are a uniform sample of
+/// the film's (`pass_order`): about `r` of the block start chains, and four
+/// times as many and 16 more is beyond reach (a Chernoff bound: below
+/// 1e-16 for any `r`).
+pub(crate) fn kept_starts(settings: &ErptSettings) -> u64 {
+    let expected = BLOCK as f64 * settings.chains_per_path;
+    (libm::ceil(4.0 * expected) as u64 + 16).min(BLOCK_PATHS)
 }
 
 /// Expected paths of a block of start paths and their chains.
@@ -72,4 +121,35 @@ pub(super) fn part_of_pass(blocks: usize, starts: usize) -> f64 {
 pub(super) fn pass_order(seed: u64, pass: u64, starts: usize) -> Permutation {
     let key = rng::stream(seed, Domain::Pass, pass).next_u64();
     Permutation::new(starts as u64, key)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A pass's start paths: one a pixel on a large film, enough for 16
+    /// chains on a small one, and a count in range for any `r` (settings
+    /// not yet validated reach `smallest_budget`); a saved count fits only
+    /// if some valid `r` gives it.
+    #[test]
+    fn a_pass_starts_sixteen_chains_and_every_pixel_alike() {
+        let with = |r| ErptSettings {
+            chains_per_path: r,
+            ..Default::default()
+        };
+        let (one, film) = (Resolution::new(1, 1), Resolution::new(64, 48));
+        assert_eq!(starts(&with(0.03), one), 534);
+        assert_eq!(starts(&with(1.0), one), 16);
+        assert_eq!(starts(&with(0.03), Resolution::new(7, 11)), 77 * 7);
+        assert_eq!(starts(&with(0.03), film), 64 * 48);
+        for r in [0.0, -1.0, f64::NAN, f64::INFINITY, 1e-300] {
+            let n = starts(&with(r), one);
+            assert!((16..=16_000).contains(&n), "{r}: {n}");
+        }
+        assert!(starts_fit(534, one) && starts_fit(16_000, one));
+        assert!(!starts_fit(16_001, one) && !starts_fit(0, one));
+        assert!(starts_fit(2 * 64 * 48, film) && !starts_fit(64 * 48 + 1, film));
+        assert!(!starts_fit(0, Resolution::new(0, 3)));
+        assert_eq!(starts(&with(0.03), Resolution::new(0, 3)), 534);
+    }
 }

@@ -21,10 +21,10 @@ pub struct ErptSettings {
     pub chain_length: u32,
     /// Expected chains started per MC path `r` (Cline et al. 2005 leave it
     /// free). 0.03 by default: a pass is then 4 paths a pixel, a path of the
-    /// mean importance `b` starts a chain 3 % of the time and one 33 times
-    /// brighter starts one for sure. At equal time it had 0.06x the relMSE of `r = 1` on the
-    /// caustic, 0.14x on the pool and 0.19x on veach-ajar, 1.45x on the
-    /// Cornell box (docs/RESULTS.md, "ERPT's chains per path").
+    /// mean importance `b` starts a chain 3 % of the time and one 34 times
+    /// brighter at least one. At equal time it had 0.06x the relMSE of
+    /// `r = 1` on the caustic, 0.14x on the pool and 0.19x on veach-ajar,
+    /// 1.45x on the Cornell box (docs/RESULTS.md, "ERPT's chains per path").
     pub chains_per_path: f64,
     /// The small-step kernel.
     pub small_step: SmallStep,

@@ -17,7 +17,7 @@ pub(super) const BLOCK: usize = TASKS * PIXELS_PER_TASK;
 /// Start paths per unit of work, as a count of paths.
 pub(crate) const BLOCK_PATHS: u64 = BLOCK as u64;
 /// The fewest start paths of a pass.
-pub(super) const MIN_STARTS: usize = 16;
+const MIN_STARTS: usize = 16;
 /// The fewest chains a pass starts on average (`r` a start path): a pass of
 /// a one-pixel film with `r = 0.03` and 16 start paths started none 61 % of
 /// the time where 30 % of the paths are lit, and rendered it black.
@@ -87,9 +87,9 @@ pub(crate) fn wave_steps(settings: &ErptSettings) -> u64 {
 /// The most start paths of a block that start chains, for the memory
 /// bound. A path starts one with probability at most `r I / b`, whose mean
 /// over the film is `r`, and a block's start pixels are a uniform sample of
-/// the film's (`pass_order`): about `r` of the block start chains, and four
-/// times as many and 16 more is beyond reach (a Chernoff bound: below
-/// 1e-16 for any `r`).
+/// the film's (`pass_order`): about `μ = 1024 r` of the block start
+/// chains, and `k = 4μ + 16` or more is beyond reach (Chernoff: `P(X >= k)
+/// <= e^-μ (eμ/k)^k`, below 1e-16 for any `μ`, largest near `μ = 2.5`).
 pub(crate) fn kept_starts(settings: &ErptSettings) -> u64 {
     let expected = BLOCK as f64 * settings.chains_per_path;
     (libm::ceil(4.0 * expected) as u64 + 16).min(BLOCK_PATHS)

@@ -90,12 +90,14 @@ pub(super) struct Segment<R> {
     pub(super) buffers: RoundBuffers<R>,
     /// Counters over every run so far.
     pub(super) totals: Totals,
-    /// The start path being traced (its splat buffer reused).
+    /// The start path being traced, and its primary sample (their memory
+    /// reused: most start paths start no chain).
     pub(super) path: Evaluated<R>,
+    pub(super) sampler: MltSampler,
 }
 
 impl<R: Default> Segment<R> {
-    pub(super) fn new(bands: SplatBands, totals: Totals) -> Self {
+    pub(super) fn new(settings: &ErptSettings, bands: SplatBands, totals: Totals) -> Self {
         Self {
             first: 0,
             pixels: 0,
@@ -104,6 +106,7 @@ impl<R: Default> Segment<R> {
             buffers: RoundBuffers::new(bands),
             totals,
             path: Evaluated::default(),
+            sampler: MltSampler::new(settings.small_step, rng::stream(0, Domain::Independent, 0)),
         }
     }
 }
@@ -139,10 +142,8 @@ where
 {
     let (oracle, importance, seed) = (scene.oracle, scene.importance, scene.seed);
     let resolution = scene.resolution;
-    let mut sampler = MltSampler::new(
-        settings.small_step,
-        rng::stream(seed, Domain::Independent, index),
-    );
+    let sampler = &mut w.sampler;
+    sampler.restart(rng::stream(seed, Domain::Independent, index));
     let mut proposal = sampler.propose(true);
     let film = proposal.film_point_in_pixel(resolution, pixel);
     let first = &mut w.path;
@@ -157,7 +158,7 @@ where
     // `u64` (a path starting 2^32 chains takes days anyway).
     (chains >= 1.0).then(|| Start {
         index,
-        sampler,
+        sampler: sampler.clone(),
         first: first.clone(),
         chains: chains.min(u32::MAX as f64) as u64,
     })

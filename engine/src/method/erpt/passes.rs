@@ -132,7 +132,7 @@ where
             work: saved
                 .totals
                 .iter()
-                .map(|&totals| Segment::new(bands, totals))
+                .map(|&totals| Segment::new(settings, bands, totals))
                 .collect(),
             bands,
             film: saved.film,

@@ -33,9 +33,9 @@ fn runs_kept(runs: u32, task: Task) -> u128 {
 /// centre's splats; and the contributions waiting to be merged: a round's
 /// (PSSMLT and replica exchange: a round is a 64th of a sample budget,
 /// at most 2^21 paths, each with its proposal and state), a block's
-/// start paths, their samplers and a wave of its chains' steps (ERPT, which
-/// merges a block's chains in waves of a block's expected chains), a pass's
-/// splats (MC).
+/// start paths that start chains, their samplers and a wave of its chains'
+/// steps (ERPT, which merges a block's chains in waves of a block's
+/// expected chains), a pass's splats (MC).
 /// A chain's numbers are 1.25x the mean the shape's pilot measured
 /// ([`RenderShape::of`]). The sizes were measured with the native tracer,
 /// unidirectional and bidirectional, by `studies/src/bin/memory_peaks.rs`
@@ -146,19 +146,19 @@ impl Method {
                     + runs_kept(s.runs, task) * run
             }
             Method::Erpt(s) => {
-                // A block's start paths and a wave's proposals and states,
-                // in vectors that grew by doubling while it ran: half as
-                // much again.
-                let wave = contributions(erpt::BLOCK_PATHS + erpt::wave_steps(s), 3);
+                // A wave's proposals and states, in vectors that grew by
+                // doubling while it ran: half as much again.
+                let wave = contributions(erpt::wave_steps(s, resolution), 3);
                 // The block's start paths that start chains keep their
                 // sampler (its numbers in `f32`, the state's and the
                 // proposal's) and their path.
-                let starts = erpt::kept_starts(s) as u128 * (START + 8 * numbers);
+                let starts = erpt::kept_starts(s, resolution) as u128 * (START + 8 * numbers);
+                // The bootstrap's candidates are let go before the first
+                // block.
                 counted
                     + exact
-                    + starts
                     + workers * CHAIN
-                    + (s.bootstrap_candidates as u128 * CANDIDATE).max(wave)
+                    + (s.bootstrap_candidates as u128 * CANDIDATE).max(wave + starts)
             }
             Method::MultiStage(s) => {
                 // One PSSMLT stage, and beside it two films (the estimate

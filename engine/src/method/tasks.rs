@@ -256,7 +256,7 @@ pub fn merge<P: PartStore + ?Sized>(parts: &P, subset: bool) -> Result<Output, E
     let mut output = match method {
         Method::Mc => mc::merge(parts, resolution, channels),
         Method::Pssmlt(_) => pssmlt::merge(parts, resolution, channels),
-        Method::Erpt(_) => erpt::merge(parts, resolution, channels),
+        Method::Erpt(s) => erpt::merge(s, parts, resolution, channels),
         Method::Replica(s) => replica::merge(s, parts, resolution, channels),
         Method::Stratified(s) => runs::merge(s, budget, parts, &tasks, resolution, channels),
         Method::MultiStage(s) => runs::merge(s, budget, parts, &tasks, resolution, channels),

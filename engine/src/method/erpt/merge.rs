@@ -5,7 +5,8 @@ use alloc::vec::Vec;
 use serde::Deserialize;
 
 use super::chains::Totals;
-use super::plan::{BLOCK, part_of_pass, scale, starts_fit};
+use super::plan::{block_starts, part_of_pass, scale, starts_fit};
+use super::settings::ErptSettings;
 use crate::chain::{Normalization, Traced};
 use crate::checkpoint;
 use crate::drive::RenderStats;
@@ -46,6 +47,7 @@ pub(super) fn finish(
 /// [`merge`](crate::method::merge)), in task order: their films, visits, passes and
 /// counters added.
 pub(crate) fn merge(
+    settings: &ErptSettings,
     parts: &mut [PartReader<'_>],
     resolution: Resolution,
     channels: usize,
@@ -61,19 +63,19 @@ pub(crate) fn merge(
         films.push(part.skim_film(resolution, channels)?);
         type Rest = (Vec<u64>, Vec<Totals>, usize, u64, usize);
         let (v, t, starts, p, done): Rest = part.take()?;
-        let blocks = starts.div_ceil(BLOCK);
+        let block = block_starts(settings, starts);
         // Every part's passes are of the same start paths (the same `r`).
         let (first, _) = head.get_or_insert((starts, (bootstrap, b, normalization)));
         if v.len() != visits.len()
             || !starts_fit(starts, resolution)
             || *first != starts
-            || done >= blocks
+            || done >= starts.div_ceil(block)
         {
             return Err(part.damaged());
         }
         visits.iter_mut().zip(&v).for_each(|(a, b)| *a += b);
         totals.extend_from_slice(&t);
-        passes += p as f64 + part_of_pass(done, starts);
+        passes += p as f64 + part_of_pass(done, block, starts);
         part.release();
     }
     let (starts, bootstrap) = head.ok_or_else(checkpoint::does_not_fit)?;

@@ -16,15 +16,16 @@
 //! importance, so a path starts `r` chains on average. The importance must
 //! be positive wherever the radiance is (paths with `I = 0` start nothing).
 //!
-//! A unit of work is a block of 1024 consecutive start pixels, run in two
-//! parallel phases: 16 tasks of 64 trace the start paths and draw how many
-//! chains each starts; then the block's chains, numbered in start order, are
-//! split into 16 tasks of nearly equal counts (merged in task order). Each
-//! chain has its own mutation and decision streams, so the many chains of
-//! one bright start path (a path through veach-ajar's door gap starts dozens)
-//! spread over the threads, and no thread waits on another's long start
-//! path; what a chain computes depends on neither the thread count nor the
-//! split. A pass visits its start pixels in a pseudo-random order drawn per
+//! A unit of work is a block of consecutive start pixels, `1024 ⌊1/r⌋` of
+//! them (about 1 024 chains at any `r <= 1`; at most a pass), run in two
+//! parallel phases: 16 tasks of nearly equal counts trace the start paths
+//! and draw how many chains each starts; then the block's chains, numbered
+//! in start order, are split into 16 tasks of nearly equal counts (merged
+//! in task order). Each chain has its own mutation and decision streams, so
+//! the many chains of one bright start path (a path through veach-ajar's
+//! door gap starts dozens) spread over the threads, and no thread waits on
+//! another's long start path; what a chain computes depends on neither the
+//! thread count nor the split. A pass visits its start pixels in a pseudo-random order drawn per
 //! pass, so the blocks done when a time budget or the observer stops the
 //! render inside a pass are a uniform sample of the film's pixels, spread
 //! over the whole image: each start is in them with probability `m / S`
@@ -49,5 +50,5 @@ mod settings;
 
 pub(crate) use merge::merge;
 pub(crate) use passes::render;
-pub(crate) use plan::{BLOCK_PATHS, kept_starts, planned_passes, smallest_budget, wave_steps};
+pub(crate) use plan::{kept_starts, planned_passes, smallest_budget, wave_steps};
 pub use settings::ErptSettings;

@@ -6,7 +6,7 @@ use alloc::vec::Vec;
 use super::chains::{Scene, Segment, Start, Totals, energy, redistribute, trace_start};
 use super::merge::{Saved, finish};
 use super::plan::{
-    BLOCK, PIXELS_PER_TASK, TASKS, block_paths, part_of_pass, pass_order, planned_passes, scale,
+    TASKS, block_paths, block_starts, blocks, part_of_pass, pass_order, planned_passes, scale,
     starts, wave_chains,
 };
 use super::settings::ErptSettings;
@@ -51,8 +51,9 @@ struct Passes<'a, O: PathOracle, I: ?Sized> {
     film: ExactFilm,
     visits: Vec<u64>,
     /// Start paths per pass: a whole number of paths per pixel
-    /// ([`starts`](super::plan::starts)).
+    /// ([`starts`](super::plan::starts)), and per block.
     starts: usize,
+    block: usize,
     /// Passes completed.
     passes: u64,
     /// Blocks done of the current pass, and the order of its start pixels.
@@ -85,7 +86,7 @@ where
                     && saved.visits.len() == resolution.pixel_count()
                     && saved.totals.len() == TASKS
                     && saved.starts == starts(settings, resolution)
-                    && saved.done < saved.starts.div_ceil(BLOCK)
+                    && saved.done < blocks(settings, saved.starts)
                     && energy(settings, saved.b).is_normal()
                     && saved.b > 0.0;
                 if !fits {
@@ -138,6 +139,7 @@ where
             film: saved.film,
             visits: saved.visits,
             starts: saved.starts,
+            block: block_starts(settings, saved.starts),
             passes: saved.passes,
             done: saved.done,
             order: pass_order(job.seed, job.task.unit(saved.passes), saved.starts),
@@ -193,13 +195,13 @@ where
 
     /// Blocks per pass `B`.
     fn blocks(&self) -> usize {
-        self.starts.div_ceil(BLOCK)
+        self.starts.div_ceil(self.block)
     }
 
     /// Passes done, `passes + m / S` for a pass of `S` start paths cut
     /// short after `m` of them.
     fn passes_done(&self) -> f64 {
-        self.passes as f64 + part_of_pass(self.done, self.starts)
+        self.passes as f64 + part_of_pass(self.done, self.block, self.starts)
     }
 
     /// The start paths of block `block` of the current pass (its starts in
@@ -207,10 +209,11 @@ where
     /// run in parallel; merged in task order.
     fn run_block(&mut self, block: usize) {
         let (pixels, starts) = (self.scene.resolution.pixel_count(), self.starts);
-        let first = block * BLOCK;
+        let first = block * self.block;
+        let count = self.block.min(starts - first);
         for (t, w) in self.work.iter_mut().enumerate() {
-            w.first = (first + t * PIXELS_PER_TASK).min(starts);
-            w.pixels = PIXELS_PER_TASK.min(starts - w.first);
+            w.first = first + count * t / TASKS;
+            w.pixels = first + count * (t + 1) / TASKS - w.first;
         }
         let pass = self.task.unit(self.passes) * starts as u64;
         let (scene, settings, energy, order) = (self.scene, self.settings, self.energy, self.order);
@@ -239,7 +242,7 @@ where
         // next. A wave's tasks take consecutive chains: every pixel receives the
         // chains' splats in chain order whatever the waves.
         let tasks = self.work.len() as u64;
-        let wave = wave_chains(settings);
+        let wave = wave_chains(settings, self.block);
         let (block_starts, chain_ends) = (&self.block_starts, &self.chain_ends);
         let mut first = 0;
         loop {
@@ -279,7 +282,7 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     fn unit_cost(&self) -> u64 {
-        block_paths(self.settings)
+        block_paths(self.settings, self.block)
     }
 
     /// This task's share of the passes the budget buys, in blocks.

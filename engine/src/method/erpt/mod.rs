@@ -17,7 +17,8 @@
 //! be positive wherever the radiance is (paths with `I = 0` start nothing).
 //!
 //! A unit of work is a block of consecutive start pixels, `1024 ⌊1/r⌋` of
-//! them (about 1 024 chains at any `r <= 1`; at most a pass), run in two
+//! them (at most 65 536 and a pass: about 1 024 chains for `1/64 <= r <=
+//! 1`), run in two
 //! parallel phases: 16 tasks of nearly equal counts trace the start paths
 //! and draw how many chains each starts; then the block's chains, numbered
 //! in start order, are split into 16 tasks of nearly equal counts (merged

@@ -12,8 +12,13 @@ use crate::rng::{self, Domain, Permutation};
 /// Tasks per block (merged in task order).
 pub(super) const TASKS: usize = 16;
 /// Start paths of a block for each whole `1 / r`: a block starts about
-/// 1 024 chains at any `r <= 1`.
+/// 1 024 chains at any `r <= 1` down to `1/64`.
 const BLOCK_CHAINS: usize = 1024;
+/// The most whole `1 / r` a block's start paths count: a block of 65 536
+/// start paths and its chains (about 0.25 s on veach-ajar at 1280x720 on
+/// two threads, whose blocks of 33 792 at 0.03 take 0.2 s) is still a
+/// short unit of a time budget.
+const MOST_PER_CHAIN: usize = 64;
 /// The fewest start paths of a pass.
 const MIN_STARTS: usize = 16;
 /// The fewest chains a pass starts on average (`r` a start path): a pass of
@@ -62,14 +67,13 @@ pub(crate) fn planned_passes(settings: &ErptSettings, resolution: Resolution, sa
 }
 
 /// Start paths of a block of a pass of `starts` (at most the pass):
-/// [`BLOCK_CHAINS`] for each whole `1 / r`, so that both phases of a
-/// block have work for every thread whatever `r` (at `r = 0.03`, blocks of
-/// 1 024 start paths started 31 chains, 2 in a task, and two threads
-/// rendered 1.74x as fast as one; blocks of 33 792, 1.96x).
+/// [`BLOCK_CHAINS`] for each whole `1 / r` (at most [`MOST_PER_CHAIN`]),
+/// so that both phases of a block have work for every thread (at `r =
+/// 0.03`, blocks of 1 024 start paths started 31 chains, 2 in a task, and
+/// two threads rendered 1.74x as fast as one; blocks of 33 792, 1.96x).
 pub(super) fn block_starts(settings: &ErptSettings, starts: usize) -> usize {
     // `as` saturates an unchecked `r`'s NaN or infinity into the range.
-    let per_chain = (libm::floor(1.0 / settings.chains_per_path) as usize)
-        .clamp(1, (1.0 / CHAINS_PER_PATH.0) as usize);
+    let per_chain = (libm::floor(1.0 / settings.chains_per_path) as usize).clamp(1, MOST_PER_CHAIN);
     (BLOCK_CHAINS * per_chain).min(starts).max(1)
 }
 
@@ -193,10 +197,11 @@ mod tests {
         assert_eq!(block_starts(&with(0.5), pass), 2048);
         assert_eq!(block_starts(&with(0.03), pass), 33 * 1024);
         assert_eq!(block_starts(&with(0.03), 534), 534);
-        assert_eq!(block_starts(&with(1e-3), 10 * pass), 1000 * 1024);
+        assert_eq!(block_starts(&with(1.0 / 64.0), pass), 64 * 1024);
+        assert_eq!(block_starts(&with(1e-3), pass), 64 * 1024);
         for r in [0.0, -1.0, f64::NAN, f64::INFINITY, 1e-300] {
             let block = block_starts(&with(r), pass);
-            assert!((1024..=1_024_000).contains(&block), "{r}: {block}");
+            assert!((1024..=64 * 1024).contains(&block), "{r}: {block}");
         }
         assert_eq!(block_starts(&with(0.03), 0), 1);
         assert_eq!(blocks(&with(0.03), pass), 28);

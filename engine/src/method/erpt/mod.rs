@@ -18,22 +18,22 @@
 //!
 //! A unit of work is a block of consecutive start pixels, `1024 ⌊1/r⌋` of
 //! them (at most 65 536 and a pass: about 1 024 chains for `1/64 <= r <=
-//! 1`), run in two
-//! parallel phases: 16 tasks of nearly equal counts trace the start paths
-//! and draw how many chains each starts; then the block's chains, numbered
-//! in start order, are split into 16 tasks of nearly equal counts (merged
-//! in task order). Each chain has its own mutation and decision streams, so
-//! the many chains of one bright start path (a path through veach-ajar's
-//! door gap starts dozens) spread over the threads, and no thread waits on
-//! another's long start path; what a chain computes depends on neither the
-//! thread count nor the split. A pass visits its start pixels in a pseudo-random order drawn per
-//! pass, so the blocks done when a time budget or the observer stops the
-//! render inside a pass are a uniform sample of the film's pixels, spread
-//! over the whole image: each start is in them with probability `m / S`
-//! (`m` start paths done of the pass's `S`; its last block may be short),
-//! and the film divided by `passes + m / S` stays an unbiased image with no
-//! bands (blocks of consecutive pixels left whole rows at 0 or 2x of their
-//! value in a pass cut at its middle).
+//! 1`), run in two parallel phases: 16 tasks of nearly equal counts trace
+//! the start paths and draw how many chains each starts; then the block's
+//! chains, numbered in start order, are split into 16 tasks of nearly equal
+//! counts (merged in task order). Each chain has its own mutation and
+//! decision streams, so the many chains of one bright start path (a path
+//! through veach-ajar's door gap starts dozens) spread over the threads, and
+//! no thread waits on another's long start path; what a chain computes
+//! depends on neither the thread count nor the split. A pass visits its
+//! start pixels in a pseudo-random order drawn per pass, so the blocks done
+//! when a time budget or the observer stops the render inside a pass are a
+//! uniform sample of the film's pixels, spread over the whole image: each
+//! start is in them with probability `m / S` (`m` start paths done of the
+//! pass's `S`; its last block may be short), and the film divided by
+//! `passes + m / S` stays an unbiased image with no bands (blocks of
+//! consecutive pixels left whole rows at 0 or 2x of their value in a pass
+//! cut at its middle).
 //!
 //! | file | owns |
 //! |---|---|

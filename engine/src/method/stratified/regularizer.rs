@@ -53,6 +53,7 @@ use serde::{Deserialize, Serialize};
 use super::settings::Anchor;
 use crate::film::Film;
 use crate::oracle::Radiance;
+use crate::parallel;
 use crate::tiles::Tiles;
 
 /// How many uniform samples a tile drew (each a sample of every pixel of
@@ -245,16 +246,17 @@ impl LargeSteps {
         let n = tiles.count();
         let mut sums = Film::new(tiles.resolution(), channels);
         let mut samples = Self {
-            counts: vec![0; n],
+            counts: Vec::new(),
             sums: vec![0.0; n],
             squares: vec![0.0; n],
         };
+        // The large steps of the tiles holding the pixel, and the centre
+        // pixel's plain MC paths.
+        samples.counts = parallel::map_indices(n, |j| {
+            let steps: u64 = tiles.tiles_of(j).map(|(s, _)| draws[s].large_steps).sum();
+            steps + draws[j].centre_paths
+        });
         for (j, pixel) in sums.data_mut().chunks_mut(channels).enumerate() {
-            for (s, _) in tiles.tiles_of(j) {
-                samples.counts[j] += draws[s].large_steps;
-            }
-            // The centre pixel's plain MC paths.
-            samples.counts[j] += draws[j].centre_paths;
             let (radiance, squares, _) = pooled.of(j);
             pixel.copy_from_slice(radiance);
             samples.squares[j] = squares;
@@ -279,13 +281,13 @@ pub(super) struct Halves {
 impl Halves {
     pub fn gather(tiles: &Tiles, draws: &[Draws], pooled: &Samples, all: &LargeSteps) -> Self {
         let n = tiles.count();
-        let (mut odd_counts, mut odd_sums) = (vec![0u64; n], vec![0.0; n]);
-        for (j, (count, sum)) in odd_counts.iter_mut().zip(&mut odd_sums).enumerate() {
-            for (s, _) in tiles.tiles_of(j) {
-                *count += draws[s].odd_steps;
-            }
-            *sum = pooled.of(j).2;
-        }
+        let odd_counts = parallel::map_indices(n, |j| {
+            tiles
+                .tiles_of(j)
+                .map(|(s, _)| draws[s].odd_steps)
+                .sum::<u64>()
+        });
+        let odd_sums: Vec<f64> = (0..n).map(|j| pooled.of(j).2).collect();
         let mut first = Film::new(tiles.resolution(), 1);
         for (j, v) in first.data_mut().iter_mut().enumerate() {
             // The difference of two sums of the same terms: clamp rounding.
@@ -318,37 +320,53 @@ impl Halves {
 /// zeros (which made stratified MCMC ~20 % dark at one sweep).
 fn pooled_means(sums: &Film, counts: &[u64]) -> Film {
     let resolution = sums.resolution();
-    let (w, h) = (resolution.width as i64, resolution.height as i64);
     let channels = sums.channels();
     let mut means = Film::new(resolution, channels);
-    let mut total = vec![0.0; channels];
-    for (j, mean) in means.data_mut().chunks_mut(channels).enumerate() {
-        let (x, y) = (j as i64 % w, j as i64 / w);
-        let mut radius = 0;
-        loop {
-            let mut n = 0u64;
-            total.fill(0.0);
-            for yy in (y - radius).max(0)..=(y + radius).min(h - 1) {
-                for xx in (x - radius).max(0)..=(x + radius).min(w - 1) {
-                    let p = (yy * w + xx) as usize;
-                    n += counts[p];
-                    let values = &sums.data()[p * channels..(p + 1) * channels];
-                    total.iter_mut().zip(values).for_each(|(t, v)| *t += v);
-                }
+    // A row of pixels a task: each pixel's mean is its own sums'.
+    let row = resolution.width.max(1) as usize;
+    parallel::for_each_chunk_init(
+        means.data_mut(),
+        row * channels,
+        || vec![0.0; channels],
+        |total, r, pixels| {
+            for (k, mean) in pixels.chunks_mut(channels).enumerate() {
+                pooled_mean(sums, counts, r * row + k, total, mean);
             }
-            if n > 0 {
-                mean.iter_mut()
-                    .zip(&total)
-                    .for_each(|(m, t)| *m = t / n as f64);
-                break;
-            }
-            if radius >= w.max(h) {
-                break;
-            }
-            radius = (2 * radius).max(1);
-        }
-    }
+        },
+    );
     means
+}
+
+/// Pixel `j`'s pooled mean (see [`pooled_means`]) into `mean`, with
+/// `total` as scratch.
+fn pooled_mean(sums: &Film, counts: &[u64], j: usize, total: &mut [f64], mean: &mut [f64]) {
+    let resolution = sums.resolution();
+    let (w, h) = (resolution.width as i64, resolution.height as i64);
+    let channels = sums.channels();
+    let (x, y) = (j as i64 % w, j as i64 / w);
+    let mut radius = 0;
+    loop {
+        let mut n = 0u64;
+        total.fill(0.0);
+        for yy in (y - radius).max(0)..=(y + radius).min(h - 1) {
+            for xx in (x - radius).max(0)..=(x + radius).min(w - 1) {
+                let p = (yy * w + xx) as usize;
+                n += counts[p];
+                let values = &sums.data()[p * channels..(p + 1) * channels];
+                total.iter_mut().zip(values).for_each(|(t, v)| *t += v);
+            }
+        }
+        if n > 0 {
+            mean.iter_mut()
+                .zip(&*total)
+                .for_each(|(m, t)| *m = t / n as f64);
+            return;
+        }
+        if radius >= w.max(h) {
+            return;
+        }
+        radius = (2 * radius).max(1);
+    }
 }
 
 /// Gives every pixel of `film` more than `sigmas` standard errors below its
@@ -417,35 +435,31 @@ fn anchor_blocks(film: &mut Film, regularizer: &Film, taken: &[bool], side: usiz
     let blocks = Blocks::new(film, side);
     let is_taken = |j: usize| taken.get(j).copied().unwrap_or(false);
     // Per block and channel: the regularizer's total, the taken pixels'.
-    let mut wanted = vec![[0.0f64; 2]; blocks.count() * channels];
-    let pixels = film
-        .data()
-        .chunks(channels)
-        .zip(regularizer.data().chunks(channels));
-    for (j, (pixel, mc)) in pixels.enumerate() {
-        let block = blocks.of(j) * channels;
-        for (c, sum) in wanted[block..block + channels].iter_mut().enumerate() {
+    let wanted = blocks.sums(|j, sums: &mut [[f64; 2]]| {
+        let pixel = &film.data()[j * channels..(j + 1) * channels];
+        let mc = &regularizer.data()[j * channels..(j + 1) * channels];
+        for (c, sum) in sums.iter_mut().enumerate() {
             sum[0] += mc[c];
             if is_taken(j) {
                 sum[1] += pixel[c];
             }
         }
-    }
+    });
     // Per block and channel, its reconstructed pixels' total as shares
     // that the 3x3 blocks around it scale (row-major, the block itself in
     // the middle): each round then costs a pass over the blocks, not the film.
-    let mut shares = vec![[0.0f64; 9]; wanted.len()];
-    for (j, pixel) in film.data().chunks(channels).enumerate() {
+    let shares = blocks.sums(|j, shares: &mut [[f64; 9]]| {
         if !is_taken(j) {
             let block = blocks.of(j);
+            let pixel = &film.data()[j * channels..(j + 1) * channels];
             for (around, weight) in blocks.blend(j) {
                 let k = blocks.neighbour(block, around);
                 for (c, v) in pixel.iter().enumerate() {
-                    shares[block * channels + c][k] += v * weight;
+                    shares[c][k] += v * weight;
                 }
             }
         }
-    }
+    });
     let mut factors = vec![1.0; wanted.len()];
     for _ in 0..FIT_ROUNDS {
         let lacks: Vec<f64> = (0..wanted.len())
@@ -476,13 +490,17 @@ fn anchor_blocks(film: &mut Film, regularizer: &Film, taken: &[bool], side: usiz
             *f = (*f * r).clamp(1.0 / most, most);
         }
     }
-    for (j, pixel) in film.data_mut().chunks_mut(channels).enumerate() {
-        if !is_taken(j) {
-            for (c, v) in pixel.iter_mut().enumerate() {
-                *v *= blocks.factor(&factors, j, c);
+    let width = blocks.width.max(1);
+    parallel::for_each_chunk(film.data_mut(), width * channels, |y, row| {
+        for (x, pixel) in row.chunks_mut(channels).enumerate() {
+            let j = y * width + x;
+            if !is_taken(j) {
+                for (c, v) in pixel.iter_mut().enumerate() {
+                    *v *= blocks.factor(&factors, j, c);
+                }
             }
         }
-    }
+    });
 }
 
 /// The anchor's fit stops when no block's total is further than this from
@@ -530,6 +548,29 @@ impl Blocks {
 
     fn count(&self) -> usize {
         self.across * self.down
+    }
+
+    /// Per block and channel, `N` sums that `add(j, sums)` adds pixel `j`
+    /// to (its block's, a sum array a channel). Each row of blocks sums its
+    /// own pixels in the film's order, on the render's threads: the same
+    /// sums whatever the threads.
+    fn sums<const N: usize>(
+        &self,
+        add: impl Fn(usize, &mut [[f64; N]]) + Sync + Send,
+    ) -> Vec<[f64; N]> {
+        let channels = self.channels;
+        // A row of blocks starts at pixel row `row height / down`, rounded
+        // down ([`along`](Self::along)).
+        let first = |row: usize| row * self.height / self.down * self.width;
+        parallel::map_indices(self.down, |row| {
+            let mut sums = vec![[0.0; N]; self.across * channels];
+            for j in first(row)..first(row + 1) {
+                let block = self.of(j) % self.across;
+                add(j, &mut sums[block * channels..(block + 1) * channels]);
+            }
+            sums
+        })
+        .concat()
     }
 
     /// The block holding pixel `j`.

@@ -4,7 +4,6 @@
 //! remainder after the last sweep, the checkpoint and the render's output.
 
 use alloc::boxed::Box;
-use alloc::vec;
 use alloc::vec::Vec;
 
 use serde::{Deserialize, Serialize};
@@ -317,13 +316,11 @@ pub(super) fn finish_runs(
         bootstrap_traces,
     } = run;
     let mut image = reconstruct_image(tiles, sums, pooled, settings, channels, stats.sweeps, stop)?;
-    let mut visits = vec![0u64; tiles.count()];
-    for s in 0..tiles.count() {
-        // Every tile steps once a sweep.
-        for (_, q) in tiles.pixels(s) {
-            visits[q] += stats.sweeps;
-        }
-    }
+    // Every tile steps once a sweep: a pixel is visited by each tile
+    // holding it.
+    let visits = parallel::map_indices(tiles.count(), |q| {
+        stats.sweeps * tiles.tiles_of(q).count() as u64
+    });
     light.add_to(&mut image.film, stats.sweeps);
     if let Some(alpha) = image.alpha {
         stats.alpha = alpha;

@@ -246,16 +246,15 @@ impl LargeSteps {
         let n = tiles.count();
         let mut sums = Film::new(tiles.resolution(), channels);
         let mut samples = Self {
-            counts: Vec::new(),
+            // The large steps of the tiles holding the pixel, and the
+            // centre pixel's plain MC paths.
+            counts: parallel::map_indices(n, |j| {
+                let steps: u64 = tiles.tiles_of(j).map(|(s, _)| draws[s].large_steps).sum();
+                steps + draws[j].centre_paths
+            }),
             sums: vec![0.0; n],
             squares: vec![0.0; n],
         };
-        // The large steps of the tiles holding the pixel, and the centre
-        // pixel's plain MC paths.
-        samples.counts = parallel::map_indices(n, |j| {
-            let steps: u64 = tiles.tiles_of(j).map(|(s, _)| draws[s].large_steps).sum();
-            steps + draws[j].centre_paths
-        });
         for (j, pixel) in sums.data_mut().chunks_mut(channels).enumerate() {
             let (radiance, squares, _) = pooled.of(j);
             pixel.copy_from_slice(radiance);

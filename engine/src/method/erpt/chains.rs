@@ -106,6 +106,7 @@ impl<R: Default> Segment<R> {
             buffers: RoundBuffers::new(bands),
             totals,
             path: Evaluated::default(),
+            // Restarted with each start path's own stream before it reads.
             sampler: MltSampler::new(settings.small_step, rng::stream(0, Domain::Independent, 0)),
         }
     }

@@ -115,6 +115,11 @@ impl PackedSample {
         }
     }
 
+    /// Lets go of its numbers: it has then read nothing.
+    pub(crate) fn forget_numbers(&mut self) {
+        self.bytes = Default::default();
+    }
+
     /// The streams' lengths and the bytes of their numbers.
     fn split(&self) -> (impl Iterator<Item = usize> + '_, &[u8]) {
         let (streams, rest) = self.bytes.split_first().unwrap_or((&0, &[]));

@@ -6,7 +6,7 @@ use alloc::vec;
 use alloc::vec::Vec;
 
 use crate::error::Error;
-use crate::parallel::map_indices;
+use crate::parallel::{for_each_chunk, map_indices};
 use crate::tiles::Tiles;
 
 /// Checks that `g` has one value per tile and offset, `mc` one per pixel,
@@ -20,10 +20,23 @@ pub(super) fn check_shapes(tiles: &Tiles, g: &[f64], mc: &[f64]) -> Result<(), E
             right: (g.len() as u32, mc.len() as u32, 1),
         });
     }
-    if let Some(&bad) = g.iter().chain(mc).find(|v| !(v.is_finite() && **v >= 0.0)) {
-        return Err(Error::invalid("estimate", bad, "finite values >= 0"));
+    match first_bad(g).or_else(|| first_bad(mc)) {
+        Some(bad) => Err(Error::invalid("estimate", bad, "finite values >= 0")),
+        None => Ok(()),
     }
-    Ok(())
+}
+
+/// The first of `values` that is not finite and `>= 0`, looked for in
+/// pieces on the render's threads (a film's `g` is millions of values).
+fn first_bad(values: &[f64]) -> Option<f64> {
+    const PIECE: usize = 1 << 16;
+    let bad = |v: &f64| !(v.is_finite() && *v >= 0.0);
+    map_indices(values.len().div_ceil(PIECE), |i| {
+        values[i * PIECE..].iter().take(PIECE).copied().find(bad)
+    })
+    .into_iter()
+    .flatten()
+    .next()
 }
 
 /// Whether each tile has an estimate: some `G_s(k) > 0` (`g` holds
@@ -32,29 +45,35 @@ pub(super) fn check_shapes(tiles: &Tiles, g: &[f64], mc: &[f64]) -> Result<(), E
 /// and eq. 12 and the weighted solver leave it out.
 pub(crate) fn informative(tiles: &Tiles, g: &[f64], channels: usize) -> Vec<bool> {
     let per_tile = tiles.offsets().len() * channels;
-    g.chunks(per_tile)
-        .map(|tile| tile.iter().any(|&v| v > 0.0))
-        .collect()
+    map_indices(tiles.count(), |s| {
+        g[s * per_tile..][..per_tile].iter().any(|&v| v > 0.0)
+    })
 }
 
 /// The image of eq. 12: every pixel the mean of its tiles' `b_s G_s(j)`,
 /// channel by channel, over the informative tiles holding it (those with some `G_s(k) > 0`). `g` holds
 /// `channels` values per tile and offset (`(s · offsets + o) · channels +
-/// c`); the result `channels` per pixel.
+/// c`); the result `channels` per pixel, a row of pixels a task.
 pub fn image(tiles: &Tiles, g: &[f64], b: &[f64], channels: usize) -> Vec<f64> {
     let o = tiles.offsets().len();
     let informative = informative(tiles, g, channels);
+    let width = tiles.resolution().width as usize;
     let mut out = vec![0.0; tiles.count() * channels];
-    for (j, pixel) in out.chunks_mut(channels).enumerate() {
-        let mut count = 0;
-        for (s, off) in tiles.tiles_of(j).filter(|&(s, _)| informative[s]) {
-            count += 1;
-            for (c, v) in pixel.iter_mut().enumerate() {
-                *v += b[s] * g[(s * o + off) * channels + c];
+    for_each_chunk(&mut out, (width * channels).max(1), |y, row| {
+        for (x, pixel) in row.chunks_mut(channels).enumerate() {
+            let mut count = 0;
+            for (s, off) in tiles
+                .tiles_of(y * width + x)
+                .filter(|&(s, _)| informative[s])
+            {
+                count += 1;
+                for (c, v) in pixel.iter_mut().enumerate() {
+                    *v += b[s] * g[(s * o + off) * channels + c];
+                }
             }
+            pixel.iter_mut().for_each(|v| *v /= count.max(1) as f64);
         }
-        pixel.iter_mut().for_each(|v| *v /= count.max(1) as f64);
-    }
+    });
     out
 }
 

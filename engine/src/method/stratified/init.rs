@@ -14,11 +14,13 @@ use crate::bootstrap::Bootstrap;
 use crate::chain::{PathChain, Traced};
 use crate::drive::{Clock, SetUpStage};
 use crate::error::Error;
+use crate::mutate::SmallStep;
 use crate::oracle::{
     FilmPoint, PathOracle, PathSample, Resolution, Sampler, SplatSink, Temperature,
 };
 use crate::parallel;
-use crate::sample::MltSampler;
+use crate::rng::Pcg32;
+use crate::sample::PackedSample;
 use crate::target::{Importance, MaxChannel};
 
 /// The union of the tile targets as one oracle for the global chains: the
@@ -73,11 +75,11 @@ where
     }
 }
 
-/// A global chain's first visit of a tile in a round.
+/// A global chain's first visit of a tile in a round: its state, the
+/// film stream read as the jitter inside the tile's pixel.
 struct Visit {
     tile: usize,
-    jitter: FilmPoint,
-    sampler: MltSampler,
+    sample: PackedSample,
 }
 
 /// What the initialization traced.
@@ -177,11 +179,12 @@ where
                     && !initialized[tile]
                     && !visits.iter().any(|v| v.tile == tile)
                 {
-                    visits.push(Visit {
-                        tile,
-                        jitter: jitter_of(state.film),
-                        sampler: chain.chain().sampler().clone(),
-                    });
+                    let jitter = jitter_of(state.film);
+                    let mut sampler = chain.chain().sampler().clone();
+                    sampler.set_film([jitter.x, jitter.y]);
+                    let mut sample = PackedSample::new(SmallStep::default(), Pcg32::new(0, 0));
+                    sampler.pack(&mut sample);
+                    visits.push(Visit { tile, sample });
                 }
             }
             visits
@@ -194,9 +197,7 @@ where
             initialized[visit.tile] = true;
             count += 1;
             let chain = &mut chains[visit.tile];
-            let mut sampler = visit.sampler;
-            sampler.set_film([visit.jitter.x, visit.jitter.y]);
-            chain.take_sampler(&sampler);
+            chain.take_sample(visit.sample);
             chain.pending = true;
             chain.start = Start::Global;
         }

@@ -317,8 +317,10 @@ where
 {
     let n = ctx.tiles.count();
     let offsets = ctx.tiles.offsets().len();
+    // Made on the render's threads: a film holds a chain per pixel.
+    let (seed, mutation) = (job.seed, &settings.mutation);
     let mut chains: Vec<TileChain<O::Radiance>> = (0..n)
-        .map(|s| TileChain::new(job.seed, s, n, offsets, &settings.mutation))
+        .map(|s| TileChain::new(seed, s, n, offsets, mutation))
         .collect();
     let init = &settings.initialization;
     let (init_traces, init_clock) = match job.budget {

@@ -19,6 +19,7 @@ use crate::error::Error;
 use crate::film::Film;
 use crate::method::job::Job;
 use crate::oracle::PathOracle;
+use crate::parallel;
 use crate::reconstruct::{self, WeightedSettings};
 use crate::tiles::Tiles;
 
@@ -59,12 +60,21 @@ pub(super) fn reconstruct_image(
     sweeps: u64,
     stop: &dyn Fn() -> bool,
 ) -> Result<Reconstructed, Error> {
-    let (draws, sums): (Vec<Draws>, Vec<_>) = sums.into_iter().unzip();
+    let (draws, mut sums): (Vec<Draws>, Vec<_>) = sums.into_iter().unzip();
     let (samples, regularizer) = LargeSteps::gather(tiles, &draws, &pooled);
     let halves = (settings.cross_validate_alpha && matches!(settings.solver, Solver::Weighted(_)))
         .then(|| Halves::gather(tiles, &draws, &pooled, &samples));
     drop((draws, pooled));
-    let unscaled = unscaled(tiles, sums, channels, sweeps.max(1), &regularizer);
+    let let_go = |tile: &mut Box<[f32]>| *tile = Box::default();
+    let unscaled = unscaled(
+        tiles,
+        &mut sums,
+        let_go,
+        channels,
+        sweeps.max(1),
+        &regularizer,
+    );
+    drop(sums);
     let mut solver = settings.solver;
     let mut alpha = None;
     if let Solver::Weighted(w) = &mut solver {
@@ -119,7 +129,7 @@ pub(super) fn reconstruct_image(
 
 /// Eq. 12 with the initial normalizations, channel by channel: a quick
 /// reconstruction for previews.
-pub(super) fn preview<S: Copy + Into<f64>, T: AsRef<[S]>>(
+pub(super) fn preview<S: Copy + Into<f64>, T: AsRef<[S]> + Send>(
     tiles: &Tiles,
     chains: impl Iterator<Item = (Draws, T)>,
     pooled: &Samples,
@@ -129,9 +139,9 @@ pub(super) fn preview<S: Copy + Into<f64>, T: AsRef<[S]>>(
     emission: Option<&SeenEmission>,
 ) -> Film {
     let channels = pooled.channels();
-    let (draws, sums): (Vec<Draws>, Vec<T>) = chains.unzip();
+    let (draws, mut sums): (Vec<Draws>, Vec<T>) = chains.unzip();
     let (_, regularizer) = LargeSteps::gather(tiles, &draws, pooled);
-    let unscaled = unscaled(tiles, sums.iter(), channels, sweeps, &regularizer);
+    let unscaled = unscaled(tiles, &mut sums, |_| {}, channels, sweeps, &regularizer);
     let mut film = Film::new(tiles.resolution(), channels);
     for c in 0..channels {
         let g = channel(&unscaled, channels, c);
@@ -232,34 +242,40 @@ impl ReconstructionTime {
 /// pixels to one weakly constrained tile. A tile black for the regularizer
 /// too stays without an estimate and is left out
 /// ([`reconstruct::informative`]).
-fn unscaled<S: Copy + Into<f64>, T: AsRef<[S]>>(
+fn unscaled<S: Copy + Into<f64>, T: AsRef<[S]> + Send>(
     tiles: &Tiles,
-    sums: impl IntoIterator<Item = T>,
+    sums: &mut [T],
+    let_go: impl Fn(&mut T) + Sync,
     channels: usize,
     sweeps: u64,
     regularizer: &Film,
 ) -> Vec<f32> {
-    let per_tile = tiles.offsets().len() * channels;
-    // Sized once: a vector grown by doubling would hold up to twice this.
-    let mut g: Vec<f32> = Vec::with_capacity(tiles.count() * per_tile);
-    // Each tile's sums are let go once read.
-    for tile in sums {
-        g.extend(
-            tile.as_ref()
-                .iter()
-                .map(|&v| (v.into() / sweeps as f64) as f32),
-        );
-    }
-    for (s, tile) in g.chunks_mut(per_tile).enumerate() {
-        if tile.iter().all(|&v| v == 0.0) {
-            for (o, pixel) in tiles.pixels(s) {
-                let mc = &regularizer.data()[pixel * channels..(pixel + 1) * channels];
-                for (g, &mc) in tile[o * channels..(o + 1) * channels].iter_mut().zip(mc) {
-                    *g = mc as f32;
+    let per_tile = (tiles.offsets().len() * channels).max(1);
+    let width = tiles.resolution().width.max(1) as usize;
+    let mut g = vec![0.0f32; tiles.count() * per_tile];
+    // A row of tiles a task, each tile's sums let go once read.
+    let mut rows: Vec<_> = g
+        .chunks_mut(per_tile * width)
+        .zip(sums.chunks_mut(width))
+        .enumerate()
+        .collect();
+    parallel::for_each(&mut rows, |(y, (g, sums))| {
+        for (x, (tile, sums)) in g.chunks_mut(per_tile).zip(sums.iter_mut()).enumerate() {
+            for (g, &v) in tile.iter_mut().zip(sums.as_ref()) {
+                *g = (v.into() / sweeps as f64) as f32;
+            }
+            let_go(sums);
+            if tile.iter().all(|&v| v == 0.0) {
+                for (o, pixel) in tiles.pixels(*y * width + x) {
+                    let mc = &regularizer.data()[pixel * channels..(pixel + 1) * channels];
+                    for (g, &mc) in tile[o * channels..(o + 1) * channels].iter_mut().zip(mc) {
+                        *g = mc as f32;
+                    }
                 }
             }
         }
-    }
+    });
+    drop(rows);
     g
 }
 
@@ -314,10 +330,10 @@ fn cross_validated_alpha(
     candidates: &[f64],
     stop: &dyn Fn() -> bool,
 ) -> Result<f64, Error> {
-    let g: Vec<f64> = unscaled
-        .chunks(channels)
-        .map(|v| v.iter().map(|&x| f64::from(x)).sum::<f64>() / channels as f64)
-        .collect();
+    let g: Vec<f64> = parallel::map_indices(unscaled.len() / channels, |i| {
+        let v = &unscaled[i * channels..(i + 1) * channels];
+        v.iter().map(|&x| f64::from(x)).sum::<f64>() / channels as f64
+    });
     let mut best = (f64::INFINITY, settings.alpha);
     for &alpha in candidates {
         if stop() {
@@ -345,19 +361,18 @@ fn cross_validated_alpha(
 }
 
 /// Channel `c` of values stored `channels` to an item.
-fn channel<S: Copy + Into<f64>>(values: &[S], channels: usize, c: usize) -> Vec<f64> {
-    values
-        .iter()
-        .skip(c)
-        .step_by(channels)
-        .map(|&v| v.into())
-        .collect()
+fn channel<S: Copy + Into<f64> + Sync>(values: &[S], channels: usize, c: usize) -> Vec<f64> {
+    parallel::map_indices(values.len() / channels, |i| values[i * channels + c].into())
 }
 
-/// Sets channel `c` of every pixel of `film` from `values` (one per pixel).
+/// Sets channel `c` of every pixel of `film` from `values` (one per
+/// pixel), a row of pixels a task.
 fn set_channel(film: &mut Film, c: usize, values: &[f64]) {
     let channels = film.channels();
-    for (pixel, v) in film.data_mut().chunks_mut(channels).zip(values) {
-        pixel[c] = *v;
-    }
+    let width = film.resolution().width as usize;
+    parallel::for_each_chunk(film.data_mut(), (width * channels).max(1), |y, row| {
+        for (x, pixel) in row.chunks_mut(channels).enumerate() {
+            pixel[c] = values[y * width + x];
+        }
+    });
 }

@@ -434,7 +434,7 @@ fn anchor_blocks(film: &mut Film, regularizer: &Film, taken: &[bool], side: usiz
     let blocks = Blocks::new(film, side);
     let is_taken = |j: usize| taken.get(j).copied().unwrap_or(false);
     // Per block and channel: the regularizer's total, the taken pixels'.
-    let wanted = blocks.sums(|j, sums: &mut [[f64; 2]]| {
+    let wanted = blocks.sums(|j, _, sums: &mut [[f64; 2]]| {
         let pixel = &film.data()[j * channels..(j + 1) * channels];
         let mc = &regularizer.data()[j * channels..(j + 1) * channels];
         for (c, sum) in sums.iter_mut().enumerate() {
@@ -447,14 +447,12 @@ fn anchor_blocks(film: &mut Film, regularizer: &Film, taken: &[bool], side: usiz
     // Per block and channel, its reconstructed pixels' total as shares
     // that the 3x3 blocks around it scale (row-major, the block itself in
     // the middle): each round then costs a pass over the blocks, not the film.
-    let shares = blocks.sums(|j, shares: &mut [[f64; 9]]| {
+    let shares = blocks.sums(|j, blend, shares: &mut [[f64; 9]]| {
         if !is_taken(j) {
-            let block = blocks.of(j);
             let pixel = &film.data()[j * channels..(j + 1) * channels];
-            for (around, weight) in blocks.blend(j) {
-                let k = blocks.neighbour(block, around);
+            for b in blend {
                 for (c, v) in pixel.iter().enumerate() {
-                    shares[c][k] += v * weight;
+                    shares[c][b.around] += v * b.weight;
                 }
             }
         }
@@ -492,10 +490,14 @@ fn anchor_blocks(film: &mut Film, regularizer: &Film, taken: &[bool], side: usiz
     let width = blocks.width.max(1);
     parallel::for_each_chunk(film.data_mut(), width * channels, |y, row| {
         for (x, pixel) in row.chunks_mut(channels).enumerate() {
-            let j = y * width + x;
-            if !is_taken(j) {
+            if !is_taken(y * width + x) {
+                // Each channel by the bilinear blend of its blocks' factors.
+                let blend = blocks.blend(x, y);
                 for (c, v) in pixel.iter_mut().enumerate() {
-                    *v *= blocks.factor(&factors, j, c);
+                    *v *= blend
+                        .iter()
+                        .map(|b| factors[b.block * channels + c] * b.weight)
+                        .sum::<f64>();
                 }
             }
         }
@@ -521,7 +523,7 @@ const FIT_ROUNDS: usize = 100;
 /// A film cut into blocks of about `side` pixels a side (as many along each
 /// axis as the side fits, rounded, at least one; their edges spread evenly,
 /// so that no block is much narrower than the others), and where each pixel
-/// lies between their centres.
+/// lies between their centres, worked out once a column and once a row.
 struct Blocks {
     width: usize,
     height: usize,
@@ -529,6 +531,51 @@ struct Blocks {
     /// Blocks across and down.
     across: usize,
     down: usize,
+    /// Per pixel column, where it lies among the blocks across.
+    columns: Vec<Place>,
+    /// Per pixel row, where it lies among the blocks down.
+    rows: Vec<Place>,
+}
+
+/// Where a pixel lies along one axis of `length` pixels cut into blocks:
+/// its block, and the blocks whose centres are either side of it with the
+/// second's weight (beyond the first and last centres one block, whose
+/// factor is then applied exactly).
+#[derive(Clone, Copy)]
+struct Place {
+    own: usize,
+    first: usize,
+    second: usize,
+    t: f64,
+}
+
+impl Place {
+    /// Pixel `x` of `length` cut into `blocks`: its block is the last whose
+    /// first pixel, `i length / blocks` rounded down, is at most `x`.
+    fn new(x: usize, length: usize, blocks: usize) -> Self {
+        let centre = |i: usize| (i * length / blocks + (i + 1) * length / blocks) as f64 / 2.0;
+        let p = x as f64 + 0.5;
+        let own = ((x + 1) * blocks - 1) / length;
+        let (first, second) = match p < centre(own) {
+            true if own > 0 => (own - 1, own),
+            false if own + 1 < blocks => (own, own + 1),
+            _ => {
+                return Self {
+                    own,
+                    first: own,
+                    second: own,
+                    t: 0.0,
+                };
+            }
+        };
+        let t = (p - centre(first)) / (centre(second) - centre(first));
+        Self {
+            own,
+            first,
+            second,
+            t,
+        }
+    }
 }
 
 impl Blocks {
@@ -536,12 +583,15 @@ impl Blocks {
         let resolution = film.resolution();
         let (width, height) = (resolution.width as usize, resolution.height as usize);
         let fit = |length: usize| ((length + side / 2) / side).clamp(1, length.max(1));
+        let (across, down) = (fit(width), fit(height));
         Self {
             width,
             height,
             channels: film.channels(),
-            across: fit(width),
-            down: fit(height),
+            across,
+            down,
+            columns: (0..width).map(|x| Place::new(x, width, across)).collect(),
+            rows: (0..height).map(|y| Place::new(y, height, down)).collect(),
         }
     }
 
@@ -549,80 +599,51 @@ impl Blocks {
         self.across * self.down
     }
 
-    /// Per block and channel, `N` sums that `add(j, sums)` adds pixel `j`
-    /// to (its block's, a sum array a channel). Each row of blocks sums its
-    /// own pixels in the film's order, on the render's threads: the same
-    /// sums whatever the threads.
+    /// Per block and channel, `N` sums that `add(j, blend, sums)` adds pixel
+    /// `j` to (its block's, a sum array a channel; `blend` is
+    /// [`blend`](Self::blend)'s). Each row of blocks sums its own pixels in
+    /// the film's order, on the render's threads: the same sums whatever the
+    /// threads.
     fn sums<const N: usize>(
         &self,
-        add: impl Fn(usize, &mut [[f64; N]]) + Sync + Send,
+        add: impl Fn(usize, [Blended; 4], &mut [[f64; N]]) + Sync + Send,
     ) -> Vec<[f64; N]> {
         let channels = self.channels;
         // A row of blocks starts at pixel row `row height / down`, rounded
-        // down ([`along`](Self::along)).
-        let first = |row: usize| row * self.height / self.down * self.width;
+        // down ([`Place::new`]).
+        let first = |row: usize| row * self.height / self.down;
         parallel::map_indices(self.down, |row| {
             let mut sums = vec![[0.0; N]; self.across * channels];
-            for j in first(row)..first(row + 1) {
-                let block = self.of(j) % self.across;
-                add(j, &mut sums[block * channels..(block + 1) * channels]);
+            for y in first(row)..first(row + 1) {
+                for x in 0..self.width {
+                    let block = self.columns[x].own;
+                    let sums = &mut sums[block * channels..(block + 1) * channels];
+                    add(y * self.width + x, self.blend(x, y), sums);
+                }
             }
             sums
         })
         .concat()
     }
 
-    /// The block holding pixel `j`.
-    fn of(&self, j: usize) -> usize {
-        let (x, y) = (j % self.width, j / self.width);
-        Self::along(y, self.height, self.down) * self.across
-            + Self::along(x, self.width, self.across)
-    }
-
-    /// Along one axis of `length` pixels cut into `blocks`, the block
-    /// holding pixel `x`: the last whose first pixel, `i length / blocks`
-    /// rounded down, is at most `x`.
-    fn along(x: usize, length: usize, blocks: usize) -> usize {
-        ((x + 1) * blocks - 1) / length
-    }
-
-    /// Along one axis of `length` pixels cut into `blocks`, the blocks
-    /// whose centres are either side of pixel `x`, and the second's weight
-    /// (beyond the first and last centres one block, whose factor is then
-    /// applied exactly).
-    fn between(x: usize, length: usize, blocks: usize) -> (usize, usize, f64) {
-        let centre = |i: usize| (i * length / blocks + (i + 1) * length / blocks) as f64 / 2.0;
-        let p = x as f64 + 0.5;
-        let own = Self::along(x, length, blocks);
-        let (first, second) = match p < centre(own) {
-            true if own > 0 => (own - 1, own),
-            false if own + 1 < blocks => (own, own + 1),
-            _ => return (own, own, 0.0),
+    /// The blocks whose centres are around pixel `(x, y)`, each with where
+    /// it lies among the 3x3 blocks around the pixel's own (row-major) and
+    /// its weight in the pixel's bilinear blend.
+    fn blend(&self, x: usize, y: usize) -> [Blended; 4] {
+        let (column, row) = (self.columns[x], self.rows[y]);
+        let (tx, ty) = (column.t, row.t);
+        let at = |bx: usize, by: usize| Blended {
+            block: by * self.across + bx,
+            around: (by + 1 - row.own) * 3 + bx + 1 - column.own,
+            weight: 0.0,
         };
-        let t = (p - centre(first)) / (centre(second) - centre(first));
-        (first, second, t)
-    }
-
-    /// The blocks whose centres are around pixel `j`, each with its weight
-    /// in the pixel's bilinear blend.
-    fn blend(&self, j: usize) -> [(usize, f64); 4] {
-        let (x0, x1, tx) = Self::between(j % self.width, self.width, self.across);
-        let (y0, y1, ty) = Self::between(j / self.width, self.height, self.down);
-        let at = |x: usize, y: usize| y * self.across + x;
+        let weighted = |b: Blended, weight| Blended { weight, ..b };
         [
-            (at(x0, y0), (1.0 - tx) * (1.0 - ty)),
-            (at(x1, y0), tx * (1.0 - ty)),
-            (at(x0, y1), (1.0 - tx) * ty),
-            (at(x1, y1), tx * ty),
+            weighted(at(column.first, row.first), (1.0 - tx) * (1.0 - ty)),
+            weighted(at(column.second, row.first), tx * (1.0 - ty)),
+            weighted(at(column.first, row.second), (1.0 - tx) * ty),
+            weighted(at(column.second, row.second), tx * ty),
         ]
-    }
-
-    /// Where block `other`, one of the 3x3 around `block`, lies among them
-    /// (row-major).
-    fn neighbour(&self, block: usize, other: usize) -> usize {
-        let dx = other % self.across + 1 - block % self.across;
-        let dy = other / self.across + 1 - block / self.across;
-        dy * 3 + dx
     }
 
     /// The `k`-th of the 3x3 blocks around `block` (row-major), if the film
@@ -632,15 +653,15 @@ impl Blocks {
         let y = (block / self.across + k / 3).checked_sub(1)?;
         (x < self.across && y < self.down).then_some((k, y * self.across + x))
     }
+}
 
-    /// Channel `c` of pixel `j`'s factor: the bilinear blend of the
-    /// `factors` (block-major, channel-minor) of the blocks around it.
-    fn factor(&self, factors: &[f64], j: usize, c: usize) -> f64 {
-        self.blend(j)
-            .iter()
-            .map(|&(block, weight)| factors[block * self.channels + c] * weight)
-            .sum()
-    }
+/// A block in a pixel's bilinear blend ([`Blocks::blend`]).
+#[derive(Clone, Copy)]
+struct Blended {
+    block: usize,
+    /// Where it lies among the 3x3 blocks around the pixel's own.
+    around: usize,
+    weight: f64,
 }
 
 /// Gives every pixel whose large-step samples all agree (at least

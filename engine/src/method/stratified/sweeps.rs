@@ -196,8 +196,10 @@ where
     pub(super) fn into_run(self, bootstrap_traces: u64) -> SweptRun {
         let centre_paths = self.centre_paths();
         let mut stats = self.stats;
-        let tiles = self
-            .chains
+        let mut chains = self.chains;
+        // What only a chain needs let go on the render's threads.
+        parallel::for_each(&mut chains, TileChain::let_go_of_state);
+        let tiles = chains
             .into_iter()
             .map(|c| {
                 match c.start {

@@ -543,11 +543,10 @@ impl<R: Radiance> TileChain<R> {
         (target, traced)
     }
 
-    /// Takes the primary sample of `sampler` (see [`Self::take_sample`]).
-    pub fn take_sampler(&mut self, sampler: &MltSampler) {
-        let mut sample = PackedSample::new(SmallStep::default(), Pcg32::new(0, 0));
-        sampler.pack(&mut sample);
-        self.take_sample(sample);
+    /// Lets go of the current state, keeping the sums and counters.
+    pub fn let_go_of_state(&mut self) {
+        self.sample.forget_numbers();
+        self.values = Box::default();
     }
 
     /// Takes the primary sample `sample`, keeping this tile's own random

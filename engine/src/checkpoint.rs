@@ -36,7 +36,7 @@ pub(crate) const MAGIC: [u8; 8] = *b"STRATAck";
 /// The checkpoint format's version. Bump it whenever a saved type changes
 /// (a field added, removed or reordered in any state a method saves, or
 /// what a saved sum means).
-pub const FORMAT_VERSION: u32 = 26;
+pub const FORMAT_VERSION: u32 = 27;
 
 /// The engine's version, also saved: a checkpoint is read only by the
 /// engine that wrote it.

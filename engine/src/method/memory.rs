@@ -206,10 +206,10 @@ mod sizes {
     /// A chain's state: its primary sample (values and proposal, per
     /// stream) and its path with splats.
     pub const CHAIN: u128 = 4096;
-    /// A tile chain of stratified MCMC at rest (112 bytes, and its primary
+    /// A tile chain of stratified MCMC at rest (80 bytes, and its primary
     /// sample's streams) and the pixel's uniform samples (40 bytes),
     /// fitted to the measured peak.
-    pub const TILE_CHAIN: u128 = 160;
+    pub const TILE_CHAIN: u128 = 144;
     /// A number of a tile chain's primary sample at rest (24 bits).
     pub const NUMBER: u128 = 3;
     /// An ERPT start path that starts chains, beside its numbers: its

@@ -9,7 +9,7 @@ use alloc::vec::Vec;
 use core::sync::atomic::{AtomicU64, Ordering};
 
 use super::settings::StratifiedSettings;
-use super::tile::{Context, Start, TileChain, Waking};
+use super::tile::{Context, Start, TileChains, Waking};
 use crate::bootstrap::Bootstrap;
 use crate::chain::{PathChain, Traced};
 use crate::drive::{Clock, SetUpStage};
@@ -102,7 +102,7 @@ pub(super) struct Initialized {
 /// time budget).
 pub(super) fn initialize<O, I>(
     ctx: &Context<'_, O, I>,
-    chains: &mut [TileChain<O::Radiance>],
+    chains: &mut TileChains<O::Radiance>,
     settings: &StratifiedSettings,
     seed: u64,
     max_traces: u64,
@@ -114,7 +114,7 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let init = &settings.initialization;
-    let n = chains.len();
+    let n = chains.chains.len();
     let wanted = libm::ceil(init.coverage * n as f64) as usize;
     if init.global_chains == 0 || wanted == 0 || max_traces == 0 {
         return Ok(Initialized::default());
@@ -196,7 +196,7 @@ where
             }
             initialized[visit.tile] = true;
             count += 1;
-            let chain = &mut chains[visit.tile];
+            let chain = &mut chains.chains[visit.tile];
             chain.take_sample(visit.sample);
             chain.pending = true;
             chain.start = Start::Global;
@@ -210,10 +210,11 @@ where
     );
     let width = ctx.tiles.resolution().width as usize;
     let work = || Waking::new(ctx.tiles, ctx.small_step);
-    let replays = parallel::sum_chunks_init(chains, width, work, |work, y, row| {
-        let pending = row.iter_mut().enumerate().filter(|(_, c)| c.pending);
-        pending.fold(Traced::default(), |traced, (x, c)| {
-            traced + c.evaluate_current(ctx, y * width + x, work)
+    let mut rows = chains.rows(width);
+    let replays = parallel::sum_chunks_init(&mut rows, 1, work, |work, y, row| {
+        let pending = row[0].tiles().enumerate().filter(|(_, t)| t.chain.pending);
+        pending.fold(Traced::default(), |traced, (x, mut t)| {
+            traced + t.evaluate_current(ctx, y * width + x, work)
         })
     });
     Ok(Initialized {

@@ -6,7 +6,7 @@
 use alloc::vec;
 use alloc::vec::Vec;
 
-use super::tile::{Context, Start, TileChain, Value, Waking};
+use super::tile::{Context, Start, Tile, TileChains, TileRow, Value, Waking};
 use crate::oracle::{PathOracle, Radiance};
 use crate::parallel;
 use crate::rng::uniform_f64;
@@ -39,8 +39,8 @@ impl core::ops::Add for ExchangeCount {
 /// buffers of one value per tile offset, reused across pairs.
 fn exchange<O, I>(
     ctx: &Context<'_, O, I>,
-    (s, a): (usize, &mut TileChain<O::Radiance>),
-    (t, b): (usize, &mut TileChain<O::Radiance>),
+    (s, a): (usize, &mut Tile<'_, O::Radiance>),
+    (t, b): (usize, &mut Tile<'_, O::Radiance>),
     scratch: &mut Scratch<O::Radiance>,
 ) -> ExchangeCount
 where
@@ -48,7 +48,7 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let mut count = ExchangeCount::default();
-    match (a.target > 0.0, b.target > 0.0) {
+    match (a.chain.target > 0.0, b.chain.target > 0.0) {
         (false, false) => {}
         (true, true) => {
             let Scratch {
@@ -60,11 +60,11 @@ where
             count.traces = traced_a.paths + traced_b.paths;
             count.invalid = traced_a.invalid + traced_b.invalid;
             count.attempts = 1;
-            let ratio = (tb * ta) / (f64::from(a.target) * f64::from(b.target));
-            if uniform_f64(a.rng.rng()) < ratio {
+            let ratio = (tb * ta) / (f64::from(a.chain.target) * f64::from(b.chain.target));
+            if uniform_f64(a.chain.rng.rng()) < ratio {
                 // The states change tiles; each tile keeps its random stream.
-                core::mem::swap(&mut a.sample, &mut b.sample);
-                a.sample.swap_own(&mut b.sample);
+                core::mem::swap(&mut a.chain.sample, &mut b.chain.sample);
+                a.chain.sample.swap_own(&mut b.chain.sample);
                 a.set_state(b_in_s, tb);
                 b.set_state(a_in_t, ta);
                 count.accepted = 1;
@@ -100,8 +100,8 @@ impl<R: Radiance> Scratch<R> {
 /// `T_t > 0` there.
 fn borrow<O, I>(
     ctx: &Context<'_, O, I>,
-    (s, a): (usize, &mut TileChain<O::Radiance>),
-    (t, b): (usize, &mut TileChain<O::Radiance>),
+    (s, a): (usize, &mut Tile<'_, O::Radiance>),
+    (t, b): (usize, &mut Tile<'_, O::Radiance>),
     scratch: &mut Scratch<O::Radiance>,
 ) -> ExchangeCount
 where
@@ -111,10 +111,10 @@ where
     let values = &mut scratch.values[0];
     let (target, traced) = a.evaluate_in(ctx, (s, t), values, &mut scratch.work);
     if target > 0.0 {
-        b.take_sample(a.sample.clone());
+        b.chain.take_sample(a.chain.sample.clone());
         b.set_state(values, target);
-        if b.start == Start::None {
-            b.start = Start::Borrowed;
+        if b.chain.start == Start::None {
+            b.chain.start = Start::Borrowed;
         }
     }
     ExchangeCount {
@@ -133,7 +133,7 @@ fn pairing(round: u64) -> (bool, usize) {
 /// Runs every exchange of one pairing, pairs in parallel.
 pub(super) fn exchange_all<O, I>(
     ctx: &Context<'_, O, I>,
-    chains: &mut [TileChain<O::Radiance>],
+    chains: &mut TileChains<O::Radiance>,
     width: usize,
     round: u64,
 ) -> ExchangeCount
@@ -142,38 +142,38 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let (horizontal, parity) = pairing(round);
+    let mut rows = chains.rows(width);
     if horizontal {
-        let row = |y: usize, row: &mut [TileChain<O::Radiance>]| {
+        let row = |y: usize, row: &mut [TileRow<'_, O::Radiance>]| {
             let mut count = ExchangeCount::default();
             let mut scratch = Scratch::new(ctx);
-            let mut x = parity;
-            while x + 1 < width {
-                let (left, right) = row.split_at_mut(x + 1);
-                let s = y * width + x;
-                let (a, b) = ((s, &mut left[x]), (s + 1, &mut right[0]));
-                count = count + exchange(ctx, a, b, &mut scratch);
-                x += 2;
+            let mut tiles: Vec<_> = row[0].tiles().collect();
+            let first = parity.min(tiles.len());
+            let pairs = tiles[first..].chunks_exact_mut(2);
+            for (k, pair) in pairs.enumerate() {
+                let [a, b] = pair else { continue };
+                let s = y * width + parity + 2 * k;
+                count = count + exchange(ctx, (s, a), (s + 1, b), &mut scratch);
             }
             count
         };
-        parallel::sum_chunks(chains, width, row)
+        parallel::sum_chunks(&mut rows, 1, row)
     } else {
-        let skip = (parity * width).min(chains.len());
-        let rows = |k: usize, pair: &mut [TileChain<O::Radiance>]| {
+        let skip = parity.min(rows.len());
+        let pairs = |k: usize, pair: &mut [TileRow<'_, O::Radiance>]| {
             let mut count = ExchangeCount::default();
-            if pair.len() < 2 * width {
+            let [top, bottom] = pair else {
                 return count;
-            }
+            };
             let mut scratch = Scratch::new(ctx);
-            let (top, bottom) = pair.split_at_mut(width);
             let y = parity + 2 * k;
-            for (x, (a, b)) in top.iter_mut().zip(bottom.iter_mut()).enumerate() {
+            for (x, (mut a, mut b)) in top.tiles().zip(bottom.tiles()).enumerate() {
                 let s = y * width + x;
-                count = count + exchange(ctx, (s, a), (s + width, b), &mut scratch);
+                count = count + exchange(ctx, (s, &mut a), (s + width, &mut b), &mut scratch);
             }
             count
         };
-        parallel::sum_chunks(&mut chains[skip..], 2 * width, rows)
+        parallel::sum_chunks(&mut rows[skip..], 2, pairs)
     }
 }
 

@@ -73,7 +73,7 @@
 //!
 //! | file | owns |
 //! |---|---|
-//! | `tile.rs` | a tile's chain: its state at rest and awake, target and weights, its accumulators |
+//! | `tile.rs` | a tile's chain: its state at rest and awake, target and weights; the film's chains, with every tile's values and sums in one array each |
 //! | `light.rs` | light tracing's splats, estimated apart by Monte Carlo |
 //! | `local.rs` | local replica exchange and state borrowing |
 //! | `init.rs` | the global chains' initialization |
@@ -92,8 +92,6 @@ mod settings;
 mod sweeps;
 mod tile;
 
-use alloc::vec::Vec;
-
 pub use self::settings::{Anchor, Initialization, Solver, StratifiedSettings};
 
 use self::init::initialize;
@@ -101,7 +99,7 @@ use self::light::LightTracing;
 use self::reconstruction::ReconstructionTime;
 use self::regularizer::Samples;
 use self::sweeps::{Saved, SweepCosts, Sweeps, SweptRun, finish_runs};
-use self::tile::{Context, TileChain};
+use self::tile::{Context, TileChains};
 use super::job::Job;
 use super::output::{Output, StratifiedStats};
 use super::runs::{self, Pooled};
@@ -191,11 +189,7 @@ where
     let costs = SweepCosts::new(&tiles, settings);
     let (position, saved) = match job.resumed::<Saved<O::Radiance>>()? {
         Some((position, saved)) => {
-            let fits = saved.chains.len() == n
-                && saved
-                    .chains
-                    .iter()
-                    .all(|c| c.fits(offsets, &settings.mutation.small_step))
+            let fits = saved.chains.fits(n, offsets, &settings.mutation.small_step)
                 && saved.samples.fits(n, O::Radiance::CHANNELS);
             let light_fits = saved.light.fits(&new_light(), &tiles)
                 && match (&saved.emission, &emission_shape) {
@@ -317,11 +311,7 @@ where
 {
     let n = ctx.tiles.count();
     let offsets = ctx.tiles.offsets().len();
-    // Made on the render's threads: a film holds a chain per pixel.
-    let (seed, mutation) = (job.seed, &settings.mutation);
-    let mut chains: Vec<TileChain<O::Radiance>> = (0..n)
-        .map(|s| TileChain::new(seed, s, n, offsets, mutation))
-        .collect();
+    let mut chains = TileChains::new(job.seed, n, offsets, &settings.mutation);
     let init = &settings.initialization;
     let (init_traces, init_clock) = match job.budget {
         Budget::Samples(total) => {

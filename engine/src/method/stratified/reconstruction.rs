@@ -5,16 +5,14 @@
 //! then the known pixels, the fallback and the anchored total (ours, see
 //! the module above); and, under a time budget, the time it is expected to take.
 
-use alloc::boxed::Box;
 use alloc::vec;
 use alloc::vec::Vec;
 
-use super::light::LightTracing;
 use super::regularizer::{Draws, Halves, LargeSteps, Samples, anchor, fall_back, take_known};
 use super::settings::{Solver, StratifiedSettings};
+use super::tile::TileSums;
 #[cfg(feature = "std")]
 use crate::drive::Budget;
-use crate::emission::SeenEmission;
 use crate::error::Error;
 use crate::film::Film;
 use crate::method::job::Job;
@@ -47,34 +45,27 @@ pub(super) struct Reconstructed {
     pub cut: bool,
 }
 
-/// The image of the tiles' `sums` (their uniform samples' counts and `N
-/// G_s(k)`) after `sweeps` sweeps; the weighted solver (and
-/// cross-validation) end early when `stop` says so. Each tile's sums are
-/// let go as they are taken, the uniform samples' once gathered.
+/// The image of the tiles' `sums` after `sweeps` sweeps; the weighted
+/// solver (and cross-validation) end early when `stop` says so. The
+/// uniform samples are let go once gathered.
 pub(super) fn reconstruct_image(
     tiles: &Tiles,
-    sums: Vec<(Draws, Box<[f32]>)>,
+    sums: TileSums,
     pooled: Samples,
     settings: &StratifiedSettings,
     channels: usize,
     sweeps: u64,
     stop: &dyn Fn() -> bool,
 ) -> Result<Reconstructed, Error> {
-    let (draws, mut sums): (Vec<Draws>, Vec<_>) = sums.into_iter().unzip();
+    let TileSums {
+        draws,
+        mut unscaled,
+    } = sums;
     let (samples, regularizer) = LargeSteps::gather(tiles, &draws, &pooled);
     let halves = (settings.cross_validate_alpha && matches!(settings.solver, Solver::Weighted(_)))
         .then(|| Halves::gather(tiles, &draws, &pooled, &samples));
     drop((draws, pooled));
-    let let_go = |tile: &mut Box<[f32]>| *tile = Box::default();
-    let unscaled = unscaled(
-        tiles,
-        &mut sums,
-        let_go,
-        channels,
-        sweeps.max(1),
-        &regularizer,
-    );
-    drop(sums);
+    estimates_of_sums(tiles, &mut unscaled, channels, sweeps.max(1), &regularizer);
     let mut solver = settings.solver;
     let mut alpha = None;
     if let Solver::Weighted(w) = &mut solver {
@@ -127,21 +118,21 @@ pub(super) fn reconstruct_image(
     })
 }
 
-/// Eq. 12 with the initial normalizations, channel by channel: a quick
-/// reconstruction for previews.
-pub(super) fn preview<S: Copy + Into<f64>, T: AsRef<[S]> + Send>(
+/// Eq. 12 with the initial normalizations, channel by channel, from the
+/// tiles' uniform samples' counts `draws` and their `sums` `N G_s(k)`: a
+/// quick reconstruction for previews.
+pub(super) fn preview(
     tiles: &Tiles,
-    chains: impl Iterator<Item = (Draws, T)>,
+    draws: &[Draws],
+    sums: &[f32],
     pooled: &Samples,
     settings: &StratifiedSettings,
     sweeps: u64,
-    light: &LightTracing,
-    emission: Option<&SeenEmission>,
 ) -> Film {
     let channels = pooled.channels();
-    let (draws, mut sums): (Vec<Draws>, Vec<T>) = chains.unzip();
-    let (_, regularizer) = LargeSteps::gather(tiles, &draws, pooled);
-    let unscaled = unscaled(tiles, &mut sums, |_| {}, channels, sweeps, &regularizer);
+    let (_, regularizer) = LargeSteps::gather(tiles, draws, pooled);
+    let mut unscaled = sums.to_vec();
+    estimates_of_sums(tiles, &mut unscaled, channels, sweeps, &regularizer);
     let mut film = Film::new(tiles.resolution(), channels);
     for c in 0..channels {
         let g = channel(&unscaled, channels, c);
@@ -150,10 +141,6 @@ pub(super) fn preview<S: Copy + Into<f64>, T: AsRef<[S]> + Send>(
         set_channel(&mut film, c, &reconstruct::image(tiles, &g, &b, 1));
     }
     anchor(&mut film, &regularizer, &[], settings.anchor);
-    light.add_to(&mut film, sweeps);
-    if let Some(emission) = emission {
-        emission.add_to(&mut film);
-    }
     film
 }
 
@@ -230,10 +217,10 @@ impl ReconstructionTime {
     }
 }
 
-/// Per tile, offset and channel `G_s(k)` (eq. 10, over `sweeps` steps), in
-/// `f32` (a render's largest array after its chains: the solver takes it a
-/// channel at a time, in `f64`). A
-/// tile whose chain never found a state with `T_s > 0` (at low budgets, one
+/// Turns the tiles' `sums` `N G_s(k)` (per tile, offset and channel) into
+/// `G_s(k)` (eq. 10, over `sweeps` steps) in place, in `f32` (a render's
+/// largest array after its chains: the solver takes it a channel at a
+/// time, in `f64`). A tile whose chain never found a state with `T_s > 0` (at low budgets, one
 /// sweep leaves some) has no estimate of its own; it takes the regularizer's
 /// values `Î(k)` instead (an unscaled estimate whose normalization is 1), so
 /// that in eq. 12 and in the solver's overlaps it stands for the Monte
@@ -242,31 +229,23 @@ impl ReconstructionTime {
 /// pixels to one weakly constrained tile. A tile black for the regularizer
 /// too stays without an estimate and is left out
 /// ([`reconstruct::informative`]).
-fn unscaled<S: Copy + Into<f64>, T: AsRef<[S]> + Send>(
+fn estimates_of_sums(
     tiles: &Tiles,
-    sums: &mut [T],
-    let_go: impl Fn(&mut T) + Sync,
+    sums: &mut [f32],
     channels: usize,
     sweeps: u64,
     regularizer: &Film,
-) -> Vec<f32> {
+) {
     let per_tile = (tiles.offsets().len() * channels).max(1);
     let width = tiles.resolution().width.max(1) as usize;
-    let mut g = vec![0.0f32; tiles.count() * per_tile];
-    // A row of tiles a task, each tile's sums let go once read.
-    let mut rows: Vec<_> = g
-        .chunks_mut(per_tile * width)
-        .zip(sums.chunks_mut(width))
-        .enumerate()
-        .collect();
-    parallel::for_each(&mut rows, |(y, (g, sums))| {
-        for (x, (tile, sums)) in g.chunks_mut(per_tile).zip(sums.iter_mut()).enumerate() {
-            for (g, &v) in tile.iter_mut().zip(sums.as_ref()) {
-                *g = (v.into() / sweeps as f64) as f32;
+    // A row of tiles a task.
+    parallel::for_each_chunk(sums, per_tile * width, |y, row| {
+        for (x, tile) in row.chunks_mut(per_tile).enumerate() {
+            for g in tile.iter_mut() {
+                *g = (f64::from(*g) / sweeps as f64) as f32;
             }
-            let_go(sums);
             if tile.iter().all(|&v| v == 0.0) {
-                for (o, pixel) in tiles.pixels(*y * width + x) {
+                for (o, pixel) in tiles.pixels(y * width + x) {
                     let mc = &regularizer.data()[pixel * channels..(pixel + 1) * channels];
                     for (g, &mc) in tile[o * channels..(o + 1) * channels].iter_mut().zip(mc) {
                         *g = mc as f32;
@@ -275,8 +254,6 @@ fn unscaled<S: Copy + Into<f64>, T: AsRef<[S]> + Send>(
             }
         }
     });
-    drop(rows);
-    g
 }
 
 /// The weights `α` of the regularizer that cross-validation chooses from

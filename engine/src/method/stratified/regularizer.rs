@@ -158,15 +158,15 @@ impl Samples {
         )
     }
 
-    /// The tile rows `y` with `y % (2 reach + 1) == phase` (`reach` from
-    /// [`Tiles::reach`]), each with its tiles' chains and the pixel rows they
+    /// The tile rows `y` of `rows` with `y % (2 reach + 1) == phase`
+    /// (`reach` from [`Tiles::reach`]), each with the pixel rows its tiles
     /// reach, which no other of these rows reaches.
     pub fn phase<'a, T>(
         &'a mut self,
-        chains: &'a mut [T],
+        rows: Vec<T>,
         tiles: &Tiles,
         phase: usize,
-    ) -> Vec<(usize, &'a mut [T], SampleRows<'a>)> {
+    ) -> Vec<(usize, T, SampleRows<'a>)> {
         let width = tiles.resolution().width as usize;
         let reach = tiles.reach();
         let span = 2 * reach + 1;
@@ -193,11 +193,7 @@ impl Samples {
             rest = later;
             first += span as isize;
         }
-        let rows = chains
-            .chunks_mut(width)
-            .enumerate()
-            .skip(phase)
-            .step_by(span);
+        let rows = rows.into_iter().enumerate().skip(phase).step_by(span);
         rows.zip(blocks).map(|((y, row), b)| (y, row, b)).collect()
     }
 }

@@ -3,7 +3,6 @@
 //! (from [`StratifiedSettings::exchange_after`] on), a sample budget's
 //! remainder after the last sweep, the checkpoint and the render's output.
 
-use alloc::boxed::Box;
 use alloc::vec::Vec;
 
 use serde::{Deserialize, Serialize};
@@ -13,7 +12,7 @@ use super::local::{exchange_all, exchange_cost};
 use super::reconstruction::{preview, reconstruct_image};
 use super::regularizer::{Draws, Samples};
 use super::settings::StratifiedSettings;
-use super::tile::{Context, Row, Start, TileChain, Waking, accumulate};
+use super::tile::{Context, Row, Start, Tile, TileChains, TileSums, Waking, accumulate};
 use crate::chain::{ChainStats, Traced};
 use crate::checkpoint;
 use crate::drive::{Budget, RenderStats, Rounds};
@@ -31,7 +30,7 @@ use crate::tiles::Tiles;
 /// and the bootstrap's traces).
 #[derive(Deserialize)]
 pub(super) struct Saved<R> {
-    pub chains: Vec<TileChain<R>>,
+    pub chains: TileChains<R>,
     pub samples: Samples,
     pub chain_stats: ChainStats,
     pub stats: StratifiedStats,
@@ -48,7 +47,7 @@ pub(super) struct Saved<R> {
 pub(super) struct Sweeps<'a, 'b, O: PathOracle, I: ?Sized> {
     pub(super) ctx: &'a Context<'b, O, I>,
     pub(super) settings: &'a StratifiedSettings,
-    pub(super) chains: Vec<TileChain<O::Radiance>>,
+    pub(super) chains: TileChains<O::Radiance>,
     /// Every pixel's uniform samples.
     pub(super) samples: Samples,
     /// The tile chains' counters, summed.
@@ -96,15 +95,15 @@ where
     /// same: a sweep's, then the remainder's).
     fn centre_paths(&self) -> u64 {
         let all = self.stats.regularizer_samples + self.stats.remainder_samples;
-        all / self.chains.len().max(1) as u64
+        all / self.chains.chains.len().max(1) as u64
     }
 
     /// Traces `paths` regularizer paths at every tile's centre: the budget's
     /// remainder ([`Self::remainder`]).
     fn trace_remainder(&mut self, paths: u32) {
         let ctx = self.ctx;
-        let rows = self.each_row(|_, chain, tile, row| {
-            let (paths, invalid) = chain.trace_regularizer(ctx, tile, paths, row);
+        let rows = self.each_row(|_, t, tile, row| {
+            let (paths, invalid) = t.chain.trace_regularizer(ctx, tile, paths, row);
             Traced { paths, invalid }
         });
         let mut traced = Traced::default();
@@ -117,7 +116,7 @@ where
         self.stats.remainder_samples += traced.paths;
     }
 
-    /// `f(work, chain, tile, row)` for every tile, in parallel, a task's
+    /// `f(work, tile's chain, tile, row)` for every tile, in parallel, a task's
     /// chains woken in its `work`; per row of tiles, in row order, the sum
     /// of `f` and what the row gave ([`Row`]). Tile rows go in phases whose
     /// rows reach disjoint pixel rows of the uniform samples
@@ -126,7 +125,7 @@ where
         &mut self,
         f: impl Fn(
             &mut Waking<O::Radiance>,
-            &mut TileChain<O::Radiance>,
+            &mut Tile<'_, O::Radiance>,
             usize,
             &mut Row<'_, O::Radiance>,
         ) -> C
@@ -139,13 +138,13 @@ where
         let ctx = self.ctx;
         let width = ctx.tiles.resolution().width as usize;
         let mut swept: Vec<Option<Swept<O::Radiance, C>>> =
-            (0..self.chains.len().div_ceil(width.max(1)))
+            (0..self.chains.chains.len().div_ceil(width.max(1)))
                 .map(|_| None)
                 .collect();
         for phase in 0..2 * ctx.tiles.reach() + 1 {
             let mut rows: Vec<_> = self
                 .samples
-                .phase(&mut self.chains, ctx.tiles, phase)
+                .phase(self.chains.rows(width), ctx.tiles, phase)
                 .into_iter()
                 .map(|(y, chains, samples)| {
                     let row = Row {
@@ -158,9 +157,9 @@ where
                 .collect();
             let work = || Waking::new(ctx.tiles, ctx.small_step);
             let sums = parallel::map_each_init(&mut rows, work, |work, (y, chains, row)| {
-                let tiles = chains.iter_mut().enumerate();
-                tiles.fold(C::default(), |sum, (x, chain)| {
-                    sum + f(work, chain, *y * width + x, row)
+                let tiles = chains.tiles().enumerate();
+                tiles.fold(C::default(), |sum, (x, mut tile)| {
+                    sum + f(work, &mut tile, *y * width + x, row)
                 })
             });
             for ((y, _, row), sum) in rows.into_iter().zip(sums) {
@@ -196,11 +195,11 @@ where
     pub(super) fn into_run(self, bootstrap_traces: u64) -> SweptRun {
         let centre_paths = self.centre_paths();
         let mut stats = self.stats;
-        let mut chains = self.chains;
-        // What only a chain needs let go on the render's threads.
-        parallel::for_each(&mut chains, TileChain::let_go_of_state);
-        let tiles = chains
-            .into_iter()
+        let TileChains {
+            chains, unscaled, ..
+        } = self.chains;
+        let draws = chains
+            .iter()
             .map(|c| {
                 match c.start {
                     Start::None => stats.never_initialized += 1,
@@ -208,11 +207,15 @@ where
                     Start::Borrowed => stats.initialized_by_borrowing += 1,
                     Start::Uniform => stats.initialized_by_uniform_draws += 1,
                 }
-                (c.draws(centre_paths), c.unscaled)
+                c.draws(centre_paths)
             })
             .collect();
+        // A packed sample a tile, let go on the render's threads.
+        let mut chains = chains;
+        parallel::for_each(&mut chains, |c| c.sample.forget_numbers());
+        drop(chains);
         SweptRun {
-            tiles,
+            tiles: TileSums { draws, unscaled },
             samples: self.samples,
             light: self.light,
             emission: self.emission,
@@ -231,9 +234,7 @@ where
 /// all its `G_s(k)` alike, which its `b_s` absorbs).
 #[derive(Clone, Serialize, Deserialize)]
 pub(crate) struct SweptRun {
-    /// Per tile, its uniform samples' counts and `N G_s(k)` per offset and
-    /// channel.
-    tiles: Vec<(Draws, Box<[f32]>)>,
+    tiles: TileSums,
     samples: Samples,
     light: LightTracing,
     emission: Option<SeenEmission>,
@@ -261,12 +262,11 @@ impl SweptRun {
         emission: Option<&SeenEmission>,
     ) -> bool {
         let per_tile = tiles.offsets().len() * channels;
-        self.tiles.len() == tiles.count()
-            && self.tiles.iter().all(|(draws, unscaled)| {
-                draws.fits()
-                    && unscaled.len() == per_tile
-                    && unscaled.iter().all(|v| v.is_finite() && *v >= 0.0)
-            })
+        let TileSums { draws, unscaled } = &self.tiles;
+        draws.len() == tiles.count()
+            && draws.iter().all(Draws::fits)
+            && unscaled.len() == tiles.count() * per_tile
+            && unscaled.iter().all(|v| v.is_finite() && *v >= 0.0)
             && self.samples.fits(tiles.count(), channels)
             && self.light.fits(light, tiles)
             && match (&self.emission, emission) {
@@ -278,11 +278,11 @@ impl SweptRun {
 
     /// Adds another run's sums and counters.
     pub(super) fn pool(&mut self, other: SweptRun) {
-        for ((draws, unscaled), (more, sums)) in self.tiles.iter_mut().zip(other.tiles) {
-            draws.add(&more);
-            for (a, b) in unscaled.iter_mut().zip(sums.iter()) {
-                accumulate(a, f64::from(*b));
-            }
+        for (draws, more) in self.tiles.draws.iter_mut().zip(&other.tiles.draws) {
+            draws.add(more);
+        }
+        for (a, b) in self.tiles.unscaled.iter_mut().zip(&other.tiles.unscaled) {
+            accumulate(a, f64::from(*b));
         }
         self.samples.pool(&other.samples);
         self.light.pool(other.light);
@@ -433,13 +433,13 @@ where
         let after = self.costs.exchange_after;
         for _ in 0..units {
             let paths = self.settings.regularizer_paths;
-            let rows = self.each_row(|work, chain, tile, row| {
+            let rows = self.each_row(|work, t, tile, row| {
                 let mut traced = SweepTraces {
-                    steps: chain.step(ctx, tile, work, row),
+                    steps: t.step(ctx, tile, work, row),
                     ..SweepTraces::default()
                 };
                 if paths > 0 {
-                    let (paths, invalid) = chain.trace_regularizer(ctx, tile, paths, row);
+                    let (paths, invalid) = t.chain.trace_regularizer(ctx, tile, paths, row);
                     traced.regularizer += Traced { paths, invalid };
                 }
                 traced
@@ -472,7 +472,7 @@ where
                 && self.stats.sweeps == last
             {
                 let left = budget.saturating_sub(self.samples());
-                let per_tile = left / self.chains.len().max(1) as u64;
+                let per_tile = left / self.chains.chains.len().max(1) as u64;
                 if per_tile > 0 {
                     self.trace_remainder(u32::try_from(per_tile).unwrap_or(u32::MAX));
                 }
@@ -490,7 +490,8 @@ where
     fn spend_rest(&mut self, seconds: f64, unit_seconds: f64) {
         let sweeps = self.stats.sweeps;
         let sweep_paths = self.costs.of(sweeps.max(1)) - self.costs.of(sweeps.max(1) - 1);
-        let paths = rest_paths_per_tile(seconds, unit_seconds, sweep_paths, self.chains.len());
+        let paths =
+            rest_paths_per_tile(seconds, unit_seconds, sweep_paths, self.chains.chains.len());
         if paths > 0 {
             self.trace_remainder(paths);
         }
@@ -504,17 +505,20 @@ where
     /// reconstruction).
     fn preview(&self) -> Film {
         let centre_paths = self.centre_paths();
-        preview(
-            self.ctx.tiles,
-            self.chains
-                .iter()
-                .map(|c| (c.draws(centre_paths), &c.unscaled)),
-            &self.samples,
-            self.settings,
-            self.stats.sweeps,
-            &self.light,
-            self.emission.as_ref(),
-        )
+        let draws: Vec<Draws> = self
+            .chains
+            .chains
+            .iter()
+            .map(|c| c.draws(centre_paths))
+            .collect();
+        let sweeps = self.stats.sweeps;
+        let (tiles, sums) = (self.ctx.tiles, &self.chains.unscaled);
+        let mut film = preview(tiles, &draws, sums, &self.samples, self.settings, sweeps);
+        self.light.add_to(&mut film, sweeps);
+        if let Some(emission) = &self.emission {
+            emission.add_to(&mut film);
+        }
+        film
     }
 }
 

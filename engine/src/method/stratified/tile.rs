@@ -5,7 +5,6 @@
 //! unscaled estimates `G_s(k)`, and the large steps its coin chose also into
 //! the Monte Carlo regularizer.
 
-use alloc::boxed::Box;
 use alloc::vec;
 use alloc::vec::Vec;
 use serde::{Deserialize, Serialize};
@@ -17,6 +16,7 @@ use crate::mutate::{MutationParams, SmallStep};
 use crate::oracle::{
     FilmPoint, PathOracle, Radiance, Resolution, Sampler, Splat, SplatSink, Temperature,
 };
+use crate::parallel;
 use crate::rng::{self, Domain, uniform_f64};
 use crate::sample::{IndependentSampler, MltSampler, PackedSample, Proposal};
 use crate::target::{Evaluated, Importance, SplatList, valid_splat};
@@ -93,25 +93,20 @@ pub(super) enum Start {
     Uniform,
 }
 
-/// A tile's chain at rest and its accumulators. A film holds a chain per
-/// pixel, so what a chain keeps between its steps is kept compact: the
-/// primary sample packed in one allocation ([`PackedSample`]), the current
-/// state's values and `G_s(k)` in one each, counters; the working form (the
-/// unpacked sample, room for a proposal) is a [`Waking`] that each task
-/// lends to its tiles in turn, and the uniform samples it draws are summed
-/// per pixel ([`Samples`](super::regularizer::Samples)).
+/// A tile's chain at rest and its counters. A film holds a chain per pixel,
+/// so what a chain keeps between its steps is kept compact: the primary
+/// sample packed in one allocation ([`PackedSample`]), counters; its
+/// current values and `G_s(k)` are in [`TileChains`]' arrays, one for
+/// every tile. The working form (the unpacked sample, room for a proposal)
+/// is a [`Waking`] that each task lends to its tiles in turn, and the
+/// uniform samples it draws are summed per pixel
+/// ([`Samples`](super::regularizer::Samples)).
 #[derive(Serialize, Deserialize)]
-pub(super) struct TileChain<R> {
+pub(super) struct TileChain {
     /// The current state's primary sample.
     pub sample: PackedSample,
-    /// The current state's evaluation in every tile pixel (offset order;
-    /// zero where the tile is clipped).
-    pub values: Box<[Value<R>]>,
     /// `T_s` of the current state, the largest importance of its values.
     pub target: f32,
-    /// `N G_s(k)` per offset and channel, in `f32`: a run adds two terms a
-    /// sweep, each rounded once (see [`add`]).
-    pub unscaled: Box<[f32]>,
     /// Its coin-chosen large steps (its uniform samples but the regularizer
     /// paths, which every tile of a run traces alike).
     pub large_steps: u64,
@@ -123,9 +118,64 @@ pub(super) struct TileChain<R> {
     pub pending: bool,
 }
 
+/// A film's tile chains, and beside them what every tile keeps a value of
+/// per tile pixel, in one array each (not a box a tile: two allocations
+/// fewer a pixel to make, free and keep).
+#[derive(Serialize, Deserialize)]
+pub(super) struct TileChains<R> {
+    pub chains: Vec<TileChain>,
+    /// Per tile, the current state's evaluation in every tile pixel
+    /// (offset order; zero where the tile is clipped).
+    pub values: Vec<Value<R>>,
+    /// Per tile, `N G_s(k)` per offset and channel, in `f32`: a run adds
+    /// two terms a sweep, each rounded once (see [`add`]).
+    pub unscaled: Vec<f32>,
+    /// Pixels a tile.
+    offsets: usize,
+}
+
+/// What a run leaves of its tile chains for the reconstruction: per tile,
+/// its uniform samples' counts, and `N G_s(k)` per offset and channel.
+#[derive(Clone, Serialize, Deserialize)]
+pub(super) struct TileSums {
+    pub draws: Vec<Draws>,
+    pub unscaled: Vec<f32>,
+}
+
+/// One tile's chain and its values and sums in [`TileChains`].
+pub(super) struct Tile<'a, R> {
+    pub chain: &'a mut TileChain,
+    pub values: &'a mut [Value<R>],
+    pub unscaled: &'a mut [f32],
+}
+
+/// A row of tiles of [`TileChains`].
+pub(super) struct TileRow<'a, R> {
+    chains: &'a mut [TileChain],
+    values: &'a mut [Value<R>],
+    unscaled: &'a mut [f32],
+    offsets: usize,
+}
+
+impl<'a, R: Radiance> TileRow<'a, R> {
+    /// Its tiles, in order.
+    pub fn tiles(&mut self) -> impl Iterator<Item = Tile<'_, R>> {
+        let offsets = self.offsets.max(1);
+        self.chains
+            .iter_mut()
+            .zip(self.values.chunks_mut(offsets))
+            .zip(self.unscaled.chunks_mut(offsets * R::CHANNELS))
+            .map(|((chain, values), unscaled)| Tile {
+                chain,
+                values,
+                unscaled,
+            })
+    }
+}
+
 /// The working form of a tile chain: a primary sample unpacked, the current
 /// state and room for a proposal. A task makes one and wakes each of its
-/// tiles' chains in it in turn ([`TileChain::step`]).
+/// tiles' chains in it in turn ([`Tile::step`]).
 pub(super) struct Waking<R> {
     chain: Chain<TileState<R>>,
 }
@@ -147,20 +197,20 @@ impl<R: Radiance> Waking<R> {
     }
 
     /// Takes `tile`'s current state.
-    fn wake(&mut self, tile: &TileChain<R>) {
+    fn wake(&mut self, tile: &Tile<'_, R>) {
         let (sampler, state) = self.chain.parts_mut();
-        sampler.unpack(&tile.sample);
-        state.values.copy_from_slice(&tile.values);
-        state.target = tile.target.into();
+        sampler.unpack(&tile.chain.sample);
+        state.values.copy_from_slice(tile.values);
+        state.target = tile.chain.target.into();
     }
 
     /// Gives `tile` back its current state.
-    fn rest(&self, tile: &mut TileChain<R>) {
-        self.chain.sampler().pack(&mut tile.sample);
+    fn rest(&self, tile: &mut Tile<'_, R>) {
+        self.chain.sampler().pack(&mut tile.chain.sample);
         let state = self.chain.state();
         tile.values.copy_from_slice(&state.values);
         // The largest of `f32` importances: exact.
-        tile.target = state.target as f32;
+        tile.chain.target = state.target as f32;
     }
 }
 
@@ -364,41 +414,110 @@ pub(super) fn accumulate(sum: &mut f32, term: f64) {
     *sum = (f64::from(*sum) + term).min(f64::from(f32::MAX)) as f32;
 }
 
-impl<R: Radiance> TileChain<R> {
-    pub fn new(
-        seed: u64,
-        tile: usize,
-        tiles: usize,
-        offsets: usize,
-        mutation: &MutationParams,
-    ) -> Self {
-        Self {
+impl<R: Radiance> TileChains<R> {
+    /// A chain for each of `tiles` tiles of `offsets` pixels, with its own
+    /// random streams of `seed`, no state yet and its sums at zero; the
+    /// chains made on the render's threads.
+    pub fn new(seed: u64, tiles: usize, offsets: usize, mutation: &MutationParams) -> Self {
+        let chains = parallel::map_indices(tiles, |tile| TileChain {
             sample: PackedSample::new(
                 mutation.small_step,
                 rng::stream(seed, Domain::Tile, tile as u64),
             ),
-            values: vec![Value::default(); offsets].into_boxed_slice(),
             target: 0.0,
-            unscaled: vec![0.0; offsets * R::CHANNELS].into_boxed_slice(),
             large_steps: 0,
             rng: IndependentSampler::new(rng::stream(seed, Domain::Tile, (tile + tiles) as u64)),
             start: Start::None,
             pending: false,
+        });
+        Self {
+            chains,
+            values: vec![Value::default(); tiles * offsets],
+            unscaled: vec![0.0; tiles * offsets * R::CHANNELS],
+            offsets,
         }
     }
 
-    /// Whether a chain read from a checkpoint fits tiles of `offsets`
-    /// offsets mutated by `small_step`: its sums sized so, finite and not
-    /// negative, its state sound.
-    pub fn fits(&self, offsets: usize, small_step: &SmallStep) -> bool {
-        self.values.len() == offsets
-            && self.unscaled.len() == offsets * R::CHANNELS
+    /// Whether chains read from a checkpoint fit `tiles` tiles of `offsets`
+    /// offsets mutated by `small_step`: their arrays sized so, the sums
+    /// finite and not negative, every state sound.
+    pub fn fits(&self, tiles: usize, offsets: usize, small_step: &SmallStep) -> bool {
+        self.offsets == offsets
+            && self.chains.len() == tiles
+            && self.values.len() == tiles * offsets
+            && self.unscaled.len() == tiles * offsets * R::CHANNELS
             && self.unscaled.iter().all(|x| x.is_finite() && *x >= 0.0)
-            && self.target.is_finite()
-            && self.sample.fits(small_step)
-            && self.large_steps < Draws::MOST
+            && self.chains.iter().all(|c| {
+                c.target.is_finite() && c.sample.fits(small_step) && c.large_steps < Draws::MOST
+            })
     }
 
+    /// Its rows of `width` tiles, in order.
+    pub fn rows(&mut self, width: usize) -> Vec<TileRow<'_, R>> {
+        let (width, offsets) = (width.max(1), self.offsets.max(1));
+        self.chains
+            .chunks_mut(width)
+            .zip(self.values.chunks_mut(width * offsets))
+            .zip(self.unscaled.chunks_mut(width * offsets * R::CHANNELS))
+            .map(|((chains, values), unscaled)| TileRow {
+                chains,
+                values,
+                unscaled,
+                offsets,
+            })
+            .collect()
+    }
+}
+
+impl TileChain {
+    /// Traces `paths` plain MC paths at tile `tile`'s centre pixel into
+    /// `row`. Returns paths traced and how many were invalid.
+    pub fn trace_regularizer<O, I>(
+        &mut self,
+        ctx: &Context<'_, O, I>,
+        tile: usize,
+        paths: u32,
+        row: &mut Row<'_, O::Radiance>,
+    ) -> (u64, u64)
+    where
+        O: PathOracle,
+        I: Importance<O::Radiance> + ?Sized,
+    {
+        let mut invalid = 0;
+        for _ in 0..paths {
+            let [x, y] = self.rng.next_2d();
+            let (v, bad) = ctx.trace_in(
+                &mut self.rng,
+                tile,
+                FilmPoint { x, y },
+                Some(&mut row.splats),
+            );
+            invalid += bad as u64;
+            row.samples.add(tile, &v.radiance, false);
+        }
+        (paths as u64, invalid)
+    }
+
+    /// Takes the primary sample `sample`, keeping this tile's own random
+    /// stream; its state must then be set or evaluated.
+    pub fn take_sample(&mut self, mut sample: PackedSample) {
+        sample.swap_own(&mut self.sample);
+        self.sample = sample;
+    }
+
+    /// Its uniform samples' counts, given the regularizer paths each tile of
+    /// the run traced.
+    pub fn draws(&self, centre_paths: u64) -> Draws {
+        Draws {
+            large_steps: self.large_steps,
+            // The odd-numbered ones, the first being number 0.
+            odd_steps: self.large_steps / 2,
+            centre_paths,
+        }
+    }
+}
+
+impl<R: Radiance> Tile<'_, R> {
     /// One Metropolis-Hastings step on `T_s` with coherent sampling (eq. 10),
     /// the chain woken in `work`; a coin-chosen large step is a uniform
     /// sample of every tile pixel, added to `row`.
@@ -415,17 +534,17 @@ impl<R: Radiance> TileChain<R> {
         O: PathOracle<Radiance = R>,
         I: Importance<R> + ?Sized,
     {
-        let dark = self.target <= 0.0;
+        let dark = self.chain.target <= 0.0;
         // A dark tile only makes large steps, but only those the coin chose
         // are the regularizer's samples: which steps those are then does not
         // depend on what the tile found, and their mean is unbiased. (Counting
         // the dark tile's forced steps too stopped the sampling at the first
         // light found: a light that 30 % of paths reach came out 5 % bright
         // at 20-32 spp.)
-        let chosen = uniform_f64(self.rng.rng()) < ctx.p_large;
+        let chosen = uniform_f64(self.chain.rng.rng()) < ctx.p_large;
         let large = dark || chosen;
         work.wake(self);
-        let unscaled = &mut self.unscaled;
+        let unscaled = &mut *self.unscaled;
         let outcome = work.chain.step(
             &TileTarget {
                 ctx,
@@ -434,52 +553,26 @@ impl<R: Radiance> TileChain<R> {
             },
             &TileWeights,
             large,
-            self.rng.rng(),
+            self.chain.rng.rng(),
             &mut row.stats,
             |state, weight| add(&state.values, weight, unscaled),
         );
+        let chain = &mut *self.chain;
         if chosen {
             let proposed = work.chain.last_proposal();
-            let odd = self.large_steps % 2 == 1;
+            let odd = chain.large_steps % 2 == 1;
             for (o, q) in ctx.tiles.pixels(tile) {
                 row.samples.add(q, &proposed.values[o].radiance, odd);
             }
             row.splats.extend_from_slice(&proposed.splats);
-            self.large_steps += 1;
+            chain.large_steps += 1;
         }
         work.rest(self);
-        if outcome.accepted && dark && self.target > 0.0 && self.start == Start::None {
-            self.start = Start::Uniform;
+        let chain = &mut *self.chain;
+        if outcome.accepted && dark && chain.target > 0.0 && chain.start == Start::None {
+            chain.start = Start::Uniform;
         }
         outcome.traced.paths
-    }
-
-    /// Traces `paths` plain MC paths at the tile's centre pixel into
-    /// `row`. Returns paths traced and how many were invalid.
-    pub fn trace_regularizer<O, I>(
-        &mut self,
-        ctx: &Context<'_, O, I>,
-        tile: usize,
-        paths: u32,
-        row: &mut Row<'_, R>,
-    ) -> (u64, u64)
-    where
-        O: PathOracle<Radiance = R>,
-        I: Importance<R> + ?Sized,
-    {
-        let mut invalid = 0;
-        for _ in 0..paths {
-            let [x, y] = self.rng.next_2d();
-            let (v, bad) = ctx.trace_in(
-                &mut self.rng,
-                tile,
-                FilmPoint { x, y },
-                Some(&mut row.splats),
-            );
-            invalid += bad as u64;
-            row.samples.add(tile, &v.radiance, false);
-        }
-        (paths as u64, invalid)
     }
 
     /// Evaluates the current state again in every tile pixel (after a
@@ -501,7 +594,7 @@ impl<R: Radiance> TileChain<R> {
         let jitter = replay.film_point(UNIT);
         let traced = ctx.trace_tile(&mut replay, tile, jitter, false, state);
         work.rest(self);
-        self.pending = false;
+        self.chain.pending = false;
         traced
     }
 
@@ -539,39 +632,15 @@ impl<R: Radiance> TileChain<R> {
             out[o] = v;
         }
         // The replay may have drawn numbers the state had forgotten.
-        work.chain.sampler().pack(&mut self.sample);
+        work.chain.sampler().pack(&mut self.chain.sample);
         (target, traced)
-    }
-
-    /// Lets go of the current state, keeping the sums and counters.
-    pub fn let_go_of_state(&mut self) {
-        self.sample.forget_numbers();
-        self.values = Box::default();
-    }
-
-    /// Takes the primary sample `sample`, keeping this tile's own random
-    /// stream; its state must then be set or evaluated.
-    pub fn take_sample(&mut self, mut sample: PackedSample) {
-        sample.swap_own(&mut self.sample);
-        self.sample = sample;
     }
 
     /// Sets the current state's tile values and target (evaluated elsewhere).
     pub fn set_state(&mut self, values: &[Value<R>], target: f64) {
         self.values.copy_from_slice(values);
         // The largest of `f32` importances: exact.
-        self.target = target as f32;
-    }
-
-    /// Its uniform samples' counts, given the regularizer paths each tile of
-    /// the run traced.
-    pub fn draws(&self, centre_paths: u64) -> Draws {
-        Draws {
-            large_steps: self.large_steps,
-            // The odd-numbered ones, the first being number 0.
-            odd_steps: self.large_steps / 2,
-            centre_paths,
-        }
+        self.chain.target = target as f32;
     }
 }
 
@@ -585,7 +654,7 @@ mod tests {
     /// docs/BENCHMARKS.md).
     #[test]
     fn a_chain_at_rest_stays_small() {
-        assert!(size_of::<TileChain<Rgb>>() <= 112);
+        assert!(size_of::<TileChain>() <= 80);
         assert!(size_of::<Value<Rgb>>() <= 16);
         assert!(size_of::<PackedSample>() <= 48);
     }

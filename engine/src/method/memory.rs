@@ -209,7 +209,7 @@ mod sizes {
     /// A tile chain of stratified MCMC at rest (80 bytes, and its primary
     /// sample's streams) and the pixel's uniform samples (40 bytes),
     /// fitted to the measured peak.
-    pub const TILE_CHAIN: u128 = 144;
+    pub const TILE_CHAIN: u128 = 128;
     /// A number of a tile chain's primary sample at rest (24 bits).
     pub const NUMBER: u128 = 3;
     /// An ERPT start path that starts chains, beside its numbers: its

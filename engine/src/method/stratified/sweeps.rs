@@ -195,9 +195,17 @@ where
     pub(super) fn into_run(self, bootstrap_traces: u64) -> SweptRun {
         let centre_paths = self.centre_paths();
         let mut stats = self.stats;
+        // The states are let go first (the packed samples on the render's
+        // threads), before the counts are made: the run holds no more than
+        // its sweeps did.
         let TileChains {
-            chains, unscaled, ..
+            mut chains,
+            values,
+            unscaled,
+            ..
         } = self.chains;
+        drop(values);
+        parallel::for_each(&mut chains, |c| c.sample.forget_numbers());
         let draws = chains
             .iter()
             .map(|c| {
@@ -210,9 +218,6 @@ where
                 c.draws(centre_paths)
             })
             .collect();
-        // A packed sample a tile, let go on the render's threads.
-        let mut chains = chains;
-        parallel::for_each(&mut chains, |c| c.sample.forget_numbers());
         drop(chains);
         SweptRun {
             tiles: TileSums { draws, unscaled },

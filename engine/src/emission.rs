@@ -239,7 +239,7 @@ impl SeenEmission {
         let (channels, first) = (self.channels, self.traced);
         let (index, count) = (self.rows.index as usize, self.rows.count.max(1) as usize);
         let len = self.len(resolution);
-        let sums = self.sums.get_or_insert_with(|| alloc::vec![0.0; len]);
+        let sums = self.sums.get_or_insert_with(|| parallel::filled(len, 0.0));
         let width = resolution.width as usize;
         let invalid = AtomicU64::new(0);
         let sighted = &self.sighted;

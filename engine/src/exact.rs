@@ -176,7 +176,8 @@ impl ExactFilm {
                 what: "film",
                 bytes: (len as u64).saturating_mul(Self::VALUE_BYTES as u64),
             })?;
-        sums.resize(len, ExactSum::default());
+        // Written on the render's threads.
+        crate::parallel::extend_filled(&mut sums, len, ExactSum::default());
         Ok(Self {
             resolution,
             channels,

@@ -122,7 +122,7 @@ pub(super) struct Samples {
 impl Samples {
     pub fn new(pixels: usize, channels: usize) -> Self {
         Self {
-            sums: vec![0.0; pixels * (channels + 2)],
+            sums: parallel::filled(pixels * (channels + 2), 0.0),
             channels,
         }
     }

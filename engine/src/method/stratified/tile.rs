@@ -432,8 +432,8 @@ impl<R: Radiance> TileChains<R> {
         });
         Self {
             chains,
-            values: vec![Value::default(); tiles * offsets],
-            unscaled: vec![0.0; tiles * offsets * R::CHANNELS],
+            values: parallel::filled(tiles * offsets, Value::default()),
+            unscaled: parallel::filled(tiles * offsets * R::CHANNELS, 0.0),
             offsets,
         }
     }

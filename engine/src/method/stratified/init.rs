@@ -210,13 +210,14 @@ where
     );
     let width = ctx.tiles.resolution().width as usize;
     let work = || Waking::new(ctx.tiles, ctx.small_step);
-    let mut rows = chains.rows(width);
-    let replays = parallel::sum_chunks_init(&mut rows, 1, work, |work, y, row| {
-        let pending = row[0].tiles().enumerate().filter(|(_, t)| t.chain.pending);
+    let replays = parallel::map_each_init(&mut chains.rows(width), work, |work, row| {
+        let y = row.y;
+        let pending = row.tiles().enumerate().filter(|(_, t)| t.chain.pending);
         pending.fold(Traced::default(), |traced, (x, mut t)| {
             traced + t.evaluate_current(ctx, y * width + x, work)
         })
     });
+    let replays = replays.into_iter().fold(Traced::default(), |a, b| a + b);
     Ok(Initialized {
         traced: target.traces.load(Ordering::Relaxed) + replays.paths,
         replays_invalid: replays.invalid,

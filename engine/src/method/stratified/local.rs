@@ -144,29 +144,31 @@ where
     let (horizontal, parity) = pairing(round);
     let mut rows = chains.rows(width);
     if horizontal {
-        let row = |y: usize, row: &mut [TileRow<'_, O::Radiance>]| {
+        let row = |row: &mut TileRow<'_, O::Radiance>| {
             let mut count = ExchangeCount::default();
             let mut scratch = Scratch::new(ctx);
-            let mut tiles: Vec<_> = row[0].tiles().collect();
-            let first = parity.min(tiles.len());
-            let pairs = tiles[first..].chunks_exact_mut(2);
-            for (k, pair) in pairs.enumerate() {
+            let first = row.y * width + parity;
+            let mut tiles: Vec<_> = row.tiles().skip(parity).collect();
+            for (k, pair) in tiles.chunks_exact_mut(2).enumerate() {
                 let [a, b] = pair else { continue };
-                let s = y * width + parity + 2 * k;
+                let s = first + 2 * k;
                 count = count + exchange(ctx, (s, a), (s + 1, b), &mut scratch);
             }
             count
         };
-        parallel::sum_chunks(&mut rows, 1, row)
+        let counts = parallel::map_each(&mut rows, row);
+        counts
+            .into_iter()
+            .fold(ExchangeCount::default(), |a, b| a + b)
     } else {
         let skip = parity.min(rows.len());
-        let pairs = |k: usize, pair: &mut [TileRow<'_, O::Radiance>]| {
+        let pairs = |_, pair: &mut [TileRow<'_, O::Radiance>]| {
             let mut count = ExchangeCount::default();
             let [top, bottom] = pair else {
                 return count;
             };
             let mut scratch = Scratch::new(ctx);
-            let y = parity + 2 * k;
+            let y = top.y;
             for (x, (mut a, mut b)) in top.tiles().zip(bottom.tiles()).enumerate() {
                 let s = y * width + x;
                 count = count + exchange(ctx, (s, &mut a), (s + width, &mut b), &mut scratch);

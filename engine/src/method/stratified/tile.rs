@@ -151,6 +151,8 @@ pub(super) struct Tile<'a, R> {
 
 /// A row of tiles of [`TileChains`].
 pub(super) struct TileRow<'a, R> {
+    /// Which row.
+    pub y: usize,
     chains: &'a mut [TileChain],
     values: &'a mut [Value<R>],
     unscaled: &'a mut [f32],
@@ -459,7 +461,9 @@ impl<R: Radiance> TileChains<R> {
             .chunks_mut(width)
             .zip(self.values.chunks_mut(width * offsets))
             .zip(self.unscaled.chunks_mut(width * offsets * R::CHANNELS))
-            .map(|((chains, values), unscaled)| TileRow {
+            .enumerate()
+            .map(|(y, ((chains, values), unscaled))| TileRow {
+                y,
                 chains,
                 values,
                 unscaled,

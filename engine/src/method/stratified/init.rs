@@ -114,7 +114,7 @@ where
     I: Importance<O::Radiance> + ?Sized,
 {
     let init = &settings.initialization;
-    let n = chains.chains.len();
+    let n = ctx.tiles.count();
     let wanted = libm::ceil(init.coverage * n as f64) as usize;
     if init.global_chains == 0 || wanted == 0 || max_traces == 0 {
         return Ok(Initialized::default());

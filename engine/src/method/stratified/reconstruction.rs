@@ -220,10 +220,10 @@ impl ReconstructionTime {
 /// Turns the tiles' `sums` `N G_s(k)` (per tile, offset and channel) into
 /// `G_s(k)` (eq. 10, over `sweeps` steps) in place, in `f32` (a render's
 /// largest array after its chains: the solver takes it a channel at a
-/// time, in `f64`). A tile whose chain never found a state with `T_s > 0` (at low budgets, one
-/// sweep leaves some) has no estimate of its own; it takes the regularizer's
-/// values `Î(k)` instead (an unscaled estimate whose normalization is 1), so
-/// that in eq. 12 and in the solver's overlaps it stands for the Monte
+/// time, in `f64`). A tile whose chain never found a state with `T_s > 0`
+/// (at low budgets, one sweep leaves some) has no estimate of its own; it
+/// takes the regularizer's values `Î(k)` instead (an unscaled estimate
+/// whose normalization is 1), so that in eq. 12 and in the solver's overlaps it stands for the Monte
 /// Carlo estimate of its pixels, not for zeros: counted as zeros, such tiles
 /// made stratified MCMC ~25 % dark at one sweep; left out, they left some
 /// pixels to one weakly constrained tile. A tile black for the regularizer

@@ -95,7 +95,7 @@ where
     /// same: a sweep's, then the remainder's).
     fn centre_paths(&self) -> u64 {
         let all = self.stats.regularizer_samples + self.stats.remainder_samples;
-        all / self.chains.chains.len().max(1) as u64
+        all / self.ctx.tiles.count().max(1) as u64
     }
 
     /// Traces `paths` regularizer paths at every tile's centre: the budget's
@@ -138,7 +138,7 @@ where
         let ctx = self.ctx;
         let width = ctx.tiles.resolution().width as usize;
         let mut swept: Vec<Option<Swept<O::Radiance, C>>> =
-            (0..self.chains.chains.len().div_ceil(width.max(1)))
+            (0..self.ctx.tiles.count().div_ceil(width.max(1)))
                 .map(|_| None)
                 .collect();
         for phase in 0..2 * ctx.tiles.reach() + 1 {
@@ -206,18 +206,15 @@ where
         } = self.chains;
         drop(values);
         parallel::for_each(&mut chains, |c| c.sample.forget_numbers());
-        let draws = chains
-            .iter()
-            .map(|c| {
-                match c.start {
-                    Start::None => stats.never_initialized += 1,
-                    Start::Global => stats.initialized_by_global_chains += 1,
-                    Start::Borrowed => stats.initialized_by_borrowing += 1,
-                    Start::Uniform => stats.initialized_by_uniform_draws += 1,
-                }
-                c.draws(centre_paths)
-            })
-            .collect();
+        for c in &chains {
+            match c.start {
+                Start::None => stats.never_initialized += 1,
+                Start::Global => stats.initialized_by_global_chains += 1,
+                Start::Borrowed => stats.initialized_by_borrowing += 1,
+                Start::Uniform => stats.initialized_by_uniform_draws += 1,
+            }
+        }
+        let draws = chains.iter().map(|c| c.draws(centre_paths)).collect();
         drop(chains);
         SweptRun {
             tiles: TileSums { draws, unscaled },
@@ -477,7 +474,7 @@ where
                 && self.stats.sweeps == last
             {
                 let left = budget.saturating_sub(self.samples());
-                let per_tile = left / self.chains.chains.len().max(1) as u64;
+                let per_tile = left / self.ctx.tiles.count().max(1) as u64;
                 if per_tile > 0 {
                     self.trace_remainder(u32::try_from(per_tile).unwrap_or(u32::MAX));
                 }
@@ -495,8 +492,7 @@ where
     fn spend_rest(&mut self, seconds: f64, unit_seconds: f64) {
         let sweeps = self.stats.sweeps;
         let sweep_paths = self.costs.of(sweeps.max(1)) - self.costs.of(sweeps.max(1) - 1);
-        let paths =
-            rest_paths_per_tile(seconds, unit_seconds, sweep_paths, self.chains.chains.len());
+        let paths = rest_paths_per_tile(seconds, unit_seconds, sweep_paths, self.ctx.tiles.count());
         if paths > 0 {
             self.trace_remainder(paths);
         }

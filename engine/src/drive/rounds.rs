@@ -22,6 +22,11 @@ pub trait Rounds {
     /// Units a budget of `samples` traces buys (each method's rounding; at
     /// least one).
     fn planned_units(&self, samples: u64) -> u64;
+    /// The fewest units a round of a sample budget holds (a round is
+    /// otherwise a 64th of the budget). By default one.
+    fn least_round(&self) -> u64 {
+        1
+    }
     /// Runs `units` more units, deterministically.
     fn run(&mut self, units: u64);
     /// Units done so far (a resumed loop's position must say as many).
@@ -111,7 +116,9 @@ pub(crate) fn drive<W: Rounds>(
         Budget::Time(_) => None,
     };
     let max_round = (MAX_ROUND_SAMPLES / work.unit_cost().max(1)).max(1);
-    let first_round = planned.map_or(1, |n| n.div_ceil(64).clamp(1, max_round));
+    let first_round = planned.map_or(1, |n| {
+        n.div_ceil(64).max(work.least_round()).clamp(1, max_round)
+    });
     let mut round = resumed.map_or(first_round, |p| p.round.clamp(1, max_round));
     let mut done = resumed.map_or(0, |p| p.done);
     let mut cancelled = false;

@@ -31,8 +31,9 @@ fn runs_kept(runs: u32, task: Task) -> u128 {
 /// sample and path); stratified MCMC's tile chains, per pixel a part of
 /// its own, one per tile pixel (the state evaluated there) and the
 /// centre's splats; and the contributions waiting to be merged: a round's
-/// (PSSMLT and replica exchange: a round is a 64th of a sample budget,
-/// at most 2^21 paths, each with its proposal and state), a block's
+/// (PSSMLT and replica exchange: a round is a 64th of a sample budget or,
+/// if more, half as many paths as the film has pixels, at most 2^21 paths,
+/// each with its proposal and state), a block's
 /// start paths that start chains, their samplers and a wave of its chains'
 /// steps (ERPT, which merges a block's chains in waves of a block's
 /// expected chains), a pass's splats (MC).
@@ -74,9 +75,11 @@ impl Method {
         // (proposal and current) and their splats.
         let contributions =
             |paths: u64, per_path: u128| paths as u128 * per_path * (100 + splats) * queued / 100;
+        // A round's least paths ([`Rounds::least_round`](crate::drive::Rounds::least_round)).
+        let half_film = u64::try_from(pixels / 2).unwrap_or(u64::MAX);
         let round = |unit: u64| {
             let most = match budget {
-                Budget::Samples(n) => (n / 64).saturating_add(unit),
+                Budget::Samples(n) => (n / 64).max(half_film).saturating_add(unit),
                 #[cfg(feature = "std")]
                 Budget::Time(_) => ROUND_PATHS,
             };

@@ -22,8 +22,9 @@ pub trait Rounds {
     /// Units a budget of `samples` traces buys (each method's rounding; at
     /// least one).
     fn planned_units(&self, samples: u64) -> u64;
-    /// The fewest units a round of a sample budget holds (a round is
-    /// otherwise a 64th of the budget). By default one.
+    /// The fewest units a round holds: a sample budget's rounds (a 64th
+    /// of the budget) are at least as large, a time budget's grow to it.
+    /// By default one.
     fn least_round(&self) -> u64 {
         1
     }
@@ -116,9 +117,8 @@ pub(crate) fn drive<W: Rounds>(
         Budget::Time(_) => None,
     };
     let max_round = (MAX_ROUND_SAMPLES / work.unit_cost().max(1)).max(1);
-    let first_round = planned.map_or(1, |n| {
-        n.div_ceil(64).max(work.least_round()).clamp(1, max_round)
-    });
+    let least_round = work.least_round().clamp(1, max_round);
+    let first_round = planned.map_or(1, |n| n.div_ceil(64).max(least_round).min(max_round));
     let mut round = resumed.map_or(first_round, |p| p.round.clamp(1, max_round));
     let mut done = resumed.map_or(0, |p| p.done);
     let mut cancelled = false;
@@ -160,7 +160,7 @@ pub(crate) fn drive<W: Rounds>(
             }
             observer.preview(&film);
         }
-        if planned.is_none() && round_clock.seconds() < MIN_ROUND_SECONDS {
+        if planned.is_none() && (round_clock.seconds() < MIN_ROUND_SECONDS || round < least_round) {
             round = (round * 2).min(max_round);
         }
         if observer.wants_checkpoint() {

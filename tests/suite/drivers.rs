@@ -628,6 +628,54 @@ fn observers_see_progress_previews_and_can_cancel() {
     }
 }
 
+/// Records the samples at every progress report.
+#[derive(Default)]
+struct SamplesSeen(Mutex<Vec<u64>>);
+
+impl Observer for SamplesSeen {
+    fn progress(&self, p: &Progress) {
+        self.0.lock().unwrap().push(p.samples);
+    }
+}
+
+/// A round of PSSMLT or replica exchange under a sample budget traces at
+/// least half as many paths as the film has pixels (`Rounds::least_round`:
+/// smaller rounds merge their splats into the exact films at a cache miss
+/// each), though a 64th of this budget is fewer; the last round may be
+/// shorter. With rounds of a 64th of the budget, PSSMLT here ran 56 rounds
+/// of 3 steps of its 37 chains (111 paths).
+#[test]
+fn a_splatting_methods_round_traces_half_the_films_pixels_at_least() {
+    let resolution = Resolution::new(64, 48);
+    let image = ProceduralImage::showcase(resolution);
+    let half_film = resolution.pixel_count() as u64 / 2;
+    for method in methods() {
+        if !matches!(method, Method::Pssmlt(_) | Method::Replica(_)) {
+            continue;
+        }
+        let name = method.name();
+        let seen = SamplesSeen::default();
+        let budget = 4 * half_film;
+        let out = render(&image, &MaxChannel, &settings(5, budget, &method), &seen).unwrap();
+        let reports = seen.0.lock().unwrap().clone();
+        assert_eq!(*reports.last().unwrap(), out.stats.samples, "{name}");
+        let rounds: Vec<u64> = reports
+            .iter()
+            .scan(0, |before, &now| {
+                Some(now - core::mem::replace(before, now))
+            })
+            .collect();
+        assert!((2..=5).contains(&rounds.len()), "{name}: {rounds:?}");
+        let (last, whole) = rounds.split_last().unwrap();
+        assert!(*last > 0, "{name}: {rounds:?}");
+        assert!(
+            whole.iter().all(|&paths| paths >= half_film),
+            "{name}: rounds of {rounds:?} paths, a film of {} pixels",
+            2 * half_film
+        );
+    }
+}
+
 /// A time budget ends every method's render, set-up included, with work
 /// done and the render not cancelled (how closely each keeps its budget,
 /// which a busy machine changes, is measured by `studies/src/bin/time_budgets.rs`:

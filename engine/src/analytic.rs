@@ -25,24 +25,28 @@ fn normalized(resolution: Resolution, p: FilmPoint) -> (f64, f64) {
 }
 
 /// Fills a film with `pixel_mean(x0, x1, y0, y1)`, the mean over each pixel's
-/// box in normalized coordinates.
+/// box in normalized coordinates (a row a task on the threads: a procedural
+/// reference at 1280x720 took a quarter of a second on one).
 fn reference_film<R: Radiance>(
     resolution: Resolution,
-    pixel_mean: impl Fn(f64, f64, f64, f64) -> R,
+    pixel_mean: impl Fn(f64, f64, f64, f64) -> R + Sync + Send,
 ) -> Film {
     let mut film = Film::new(resolution, R::CHANNELS);
     let (w, h) = (resolution.width as f64, resolution.height as f64);
-    for y in 0..resolution.height {
-        for x in 0..resolution.width {
+    let row = (resolution.width as usize * R::CHANNELS).max(1);
+    crate::parallel::for_each_chunk(film.data_mut(), row, |y, values| {
+        for (x, pixel) in values.chunks_exact_mut(R::CHANNELS).enumerate() {
             let v = pixel_mean(
                 x as f64 / w,
                 (x + 1) as f64 / w,
                 y as f64 / h,
                 (y + 1) as f64 / h,
             );
-            film.add(y as usize * resolution.width as usize + x as usize, 1.0, &v);
+            for (c, value) in pixel.iter_mut().enumerate() {
+                *value += v.channel(c) as f64;
+            }
         }
-    }
+    });
     film
 }
 

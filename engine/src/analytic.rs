@@ -25,8 +25,7 @@ fn normalized(resolution: Resolution, p: FilmPoint) -> (f64, f64) {
 }
 
 /// Fills a film with `pixel_mean(x0, x1, y0, y1)`, the mean over each pixel's
-/// box in normalized coordinates (a row a task on the threads: a procedural
-/// reference at 1280x720 took a quarter of a second on one).
+/// box in normalized coordinates, a row a task on the render's threads.
 fn reference_film<R: Radiance>(
     resolution: Resolution,
     pixel_mean: impl Fn(f64, f64, f64, f64) -> R + Sync + Send,

@@ -428,15 +428,11 @@ impl<W: Runs> Rounds for Splatting<W> {
         samples.div_ceil(unit).max(1)
     }
 
-    /// Units of at least half as many traces as the film has pixels. A
+    /// Units of at least half as many traces as the film has pixels: a
     /// round's splats land on the film at random pixels, each on its
     /// pixel's exact sums (two or three cache lines), so the merge of a
-    /// round that touches few pixels misses the caches on every splat;
-    /// fewer, larger rounds touch fewer lines. At 1280x720 and 8 paths a
-    /// pixel (rounds of a 64th of the budget before) PSSMLT takes 0.94x
-    /// the time, multi-stage MLT (each stage a budget of its own) 0.84x:
-    /// the same images, and the splat buffers of a render at 32 paths a
-    /// pixel.
+    /// round that touches few pixels misses the caches on every splat
+    /// (docs/BENCHMARKS.md, "The splat merge at user sizes").
     fn least_round(&self) -> u64 {
         let paths = self.bands.resolution.pixel_count() as u64 / 2;
         paths.div_ceil(self.unit_cost())
